@@ -1,0 +1,140 @@
+"""The result contract shared by the monolithic reference and the co-simulation.
+
+``DIR/results.csv``: one header row, SI units (angles in rad except ``delta_deg``),
+rows at the output interval, streamed (flushed row by row). A row at time t_k holds
+every signal at communication point t_k: the plant's outputs at t_k and the control
+unit's outputs as last computed (at t_{k-1}), i.e. before step k is taken.
+
+``DIR/metrics.json``: the figures of ``compute_metrics`` plus run bookkeeping.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+#: columns every results.csv has, in this order (more may follow)
+CONTRACT_COLUMNS = (
+    "time", "delta_deg", "omega_ref", "omega_m", "omega_hat", "theta_e", "theta_hat",
+    "i_d", "i_q", "i_d_hat", "i_q_hat", "T_e", "T_L_mech", "T_L_hat", "v_d", "v_q",
+)
+#: extra columns the project's runs add
+EXTRA_COLUMNS = ("i_alpha", "i_beta", "v_alpha", "v_beta", "i_qref", "v_vehicle")
+ALL_COLUMNS = CONTRACT_COLUMNS + EXTRA_COLUMNS
+
+#: speed band for settling times [rad/s]
+SETTLING_BAND = 1.0
+#: averaging window at the end of each plateau [s]
+PLATEAU_WINDOW = 2.0
+
+
+class ResultWriter:
+    """Streams rows to ``results.csv``; every row is flushed when written."""
+
+    def __init__(self, out_dir, columns=ALL_COLUMNS):
+        self.dir = Path(out_dir)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.columns = tuple(columns)
+        self.path = self.dir / "results.csv"
+        self._fh = open(self.path, "w", encoding="ascii", newline="")
+        self._fh.write(",".join(self.columns) + "\n")
+        self._fh.flush()
+        self.rows = 0
+
+    def write(self, values) -> None:
+        # repr() is the shortest string that round-trips the double exactly
+        self._fh.write(",".join([repr(float(v)) for v in values]) + "\n")
+        self._fh.flush()
+        self.rows += 1
+
+    def close(self) -> None:
+        if not self._fh.closed:
+            self._fh.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def read_results(path) -> dict[str, np.ndarray]:
+    """results.csv (or its directory) -> {column: array}. Tolerates a cut last line."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "results.csv"
+    with open(path, encoding="ascii") as fh:
+        header = fh.readline().strip().split(",")
+        lines = [ln for ln in fh.read().split("\n") if ln.count(",") == len(header) - 1]
+    data = np.array([[float(x) for x in ln.split(",")] for ln in lines]).reshape(-1, len(header))
+    return {name: data[:, i] for i, name in enumerate(header)}
+
+
+def _wrap(x):
+    return (x + math.pi) % (2 * math.pi) - math.pi
+
+
+def _rms(x) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float("nan")
+
+
+def compute_metrics(r: dict[str, np.ndarray]) -> dict:
+    """Figures of merit from recorded columns (see module doc for the contract)."""
+    t = r["time"]
+    speed_err = r["omega_ref"] - r["omega_m"]
+    theta_err = _wrap(r["theta_hat"] - r["theta_e"])
+    m = {
+        "speed_rms_error": _rms(speed_err),
+        "omega_hat_rms_error": _rms(r["omega_hat"] - r["omega_m"]),
+        "theta_error_rms": _rms(theta_err),
+        "theta_error_max": float(np.max(np.abs(theta_err))) if len(t) else float("nan"),
+    }
+    # piecewise-constant segments of the recorded elevation
+    delta = r["delta_deg"]
+    change_idx = [i for i in range(1, len(delta)) if delta[i] != delta[i - 1]]
+    bounds = [0] + change_idx + [len(delta)]
+    plateaus, steps = [], []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        t_start = float(t[a])
+        t_end = float(t[b]) if b < len(t) else float(t[-1])
+        if t_end - t_start < PLATEAU_WINDOW:
+            continue
+        w = (t >= t_end - PLATEAU_WINDOW) & (t <= t_end)
+        if b < len(t):
+            w &= t < t_end
+        plateaus.append({
+            "t_start": t_start, "t_end": t_end, "delta_deg": float(delta[a]),
+            **{f"{k}_mean": float(np.mean(r[k][w])) for k in ("T_L_mech", "T_L_hat", "T_e", "omega_m", "omega_hat")},
+        })
+    for i, a in enumerate(change_idx):
+        b = change_idx[i + 1] if i + 1 < len(change_idx) else len(t)
+        dev = np.abs(speed_err[a:b])
+        outside = np.nonzero(dev > SETTLING_BAND)[0]
+        if len(outside) == 0:
+            settling = 0.0
+        elif outside[-1] == len(dev) - 1:
+            settling = None  # never settled within the segment
+        else:
+            settling = float(t[a + outside[-1] + 1] - t[a])
+        steps.append({
+            "t": float(t[a]), "delta_from_deg": float(delta[a - 1]), "delta_to_deg": float(delta[a]),
+            "max_speed_deviation": float(dev.max()) if len(dev) else 0.0,
+            "settling_time": settling,
+        })
+    m["plateaus"] = plateaus
+    m["steps"] = steps
+    return m
+
+
+def write_metrics(out_dir, metrics: dict) -> Path:
+    """Write metrics.json atomically (a reader never sees half a file)."""
+    path = Path(out_dir) / "metrics.json"
+    tmp = path.with_suffix(".json.tmp")
+    text = json.dumps(metrics, indent=2, allow_nan=True)
+    tmp.write_text(text + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,146 @@
+"""Road-elevation and speed-reference profiles of section III, and user CSV profiles.
+
+Scenario 1 (Fig. 6): 0 deg for 0-50 s, then up in 5 deg steps every 30 s to 25 deg
+(170-200 s), and back down in 5 deg steps to 0 deg (320-350 s).
+
+Scenario 2 (Fig. 7): the text is garbled (it gives 170-200 s twice and ends at 250 s);
+read here as 0 deg for 0-50 s, then alternating 22 deg / 0 deg every 30 s up to 350 s,
+which keeps the 350 s length of scenario 1 and the 30 s plateaus of both texts.
+
+Speed reference (Fig. 8): 200 rad/s, reached from standstill by a ramp.
+"""
+
+from __future__ import annotations
+
+import bisect
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from .params import ScenarioParams
+
+INTERPOLATIONS = ("previous", "linear")
+
+
+class ProfileError(ValueError):
+    """A malformed profile (CSV or table)."""
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A signal given at breakpoints: piecewise-constant ("previous") or linear.
+
+    Before the first breakpoint the first value holds, after the last the last value.
+    """
+
+    times: tuple[float, ...]
+    values: tuple[float, ...]
+    interpolation: str = "previous"
+    name: str = "value"
+    unit: str = ""
+
+    def __post_init__(self):
+        if len(self.times) == 0 or len(self.times) != len(self.values):
+            raise ProfileError(f"profile {self.name!r} needs equally many times and values (at least one)")
+        if self.interpolation not in INTERPOLATIONS:
+            raise ProfileError(f"interpolation must be one of {INTERPOLATIONS} (got {self.interpolation!r})")
+        for i, (t, v) in enumerate(zip(self.times, self.values)):
+            if not (math.isfinite(t) and math.isfinite(v)):
+                raise ProfileError(f"profile {self.name!r}: breakpoint {i} is not finite ({t}, {v})")
+            if i and not t > self.times[i - 1]:
+                raise ProfileError(f"profile {self.name!r}: time does not increase at breakpoint {i} ({t})")
+
+    def __call__(self, t: float) -> float:
+        ts, vs = self.times, self.values
+        i = bisect.bisect_right(ts, t) - 1
+        if i < 0:
+            return vs[0]
+        if i >= len(ts) - 1 or self.interpolation == "previous":
+            return vs[i]
+        t0, t1 = ts[i], ts[i + 1]
+        return vs[i] + (vs[i + 1] - vs[i]) * (t - t0) / (t1 - t0)
+
+    def change_times(self) -> list[float]:
+        """Times where a piecewise-constant profile jumps."""
+        if self.interpolation != "previous":
+            return []
+        return [t for t, v0, v1 in zip(self.times[1:], self.values[:-1], self.values[1:]) if v1 != v0]
+
+    def scaled(self, factor: float, name: str | None = None, unit: str | None = None) -> "Profile":
+        return Profile(self.times, tuple(v * factor for v in self.values), self.interpolation,
+                       name or self.name, self.unit if unit is None else unit)
+
+
+def _steps_deg(pairs) -> Profile:
+    times = tuple(float(t) for t, _ in pairs)
+    values = tuple(math.radians(d) for _, d in pairs)
+    return Profile(times, values, "previous", "delta", "rad")
+
+
+#: scenario 1 elevation, (start time [s], angle [deg]) of each plateau
+SCENARIO1_DEG = ((0, 0), (50, 5), (80, 10), (110, 15), (140, 20), (170, 25),
+                 (200, 20), (230, 15), (260, 10), (290, 5), (320, 0))
+#: scenario 2 elevation (reading: alternate 22/0 deg every 30 s after 50 s)
+SCENARIO2_DEG = ((0, 0), (50, 22), (80, 0), (110, 22), (140, 0), (170, 22),
+                 (200, 0), (230, 22), (260, 0), (290, 22), (320, 0))
+SCENARIO_STOP_TIME = 350.0
+
+
+def elevation_profile(scenario: int | str) -> Profile:
+    """Road elevation delta [rad] of scenario 1 or 2."""
+    key = str(scenario).removeprefix("scenario")
+    if key == "1":
+        return _steps_deg(SCENARIO1_DEG)
+    if key == "2":
+        return _steps_deg(SCENARIO2_DEG)
+    raise ProfileError(f"unknown scenario {scenario!r}; choose 1 or 2, or give a CSV profile")
+
+
+def speed_reference(p: ScenarioParams | None = None) -> Profile:
+    """omega_ref [rad/s]: ramp from 0 to ``omega_ref`` in ``startup_time``, then constant."""
+    p = p or ScenarioParams()
+    if p.startup_time > 0:
+        return Profile((0.0, p.startup_time), (0.0, p.omega_ref), "linear", "omega_ref", "rad/s")
+    return Profile((0.0,), (p.omega_ref,), "previous", "omega_ref", "rad/s")
+
+
+def load_profile_csv(path, interpolation: str = "previous", name: str | None = None,
+                     scale: float = 1.0, unit: str = "") -> Profile:
+    """Read a two-column CSV (header row, then ``time,value`` rows) into a Profile.
+
+    ``scale`` multiplies the values (e.g. pi/180 for a file in degrees). Errors name the
+    file and line.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ProfileError(f"{path}: profile file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProfileError(f"{path}: cannot read profile ({exc})") from None
+    rows = list(csv.reader(text.splitlines()))
+    if not rows:
+        raise ProfileError(f"{path}: empty profile file")
+    header = [h.strip() for h in rows[0]]
+    if len(header) < 2:
+        raise ProfileError(f"{path}:1: header needs two columns (time, value), got {header}")
+    times, values = [], []
+    for lineno, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) < 2:
+            raise ProfileError(f"{path}:{lineno}: missing column (need time, value)")
+        try:
+            t, v = float(row[0]), float(row[1])
+        except ValueError:
+            raise ProfileError(f"{path}:{lineno}: not a number: {row[:2]}") from None
+        if not (math.isfinite(t) and math.isfinite(v)):
+            raise ProfileError(f"{path}:{lineno}: value is not finite: {row[:2]}")
+        if times and not t > times[-1]:
+            raise ProfileError(f"{path}:{lineno}: time does not increase ({t} after {times[-1]})")
+        times.append(t)
+        values.append(v * scale)
+    if not times:
+        raise ProfileError(f"{path}: no data rows")
+    return Profile(tuple(times), tuple(values), interpolation, name or header[1], unit)
