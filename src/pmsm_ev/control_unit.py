@@ -9,10 +9,14 @@ Per control period, at t_k, with the plant's measured currents at t_k:
 3. observer measurement update (eqs 25-27);
 4. speed PI on omega_hat (14), current PIs + decoupling on omega_hat (15-20);
 5. inverse Park at the control angle (measured, or the updated estimate), advanced by
-   ``angle_advance`` periods of omega_hat, to v_alpha, v_beta held until t_{k+1}.
+   ``angle_advance`` periods of omega_hat, to v_alpha, v_beta held until t_{k+1}; with
+   ``zoh_compensation`` the held vector is lengthened by a/sin(a), a = omega_e dt/2, so
+   that its mean over the period, seen from the turning rotor, equals the command.
 """
 
 from __future__ import annotations
+
+import math
 
 from .controller import CurrentController, SpeedController
 from .observers import make_observer
@@ -42,6 +46,8 @@ class ControlUnit:
         self.speed = SpeedController(self.params, dt)
         self.current = CurrentController(self.params, self.motor, dt)
         self._advance = self.params.angle_advance * dt * self.motor.N
+        self._half_period_n = 0.5 * dt * self.motor.N
+        self._zoh = bool(self.params.zoh_compensation)
         self.reset()
 
     def reset(self) -> None:
@@ -69,7 +75,10 @@ class ControlUnit:
         self.i_d, self.i_q = i_d, i_q
         self.i_qref = self.speed.step(omega_ref, omega_hat)  # (14)
         self.v_d, self.v_q = self.current.step(self.params.i_d_ref, self.i_qref, i_d, i_q, omega_hat)  # (15)-(20)
-        self.v_alpha, self.v_beta = inverse_park(self.v_d, self.v_q, theta_ctrl + self._advance * omega_hat)
+        half_arc = self._half_period_n * omega_hat  # a = omega_e dt / 2
+        gain = half_arc / math.sin(half_arc) if self._zoh and abs(half_arc) > 1e-6 else 1.0
+        self.v_alpha, self.v_beta = inverse_park(gain * self.v_d, gain * self.v_q,
+                                                 theta_ctrl + self._advance * omega_hat)
 
     # outputs of the observer, for recording
     @property

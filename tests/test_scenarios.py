@@ -1,0 +1,60 @@
+"""Scenario profiles of section III and CSV profiles."""
+
+import math
+
+import pytest
+
+from pmsm_ev.params import ScenarioParams
+from pmsm_ev.scenarios import ProfileError, elevation_profile, load_profile_csv, speed_reference
+
+
+def deg(p, t):
+    return math.degrees(p(t))
+
+
+def test_scenario1_steps_up_and_down():
+    p = elevation_profile(1)
+    assert [round(deg(p, t)) for t in (10, 60, 90, 120, 150, 180, 210, 240, 270, 300, 330)] == \
+        [0, 5, 10, 15, 20, 25, 20, 15, 10, 5, 0]
+    assert p.change_times() == [50, 80, 110, 140, 170, 200, 230, 260, 290, 320]
+
+
+def test_scenario2_alternates_every_30_s():
+    p = elevation_profile("scenario2")
+    assert [round(deg(p, t)) for t in range(5, 350, 30)][:12] == [0, 0, 22, 0, 22, 0, 22, 0, 22, 0, 22, 0]
+    assert deg(p, 49.999) == 0 and deg(p, 50.0) == pytest.approx(22)
+
+
+def test_speed_reference_ramp():
+    w = speed_reference(ScenarioParams(omega_ref=200.0, startup_time=10.0))
+    assert (w(0.0), w(5.0), w(10.0), w(300.0)) == (0.0, 100.0, 200.0, 200.0)
+
+
+def test_unknown_scenario():
+    with pytest.raises(ProfileError):
+        elevation_profile(3)
+
+
+def test_csv_profile(tmp_path):
+    f = tmp_path / "route.csv"
+    f.write_text("time,delta_deg\n0,0\n10,4\n20,0\n")
+    p = load_profile_csv(f, "linear", scale=math.pi / 180)
+    assert deg(p, 5.0) == pytest.approx(2.0)
+    assert deg(p, 25.0) == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("text,where", [
+    ("", "empty"),
+    ("time\n0\n", ":1:"),
+    ("time,v\n0,1\n1\n", ":3:"),
+    ("time,v\n0,abc\n", ":2:"),
+    ("time,v\n0,1\n0,2\n", ":3:"),
+    ("time,v\n0,nan\n", ":2:"),
+    ("time,v\n", "no data"),
+])
+def test_csv_profile_errors_name_file_and_line(tmp_path, text, where):
+    f = tmp_path / "bad.csv"
+    f.write_text(text)
+    with pytest.raises(ProfileError) as e:
+        load_profile_csv(f)
+    assert "bad.csv" in str(e.value) and where in str(e.value)
