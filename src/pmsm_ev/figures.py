@@ -113,6 +113,8 @@ def load_run(run_dir) -> tuple[Path, dict[str, np.ndarray]]:
         path = path / "results.csv"
     if not path.is_file():
         raise FiguresError(f"{path}: results file not found")
+    if path.stat().st_size == 0:
+        raise FiguresError(f"{path}: malformed results file (empty, no header row)")
     try:
         r = read_results(path)
     except (ValueError, UnicodeDecodeError, OSError) as exc:
@@ -234,7 +236,7 @@ def plot_speed(r, title):
     ax = ax[0, 0]
     t = r["time"]
     _line(ax, t, r["omega_ref"], True, color=C_REF, lw=1.4, label="reference ω_ref")
-    _line(ax, t, r["omega_m"], True, color=C_ACT, lw=1.0, label="actual ω_m")
+    _line(ax, t, r["omega_m"], True, color=C_ACT, lw=1.6, label="actual ω_m")
     _line(ax, t, r["omega_hat"], True, color=C_EST, lw=0.9, ls="--", label="estimated ω̂ (EKF)")
     ax.set_xlim(t[0], t[-1])
     ax.set_title(title)
@@ -274,7 +276,7 @@ def plot_speed_zoom(r, title):
         ax = axes[i // ncols, i % ncols]
         x = t[w] - tc
         ax.plot(x, r["omega_ref"][w], color=C_REF, lw=1.2, label="reference")
-        ax.plot(x, r["omega_m"][w], color=C_ACT, lw=1.0, label="actual")
+        ax.plot(x, r["omega_m"][w], color=C_ACT, lw=1.6, label="actual")
         ax.plot(x, r["omega_hat"][w], color=C_EST, lw=0.9, ls="--", label="estimated")
         ax.axvline(0.0, color="0.5", lw=0.8, ls=":")
         ax.set_xlim(-ZOOM_BEFORE, ZOOM_AFTER)
@@ -328,20 +330,20 @@ def plot_angle(r, title, pole_pairs: int):
             ax.plot(*_break_at_wraps(tf, np.interp(tf, t[sel], cont)), color=colour, lw=lw, label=label)
             ax.plot(t[win], _wrap(r[key][win]), "o", color=colour, ms=4 if key == "theta_e" else 2.5,
                     mfc="none" if key == "theta_e" else colour)
-        note = (f"dots: recorded rows every {dt * 1e3:g} ms; lines: unwrapped with N·ω and "
-                f"interpolated (N = {pole_pairs})")
-        ax.text(0.01, 0.03, note, transform=ax.transAxes, fontsize=7, color="0.3")
+        note = (f"\ndots: rows recorded every {dt * 1e3:.3g} ms; lines: rows unwrapped "
+                f"with N·ω (N = {pole_pairs}) and interpolated")
     ax.set_xlim(t0, t1)
+    ax.ticklabel_format(axis="x", useOffset=False)
     ax.set_ylim(-math.pi * 1.05, math.pi * 1.25)
     ax.set_yticks([-math.pi, -math.pi / 2, 0, math.pi / 2, math.pi])
     ax.set_yticklabels(["−π", "−π/2", "0", "π/2", "π"])
-    ax.set_title(f"last {t1 - t0:.3g} s (~{ANGLE_PERIODS} electrical periods)", fontsize=9)
+    ax.set_title(f"last {(t1 - t0) * 1e3:.3g} ms of the run (~{ANGLE_PERIODS} electrical periods)"
+                 + note, fontsize=8)
     _finish(ax, ylabel="electrical angle [rad]", legend=False)
     ax.legend(loc="upper right", fontsize=8, ncol=2)
 
     err = _wrap(r["theta_hat"] - r["theta_e"])
     _line(ax_err, t, err, True, color="tab:purple", lw=0.8, label="wrap(θ̂ − θ_e)")
-    ax_err.axvspan(t0, t1, color="0.85", zorder=0, label="window above")
     ax_err.set_xlim(t[0], t[-1])
     sec = ax_err.secondary_yaxis("right", functions=(np.degrees, np.radians))
     sec.set_ylabel("[deg]")
