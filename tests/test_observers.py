@@ -170,3 +170,46 @@ def test_speed_pi_limit_and_antiwindup():
     assert sc.integral <= p.i_q_max + p.ki_w * 200.0 * DT  # did not wind up
     # and it leaves saturation as soon as the error reverses
     assert sc.step(0.0, 10.0) < p.i_q_max
+
+
+class DenseEkf:
+    """Eqs 23-27 written literally with numpy, the oracle for the scalar filters."""
+
+    def __init__(self, ekf):
+        self.e = ekf
+        self.x = ekf.x.copy()
+        self.P = ekf.P.copy()
+        n = ekf.n_states
+        self.Q = np.diag(ekf.q)
+        self.R = np.diag([ekf.r0, ekf.r1])
+        self.I = np.eye(n)
+
+    def step(self, v_d, v_q, z):
+        F = self.e.jacobian_f(self.x, v_d, v_q)
+        self.x = self.e.f(self.x, v_d, v_q)  # (23)
+        self.P = F @ self.P @ F.T + self.Q  # (24)
+        H = self.e.jacobian_h(self.x)
+        K = self.P @ H.T @ np.linalg.inv(H @ self.P @ H.T + self.R)  # (25), J_h^T
+        self.x = self.x + K @ (z - self.e.h(self.x))  # (26)
+        self.P = (self.I - K @ H) @ self.P  # (27)
+
+
+@pytest.mark.parametrize("cls", [Ekf5, Ekf4, Ekf5AlphaBeta])
+def test_scalar_filter_equals_dense_eqs_23_to_27(cls):
+    rng = np.random.default_rng(1)
+    ekf = cls(M, DT)
+    dense = DenseEkf(ekf)
+    theta = 0.2
+    for k in range(300):
+        v_d, v_q = -20.0 + rng.normal(), 60.0 + rng.normal()
+        theta += 800.0 * DT
+        i_d, i_q = rng.normal(), 100.0 + rng.normal()
+        c, s = math.cos(theta), math.sin(theta)
+        i_a, i_b = c * i_d - s * i_q, s * i_d + c * i_q
+        z = np.array([i_a, i_b]) if cls is Ekf5AlphaBeta else np.array([i_d, i_q])
+        ekf.predict(v_d, v_q)
+        ekf.correct(i_a, i_b, i_d, i_q)
+        dense.step(v_d, v_q, z)
+        dense.x[3] = (dense.x[3] + math.pi) % (2 * math.pi) - math.pi
+    np.testing.assert_allclose(ekf.x, dense.x, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(ekf.P, dense.P, rtol=1e-7, atol=1e-12)

@@ -35,88 +35,129 @@ ID, IQ, W, TH, TL = range(5)
 
 
 class ExtendedKalmanFilter:
-    """Discrete EKF, steps 23-27; subclasses give f, J_f, h, J_h and the measurement."""
+    """Discrete EKF, steps 23-27, in scalar Python.
+
+    The filter is small (n = 4 or 5) and J_f is the identity plus a few entries, so the
+    covariance work is written out for that sparsity on lists of floats: no numpy on 5x5
+    matrices in the per-step path (numpy's per-call overhead dominates at this size).
+    ``x`` and ``P`` are available as numpy arrays for inspection; ``tests`` keep a dense
+    numpy implementation of eqs 23-27 as the oracle this one is checked against.
+
+    Subclasses give f (``_predict_state``), the entries of J_f (``_jacobian_entries``),
+    h and J_h (``_measurement_update``).
+    """
 
     n_states = 0
 
     def __init__(self, motor: MotorParams, dt: float, q_diag, r_diag, p0_diag, x0=None):
         self.motor = motor
         self.dt = dt
-        self.Q = np.diag(np.asarray(q_diag, dtype=float))
-        self.R = np.diag(np.asarray(r_diag, dtype=float))
-        self._p0 = np.diag(np.asarray(p0_diag, dtype=float))
-        self._x0 = np.zeros(self.n_states) if x0 is None else np.asarray(x0, dtype=float).copy()
-        self._eye = np.eye(self.n_states)
+        n = self.n_states
+        self.q = [float(v) for v in q_diag]
+        self.r0, self.r1 = (float(v) for v in r_diag)
+        self.p0 = [float(v) for v in p0_diag]
+        self.x0 = [0.0] * n if x0 is None else [float(v) for v in x0]
+        m = motor
+        # constants of A2-A6 and A8-A32
+        self._a_rd = 1.0 - m.R_s * dt / m.L_d  # (A8)
+        self._a_rq = 1.0 - m.R_s * dt / m.L_q  # (A14)
+        self._c_wq = m.N * m.L_q * dt / m.L_d  # (A9)/omega, (A10)/i_q
+        self._c_wd = m.N * m.L_d * dt / m.L_q  # (A13)/omega
+        self._c_wpsi = m.N * m.psi * dt / m.L_q  # (A15), psi part
+        self._c_vd = dt / m.L_d
+        self._c_vq = dt / m.L_q
+        self._c_tpsi = m.N * m.psi * dt / m.J_m  # (A19), psi part
+        self._c_tdq = m.N * (m.L_d - m.L_q) * dt / m.J_m  # (A18)/i_q, (A19)/i_d
+        self._c_tl = -dt / m.J_m  # (A22)
+        self._c_th = m.N * dt  # (A25)
         self.reset()
 
     def reset(self) -> None:
-        self.x = self._x0.copy()
-        self.P = self._p0.copy()
-        self.theta_prior = float(self.x[TH])
+        n = self.n_states
+        self._x = list(self.x0)
+        self._P = [[self.p0[i] if i == j else 0.0 for j in range(n)] for i in range(n)]
+        self.theta_prior = self._x[TH]
 
-    # -- model, overridden -------------------------------------------------------
-    def f(self, x, v_d, v_q):  # pragma: no cover - abstract
-        raise NotImplementedError
+    # -- shared model pieces -------------------------------------------------------
+    def _predict_currents(self, i_d, i_q, w, v_d, v_q):
+        """f1, f2 of A2-A3 (forward Euler of eqs 10-11)."""
+        return (self._a_rd * i_d + self._c_wq * w * i_q + self._c_vd * v_d,  # (A2)
+                self._a_rq * i_q - self._c_wd * w * i_d - self._c_wpsi * w + self._c_vq * v_q)  # (A3)
 
-    def jacobian_f(self, x, v_d, v_q):  # pragma: no cover - abstract
-        raise NotImplementedError
-
-    def h(self, x):  # pragma: no cover - abstract
-        raise NotImplementedError
-
-    def jacobian_h(self, x):  # pragma: no cover - abstract
-        raise NotImplementedError
-
-    def measurement(self, i_alpha, i_beta, i_d, i_q):  # pragma: no cover - abstract
-        raise NotImplementedError
-
-    # -- steps 23-27 -------------------------------------------------------------
-    def predict(self, v_d: float, v_q: float) -> None:
-        F = self.jacobian_f(self.x, v_d, v_q)  # J_f at x_{k-1}^e
-        self.x = self.f(self.x, v_d, v_q)  # (23)
-        self.P = F @ self.P @ F.T + self.Q  # (24)
-        self.theta_prior = float(self.x[TH])
-
-    def correct(self, i_alpha, i_beta, i_d, i_q, theta_meas=0.0, omega_meas=0.0) -> None:
-        z = self.measurement(i_alpha, i_beta, i_d, i_q)
-        H = self.jacobian_h(self.x)
-        PHt = self.P @ H.T
-        S = H @ PHt + self.R
-        K = PHt @ np.linalg.inv(S)  # (25), with J_h^T where the paper prints J_h^-1
-        self.x = self.x + K @ (z - self.h(self.x))  # (26)
-        self.P = (self._eye - K @ H) @ self.P  # (27)
-        self.P = 0.5 * (self.P + self.P.T)  # keep P symmetric against round-off
-        self.x[TH] = wrap_angle(self.x[TH])
+    def _update(self, pht, s00, s01, s11, y0, y1) -> None:
+        """Eqs 25-27 from PH^T (n x 2 rows), S = H P H^T + R and the innovation y."""
+        det = s00 * s11 - s01 * s01
+        i00, i01, i11 = s11 / det, -s01 / det, s00 / det  # S^-1
+        x, P = self._x, self._P
+        n = self.n_states
+        K = [(a * i00 + b * i01, a * i01 + b * i11) for a, b in pht]  # (25): P H^T S^-1
+        for i in range(n):
+            k0, k1 = K[i]
+            x[i] += k0 * y0 + k1 * y1  # (26)
+        # (27): P - K (P H^T)^T, symmetric by construction; compute the upper half
+        for i in range(n):
+            k0, k1 = K[i]
+            Pi = P[i]
+            for j in range(i, n):
+                v = Pi[j] - k0 * pht[j][0] - k1 * pht[j][1]
+                Pi[j] = v
+                P[j][i] = v
+        x[TH] = wrap_angle(x[TH])
 
     # -- estimates ---------------------------------------------------------------
     @property
+    def x(self) -> np.ndarray:
+        return np.array(self._x)
+
+    @property
+    def P(self) -> np.ndarray:
+        return np.array(self._P)
+
+    @property
     def i_d_hat(self) -> float:
-        return float(self.x[ID])
+        return self._x[ID]
 
     @property
     def i_q_hat(self) -> float:
-        return float(self.x[IQ])
+        return self._x[IQ]
 
     @property
     def omega_hat(self) -> float:
-        return float(self.x[W])
+        return self._x[W]
 
     @property
     def theta_hat(self) -> float:
-        return float(self.x[TH])
+        return self._x[TH]
 
     @property
     def T_L_hat(self) -> float:
-        return float(self.x[TL]) if self.n_states > TL else 0.0
+        return self._x[TL] if self.n_states > TL else 0.0
 
     def get_state(self) -> tuple:
-        return tuple(self.x.tolist()) + tuple(self.P.ravel().tolist()) + (self.theta_prior,)
+        return tuple(self._x) + tuple(v for row in self._P for v in row) + (self.theta_prior,)
 
     def set_state(self, state) -> None:
         n = self.n_states
-        self.x = np.array(state[:n], dtype=float)
-        self.P = np.array(state[n:n + n * n], dtype=float).reshape(n, n)
+        self._x = [float(v) for v in state[:n]]
+        flat = [float(v) for v in state[n:n + n * n]]
+        self._P = [flat[i * n:(i + 1) * n] for i in range(n)]
         self.theta_prior = float(state[n + n * n])
+
+    # -- the model as functions of a state vector (for tests and inspection) ---------
+    def f(self, x, v_d, v_q) -> np.ndarray:
+        saved = self._x
+        self._x = [float(v) for v in x]
+        try:
+            self._predict_state(v_d, v_q)
+            return np.array(self._x)
+        finally:
+            self._x = saved
+
+    def jacobian_f(self, x, v_d, v_q) -> np.ndarray:
+        F = np.eye(self.n_states)
+        for (i, j), v in self._jacobian_entries(*(float(v) for v in x[:3])).items():
+            F[i, j] = v
+        return F
 
 
 class Ekf5(ExtendedKalmanFilter):
@@ -129,45 +170,70 @@ class Ekf5(ExtendedKalmanFilter):
         super().__init__(motor, dt,
                          (e.q_i, e.q_i, e.q_omega, e.q_theta, e.q_TL), (e.r_i, e.r_i),
                          (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta, e.p0_TL), x0)
-        self._H = np.zeros((2, 5))
-        self._H[0, ID] = self._H[1, IQ] = 1.0
 
-    def f(self, x, v_d, v_q):
-        m, dt = self.motor, self.dt
+    def _predict_state(self, v_d, v_q) -> None:
+        x = self._x
         i_d, i_q, w, th, t_l = x
-        return np.array([
-            i_d - m.R_s * i_d * dt / m.L_d + m.N * w * m.L_q * i_q * dt / m.L_d + v_d * dt / m.L_d,  # (A2)
-            i_q - m.R_s * i_q * dt / m.L_q - m.N * w * m.L_d * i_d * dt / m.L_q
-            - m.N * w * m.psi * dt / m.L_q + v_q * dt / m.L_q,  # (A3)
-            w + (m.N * m.psi * i_q + m.N * (m.L_d - m.L_q) * i_d * i_q - t_l) * dt / m.J_m,  # (A4)
-            th + m.N * w * dt,  # (A5)
-            t_l,  # (A6)
-        ])
+        x[0], x[1] = self._predict_currents(i_d, i_q, w, v_d, v_q)  # (A2), (A3)
+        x[2] = w + self._c_tpsi * i_q + self._c_tdq * i_d * i_q + self._c_tl * t_l  # (A4)
+        x[3] = th + self._c_th * w  # (A5)
+        # x[4] = t_l  (A6)
 
-    def jacobian_f(self, x, v_d, v_q):
-        m, dt = self.motor, self.dt
-        i_d, i_q, w = x[ID], x[IQ], x[W]
-        F = np.eye(5)
-        F[0, 0] = 1.0 - m.R_s * dt / m.L_d  # (A8)
-        F[0, 1] = m.N * w * m.L_q * dt / m.L_d  # (A9)
-        F[0, 2] = m.N * m.L_q * i_q * dt / m.L_d  # (A10)
-        F[1, 0] = -m.N * w * m.L_d * dt / m.L_q  # (A13)
-        F[1, 1] = 1.0 - m.R_s * dt / m.L_q  # (A14)
-        F[1, 2] = -(m.N * m.L_d * i_d + m.N * m.psi) * dt / m.L_q  # (A15)
-        F[2, 0] = m.N * (m.L_d - m.L_q) * i_q * dt / m.J_m  # (A18)
-        F[2, 1] = (m.N * m.psi + m.N * (m.L_d - m.L_q) * i_d) * dt / m.J_m  # (A19)
-        F[2, 4] = -dt / m.J_m  # (A22)
-        F[3, 2] = m.N * dt  # (A25)
-        return F  # all other entries 0 or 1: (A11-12, A16-17, A20-21, A23-24, A26-32)
+    def _jacobian_entries(self, i_d, i_q, w) -> dict:
+        """Off-identity entries of J_f (A8-A32); the rest are 0 or 1."""
+        return {
+            (0, 0): self._a_rd, (0, 1): self._c_wq * w, (0, 2): self._c_wq * i_q,  # (A8-A10)
+            (1, 0): -self._c_wd * w, (1, 1): self._a_rq, (1, 2): -self._c_wd * i_d - self._c_wpsi,  # (A13-A15)
+            (2, 0): self._c_tdq * i_q, (2, 1): self._c_tpsi + self._c_tdq * i_d, (2, 4): self._c_tl,  # (A18, A19, A22)
+            (3, 2): self._c_th,  # (A25)
+        }
 
-    def h(self, x):
-        return x[:2].copy()
+    def predict(self, v_d: float, v_q: float) -> None:
+        """Eqs 23-24: x^f = f(x^e), P^f = J_f P J_f^T + Q, with J_f at x^e_{k-1}."""
+        i_d, i_q, w = self._x[0], self._x[1], self._x[2]
+        # J_f rows (A8-A32): r0 = [f00 f01 f02 0 0], r1 = [f10 f11 f12 0 0],
+        # r2 = [f20 f21 1 0 f24], r3 = [0 0 f32 1 0], r4 = [0 0 0 0 1]
+        f00, f01, f02 = self._a_rd, self._c_wq * w, self._c_wq * i_q
+        f10, f11, f12 = -self._c_wd * w, self._a_rq, -self._c_wd * i_d - self._c_wpsi
+        f20, f21, f24 = self._c_tdq * i_q, self._c_tpsi + self._c_tdq * i_d, self._c_tl
+        f32 = self._c_th
+        self._predict_state(v_d, v_q)  # (23)
+        P0, P1, P2, P3, P4 = self._P
+        # A = J_f P, row by row
+        A0 = [f00 * a + f01 * b + f02 * c for a, b, c in zip(P0, P1, P2)]
+        A1 = [f10 * a + f11 * b + f12 * c for a, b, c in zip(P0, P1, P2)]
+        A2 = [f20 * a + f21 * b + c + f24 * e for a, b, c, e in zip(P0, P1, P2, P4)]
+        A3 = [f32 * c + d for c, d in zip(P2, P3)]
+        A4 = P4
+        # P^f = A J_f^T + Q (24): column j of A J_f^T is A @ (row j of J_f)
+        rows = []
+        for A in (A0, A1, A2, A3, A4):
+            a0, a1, a2, a3, a4 = A
+            rows.append([f00 * a0 + f01 * a1 + f02 * a2,
+                         f10 * a0 + f11 * a1 + f12 * a2,
+                         f20 * a0 + f21 * a1 + a2 + f24 * a4,
+                         f32 * a2 + a3,
+                         a4])
+        q = self.q
+        for i in range(5):
+            rows[i][i] += q[i]
+        self._P = rows
+        self.theta_prior = self._x[TH]
 
-    def jacobian_h(self, x):
-        return self._H  # (A33): [I_2 0]
+    def correct(self, i_alpha, i_beta, i_d, i_q, theta_meas=0.0, omega_meas=0.0) -> None:
+        """Eqs 25-27 with z = [i_d, i_q], h(x) = [x0, x1], J_h = [I_2 0] (A33)."""
+        P = self._P
+        pht = [(row[0], row[1]) for row in P]
+        self._update(pht, P[0][0] + self.r0, P[0][1], P[1][1] + self.r1,
+                     i_d - self._x[0], i_q - self._x[1])
 
-    def measurement(self, i_alpha, i_beta, i_d, i_q):
-        return np.array([i_d, i_q])
+    def h(self, x) -> np.ndarray:
+        return np.array([x[ID], x[IQ]], dtype=float)
+
+    def jacobian_h(self, x) -> np.ndarray:
+        H = np.zeros((2, self.n_states))
+        H[0, ID] = H[1, IQ] = 1.0  # (A33)
+        return H
 
 
 class Ekf5AlphaBeta(Ekf5):
@@ -177,20 +243,30 @@ class Ekf5AlphaBeta(Ekf5):
     observable from the currents alone: the physically sensorless form.
     """
 
-    def h(self, x):
+    def correct(self, i_alpha, i_beta, i_d, i_q, theta_meas=0.0, omega_meas=0.0) -> None:
+        x, P = self._x, self._P
+        c, s = math.cos(x[TH]), math.sin(x[TH])
+        xd, xq = x[ID], x[IQ]
+        # J_h rows: [c, -s, 0, h03, 0], [s, c, 0, h13, 0]
+        h03 = -s * xd - c * xq
+        h13 = c * xd - s * xq
+        pht = [(c * row[0] - s * row[1] + h03 * row[3], s * row[0] + c * row[1] + h13 * row[3]) for row in P]
+        s00 = c * pht[0][0] - s * pht[1][0] + h03 * pht[3][0] + self.r0
+        s01 = c * pht[0][1] - s * pht[1][1] + h03 * pht[3][1]
+        s11 = s * pht[0][1] + c * pht[1][1] + h13 * pht[3][1] + self.r1
+        self._update(pht, s00, s01, s11, i_alpha - (c * xd - s * xq), i_beta - (s * xd + c * xq))
+
+    def h(self, x) -> np.ndarray:
         c, s = math.cos(x[TH]), math.sin(x[TH])
         return np.array([c * x[ID] - s * x[IQ], s * x[ID] + c * x[IQ]])
 
-    def jacobian_h(self, x):
+    def jacobian_h(self, x) -> np.ndarray:
         c, s = math.cos(x[TH]), math.sin(x[TH])
         i_d, i_q = x[ID], x[IQ]
         return np.array([
             [c, -s, 0.0, -s * i_d - c * i_q, 0.0],
             [s, c, 0.0, c * i_d - s * i_q, 0.0],
         ])
-
-    def measurement(self, i_alpha, i_beta, i_d, i_q):
-        return np.array([i_alpha, i_beta])
 
 
 class Ekf4(ExtendedKalmanFilter):
@@ -203,41 +279,47 @@ class Ekf4(ExtendedKalmanFilter):
         super().__init__(motor, dt,
                          (e.q_i, e.q_i, e.q_omega_ekf4, e.q_theta), (e.r_i, e.r_i),
                          (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta), x0)
-        self._H = np.zeros((2, 4))
-        self._H[0, ID] = self._H[1, IQ] = 1.0
 
-    def f(self, x, v_d, v_q):
-        m, dt = self.motor, self.dt
+    def _predict_state(self, v_d, v_q) -> None:
+        x = self._x
         i_d, i_q, w, th = x
-        return np.array([
-            i_d - m.R_s * i_d * dt / m.L_d + m.N * w * m.L_q * i_q * dt / m.L_d + v_d * dt / m.L_d,  # (A2)
-            i_q - m.R_s * i_q * dt / m.L_q - m.N * w * m.L_d * i_d * dt / m.L_q
-            - m.N * w * m.psi * dt / m.L_q + v_q * dt / m.L_q,  # (A3)
-            w,  # no load model: omega is a random walk
-            th + m.N * w * dt,  # (A5)
-        ])
+        x[0], x[1] = self._predict_currents(i_d, i_q, w, v_d, v_q)  # (A2), (A3)
+        # x[2] = w: no load model, omega is a random walk
+        x[3] = th + self._c_th * w  # (A5)
 
-    def jacobian_f(self, x, v_d, v_q):
-        m, dt = self.motor, self.dt
-        i_d, i_q, w = x[ID], x[IQ], x[W]
-        F = np.eye(4)
-        F[0, 0] = 1.0 - m.R_s * dt / m.L_d
-        F[0, 1] = m.N * w * m.L_q * dt / m.L_d
-        F[0, 2] = m.N * m.L_q * i_q * dt / m.L_d
-        F[1, 0] = -m.N * w * m.L_d * dt / m.L_q
-        F[1, 1] = 1.0 - m.R_s * dt / m.L_q
-        F[1, 2] = -(m.N * m.L_d * i_d + m.N * m.psi) * dt / m.L_q
-        F[3, 2] = m.N * dt
-        return F
+    def _jacobian_entries(self, i_d, i_q, w) -> dict:
+        return {
+            (0, 0): self._a_rd, (0, 1): self._c_wq * w, (0, 2): self._c_wq * i_q,
+            (1, 0): -self._c_wd * w, (1, 1): self._a_rq, (1, 2): -self._c_wd * i_d - self._c_wpsi,
+            (3, 2): self._c_th,
+        }
 
-    def h(self, x):
-        return x[:2].copy()
+    def predict(self, v_d: float, v_q: float) -> None:
+        i_d, i_q, w = self._x[0], self._x[1], self._x[2]
+        f00, f01, f02 = self._a_rd, self._c_wq * w, self._c_wq * i_q
+        f10, f11, f12 = -self._c_wd * w, self._a_rq, -self._c_wd * i_d - self._c_wpsi
+        f32 = self._c_th
+        self._predict_state(v_d, v_q)  # (23)
+        P0, P1, P2, P3 = self._P
+        A0 = [f00 * a + f01 * b + f02 * c for a, b, c in zip(P0, P1, P2)]
+        A1 = [f10 * a + f11 * b + f12 * c for a, b, c in zip(P0, P1, P2)]
+        A3 = [f32 * c + d for c, d in zip(P2, P3)]
+        rows = []
+        for A in (A0, A1, P2, A3):
+            a0, a1, a2, a3 = A
+            rows.append([f00 * a0 + f01 * a1 + f02 * a2,
+                         f10 * a0 + f11 * a1 + f12 * a2,
+                         a2,
+                         f32 * a2 + a3])
+        q = self.q
+        for i in range(4):
+            rows[i][i] += q[i]
+        self._P = rows  # (24)
+        self.theta_prior = self._x[TH]
 
-    def jacobian_h(self, x):
-        return self._H
-
-    def measurement(self, i_alpha, i_beta, i_d, i_q):
-        return np.array([i_d, i_q])
+    correct = Ekf5.correct
+    h = Ekf5.h
+    jacobian_h = Ekf5.jacobian_h
 
 
 class Sensored:
