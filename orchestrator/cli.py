@@ -1,0 +1,287 @@
+"""``pmsm-cosim``: run, build, inspect and plot co-simulations.
+
+Every user error (missing file, bad system file, unknown variable, a value an FMU
+refuses, ...) ends in one line ``error: ...`` on stderr and exit code 2.
+Exit codes of ``run``: 0 completed, 1 failed during the steps, 130 interrupted (Ctrl-C).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from pmsm_ev.params import ParameterError
+from pmsm_ev.scenarios import ProfileError
+
+from .errors import CosimError, one_line
+from .system import ALGORITHMS, PACKAGED_SCENARIOS, load_system, project_fmu_dir
+
+#: the instances --plant and --controller replace the FMU of
+PLANT_INSTANCE = "plant"
+CONTROLLER_INSTANCE = "ctrl"
+EXIT_USER_ERROR = 2
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+
+def _err(message: str) -> int:
+    print(f"error: {one_line(message)}", file=sys.stderr)
+    return EXIT_USER_ERROR
+
+
+def _note(message: str, quiet: bool = False) -> None:
+    if not quiet:
+        print(f"note: {message}", file=sys.stderr)
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0 (got {text})")
+    return value
+
+
+# --- FMU building -------------------------------------------------------------------
+
+def _load_builder():
+    """pmsm_ev_fmus.build.build_all, or None when the project's FMU build is not importable."""
+    try:
+        from pmsm_ev_fmus.build import build_all  # noqa: PLC0415
+    except ImportError:
+        return None
+    return build_all
+
+
+def ensure_fmus(spec, quiet: bool = False) -> None:
+    """Build (or bring up to date) the project's FMUs a system uses, before loading it."""
+    fmu_dir = project_fmu_dir()
+    needed = [c for c in spec.components if c.fmu.parent == fmu_dir]
+    if not needed:
+        return
+    build_all = _load_builder()
+    if build_all is None:
+        for c in needed:
+            if not c.fmu.is_file():
+                raise CosimError(f"{c.name}: FMU not found: {c.fmu} (and the project's FMU build, "
+                                 f"pmsm_ev_fmus.build, is not importable)")
+        return
+    missing = [c for c in needed if not c.fmu.is_file()]
+    if missing:
+        _note(f"building FMUs into {fmu_dir} ...", quiet)
+    try:
+        build_all(out_dir=fmu_dir)
+    except Exception as exc:
+        raise CosimError(f"building the FMUs failed: {type(exc).__name__}: {exc}") from None
+    for c in needed:
+        if not c.fmu.is_file():
+            raise CosimError(f"{c.name}: FMU not found: {c.fmu} (not among the project's built FMUs)")
+
+
+# --- figures ---------------------------------------------------------------------------
+
+def draw_figures(run_dir: Path, scenario_label, quiet: bool = False) -> list[Path] | None:
+    """Figures of a run via pmsm_ev.figures.make_figures; None (with a note) if unavailable."""
+    try:
+        from pmsm_ev.figures import make_figures  # noqa: PLC0415
+    except ImportError as exc:
+        _note(f"figures skipped: pmsm_ev.figures is not available ({exc})", quiet)
+        return None
+    try:
+        return make_figures(run_dir, scenario_label=scenario_label)
+    except Exception as exc:  # a run too short to plot must not fail the run
+        _note(f"figures skipped: {one_line(exc)}", quiet)
+        return None
+
+
+# --- commands --------------------------------------------------------------------------
+
+def cmd_run(a) -> int:
+    from .master import Master  # noqa: PLC0415
+    from .progress import ProgressBar  # noqa: PLC0415
+
+    spec = load_system(a.system)
+    if a.plant:
+        spec.set_fmu(PLANT_INSTANCE, a.plant)
+    if a.controller:
+        spec.set_fmu(CONTROLLER_INSTANCE, a.controller)
+    for assignment in a.fmu or ():
+        inst, sep, path = assignment.partition("=")
+        if not sep or not path:
+            raise CosimError(f"--fmu {assignment!r}: expected INSTANCE=FMU")
+        spec.set_fmu(inst.strip(), path.strip())
+    if a.stop_time is not None:
+        spec.stop_time = a.stop_time
+    if a.step is not None:
+        spec.step_size = a.step
+    if a.output_interval is not None:
+        spec.output_interval = a.output_interval
+    if a.algorithm is not None:
+        spec.algorithm = a.algorithm
+    for assignment in a.set or ():
+        spec.set_start(assignment)
+    for assignment in a.profile or ():
+        spec.set_signal_csv(assignment)
+    out = Path(a.out) if a.out else Path("runs") / spec.name
+    ensure_fmus(spec, a.quiet)
+    master = Master(spec)
+    if not a.quiet:
+        for w in master.warnings:
+            _note(w)
+    progress = ProgressBar(spec.stop_time) if ProgressBar.wanted(a.quiet) else None
+    m = master.run(out, progress=progress,
+                   extra_settings={"command_line": {"set": list(a.set or ()), "profile": list(a.profile or ())}})
+    figures = None
+    if not a.no_figures and m["rows"] >= 2:
+        figures = draw_figures(out, spec.name, a.quiet)
+    fig_note = f", {len(figures)} figures" if figures else ""
+    print(f"{m['status']}: {m['macro_steps']} steps in {m['wall_time_s']:.2f} s "
+          f"({m['us_per_step']:.1f} us/step), {m['rows']} rows{fig_note}; results in {out}")
+    if m["status"] == "completed":
+        return 0
+    return EXIT_INTERRUPTED if m["status"] == "interrupted" else EXIT_FAILED
+
+
+def cmd_build(a) -> int:
+    build_all = _load_builder()
+    if build_all is None:
+        raise CosimError("the project's FMU build (pmsm_ev_fmus.build) is not importable")
+    kwargs = {"force": a.force, "out_dir": project_fmu_dir()}
+    if a.names:
+        kwargs["names"] = a.names
+    try:
+        paths = build_all(**kwargs)
+    except (CosimError, ParameterError, ProfileError):
+        raise
+    except Exception as exc:
+        raise CosimError(f"building the FMUs failed: {type(exc).__name__}: {exc}") from None
+    for name, path in paths.items():
+        print(f"{name}: {path}")
+    return 0
+
+
+def cmd_info(a) -> int:
+    from .fmu import read_description, variable_unit  # noqa: PLC0415
+
+    md = read_description(Path(a.fmu))
+    cs = md.coSimulation
+    print(f"{md.modelName} (FMI {md.fmiVersion}, co-simulation, model identifier {cs.modelIdentifier})")
+    if md.description:
+        print(f"  {md.description}")
+    print(f"  generated by {md.generationTool or '?'}; guid {md.guid}")
+    if md.defaultExperiment is not None:
+        de = md.defaultExperiment
+        print(f"  default experiment: start {de.startTime}, stop {de.stopTime}, step {de.stepSize}")
+    rows = [("name", "causality", "variability", "type", "unit", "start", "description")]
+    order = {"input": 0, "output": 1, "parameter": 2, "calculatedParameter": 3, "local": 4, "independent": 5}
+    variables = sorted(md.modelVariables, key=lambda v: (order.get(v.causality, 9), v.valueReference))
+    if a.causality:
+        variables = [v for v in variables if v.causality == a.causality]
+    for v in variables:
+        rows.append((v.name, v.causality, v.variability, v.type, variable_unit(v) or "-",
+                     "-" if v.start is None else str(v.start), v.description or ""))
+    widths = [max(len(r[i]) for r in rows) for i in range(6)]
+    for r in rows:
+        print("  " + "  ".join(r[i].ljust(widths[i]) for i in range(6)) + "  " + r[6])
+    return 0
+
+
+def cmd_plot(a) -> int:
+    run_dir = Path(a.dir)
+    if not run_dir.exists():
+        raise CosimError(f"{run_dir}: no such run directory")
+    label = a.scenario
+    if label is None:
+        try:
+            label = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8")).get("scenario")
+        except (OSError, ValueError):
+            label = None
+    try:
+        from pmsm_ev.figures import make_figures  # noqa: PLC0415
+    except ImportError as exc:
+        raise CosimError(f"figures are not available (pmsm_ev.figures: {exc})") from None
+    try:
+        paths = make_figures(run_dir, scenario_label=label)
+    except ValueError as exc:  # FiguresError
+        raise CosimError(str(exc)) from None
+    for p in paths:
+        print(p)
+    return 0
+
+
+# --- parser ------------------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="pmsm-cosim",
+        description="Co-simulate the PMSM EV drive FMUs (FMI 2.0) with a fixed-step master.",
+        epilog="Run 'pmsm-cosim COMMAND --help' for the options of a command.")
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    r = sub.add_parser("run", help="co-simulate a scenario or a system file",
+                       description="Co-simulate a shipped scenario (scenario1, scenario2) or a system file "
+                                   "(TOML, see docs/system-file.md); write OUT/results.csv, OUT/metrics.json "
+                                   "and OUT/figures/*.png. Missing project FMUs are built first.")
+    r.add_argument("system", metavar="SCENARIO_OR_SYSTEM",
+                   help=f"{' or '.join(PACKAGED_SCENARIOS)}, or the path of a system file")
+    r.add_argument("--plant", metavar="FMU", help=f"FMU of the instance '{PLANT_INSTANCE}'")
+    r.add_argument("--controller", metavar="FMU",
+                   help=f"FMU of the instance '{CONTROLLER_INSTANCE}' (e.g. fmus/FocEkf4.fmu swaps the observer)")
+    r.add_argument("--fmu", action="append", metavar="INSTANCE=FMU", help="FMU of any instance (repeatable)")
+    r.add_argument("--stop-time", type=_positive, metavar="S", help="stop time [s] (default: the system file's)")
+    r.add_argument("--step", type=_positive, metavar="S", help="base communication step [s]")
+    r.add_argument("--algorithm", choices=ALGORITHMS, help="coupling (default: the system file's, gauss-seidel)")
+    r.add_argument("--output-interval", type=_positive, metavar="S", help="recording interval [s]")
+    r.add_argument("--set", action="extend", nargs="+", metavar="INSTANCE.VAR=VALUE",
+                   help="start value of an FMU variable, e.g. ctrl.angle_source=estimated plant.omega_m0=200")
+    r.add_argument("--profile", action="append", metavar="SIGNAL=CSV",
+                   help="take a scenario signal from a (time, value) CSV file in the signal's unit, "
+                        "e.g. delta=route.csv (repeatable)")
+    r.add_argument("--out", metavar="DIR", help="output directory (default: runs/<scenario name>)")
+    r.add_argument("--no-figures", action="store_true", help="do not draw figures")
+    r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes")
+    r.set_defaults(func=cmd_run)
+
+    b = sub.add_parser("build", help="build the project's FMUs into fmus/",
+                       description="Build the project's FMUs (pmsm_ev_fmus.build.build_all); "
+                                   "only those whose sources changed unless --force.")
+    b.add_argument("--force", action="store_true", help="rebuild even when up to date")
+    b.add_argument("names", nargs="*", metavar="NAME", help="build only these FMUs (default: all)")
+    b.set_defaults(func=cmd_build)
+
+    i = sub.add_parser("info", help="list an FMU's variables",
+                       description="Print an FMU's model information and its variables with causality, "
+                                   "variability, type, unit, start value and description.")
+    i.add_argument("fmu", metavar="FMU", help="the .fmu file")
+    i.add_argument("--causality", choices=("input", "output", "parameter", "calculatedParameter", "local"),
+                   help="only variables of this causality")
+    i.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("plot", help="draw the figures of an existing run",
+                       description="Draw the figures of a run directory (DIR/results.csv) into DIR/figures.")
+    p.add_argument("dir", metavar="DIR", help="run directory")
+    p.add_argument("--scenario", metavar="LABEL",
+                   help="scenario1/scenario2 names the figures after the paper's (default: from metrics.json)")
+    p.set_defaults(func=cmd_plot)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (CosimError, ParameterError, ProfileError) as exc:
+        return _err(str(exc))
+    except OSError as exc:
+        return _err(f"{exc.filename + ': ' if getattr(exc, 'filename', None) else ''}{exc.strerror or exc}")
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,282 @@
+"""One FMU instance on fmpy's FMI 2.0 co-simulation API.
+
+:class:`FmuInstance` reads the model description (cheap, no library loaded) so that a
+system can be checked before anything is instantiated; :meth:`FmuInstance.instantiate`
+then extracts the FMU, loads its library and runs instantiate, setupExperiment, the
+start values, enterInitializationMode; :meth:`exit_initialization` completes the
+initialization. For the stepping loop it exposes the raw ctypes entry points
+(``get_real``, ``set_real``, ``do_step``) and the instance handle ``handle``: they
+are called with preallocated value-reference and value arrays, no per-call wrapping.
+The FMU's log messages are collected so a refusal can be reported in one line.
+"""
+
+from __future__ import annotations
+
+import ast
+import ctypes
+import re
+import shutil
+import zipfile
+from pathlib import Path
+
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, calloc, free)
+from fmpy.model_description import ValidationError
+
+from .errors import CosimError, close_matches, one_line
+
+STATUS = ("OK", "warning", "discard", "error", "fatal", "pending")
+#: causalities whose value may be set before initialization
+SETTABLE_CAUSALITIES = ("parameter", "input")
+_EXC_REPR = re.compile(r"^([A-Za-z_][A-Za-z0-9_.]*(?:Error|Exception))\((.*)\)$", re.S)
+_EXC_TEXT = re.compile(r"(?:^|: )([A-Za-z_][A-Za-z0-9_]*(?:Error|Exception)): (.*)$")
+#: exception classes whose text alone says it all
+PLAIN_EXCEPTIONS = ("ValueError", "ParameterError", "ProfileError")
+
+
+def _exception_text(cls: str, text: str) -> str:
+    short = cls.rsplit(".", 1)[-1]
+    if short in PLAIN_EXCEPTIONS and text:
+        return text
+    return f"{short}: {text}" if text else short
+
+
+def fmu_reason(message: str) -> str:
+    """The useful part of an FMU log message.
+
+    An exception raised inside a Python FMU shows up either as its repr on the last line
+    (``...\\nValueError('text')``, PythonFMU's own report) or as ``...: ParameterError:
+    text`` (the project's FMUs). This returns ``text``, prefixed by the exception class
+    unless it is a plain value error.
+    """
+    lines = [ln.strip() for ln in str(message).splitlines() if ln.strip()]
+    if not lines:
+        return ""
+    last = lines[-1]
+    m = _EXC_REPR.match(last)
+    if m:
+        cls, args = m.group(1), m.group(2)
+        try:
+            value = ast.literal_eval(args) if args else ""
+        except (ValueError, SyntaxError):
+            value = args
+        return _exception_text(cls, value if isinstance(value, str) else str(value))
+    m = _EXC_TEXT.search(last)
+    if m:
+        return _exception_text(m.group(1), m.group(2).strip())
+    return one_line(message)
+
+
+def variable_unit(sv) -> str:
+    """The unit a variable declares (directly or through its declared type), or ""."""
+    if getattr(sv, "unit", None):
+        return sv.unit
+    dt = getattr(sv, "declaredType", None)
+    return (getattr(dt, "unit", None) or "") if dt is not None else ""
+
+
+def read_description(path: Path, label: str = ""):
+    """fmpy's model description of an FMU file, or a one-line CosimError."""
+    who = f"{label}: " if label else ""
+    if not path.is_file():
+        raise CosimError(f"{who}FMU not found: {path}")
+    try:
+        md = read_model_description(str(path), validate=True)
+    except ValidationError as exc:
+        raise CosimError(f"{who}{path}: invalid modelDescription.xml ({one_line(exc)})") from None
+    except (zipfile.BadZipFile, KeyError, OSError) as exc:
+        raise CosimError(f"{who}{path}: not an FMU ({one_line(exc)})") from None
+    except Exception as exc:  # fmpy raises plain Exceptions for malformed XML
+        raise CosimError(f"{who}{path}: cannot read the model description ({one_line(exc)})") from None
+    if md.fmiVersion != "2.0":
+        raise CosimError(f"{who}{path}: FMI {md.fmiVersion} FMU; only FMI 2.0 is supported")
+    if md.coSimulation is None:
+        raise CosimError(f"{who}{path}: not a co-simulation FMU (no <CoSimulation> element)")
+    return md
+
+
+def convert_start(sv, value, where: str):
+    """A start value in the Python type fmpy's setter of ``sv``'s type expects."""
+    kind = sv.type
+    try:
+        if kind == "Real":
+            if isinstance(value, bool):
+                raise ValueError
+            return float(value)
+        if kind in ("Integer", "Enumeration"):
+            if isinstance(value, bool):
+                raise ValueError
+            if isinstance(value, str):
+                value = float(value) if any(ch in value for ch in ".eE") else int(value, 0)
+            if isinstance(value, float):
+                if not value.is_integer():
+                    raise ValueError
+                value = int(value)
+            return int(value)
+        if kind == "Boolean":
+            if isinstance(value, bool):
+                return value
+            if isinstance(value, (int, float)) and value in (0, 1):
+                return bool(value)
+            if isinstance(value, str) and value.strip().lower() in ("true", "false", "1", "0"):
+                return value.strip().lower() in ("true", "1")
+            raise ValueError
+        if kind == "String":
+            return value if isinstance(value, str) else str(value)
+    except (ValueError, TypeError, OverflowError):
+        pass
+    raise CosimError(f"{where}: {value!r} is not a valid {kind} value")
+
+
+class FmuInstance:
+    """An FMU file, its model description and (after ``instantiate``) a live instance."""
+
+    def __init__(self, name: str, path: Path):
+        self.name = name
+        self.path = Path(path)
+        self.md = read_description(self.path, name)
+        self.variables = {sv.name: sv for sv in self.md.modelVariables}
+        self.model_identifier = self.md.coSimulation.modelIdentifier
+        self.fmu: FMU2Slave | None = None
+        self.unzip_dir: str | None = None
+        self.handle = None
+        self.messages: list[tuple[int, str]] = []  #: (status, text) of every logged message
+        self._initialized = False
+        self._mark = 0
+        self._logger = fmi2CallbackLoggerTYPE(self._log)
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = self._logger
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        # raw ctypes entry points, set by instantiate()
+        self.get_real = self.set_real = self.get_integer = self.get_boolean = self.do_step = None
+
+    # -- model description look-ups ----------------------------------------------
+    def variable(self, name: str, context: str = ""):
+        sv = self.variables.get(name)
+        if sv is None:
+            ctx = f"{context}: " if context else ""
+            raise CosimError(f"{ctx}{self.name} ({self.path.name}) has no variable {name!r}"
+                             f"{close_matches(name, self.variables)}")
+        return sv
+
+    # -- logging -----------------------------------------------------------------
+    def _log(self, env, instance_name, status, category, message):
+        text = message.decode("utf-8", "replace") if message else ""
+        self.messages.append((int(status), text))
+
+    def last_problem(self) -> str:
+        """Why the last call failed: the first error (else warning) logged since ``mark``."""
+        recent = self.messages[self._mark:]
+        for threshold in (3, 2, 1):
+            for status, text in recent:
+                if status >= threshold:
+                    return fmu_reason(text)
+        return fmu_reason(recent[-1][1]) if recent else ""
+
+    def mark(self) -> None:
+        """Forget older messages for ``last_problem`` (called before each FMI phase)."""
+        self._mark = len(self.messages)
+
+    def _refused(self, action: str, exc: Exception | None = None) -> CosimError:
+        reason = self.last_problem()
+        if not reason and exc is not None:
+            reason = one_line(exc)
+        return CosimError(f"{self.name} ({self.path.name}): {action} refused" + (f": {reason}" if reason else ""))
+
+    # -- life cycle -------------------------------------------------------------------
+    def instantiate(self, start_time: float, stop_time: float, start_values: dict) -> None:
+        """Extract, load, instantiate, setupExperiment, set start values, enterInitializationMode."""
+        try:
+            self.unzip_dir = extract(str(self.path))
+        except Exception as exc:
+            raise CosimError(f"{self.name}: cannot extract {self.path} ({one_line(exc)})") from None
+        try:
+            self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip_dir,
+                                 modelIdentifier=self.model_identifier, instanceName=self.name)
+        except Exception as exc:
+            raise CosimError(f"{self.name}: cannot load the FMU's binary ({one_line(exc)})") from None
+        try:
+            self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
+        except Exception as exc:
+            raise self._refused("fmi2Instantiate", exc) from None
+        self.handle = self.fmu.component
+        f = self.fmu._functions
+        self.get_real, self.set_real = f["fmi2GetReal"], f["fmi2SetReal"]
+        self.get_integer, self.get_boolean = f["fmi2GetInteger"], f["fmi2GetBoolean"]
+        self.do_step = f["fmi2DoStep"]
+        try:
+            self.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
+        except FMICallException as exc:
+            raise self._refused("fmi2SetupExperiment", exc) from None
+        for var, value in start_values.items():
+            self.set_value(var, value, f"start value {self.name}.{var}")
+        self.mark()
+        try:
+            self.fmu.enterInitializationMode()
+        except FMICallException as exc:
+            raise self._refused("fmi2EnterInitializationMode", exc) from None
+
+    def exit_initialization(self) -> None:
+        self.mark()
+        try:
+            self.fmu.exitInitializationMode()
+        except FMICallException as exc:
+            raise self._refused("fmi2ExitInitializationMode (start values)", exc) from None
+        self._initialized = True
+        self.mark()
+
+    def check_settable(self, name: str, context: str):
+        sv = self.variable(name, context)
+        ok = sv.causality in SETTABLE_CAUSALITIES or (
+            sv.initial in ("exact", "approx") and sv.causality not in ("calculatedParameter", "independent"))
+        if not ok or sv.variability == "constant":
+            raise CosimError(f"{context}: {self.name}.{name} is {sv.variability} {sv.causality} "
+                             f"and cannot be set")
+        return sv
+
+    def set_value(self, name: str, value, context: str) -> None:
+        """Set one variable by its type (Real/Integer/Enumeration/Boolean/String)."""
+        sv = self.check_settable(name, context)
+        value = convert_start(sv, value, context)
+        vr = [sv.valueReference]
+        self.mark()
+        try:
+            if sv.type == "Real":
+                self.fmu.setReal(vr, [value])
+            elif sv.type in ("Integer", "Enumeration"):
+                self.fmu.setInteger(vr, [value])
+            elif sv.type == "Boolean":
+                self.fmu.setBoolean(vr, [value])
+            else:
+                self.fmu.setString(vr, [value])
+        except FMICallException as exc:
+            raise self._refused(f"{name} = {value!r}", exc) from None
+
+    def close(self) -> None:
+        """Terminate and free the instance, unload the library, delete the extracted files."""
+        if self.fmu is not None:
+            try:
+                if self._initialized:
+                    self.fmu.terminate()
+            except Exception:
+                pass
+            try:
+                self.fmu.freeInstance()
+            except Exception:
+                pass
+            self.fmu = None
+            self.handle = None
+        if self.unzip_dir is not None:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            self.unzip_dir = None
+
+
+def real_array(values) -> ctypes.Array:
+    return (ctypes.c_double * len(values))(*values)
+
+
+def vr_array(refs) -> ctypes.Array:
+    return (ctypes.c_uint * len(refs))(*refs)

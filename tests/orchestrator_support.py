@@ -1,0 +1,48 @@
+"""Helpers for the orchestrator's tests: toy FMUs (built once per session) and system files."""
+
+from __future__ import annotations
+
+import atexit
+import functools
+import shutil
+import tempfile
+from pathlib import Path
+
+TOY_SOURCES = Path(__file__).parent / "toy_fmus"
+
+
+@functools.lru_cache(maxsize=None)
+def toy_fmus() -> dict[str, Path]:
+    """{"ToySource": path, "ToySink": path}, built with pythonfmu into a temporary directory."""
+    from pythonfmu.builder import FmuBuilder
+
+    out = Path(tempfile.mkdtemp(prefix="toy_fmus_"))
+    atexit.register(shutil.rmtree, out, True)
+    return {name: Path(FmuBuilder.build_FMU(TOY_SOURCES / f"{name}.py", dest=out))
+            for name in ("ToySource", "ToySink")}
+
+
+def toy_system(tmp_path: Path, *, order=("src", "snk"), algorithm="gauss-seidel", stop_time=0.01,
+               step=1e-3, output_interval=None, src_multiple=1, snk_multiple=1, signals="",
+               record=None, connections=('"src.y -> snk.u"',), snk_start="", name="toy") -> Path:
+    """Write a system file of ToySource 'src' -> ToySink 'snk' and return its path."""
+    fmus = toy_fmus()
+    comps = {
+        "src": f'[[components]]\nname = "src"\nfmu = "{fmus["ToySource"]}"\nstep_multiple = {src_multiple}\n',
+        "snk": f'[[components]]\nname = "snk"\nfmu = "{fmus["ToySink"]}"\nstep_multiple = {snk_multiple}\n'
+               + (f"start = {{ {snk_start} }}\n" if snk_start else ""),
+    }
+    record = record or {
+        "time": '"time"', "y": '"src.y"', "src_calls": '"src.calls"', "last_u": '"snk.last_u"',
+        "snk_calls": '"snk.calls"', "last_h": '"snk.last_h"', "last_t": '"snk.last_t"',
+    }
+    text = f'name = "{name}"\nconnections = [{", ".join(connections)}]\n\n'
+    text += "[experiment]\n"
+    text += f"step_size = {step!r}\nstop_time = {stop_time!r}\n"
+    text += f"output_interval = {output_interval if output_interval is not None else step!r}\n"
+    text += f'algorithm = "{algorithm}"\n\n'
+    text += "\n".join(comps[c] for c in order) + "\n" + signals + "\n[record]\n"
+    text += "\n".join(f"{k} = {v}" for k, v in record.items()) + "\n"
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
