@@ -1,0 +1,11 @@
+"""FMI 2.0 co-simulation units of the drive: pythonfmu slaves around ``pmsm_ev`` and
+their build (``build_all``, ``main``; see ``pmsm_ev_fmus.build``).
+
+FMUs: ``PmsmEvPlant`` (vehicle + PMSM) and one controller-plus-observer FMU per observer,
+all with one interface: ``FocEkf5`` (the paper's EKF), ``FocEkf4``, ``FocEkf5AB``,
+``FocSensored``.
+"""
+
+from .build import FMUS, OBSERVER_FMUS, BuildError, build_all, build_fmu, default_out_dir, main
+
+__all__ = ["FMUS", "OBSERVER_FMUS", "BuildError", "build_all", "build_fmu", "default_out_dir", "main"]

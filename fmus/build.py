@@ -1,0 +1,339 @@
+"""Build the project's FMUs with pythonfmu: ``build_all`` and the CLI ``main``.
+
+Each FMU is self-contained: its ``resources/`` holds the slave script, the ``fmus``
+modules it imports and a copy of the ``pmsm_ev`` package, all renamed with an 8-hex
+content hash (``pmsm_ev_<hash>``, ``pmsm_ev_fmus_<module>_<hash>``), so that
+
+* it runs with a Python interpreter that has numpy but not this project, and
+* FMUs of different builds, and the installed project, share one interpreter (one
+  ``sys.modules``) without colliding.
+
+The hash covers everything that goes into the FMU: the slave script, the ``fmus``
+modules, the ``pmsm_ev`` sources, this build module and the pythonfmu version. It is
+stored in ``resources/build_info.json``; ``build_all`` rebuilds an FMU only when the hash
+differs (or ``force``). The modelDescription is written by the slaves themselves
+(``slave_support.DriveSlave.to_xml``: units, dependencies, InitialUnknowns); the build
+validates every FMU with ``fmpy.validation`` before it replaces the old file.
+
+Usage::
+
+    python -m pmsm_ev_fmus [--out DIR] [--force] [NAME ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import hashlib
+import html
+import importlib
+import json
+import os
+import re
+import shutil
+import sys
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+BUILD_INFO = "build_info.json"
+PROJECT_MODULE_PREFIX = "pmsm_ev_fmus"
+PHYSICS_PACKAGE = "pmsm_ev"
+
+#: FMU name -> (slave script in this package, can handle a variable communication step size)
+FMUS: dict[str, tuple[str, bool]] = {
+    "PmsmEvPlant": ("pmsm_ev_plant.py", True),
+    "FocEkf5": ("foc_ekf5.py", False),
+    "FocEkf4": ("foc_ekf4.py", False),
+    "FocEkf5AB": ("foc_ekf5ab.py", False),
+    "FocSensored": ("foc_sensored.py", False),
+}
+#: observer of each controller FMU (pmsm_ev.params.OBSERVERS)
+OBSERVER_FMUS = {"ekf5": "FocEkf5", "ekf4": "FocEkf4", "ekf5ab": "FocEkf5AB", "sensored": "FocSensored"}
+
+
+class BuildError(RuntimeError):
+    """An FMU cannot be built."""
+
+
+def default_out_dir() -> Path:
+    """Where FMUs go by default: this package's directory (``fmus/`` in a checkout)."""
+    return HERE
+
+
+def physics_dir() -> Path:
+    """Directory of the ``pmsm_ev`` package (editable or regular install)."""
+    return Path(importlib.import_module(PHYSICS_PACKAGE).__file__).resolve().parent
+
+
+def _pythonfmu_version() -> str:
+    from pythonfmu import __version__
+    return __version__
+
+
+# -- sources and their hash ------------------------------------------------------------
+def _project_imports(source: str, where: str) -> list[str]:
+    """Modules of the project imported by ``source`` (only ``from X import ...`` allowed)."""
+    found = []
+    for node in ast.walk(ast.parse(source, where)):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] in (PHYSICS_PACKAGE, PROJECT_MODULE_PREFIX):
+                    raise BuildError(f"{where}: write 'from {alias.name} import ...' so the build can "
+                                     f"rename it (line {node.lineno})")
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                raise BuildError(f"{where}: relative import on line {node.lineno}; the slave modules "
+                                 f"become top-level modules in the FMU")
+            root = (node.module or "").split(".")[0]
+            if root in (PHYSICS_PACKAGE, PROJECT_MODULE_PREFIX):
+                found.append(node.module)
+    return found
+
+
+def _fmus_modules(script: str) -> list[str]:
+    """The slave script and the modules of this package it needs, recursively (file names)."""
+    order, todo = [], [script]
+    while todo:
+        name = todo.pop()
+        if name in order:
+            continue
+        path = HERE / name
+        if not path.is_file():
+            raise BuildError(f"missing module {path}")
+        order.append(name)
+        for module in _project_imports(path.read_text(encoding="utf-8"), str(path)):
+            if module.startswith(PROJECT_MODULE_PREFIX + "."):
+                todo.append(module.split(".", 1)[1].replace(".", "/") + ".py")
+            elif module == PROJECT_MODULE_PREFIX:
+                raise BuildError(f"{path}: import from a module of {PROJECT_MODULE_PREFIX}, not the package")
+    return order
+
+
+def _physics_files(script: str) -> list[Path]:
+    """The ``pmsm_ev`` modules the slave needs: those the ``fmus`` modules import and,
+    recursively, their relative imports (plus ``__init__.py``)."""
+    root = physics_dir()
+    todo = ["__init__"]
+    for module in _fmus_modules(script):
+        for imported in _project_imports((HERE / module).read_text(encoding="utf-8"), module):
+            head, _, rest = imported.partition(".")
+            if head == PHYSICS_PACKAGE and rest:
+                todo.append(rest.split(".")[0])
+    seen: set[str] = set()
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        path = root / f"{name}.py"
+        if not path.is_file():
+            raise BuildError(f"missing module {path}")
+        seen.add(name)
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                if node.module:
+                    todo.append(node.module.split(".")[0])
+                else:
+                    todo.extend(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level > 1:
+                raise BuildError(f"{path}:{node.lineno}: import from outside the package")
+    return sorted(root / f"{name}.py" for name in seen)
+
+
+def source_hash(name: str) -> str:
+    """SHA-256 over everything an FMU is made of (see the module doc)."""
+    script, variable_step = FMUS[name]
+    h = hashlib.sha256()
+
+    def add(label: str, data: bytes) -> None:
+        h.update(f"{label}\0{len(data)}\0".encode())
+        h.update(data)
+
+    add("format", b"pmsm-ev-fmus 1")
+    add("fmu", f"{name} {script} {variable_step}".encode())
+    add("pythonfmu", _pythonfmu_version().encode())
+    add("build.py", Path(__file__).read_bytes())
+    for module in sorted(_fmus_modules(script)):
+        add(f"fmus/{module}", (HERE / module).read_bytes())
+    for path in _physics_files(script):
+        add(f"pmsm_ev/{path.name}", path.read_bytes())
+    return h.hexdigest()
+
+
+def _bundled_module(module: str, tag: str) -> str:
+    root, _, rest = module.partition(".")
+    if root == PHYSICS_PACKAGE:
+        return f"{PHYSICS_PACKAGE}_{tag}" + (f".{rest}" if rest else "")
+    if root == PROJECT_MODULE_PREFIX:
+        return f"{PROJECT_MODULE_PREFIX}_{rest.replace('.', '_')}_{tag}"
+    return module
+
+
+def rewrite_imports(source: str, tag: str, where: str = "<slave>") -> str:
+    """``from pmsm_ev.x import`` -> ``from pmsm_ev_<tag>.x import``, and
+    ``from pmsm_ev_fmus.m import`` -> ``from pmsm_ev_fmus_m_<tag> import``; nothing else."""
+    lines = source.splitlines(keepends=True)
+    for node in ast.walk(ast.parse(source, where)):
+        if isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            new = _bundled_module(node.module, tag)
+            if new == node.module:
+                continue
+            pattern = re.compile(r"^(\s*from\s+)" + re.escape(node.module) + r"(\s+import\b)")
+            line = lines[node.lineno - 1]
+            if not pattern.search(line):
+                raise BuildError(f"{where}:{node.lineno}: cannot rewrite the import of {node.module}")
+            lines[node.lineno - 1] = pattern.sub(lambda m: m.group(1) + new + m.group(2), line, count=1)
+    rewritten = "".join(lines)
+    for module in _project_imports(rewritten, where):
+        raise BuildError(f"{where}: import of {module} left unrenamed")
+    return rewritten
+
+
+# -- building ------------------------------------------------------------------------
+def read_build_info(fmu: Path) -> dict | None:
+    """``resources/build_info.json`` of a built FMU, or None."""
+    try:
+        with zipfile.ZipFile(fmu) as zf:
+            return json.loads(zf.read(f"resources/{BUILD_INFO}").decode("utf-8"))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return None
+
+
+def is_up_to_date(name: str, out_dir=None) -> bool:
+    fmu = Path(out_dir or default_out_dir()) / f"{name}.fmu"
+    info = read_build_info(fmu) if fmu.is_file() else None
+    return info is not None and info.get("hash") == source_hash(name)
+
+
+def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]:
+    """Write the renamed sources into ``stage``; return (script, project files, doc dir)."""
+    script, variable_step = FMUS[name]
+    tag = digest[:8]
+    physics = stage / f"{PHYSICS_PACKAGE}_{tag}"
+    physics.mkdir()
+    files: dict[str, str] = {}
+    for path in _physics_files(script):  # relative imports inside the package: a verbatim copy
+        shutil.copyfile(path, physics / path.name)
+        files[f"{physics.name}/{path.name}"] = hashlib.sha256(path.read_bytes()).hexdigest()
+    project_files: list[Path] = [physics]
+    staged_script = None
+    for module in _fmus_modules(script):
+        source = (HERE / module).read_text(encoding="utf-8")
+        bundled = _bundled_module(f"{PROJECT_MODULE_PREFIX}.{module[:-3]}", tag)
+        target = stage / f"{bundled}.py"
+        target.write_text(rewrite_imports(source, tag, str(HERE / module)), encoding="utf-8")
+        files[target.name] = hashlib.sha256(target.read_bytes()).hexdigest()
+        if module == script:
+            staged_script = target
+        else:
+            project_files.append(target)
+    info = {
+        "fmu": name,
+        "hash": digest,
+        "tag": tag,
+        "slave_module": staged_script.stem,
+        "physics_package": physics.name,
+        "project_version": importlib.import_module(PHYSICS_PACKAGE).__version__,
+        "pythonfmu": _pythonfmu_version(),
+        "python_built_with": sys.version.split()[0],
+        "files_sha256": files,
+    }
+    info_path = stage / BUILD_INFO
+    info_path.write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
+    project_files.append(info_path)
+    doc = stage / "documentation"
+    doc.mkdir()
+    readme = HERE / "README.md"
+    if readme.is_file():
+        text = readme.read_text(encoding="utf-8")
+        (doc / "README.md").write_text(text, encoding="utf-8")
+        (doc / "index.html").write_text(
+            f"<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{name}</title></head>"
+            f"<body><pre>{html.escape(text)}</pre></body></html>\n", encoding="utf-8")
+    return staged_script, project_files, doc
+
+
+def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]:
+    """Build one FMU into ``out_dir``; return (path, whether it was (re)built)."""
+    if name not in FMUS:
+        raise BuildError(f"unknown FMU {name!r}; choose from {', '.join(FMUS)}")
+    out = Path(out_dir or default_out_dir())
+    out.mkdir(parents=True, exist_ok=True)
+    target = out / f"{name}.fmu"
+    digest = source_hash(name)
+    if not force and target.is_file() and (read_build_info(target) or {}).get("hash") == digest:
+        return target, False
+
+    from pythonfmu import FmuBuilder  # noqa: PLC0415 - only needed when building
+
+    (out / ".build").mkdir(exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f"{name}-", dir=out / ".build"))
+    saved_path, saved_modules = list(sys.path), set(sys.modules)
+    try:
+        script, project_files, doc = _stage(name, digest, stage)
+        built = FmuBuilder.build_FMU(
+            script, dest=stage / f"{name}.fmu", project_files=project_files, documentation_folder=doc,
+            canGetAndSetFMUstate=True, canSerializeFMUstate=True,
+            canHandleVariableCommunicationStepSize=FMUS[name][1])
+        _check(built, name)
+        os.replace(built, target)
+    finally:
+        # pythonfmu imports the staged modules and puts the stage on sys.path: undo both
+        sys.path[:] = saved_path
+        tag = digest[:8]
+        for module in set(sys.modules) - saved_modules:
+            if module.endswith(f"_{tag}") or f"_{tag}." in module:
+                del sys.modules[module]
+        shutil.rmtree(stage, ignore_errors=True)
+        try:
+            (out / ".build").rmdir()
+        except OSError:
+            pass  # another build is using it
+    return target, True
+
+
+def _check(fmu: Path, name: str) -> None:
+    from fmpy.validation import validate_fmu  # noqa: PLC0415
+
+    problems = validate_fmu(str(fmu))
+    if problems:
+        raise BuildError(f"{name}.fmu does not validate: " + "; ".join(problems))
+
+
+def build_all(out_dir=None, force: bool = False, names=None) -> dict[str, Path]:
+    """Build the FMUs ``names`` (default: all) into ``out_dir`` (default: ``fmus/``),
+    skipping those whose sources did not change unless ``force``; return name -> path."""
+    names = list(FMUS) if names is None else list(names)
+    unknown = [n for n in names if n not in FMUS]
+    if unknown:
+        raise BuildError(f"unknown FMU {', '.join(unknown)}; choose from {', '.join(FMUS)}")
+    return {name: build_fmu(name, out_dir, force)[0] for name in names}
+
+
+def main(argv=None, prog: str | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog or "python -m pmsm_ev_fmus",
+                                 description="Build the FMI 2.0 co-simulation FMUs of the drive (pythonfmu).")
+    ap.add_argument("names", nargs="*", metavar="NAME", help=f"FMUs to build (default: all): {', '.join(FMUS)}")
+    ap.add_argument("--out", default=None, help=f"output directory (default: {default_out_dir()})")
+    ap.add_argument("--force", action="store_true", help="rebuild even if the sources did not change")
+    a = ap.parse_args(argv)
+    names = a.names or list(FMUS)
+    unknown = [n for n in names if n not in FMUS]
+    if unknown:
+        ap.error(f"unknown FMU {', '.join(unknown)}; choose from {', '.join(FMUS)}")
+    for name in names:
+        t0 = time.perf_counter()
+        try:
+            path, built = build_fmu(name, a.out, a.force)
+        except (BuildError, OSError) as exc:
+            print(f"error: {name}: {exc}", file=sys.stderr)
+            return 1
+        state = f"built in {time.perf_counter() - t0:.1f} s" if built else "up to date"
+        print(f"{name}: {state}: {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

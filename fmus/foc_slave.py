@@ -1,0 +1,153 @@
+"""The controller-plus-observer slave shared by FocEkf5, FocEkf4, FocEkf5AB and
+FocSensored: ``pmsm_ev.control_unit.ControlUnit`` as an FMI 2.0 co-simulation unit.
+
+No equations here: ``do_step(t, h)`` is ``ControlUnit.step(i_alpha, i_beta, omega_ref,
+theta_meas, omega_meas)``, then the unit's outputs are copied into the output variables.
+
+The control period is the communication step size: the unit is built at
+``exit_initialization_mode`` (which validates the parameters) and rebuilt, still
+untouched, with ``dt`` = the size of the first ``do_step``; a later step of another size
+(beyond a relative 1e-6, the round-off of masters that compute h = t_next - t) is an
+error.
+"""
+
+from __future__ import annotations
+
+from pmsm_ev import __version__
+from pmsm_ev.control_unit import ControlUnit
+from pmsm_ev.params import ANGLE_SOURCES, DT_DEFAULT, ControllerParams, EkfParams, MotorParams
+from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
+
+#: relative tolerance on the communication step size after the first step
+STEP_SIZE_RTOL = 1.0e-6
+
+DESCRIPTION = (
+    "Speed and current control of a sensorless EV drive (Wicaksono, Harini, Yusivar, "
+    "'Sensorless PMSM Control using Fifth Order EKF in Electric Vehicle Application'): "
+    "field-oriented control (speed PI, current PIs, decoupling, eqs 14-20) with {observer}. "
+    "One control period per communication step: fmi2DoStep(t, h) reads the inputs at t "
+    "(measured currents i_alpha, i_beta; omega_ref; theta_meas, omega_meas, used only with "
+    "angle_source = 'measured' or by the sensored observer), runs the observer and the "
+    "controller, and sets the voltage v_alpha, v_beta that the plant must hold over [t, t+h]. "
+    "The outputs change only inside fmi2DoStep, so no output depends directly on an input at the "
+    "same communication point (a one-step delay, as in a sampled drive); before the first step "
+    "all outputs are 0. The sample period dt of the controller and observer is the size of the "
+    "first communication step; every later step must have the same size (relative tolerance 1e-6), "
+    "otherwise fmi2DoStep fails. The parameters of the motor are the controller's model of the "
+    "motor and need not equal the plant's. A Python FMU (pythonfmu): it needs a Python 3 "
+    "interpreter with numpy; the project code it runs is bundled in resources/."
+)
+
+
+class FocSlave(DriveSlave):
+    """FMU slave around ``ControlUnit`` with the observer given by the subclass."""
+
+    def __init__(self, observer: str, observer_text: str, parameter_notes=None, **kwargs):
+        super().__init__(**kwargs)
+        self.parameter_notes.update(parameter_notes or {})
+        self.description = DESCRIPTION.format(observer=observer_text)
+        self.version = __version__
+        self._observer = observer
+
+        self.add_input("i_alpha", "A", "measured stator current, alpha axis (stationary frame)")
+        self.add_input("i_beta", "A", "measured stator current, beta axis (stationary frame)")
+        self.add_input("omega_ref", "rad/s", "mechanical speed reference", display_unit="rpm")
+        self.add_input("theta_meas", "rad", "measured electrical rotor angle (angle_source 'measured', "
+                                            "sensored observer)")
+        self.add_input("omega_meas", "rad/s", "measured mechanical rotor speed (sensored observer)",
+                       display_unit="rpm")
+
+        hold = ", computed at the last step"
+        self.add_output("v_alpha", "V", "commanded stator voltage, alpha axis, to be held until the next "
+                                        "step (inverse Park at the control angle advanced by angle_advance "
+                                        "periods)", discrete=True)
+        self.add_output("v_beta", "V", "commanded stator voltage, beta axis, to be held until the next step",
+                        discrete=True)
+        self.add_output("v_d", "V", "commanded d-axis voltage (eq 19, limited to u_max)" + hold, discrete=True)
+        self.add_output("v_q", "V", "commanded q-axis voltage (eq 20, limited to u_max)" + hold, discrete=True)
+        self.add_output("i_d_hat", "A", "observer estimate of the d-axis current" + hold, discrete=True)
+        self.add_output("i_q_hat", "A", "observer estimate of the q-axis current" + hold, discrete=True)
+        self.add_output("omega_hat", "rad/s", "observer estimate of the mechanical speed" + hold,
+                        discrete=True, display_unit="rpm")
+        self.add_output("theta_hat", "rad", "observer estimate of the electrical angle" + hold, discrete=True)
+        self.add_output("T_L_hat", "N.m", "observer estimate of the load torque (0 for observers without "
+                                          "a load state)" + hold, discrete=True)
+        self.add_output("i_d", "A", "d-axis current as the controller sees it (measured currents, Park at "
+                                    "the control angle)" + hold, discrete=True)
+        self.add_output("i_q", "A", "q-axis current as the controller sees it" + hold, discrete=True)
+        self.add_output("i_qref", "A", "q-current reference from the speed PI (eq 14), limited to i_q_max"
+                        + hold, discrete=True)
+
+        self.add_parameters(ControllerParams, EkfParams, MotorParams)
+        self.add_parameter("angle_source", "measured")
+        self._unit = None
+        self._dt = None  # sample period, fixed by the first do_step
+
+    # -- physics hooks ---------------------------------------------------------------
+    def build(self) -> None:
+        self._build_unit(DT_DEFAULT)
+        self._dt = None
+
+    def _build_unit(self, dt: float) -> None:
+        if self.angle_source not in ANGLE_SOURCES:  # ControlUnit checks it too; say which value
+            raise FmuUsageError(f"angle_source must be one of {ANGLE_SOURCES} (got {self.angle_source!r})")
+        self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
+                                 self.parameters(ControllerParams), self.parameters(EkfParams), dt)
+        self.mark_built()
+        self._copy_outputs()
+
+    def physics_state(self):
+        return {"dt": self._dt, "unit_dt": self._unit.dt, "unit": list(self._unit.get_state())}
+
+    def restore_physics(self, snapshot) -> None:
+        if self._unit is None or self.needs_rebuild() or self._unit.dt != snapshot["unit_dt"]:
+            self._build_unit(snapshot["unit_dt"])
+        self._unit.set_state(snapshot["unit"])
+        self._dt = snapshot["dt"]
+        self._copy_outputs()
+
+    def forget_physics(self) -> None:
+        self._unit = None
+        self._dt = None
+
+    def _copy_outputs(self) -> None:
+        u = self._unit
+        self.v_alpha = u.v_alpha
+        self.v_beta = u.v_beta
+        self.v_d = u.v_d
+        self.v_q = u.v_q
+        self.i_d = u.i_d
+        self.i_q = u.i_q
+        self.i_qref = u.i_qref
+        self.i_d_hat, self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat = u.estimates
+
+    def _fix_sample_period(self, step_size: float) -> None:
+        if not self._initialized:
+            raise FmuUsageError("fmi2DoStep before fmi2ExitInitializationMode")
+        if self._dt is None:  # first step: the unit is untouched, rebuild it with dt = h
+            if step_size != self._unit.dt:
+                self._build_unit(step_size)  # raises ParameterError unless h > 0
+            self._dt = step_size
+        elif not abs(step_size - self._dt) <= STEP_SIZE_RTOL * self._dt:
+            raise FmuUsageError(f"communication step size {step_size!r} s differs from the first one, "
+                                f"{self._dt!r} s, the sample period of the controller")
+
+    # -- FMI -------------------------------------------------------------------------
+    def do_step(self, current_time, step_size):
+        try:
+            if step_size != self._dt:
+                self._fix_sample_period(step_size)
+            u = self._unit
+            u.step(self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
+            self.v_alpha = u.v_alpha
+            self.v_beta = u.v_beta
+            self.v_d = u.v_d
+            self.v_q = u.v_q
+            self.i_d = u.i_d
+            self.i_q = u.i_q
+            self.i_qref = u.i_qref
+            self.i_d_hat, self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat = u.estimates
+        except Exception as exc:
+            self._fail("fmi2DoStep", exc)
+            raise
+        return True

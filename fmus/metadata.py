@@ -1,0 +1,117 @@
+"""Units and descriptions of the FMU variables (data only, no physics).
+
+``PARAMETERS`` describes every field of the parameter dataclasses in ``pmsm_ev.params``
+that an FMU exposes: ``name -> (unit, description)``; ``unit`` is ``None`` for
+dimensionless, Integer, Boolean and String variables. The tests check that every field
+of those dataclasses has an entry here, so a new field in ``pmsm_ev.params`` shows up as
+a failing test rather than as an FMU variable without unit or description.
+
+``UNITS`` holds the SI base-unit exponents written to ``<UnitDefinitions>`` (FMI 2.0,
+section 2.2.2); ``DISPLAY_UNITS`` the display units offered for some of them.
+"""
+
+from __future__ import annotations
+
+import math
+
+#: unit name -> exponents of the SI base units (FMI 2.0 BaseUnit attributes)
+UNITS: dict[str, dict[str, int]] = {
+    "V": {"kg": 1, "m": 2, "s": -3, "A": -1},
+    "A": {"A": 1},
+    "A2": {"A": 2},
+    "rad": {"rad": 1},
+    "rad2": {"rad": 2},
+    "rad/s": {"rad": 1, "s": -1},
+    "rad2/s2": {"rad": 2, "s": -2},
+    "s": {"s": 1},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    "N2.m2": {"kg": 2, "m": 4, "s": -4},
+    "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
+    "m/s": {"m": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2},
+    "m": {"m": 1},
+    "m2": {"m": 2},
+    "kg": {"kg": 1},
+    "kg/m3": {"kg": 1, "m": -3},
+    "kg.m2": {"kg": 1, "m": 2},
+    "Ohm": {"kg": 1, "m": 2, "s": -3, "A": -2},
+    "H": {"kg": 1, "m": 2, "s": -2, "A": -2},
+    "Wb": {"kg": 1, "m": 2, "s": -2, "A": -1},
+    "V/A": {"kg": 1, "m": 2, "s": -3, "A": -2},
+    "V/(A.s)": {"kg": 1, "m": 2, "s": -4, "A": -2},
+    "A.s/rad": {"A": 1, "s": 1, "rad": -1},
+    "A/rad": {"A": 1, "rad": -1},
+}
+
+#: unit name -> [(display unit, factor)], display value = factor * value
+DISPLAY_UNITS: dict[str, list[tuple[str, float]]] = {
+    "rad": [("deg", 180.0 / math.pi)],
+    "rad/s": [("rpm", 30.0 / math.pi)],
+    "m/s": [("km/h", 3.6)],
+}
+
+_T1 = " (Table I)"
+_T2 = " (Table II)"
+
+#: parameter name -> (unit, description); names are the dataclass field names
+PARAMETERS: dict[str, tuple[str | None, str]] = {
+    # MotorParams: Table I of the paper plus the friction terms of eq 8
+    "N": (None, "pole pairs" + _T1),
+    "psi": ("Wb", "permanent-magnet flux linkage [V s/rad]" + _T1),
+    "L_d": ("H", "d-axis inductance" + _T1),
+    "L_q": ("H", "q-axis inductance" + _T1),
+    "R_s": ("Ohm", "stator resistance" + _T1),
+    "J_m": ("kg.m2", "rotor inertia" + _T1),
+    "B_m": ("N.m.s/rad", "viscous friction coefficient of eq 8"),
+    "T_m0": ("N.m", "constant (Coulomb) friction torque of eq 8"),
+    "omega_eps": ("rad/s", "speed scale of the smooth sign of T_m0 (load_model 'physical')"),
+    # VehicleParams: Table II
+    "c_r": (None, "rolling-resistance coefficient" + _T2),
+    "g": ("m/s2", "gravitational acceleration" + _T2),
+    "rho_a": ("kg/m3", "air density" + _T2),
+    "c_d": (None, "aerodynamic drag coefficient" + _T2),
+    "A_f": ("m2", "frontal area" + _T2),
+    "r_w": ("m", "wheel radius" + _T2),
+    "eta": (None, "gear efficiency, in (0, 1]" + _T2),
+    "n_g": (None, "gear ratio, motor speed / wheel speed" + _T2),
+    "m_v": ("kg", "vehicle mass" + _T2),
+    "v_a": ("m/s", "head-wind speed, added to the vehicle speed in the drag force (eq 4)" + _T2),
+    "load_model": (None, "road-load model: 'physical' (rolling resistance and friction oppose motion, "
+                         "drag along the relative air speed) or 'paper' (eqs 3-4 and 8 as printed)"),
+    "v_eps": ("m/s", "speed scale of the smooth sign of rolling resistance (load_model 'physical')"),
+    # PlantParams: numerics and initial state
+    "rk4_substeps": (None, "RK4 sub-steps per communication step"),
+    "i_d0": ("A", "initial d-axis current"),
+    "i_q0": ("A", "initial q-axis current"),
+    "omega_m0": ("rad/s", "initial mechanical rotor speed"),
+    "theta_e0": ("rad", "initial electrical rotor angle"),
+    # ControllerParams: FOC, eqs 14-20
+    "kp_w": ("A.s/rad", "speed PI proportional gain (eq 14)"),
+    "ki_w": ("A/rad", "speed PI integral gain (eq 14)"),
+    "kp_id": ("V/A", "d-current PI proportional gain (eq 15)"),
+    "ki_id": ("V/(A.s)", "d-current PI integral gain (eq 15)"),
+    "kp_iq": ("V/A", "q-current PI proportional gain (eq 16)"),
+    "ki_iq": ("V/(A.s)", "q-current PI integral gain (eq 16)"),
+    "T_d": ("s", "time constant of the decoupling low-pass filters (eqs 17-18)"),
+    "i_d_ref": ("A", "d-current reference"),
+    "i_q_max": ("A", "q-current reference limit"),
+    "u_max": ("V", "voltage-vector magnitude limit"),
+    "decoupling": (None, "decoupling signs: 'physical' (cancels the back-EMF and cross-coupling of eq 11) "
+                         "or 'paper' (eq 20 as printed)"),
+    "angle_advance": (None, "advance of the inverse-Park angle, in control periods of omega_hat"),
+    "zoh_compensation": (None, "lengthen the held voltage vector by a/sin(a), a = omega_e dt/2"),
+    # EkfParams: diagonal covariances of eqs 24-27
+    "q_i": ("A2", "EKF process noise of the currents, per step"),
+    "q_omega": ("rad2/s2", "EKF process noise of the speed, per step (5-state EKFs)"),
+    "q_theta": ("rad2", "EKF process noise of the angle, per step"),
+    "q_TL": ("N2.m2", "EKF process noise of the load torque, per step (5-state EKFs)"),
+    "r_i": ("A2", "EKF measurement noise of the currents"),
+    "p0_i": ("A2", "EKF initial covariance of the currents"),
+    "p0_omega": ("rad2/s2", "EKF initial covariance of the speed"),
+    "p0_theta": ("rad2", "EKF initial covariance of the angle"),
+    "p0_TL": ("N2.m2", "EKF initial covariance of the load torque (5-state EKFs)"),
+    "q_omega_ekf4": ("rad2/s2", "EKF process noise of the speed, per step (EKF4 only)"),
+    # ControlUnit
+    "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
+                           "simulation) or 'estimated' (observer angle, truly sensorless)"),
+}

@@ -1,0 +1,328 @@
+"""Machinery shared by the project's pythonfmu slaves; no physics here.
+
+``DriveSlave`` is a ``pythonfmu.Fmi2Slave`` that adds what the project's FMUs need on
+top of pythonfmu 0.7.0:
+
+* variables declared with unit and description; parameters declared from the
+  ``pmsm_ev.params`` dataclasses, one FMU parameter per field (Real, Integer, Boolean or
+  String after the field's type), fixed after initialisation;
+* a complete modelDescription (``to_xml``): UnitDefinitions and ``unit`` attributes,
+  start values that round-trip exactly (``repr``), ModelStructure with the output
+  dependencies (none: every output is computed inside ``do_step``) and the
+  InitialUnknowns with their dependencies;
+* lean Real access: ``get_real``/``set_real`` index a tuple of bound getters/setters
+  instead of pythonfmu's dict look-up and type test per variable;
+* the physics is built from the parameters (and validated by the dataclasses) at
+  ``exit_initialization_mode``; a ``ParameterError`` is logged and raised;
+* the FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``, JSON-serialisable) holds every
+  variable plus the full state of the wrapped physics (subclass hooks).
+
+Errors: pythonfmu 0.7.0's C wrapper turns every Python exception into ``fmi2Fatal``
+(there is no way to return ``fmi2Error`` from Python) and drops the exception text, so
+the reason is logged first with status ``fmi2Error`` (category ``logStatusError``; the
+wrapper forwards log messages only when the master enables logging). The same wrapper
+releases the Python instance, its class and its log queue when the exception occurs
+and once more in ``fmi2FreeInstance``; ``_fail`` takes one extra reference to each, so
+a master that frees a failed instance does not crash the process.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import functools
+from xml.etree.ElementTree import Element, SubElement
+
+from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave,
+                       Fmi2Variability, Integer, Real, String)
+from pythonfmu.enums import Fmi2Status
+
+from pmsm_ev_fmus.metadata import DISPLAY_UNITS, PARAMETERS, UNITS
+
+AUTHOR = "pmsm-ev-cosim contributors"
+LICENSE = "MIT"
+#: DefaultExperiment of every FMU: the paper's 350 s scenarios at the 10 kHz control rate
+START_TIME, STOP_TIME, STEP_SIZE = 0.0, 350.0, 1.0e-4
+
+_KINDS = {"float": Real, "int": Integer, "bool": Boolean, "str": String}
+
+
+class FmuUsageError(RuntimeError):
+    """An FMI call that the FMU cannot honour (illegal value or call sequence)."""
+
+
+class SimulationError(RuntimeError):
+    """The physics cannot continue (e.g. its state is no longer finite)."""
+
+
+def _wrong_access(name: str, what: str, *_args):
+    raise FmuUsageError(f"variable {name!r} {what}")
+
+
+class DriveSlave(Fmi2Slave):
+    """Base of the project's slaves (abstract: subclasses give the physics hooks).
+
+    Subclasses declare their variables in ``__init__`` and implement ``build`` (make the
+    physics object from the parameters, copy its outputs), ``do_step``,
+    ``physics_state`` and ``restore_physics``.
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.author = AUTHOR
+        self.license = LICENSE
+        self.default_experiment = DefaultExperiment(start_time=START_TIME, stop_time=STOP_TIME,
+                                                    step_size=STEP_SIZE)
+        self._units: dict[str, str | None] = {}
+        self._display_units: dict[str, str] = {}
+        self._start_dependencies: dict[str, tuple[str, ...]] = {}
+        self._parameter_names: list[str] = []
+        self.parameter_notes: dict[str, str] = {}  # name -> text appended to the description
+        self._real_getters: list = []
+        self._real_setters: list = []
+        self._initialized = False
+        self._stale = True  # parameters changed since the physics was built
+        self._built_with = None  # parameter values the physics was built with
+
+    # -- declaring variables ---------------------------------------------------------
+    def _declare(self, var, value, unit=None, display_unit=None):
+        name = var.name
+        if name in self._units:
+            raise ValueError(f"variable {name!r} declared twice")
+        setattr(self, name, value)
+        if var.getter is None:
+            var.getter = functools.partial(getattr, self, name)
+        self._units[name] = unit
+        if display_unit:
+            self._display_units[name] = display_unit
+        vr = len(self.vars)
+        self.register_variable(var, nested=False)
+        assert var.value_reference == vr == len(self._real_getters)
+        if isinstance(var, Real):
+            self._real_getters.append(var.getter)
+            if var.causality == Fmi2Causality.output:
+                self._real_setters.append(functools.partial(_wrong_access, name, "is an output and cannot be set"))
+            else:
+                self._real_setters.append(var.setter)
+        else:
+            self._real_getters.append(functools.partial(_wrong_access, name, f"is not a Real ({type(var).__name__})"))
+            self._real_setters.append(functools.partial(_wrong_access, name, f"is not a Real ({type(var).__name__})"))
+
+    def add_input(self, name: str, unit: str | None, description: str, start: float = 0.0,
+                  display_unit: str | None = None) -> None:
+        """A Real input, continuous; its value is held over each communication step."""
+        var = Real(name, causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
+                   description=description, setter=functools.partial(setattr, self, name))
+        self._declare(var, float(start), unit, display_unit)
+
+    def add_output(self, name: str, unit: str | None, description: str, *, discrete: bool = False,
+                   start: float | None = 0.0, start_dependencies=(), display_unit: str | None = None) -> None:
+        """A Real output. ``start=None``: its initial value is calculated from the parameters
+        named in ``start_dependencies`` (initial="calculated", listed in InitialUnknowns);
+        otherwise it is ``start`` until the first step, whatever the parameters
+        (initial="exact")."""
+        variability = Fmi2Variability.discrete if discrete else Fmi2Variability.continuous
+        initial = Fmi2Initial.calculated if start is None else Fmi2Initial.exact
+        var = Real(name, causality=Fmi2Causality.output, variability=variability, initial=initial,
+                   description=description)
+        if start is None:
+            self._start_dependencies[name] = tuple(start_dependencies)
+        self._declare(var, 0.0 if start is None else float(start), unit, display_unit)
+
+    def add_parameter(self, name: str, value, kind=None, description: str | None = None,
+                      unit: str | None = None) -> None:
+        """A parameter (fixed, initial="exact"); unit and description default to ``metadata``."""
+        known_unit, known_text = PARAMETERS.get(name, (None, None))
+        unit = unit if unit is not None else known_unit
+        description = description or known_text or f"{name} (see pmsm_ev.params)"
+        if name in self.parameter_notes:
+            description += "; " + self.parameter_notes[name]
+        kind = kind or (Boolean if isinstance(value, bool) else Integer if isinstance(value, int)
+                        else Real if isinstance(value, float) else String)
+        if kind is Real:
+            value = float(value)
+        var = kind(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                   initial=Fmi2Initial.exact, description=description,
+                   setter=functools.partial(self._set_parameter, name))
+        self._declare(var, value, unit)
+        self._parameter_names.append(name)
+
+    def add_parameters(self, *groups) -> None:
+        """One parameter per field of each dataclass in ``groups``, default = field default."""
+        for cls in groups:
+            defaults = cls()
+            for f in dataclasses.fields(cls):
+                type_name = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+                self.add_parameter(f.name, getattr(defaults, f.name), _KINDS.get(type_name))
+
+    def _set_parameter(self, name, value) -> None:
+        if value == getattr(self, name):
+            return
+        if self._initialized:
+            raise FmuUsageError(f"parameter {name!r} is fixed: it cannot change after initialisation")
+        setattr(self, name, value)
+        self._stale = True
+
+    def parameters(self, cls):
+        """The dataclass ``cls`` filled from the current parameter values (not validated)."""
+        return cls(**{f.name: getattr(self, f.name) for f in dataclasses.fields(cls)})
+
+    def parameter_values(self) -> tuple:
+        return tuple(getattr(self, name) for name in self._parameter_names)
+
+    def mark_built(self) -> None:
+        """Called by ``build``: the physics now matches the parameters."""
+        self._built_with = self.parameter_values()
+        self._stale = False
+
+    # -- hooks ---------------------------------------------------------------------
+    def build(self) -> None:  # pragma: no cover - abstract
+        """Make the physics from the parameters (raises ParameterError), copy its outputs."""
+        raise NotImplementedError
+
+    def physics_state(self):  # pragma: no cover - abstract
+        """The physics state as a JSON-serialisable snapshot."""
+        raise NotImplementedError
+
+    def restore_physics(self, snapshot) -> None:  # pragma: no cover - abstract
+        """Rebuild the physics if the parameters differ, set its state, copy its outputs."""
+        raise NotImplementedError
+
+    def forget_physics(self) -> None:  # pragma: no cover - abstract
+        """Drop the physics (a state from before initialisation was restored)."""
+        raise NotImplementedError
+
+    def needs_rebuild(self) -> bool:
+        return self._built_with != self.parameter_values()
+
+    # -- FMI calls -------------------------------------------------------------------
+    def _fail(self, where: str, exc: Exception) -> None:
+        """Log why an FMI call fails; keep the objects the C wrapper releases twice alive."""
+        self.log(f"{type(self).__name__} {self.instance_name!r}: {where}: {type(exc).__name__}: {exc}",
+                 Fmi2Status.error)
+        for obj in (self, self.log_queue, type(self)):
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+
+    def exit_initialization_mode(self):
+        try:
+            self.build()  # validates the parameters
+            self._initialized = True
+        except Exception as exc:
+            self._fail("fmi2ExitInitializationMode", exc)
+            raise
+
+    def get_real(self, vrs):
+        try:
+            if self._stale:  # only before initialisation: outputs calculated from parameters
+                self.build()
+            getters = self._real_getters
+            return [getters[vr]() for vr in vrs]
+        except Exception as exc:
+            self._fail("fmi2GetReal", exc)
+            raise
+
+    def set_real(self, vrs, values):
+        try:
+            setters = self._real_setters
+            for vr, value in zip(vrs, values):
+                setters[vr](value)
+        except Exception as exc:
+            self._fail("fmi2SetReal", exc)
+            raise
+
+    def get_integer(self, vrs):
+        return self._guarded("fmi2GetInteger", super().get_integer, vrs)
+
+    def get_boolean(self, vrs):
+        return self._guarded("fmi2GetBoolean", super().get_boolean, vrs)
+
+    def get_string(self, vrs):
+        return self._guarded("fmi2GetString", super().get_string, vrs)
+
+    def set_integer(self, vrs, values):
+        return self._guarded("fmi2SetInteger", super().set_integer, vrs, values)
+
+    def set_boolean(self, vrs, values):
+        return self._guarded("fmi2SetBoolean", super().set_boolean, vrs, values)
+
+    def set_string(self, vrs, values):
+        return self._guarded("fmi2SetString", super().set_string, vrs, values)
+
+    def _guarded(self, where, call, *args):
+        try:
+            return call(*args)
+        except Exception as exc:
+            self._fail(where, exc)
+            raise
+
+    def _get_fmu_state(self):
+        """Every variable, plus the physics state once initialised (JSON-serialisable)."""
+        try:
+            return {
+                "variables": {var.name: getattr(self, var.name) for var in self.vars.values()},
+                "initialized": self._initialized,
+                "physics": self.physics_state() if self._initialized else None,
+            }
+        except Exception as exc:
+            self._fail("fmi2GetFMUstate", exc)
+            raise
+
+    def _set_fmu_state(self, state):
+        try:
+            for name, value in state["variables"].items():
+                setattr(self, name, value)
+            self._initialized = bool(state["initialized"])
+            if self._initialized:
+                self.restore_physics(state["physics"])
+            else:
+                self.forget_physics()
+                self._built_with = None
+                self._stale = True
+        except Exception as exc:
+            self._fail("fmi2SetFMUstate", exc)
+            raise
+
+    # -- modelDescription ------------------------------------------------------------
+    def to_xml(self, model_options=None):
+        root = super().to_xml(model_options or {})
+        variables = list(self.vars.values())
+        index = {var.name: i + 1 for i, var in enumerate(variables)}
+
+        # UnitDefinitions go right after CoSimulation (FMI 2.0 schema order)
+        used = sorted({u for u in self._units.values() if u})
+        definitions = Element("UnitDefinitions")
+        for unit in used:
+            element = SubElement(definitions, "Unit", name=unit)
+            SubElement(element, "BaseUnit", {k: str(v) for k, v in UNITS[unit].items()})
+            for display, factor in DISPLAY_UNITS.get(unit, ()):
+                SubElement(element, "DisplayUnit", name=display, factor=repr(factor))
+        if used:
+            root.insert(list(root).index(root.find("CoSimulation")) + 1, definitions)
+
+        for element in root.find("ModelVariables"):
+            name = element.get("name")
+            typed = element[0]
+            unit = self._units.get(name)
+            if unit:
+                typed.set("unit", unit)
+            if name in self._display_units:
+                typed.set("displayUnit", self._display_units[name])
+            if typed.tag == "Real" and "start" in typed.attrib:
+                typed.set("start", repr(float(getattr(self, name))))  # exact round trip
+
+        structure = root.find("ModelStructure")
+        for child in list(structure):
+            structure.remove(child)
+        outputs = [var for var in variables if var.causality == Fmi2Causality.output]
+        if outputs:
+            node = SubElement(structure, "Outputs")
+            for var in outputs:  # computed inside do_step only: no direct feedthrough
+                SubElement(node, "Unknown", index=str(index[var.name]), dependencies="")
+        calculated = [var for var in outputs if var.initial == Fmi2Initial.calculated]
+        if calculated:
+            node = SubElement(structure, "InitialUnknowns")
+            for var in calculated:
+                deps = sorted(index[n] for n in self._start_dependencies[var.name])
+                SubElement(node, "Unknown", index=str(index[var.name]),
+                           dependencies=" ".join(str(d) for d in deps))
+        return root
