@@ -173,7 +173,7 @@ class Master:
         for comp in s.components:
             inst = self.instances[comp.name]
             for var in comp.start:
-                inst.check_settable(var, f"{where}start value {comp.name}.{var}")
+                inst.check_settable(var, f"start value {comp.name}.{var}")
 
     def _unconnected_inputs(self) -> list[str]:
         driven = {(c.dst, c.dst_var) for c in self.spec.connections}

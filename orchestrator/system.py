@@ -313,6 +313,9 @@ def load_system(path) -> SystemSpec:
     path = Path(path)
     if path.suffix == "" and str(path) in PACKAGED_SCENARIOS:
         path = packaged_scenario(str(path))
+    elif path.suffix == "" and not path.exists():
+        raise CosimError(f"no scenario or system file {str(path)!r}{close_matches(str(path), PACKAGED_SCENARIOS)}; "
+                         f"shipped scenarios: {', '.join(PACKAGED_SCENARIOS)}")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

@@ -46,3 +46,34 @@ def toy_system(tmp_path: Path, *, order=("src", "snk"), algorithm="gauss-seidel"
     path = tmp_path / f"{name}.toml"
     path.write_text(text, encoding="utf-8")
     return path
+
+
+def project_fmus() -> dict[str, Path]:
+    """The project's FMUs, built (or found up to date) by pmsm_ev_fmus.build; skip without it."""
+    import pytest
+
+    try:
+        from pmsm_ev_fmus.build import build_all
+    except ImportError as exc:  # the FMU build is not installed
+        pytest.skip(f"pmsm_ev_fmus.build not importable: {exc}")
+    return _built(build_all)
+
+
+@functools.lru_cache(maxsize=None)
+def _built(build_all) -> dict[str, Path]:
+    return build_all()
+
+
+def plateau_system(tmp_path: Path, delta_deg: float = 0.0, omega_ref: float = 200.0) -> Path:
+    """Scenario 2's system with a constant elevation and a constant speed reference."""
+    from importlib import resources
+
+    text = (resources.files("orchestrator") / "scenarios" / "scenario2.toml").read_text(encoding="utf-8")
+    start, end = text.index("[signals.delta]"), text.index("[record]")
+    signals = (f'[signals.delta]\nunit = "deg"\ntable = [[0.0, {delta_deg!r}]]\ndrives = "plant.delta"\n\n'
+               f'[signals.omega_ref]\nunit = "rad/s"\ntable = [[0.0, {omega_ref!r}]]\ndrives = "ctrl.omega_ref"\n\n')
+    text = text[:start] + signals + text[end:]
+    text = text.replace('name = "scenario2"', 'name = "plateau"')
+    path = tmp_path / "plateau.toml"
+    path.write_text(text, encoding="utf-8")
+    return path

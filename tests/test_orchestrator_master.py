@@ -1,0 +1,261 @@
+"""The master's own mechanics, with toy FMUs (tests/toy_fmus): coupling order, multi-rate,
+scenario signals, start values, load-time checks, recording, failure and interruption."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from orchestrator.errors import CosimError
+from orchestrator.master import Master
+from orchestrator.system import load_system
+from orchestrator_support import toy_system
+from pmsm_ev.results import read_results
+from pmsm_ev.scenarios import Profile
+
+STEP = 1e-3
+
+
+def run(path, out, **kw):
+    m = Master(load_system(path))
+    return m.run(out, catch_sigint=False, **kw), read_results(out)
+
+
+def rows_of(out):
+    return (out / "results.csv").read_text().splitlines()
+
+
+# --- coupling ---------------------------------------------------------------------------
+
+def test_gauss_seidel_reads_the_freshest_outputs(tmp_path):
+    # order src, snk: at step n src advances first (y = n + 1), snk then reads it
+    m, r = run(toy_system(tmp_path, order=("src", "snk")), tmp_path / "out")
+    assert m["status"] == "completed" and m["macro_steps"] == 10
+    assert list(r["y"]) == [float(k) for k in range(11)]
+    assert list(r["last_u"]) == list(r["y"])  # row n: snk saw y after src's step n-1
+
+
+def test_gauss_seidel_order_matters(tmp_path):
+    # order snk, src: snk reads y before src's step -> one step behind
+    _, r = run(toy_system(tmp_path, order=("snk", "src")), tmp_path / "out")
+    assert list(r["last_u"][1:]) == [float(k) for k in range(10)]
+
+
+@pytest.mark.parametrize("order", [("src", "snk"), ("snk", "src")])
+def test_jacobi_reads_the_values_at_t_k(tmp_path, order):
+    _, r = run(toy_system(tmp_path, order=order, algorithm="jacobi"), tmp_path / "out")
+    assert list(r["last_u"][1:]) == [float(k) for k in range(10)]  # independent of the order
+
+
+def test_communication_points_are_step_counter_times_step(tmp_path):
+    step = 1e-4
+    _, r = run(toy_system(tmp_path, step=step, stop_time=0.003), tmp_path / "out")
+    assert list(r["time"]) == [k * step for k in range(31)]
+    assert list(r["last_t"][1:]) == [k * step for k in range(30)]  # never an accumulated sum
+    assert set(r["last_h"][1:]) == {step}
+
+
+# --- multi-rate -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("src_k, snk_k", [(1, 3), (2, 3), (4, 1)])
+def test_multi_rate_step_counts(tmp_path, src_k, snk_k):
+    stop = 0.024
+    m, r = run(toy_system(tmp_path, stop_time=stop, src_multiple=src_k, snk_multiple=snk_k,
+                          record={"time": '"time"', "src_calls": '"src.calls"', "src_n": '"src.n_steps"',
+                                  "snk_calls": '"snk.calls"', "snk_h": '"snk.last_h"', "u_sets": '"snk.u_sets"',
+                                  "last_t": '"snk.last_t"'}),
+               tmp_path / "out")
+    assert m["macro_steps"] == 24
+    assert r["src_calls"][-1] == round(stop / (src_k * STEP))
+    assert r["src_n"][-1] == round(stop / (src_k * STEP))  # an Integer output, recorded
+    assert r["snk_calls"][-1] == round(stop / (snk_k * STEP))
+    assert r["snk_h"][-1] == snk_k * STEP
+    # the slow component's inputs are set only when it steps (y changes at each src step)
+    assert r["u_sets"][-1] <= r["snk_calls"][-1]
+    # and it is stepped at the multiples of its period
+    assert all(round(t / STEP) % snk_k == 0 for t in r["last_t"][1:])
+
+
+def test_multi_rate_stop_time_must_fit_the_slow_step(tmp_path):
+    with pytest.raises(CosimError, match="not a multiple of snk's step"):
+        Master(load_system(toy_system(tmp_path, stop_time=0.010, snk_multiple=3)))
+
+
+# --- scenario signals ---------------------------------------------------------------------------
+
+SIGNALS = '''
+[signals.angle]
+unit = "deg"
+interpolation = "previous"
+table = [[0, 0], [0.0035, 5], [0.007, 5], [0.008, 10]]
+drives = "snk.u"
+
+[signals.ramp]
+interpolation = "linear"
+table = [[0.001, 0.0], [0.006, 1.3]]
+drives = ["snk.w"]
+'''
+
+
+def test_signals_are_profile_values_at_k_times_step_and_set_only_on_change(tmp_path):
+    path = toy_system(tmp_path, connections=(), signals=SIGNALS, stop_time=0.01,
+                      record={"time": '"time"', "angle_deg": '{ from = "signals.angle", unit = "deg" }',
+                              "angle": '"signals.angle"', "ramp": '"signals.ramp"',
+                              "last_u": '"snk.last_u"', "last_w": '"snk.last_w"', "u_sets": '"snk.u_sets"'})
+    m, r = run(path, tmp_path / "out")
+    assert m["status"] == "completed"
+    deg = Profile((0.0, 0.0035, 0.007, 0.008), (0.0, 5.0, 5.0, 10.0), "previous")
+    ramp = Profile((0.001, 0.006), (0.0, 1.3), "linear")
+    for n in range(11):
+        t = n * STEP
+        assert r["angle"][n] == math.radians(deg(t))  # bit-identical
+        assert r["angle_deg"][n] == math.degrees(math.radians(deg(t)))
+        assert r["ramp"][n] == ramp(t)
+        if n:
+            assert r["last_u"][n] == math.radians(deg((n - 1) * STEP))
+            assert r["last_w"][n] == ramp((n - 1) * STEP)
+    # u set at initialization (0), at t = 0.004 (5 deg) and t = 0.008 (10 deg) only
+    assert r["u_sets"][-1] == 3
+
+
+def test_signal_from_csv(tmp_path):
+    csv = tmp_path / "route.csv"
+    csv.write_text("time,angle_deg\n0,0\n0.002,3\n0.005,-4\n")
+    sig = f'[signals.angle]\nunit = "deg"\ncsv = "{csv.name}"\ndrives = "snk.u"\n'
+    path = toy_system(tmp_path, connections=(), signals=sig, stop_time=0.008,
+                      record={"time": '"time"', "angle": '"signals.angle"'})
+    _, r = run(path, tmp_path / "out")
+    assert list(r["angle"]) == [math.radians(d) for d in (0, 0, 3, 3, 3, -4, -4, -4, -4)]
+
+
+# --- start values ------------------------------------------------------------------------------
+
+ECHO = {"time": '"time"', "gain": '"snk.echo_gain"', "count": '"snk.echo_count"',
+        "flag": '"snk.echo_flag"', "label_len": '"snk.echo_label_len"'}
+
+
+def test_start_values_by_type_from_the_system_file(tmp_path):
+    path = toy_system(tmp_path, snk_start='gain = 2.5, count = 3, flag = true, label = "hello"', record=ECHO)
+    _, r = run(path, tmp_path / "out")
+    assert (r["gain"][0], r["count"][0], r["flag"][0], r["label_len"][0]) == (2.5, 3.0, 1.0, 5.0)
+
+
+def test_start_values_from_strings(tmp_path):
+    spec = load_system(toy_system(tmp_path, record=ECHO))
+    for a in ("snk.gain=1e-3", "snk.count=4", "snk.flag=true", "snk.label=abcdefg"):
+        spec.set_start(a)
+    Master(spec).run(tmp_path / "out", catch_sigint=False)
+    r = read_results(tmp_path / "out")
+    assert (r["gain"][0], r["count"][0], r["flag"][0], r["label_len"][0]) == (1e-3, 4.0, 1.0, 7.0)
+
+
+@pytest.mark.parametrize("assignment, message", [
+    ("snk.count=1.5", "not a valid Integer"),
+    ("snk.flag=maybe", "not a valid Boolean"),
+    ("snk.gain=abc", "not a valid Real"),
+    ("snk.calls=1", "cannot be set"),
+    ("snk.gian=1", "did you mean: gain"),
+    ("snkk.gain=1", "did you mean: snk"),
+])
+def test_bad_start_values(tmp_path, assignment, message):
+    spec = load_system(toy_system(tmp_path))
+    with pytest.raises(CosimError, match=message):
+        spec.set_start(assignment)
+        m = Master(spec)
+        m.run(tmp_path / "out", catch_sigint=False)
+
+
+# --- load-time checks ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("connection, message", [
+    ('"src.yy -> snk.u"', r"has no variable 'yy' \(did you mean: y"),
+    ('"src.y -> snk.uu"', r"has no variable 'uu' \(did you mean: u"),
+    ('"srcc.y -> snk.u"', r"unknown instance 'srcc' \(did you mean: src"),
+    ('"snk.u -> src.slope"', "is a input, not an output|not an output"),
+    ('"src.y -> snk.last_u"', "not an input"),
+    ('"src.n_steps -> snk.u"', "only Real variables"),
+])
+def test_connections_are_checked_at_load(tmp_path, connection, message):
+    with pytest.raises(CosimError, match=message) as exc:
+        Master(load_system(toy_system(tmp_path, connections=(connection,))))
+    assert "\n" not in str(exc.value)
+
+
+def test_unknown_recorded_variable(tmp_path):
+    with pytest.raises(CosimError, match=r"no variable 'clls' \(did you mean: calls"):
+        Master(load_system(toy_system(tmp_path, record={"time": '"time"', "c": '"src.clls"'})))
+
+
+def test_an_input_driven_twice_is_refused(tmp_path):
+    sig = '[signals.s]\ntable = [[0, 1]]\ndrives = "snk.u"\n'
+    with pytest.raises(CosimError, match="driven twice"):
+        load_system(toy_system(tmp_path, signals=sig))
+
+
+def test_unconnected_inputs_are_reported(tmp_path):
+    m = Master(load_system(toy_system(tmp_path)))
+    assert any("snk.w" in w for w in m.warnings)
+    m.close()
+
+
+# --- recording --------------------------------------------------------------------------------
+
+def test_rows_every_output_interval_plus_the_stop_time(tmp_path):
+    m, r = run(toy_system(tmp_path, stop_time=0.01, output_interval=0.003), tmp_path / "out")
+    assert list(r["time"]) == [0.0, 3 * STEP, 6 * STEP, 9 * STEP, 10 * STEP]
+    assert m["rows"] == 5
+    assert list(r["y"]) == [0.0, 3.0, 6.0, 9.0, 10.0]
+
+
+def test_output_interval_must_be_a_multiple_of_the_step(tmp_path):
+    with pytest.raises(CosimError, match="output interval"):
+        Master(load_system(toy_system(tmp_path, output_interval=0.0015)))
+
+
+def test_metrics_json_bookkeeping(tmp_path):
+    run(toy_system(tmp_path), tmp_path / "out")
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    for key in ("status", "wall_time_s", "macro_steps", "us_per_step", "algorithm", "step_size",
+                "stop_time", "output_interval", "settings"):
+        assert key in m
+    assert m["status"] == "completed" and m["macro_steps"] == 10
+    assert [c["name"] for c in m["settings"]["components"]] == ["src", "snk"]
+
+
+def test_a_failed_step_keeps_the_rows_and_says_why(tmp_path):
+    m, r = run(toy_system(tmp_path, snk_start="fail_at = 4"), tmp_path / "out")
+    assert m["status"].startswith("failed: snk: fmi2DoStep failed at t = 0.003 s")
+    assert "fails on purpose" in m["status"]
+    assert m["macro_steps"] == 3
+    assert list(r["time"]) == [0.0, STEP, 2 * STEP, 3 * STEP]
+    assert json.loads((tmp_path / "out" / "metrics.json").read_text())["status"] == m["status"]
+
+
+class StopAfter:
+    """A progress 'bar' that asks the master to stop, as Ctrl-C does."""
+
+    def __init__(self, calls):
+        self.calls, self.master = calls, None
+
+    def update(self, t):
+        self.calls -= 1
+        if self.calls == 0:
+            self.master.request_stop()
+
+    def close(self):
+        pass
+
+
+def test_interruption_keeps_the_rows_and_writes_metrics(tmp_path):
+    master = Master(load_system(toy_system(tmp_path, stop_time=0.05)))
+    stopper = StopAfter(3)
+    stopper.master = master
+    m = master.run(tmp_path / "out", progress=stopper, catch_sigint=False)
+    assert m["status"] == "interrupted"
+    r = read_results(tmp_path / "out")
+    # stop asked at the 3rd check (t = 2 steps): that chunk ends, its row is written, stop
+    assert m["macro_steps"] == 3
+    assert list(r["time"]) == [0.0, STEP, 2 * STEP, 3 * STEP] and m["rows"] == 4
+    assert json.loads((tmp_path / "out" / "metrics.json").read_text())["status"] == "interrupted"
