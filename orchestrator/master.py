@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import bisect
 import ctypes
+import functools
 import math
 import signal
 import sys
@@ -64,12 +65,14 @@ class _Interrupted(Exception):
 
 @dataclass
 class _SignalTarget:
-    """An input driven by a scenario signal: its value reference and a one-value buffer."""
+    """An input driven by a scenario signal."""
 
     stepper: "_Stepper"
-    vr: object
-    buf: object
+    set: object  #: zero-argument fmi2SetReal of this input from ``buf``
+    buf: object  #: one-value buffer
     label: str
+    immediate: bool  #: set at once when the value changes (single-rate), else queued
+    queued: bool = False
 
 
 @dataclass
@@ -79,6 +82,7 @@ class _Signal:
     targets: list = field(default_factory=list)
     value: float = math.nan
     next_n: int = 0  #: the first base step at which the profile must be evaluated again
+    ramp_end: int = 0  #: on a linear segment: the first step at or after its end
 
 
 @dataclass
@@ -90,10 +94,10 @@ class _Stepper:
     step_size: float
     handle: object = None
     do_step: object = None
-    #: (get, src_handle, src_vrs, count, buf, set, dst_handle, dst_vrs, src_name): one
-    #: per source instance, all its connected outputs in one get and one set call
+    #: [(get, set, source name)]: zero-argument fmi2GetReal of the connected outputs of
+    #: one source instance into a buffer and fmi2SetReal of the inputs from that buffer
     transfers: list = field(default_factory=list)
-    pending: dict = field(default_factory=dict)  #: signal targets whose value changed
+    pending: list = field(default_factory=list)  #: queued signal targets (multi-rate)
 
 
 class Master:
@@ -211,32 +215,30 @@ class Master:
             svr = vr_array([si.variables[c.src_var].valueReference for c in conns])
             dvr = vr_array([di.variables[c.dst_var].valueReference for c in conns])
             buf = real_array([0.0] * len(conns))
-            by_name[dst].transfers.append((si.get_real, si.handle, svr, len(conns), buf,
-                                           di.set_real, di.handle, dvr, src))
+            by_name[dst].transfers.append((functools.partial(si.get_real, si.handle, svr, len(conns), buf),
+                                           functools.partial(di.set_real, di.handle, dvr, len(conns), buf),
+                                           src))
         # scenario signals; their inputs get the value at t = 0 in initialization mode
         self.signals = []
         for spec in s.signals.values():
             sig = _Signal(spec.name, spec.profile)
             for inst_name, var in spec.drives:
-                inst = self.instances[inst_name]
-                sig.targets.append(_SignalTarget(by_name[inst_name], vr_array([inst.variables[var].valueReference]),
-                                                 real_array([0.0]), f"{inst_name}.{var}"))
+                inst, st = self.instances[inst_name], by_name[inst_name]
+                buf = real_array([0.0])
+                setter = functools.partial(inst.set_real, inst.handle,
+                                           vr_array([inst.variables[var].valueReference]), 1, buf)
+                sig.targets.append(_SignalTarget(st, setter, buf, f"{inst_name}.{var}", st.multiple == 1))
             self.signals.append(sig)
-        self._update_signals(0)
-        for st in self.steppers:
-            try:
+        try:
+            self._update_signals(0)
+            for st in self.steppers:
                 self._flush_pending(st, 0.0)
-            except _StepFailed as exc:
-                raise CosimError(str(exc)) from None
+        except _StepFailed as exc:
+            raise CosimError(str(exc)) from None
         for comp in s.components:
             self.instances[comp.name].exit_initialization()
-        # due components per phase of the multi-rate schedule
-        period = 1
-        for st in self.steppers:
-            period = period * st.multiple // math.gcd(period, st.multiple)
-        self.period = period
-        self.due = [tuple(st for st in self.steppers if n % st.multiple == 0) for n in range(period)]
         self._build_recorder()
+        self._steps = self._compile_steps()
 
     def _build_recorder(self) -> None:
         """Per instance, one get call per type for the recorded variables; a row plan."""
@@ -275,24 +277,29 @@ class Master:
         self.row_plan = plan
 
     # -- scenario signals --------------------------------------------------------------
-    def _next_eval(self, profile, n: int) -> int:
-        """First base step after n at which ``profile(t)`` can differ from ``profile(n h)``."""
-        h, ts = self.h, profile.times
-        i = bisect.bisect_right(ts, n * h) - 1
-        if profile.interpolation == "linear" and 0 <= i < len(ts) - 1:
-            return n + 1  # on a ramp
-        if i + 1 >= len(ts):
-            return _NEVER  # after the last breakpoint: constant
-        t_next = ts[i + 1]
-        m = max(n + 1, math.ceil(t_next / h))
-        while m - 1 > n and (m - 1) * h >= t_next:
+    def _first_step_at(self, t_event: float, n: int) -> int:
+        """The first base step m > n with m * h >= t_event."""
+        h = self.h
+        m = max(n + 1, math.ceil(t_event / h))
+        while m - 1 > n and (m - 1) * h >= t_event:
             m -= 1
-        while m * h < t_next:
+        while m * h < t_event:
             m += 1
         return m
 
+    def _next_eval(self, profile, n: int) -> tuple[int, int]:
+        """(next step at which ``profile`` can differ from ``profile(n h)``, end of the ramp)."""
+        ts = profile.times
+        i = bisect.bisect_right(ts, n * self.h) - 1
+        if i + 1 >= len(ts):
+            return _NEVER, 0  # after the last breakpoint: constant
+        if profile.interpolation == "linear" and i >= 0:
+            return n + 1, self._first_step_at(ts[i + 1], n)  # on a ramp: every step
+        return self._first_step_at(ts[i + 1], n), 0  # constant until the next breakpoint
+
     def _update_signals(self, n: int) -> int:
-        """Re-evaluate the signals due at step n; queue changed values; next step to look again."""
+        """Evaluate the signals due at step n, set (or queue) the inputs whose value changed;
+        return the next step at which a signal must be evaluated."""
         t = n * self.h
         nxt = _NEVER
         for sig in self.signals:
@@ -302,17 +309,26 @@ class Master:
                     sig.value = v
                     for tg in sig.targets:
                         tg.buf[0] = v
-                        tg.stepper.pending[id(tg)] = tg
-                sig.next_n = self._next_eval(sig.profile, n)
+                        if tg.immediate:
+                            if tg.set() > 1:
+                                raise self._set_failed(tg, t)
+                        elif not tg.queued:
+                            tg.queued = True
+                            tg.stepper.pending.append(tg)
+                if n + 1 < sig.ramp_end:
+                    sig.next_n = n + 1
+                else:
+                    sig.next_n, sig.ramp_end = self._next_eval(sig.profile, n)
             if sig.next_n < nxt:
                 nxt = sig.next_n
         return nxt
 
     def _flush_pending(self, st: _Stepper, t: float) -> None:
-        set_real, handle = st.inst.set_real, st.handle
-        for tg in st.pending.values():
-            if set_real(handle, tg.vr, 1, tg.buf) > 1:
-                raise _StepFailed(self._describe(st.inst, f"setting {tg.label} = {tg.buf[0]!r}", t))
+        """Set the queued signal inputs of a multi-rate component (when it is stepped)."""
+        for tg in st.pending:
+            tg.queued = False
+            if tg.set() > 1:
+                raise self._set_failed(tg, t)
         st.pending.clear()
 
     # -- stepping ---------------------------------------------------------------------
@@ -320,64 +336,76 @@ class Master:
         reason = inst.last_problem()
         return f"{inst.name}: {action} failed at t = {t:.9g} s" + (f": {reason}" if reason else "")
 
-    def _transfer_failed(self, tr, t: float) -> _StepFailed:
-        get, src_h, svr, cnt, buf, set_, dst_h, dvr, src_name = tr
-        if get(src_h, svr, cnt, buf) > 1:
-            return _StepFailed(self._describe(self.instances[src_name], "fmi2GetReal", t))
-        dst = next(st.inst for st in self.steppers if st.handle == dst_h)
-        return _StepFailed(self._describe(dst, f"fmi2SetReal of the inputs from {src_name}", t))
+    def _set_failed(self, tg: _SignalTarget, t: float) -> _StepFailed:
+        return _StepFailed(self._describe(tg.stepper.inst, f"setting {tg.label} = {tg.buf[0]!r}", t))
 
-    def _steps_gauss_seidel(self, n0: int, n1: int, sig_next: int) -> int:
-        h, due, period = self.h, self.due, self.period
-        n = n0
-        try:
-            for n in range(n0, n1):
-                if n >= sig_next:
-                    sig_next = self._update_signals(n)
-                t = n * h
-                for st in due[n % period]:
-                    for tr in st.transfers:
-                        if tr[0](tr[1], tr[2], tr[3], tr[4]) > 1 or tr[5](tr[6], tr[7], tr[3], tr[4]) > 1:
-                            raise self._transfer_failed(tr, t)
-                    if st.pending:
-                        self._flush_pending(st, t)
-                    if st.do_step(st.handle, t, st.step_size, 1) > 1:
-                        raise _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
-        except _StepFailed as exc:
-            exc.n = n
-            raise
-        except KeyboardInterrupt:
-            raise _Interrupted(n) from None
-        return sig_next
+    def _transfer_failed(self, st: _Stepper, t: float) -> _StepFailed:
+        for get, set_, src in st.transfers:
+            if get() > 1:
+                return _StepFailed(self._describe(self.instances[src], "fmi2GetReal", t))
+            if set_() > 1:
+                return _StepFailed(self._describe(st.inst, f"fmi2SetReal of the inputs from {src}", t))
+        return _StepFailed(f"{st.inst.name}: exchanging values failed at t = {t:.9g} s")
 
-    def _steps_jacobi(self, n0: int, n1: int, sig_next: int) -> int:
-        h, due, period = self.h, self.due, self.period
-        n = n0
-        try:
-            for n in range(n0, n1):
-                if n >= sig_next:
-                    sig_next = self._update_signals(n)
-                t = n * h
-                steppers = due[n % period]
-                for st in steppers:  # every read at t_n before any write
-                    for tr in st.transfers:
-                        if tr[0](tr[1], tr[2], tr[3], tr[4]) > 1:
-                            raise self._transfer_failed(tr, t)
-                for st in steppers:
-                    for tr in st.transfers:
-                        if tr[5](tr[6], tr[7], tr[3], tr[4]) > 1:
-                            raise self._transfer_failed(tr, t)
-                    if st.pending:
-                        self._flush_pending(st, t)
-                for st in steppers:
-                    if st.do_step(st.handle, t, st.step_size, 1) > 1:
-                        raise _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
-        except _StepFailed as exc:
-            exc.n = n
-            raise
-        except KeyboardInterrupt:
-            raise _Interrupted(n) from None
-        return sig_next
+    def _step_failed(self, st: _Stepper, t: float) -> _StepFailed:
+        return _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
+
+    def _compile_steps(self):
+        """The stepping loop of this system, generated once, unrolled over its components.
+
+        ``steps(n0, n1, sig_next)`` takes the base steps n0 .. n1-1 and returns the next
+        step at which a signal must be evaluated. Every FMI call in it is a prebuilt
+        ``functools.partial`` of the raw ctypes entry point with its value-reference and
+        value arrays: no look-ups, no allocation, no loop over components per step.
+        A failing call raises ``_StepFailed`` carrying the step it failed at.
+        """
+        ns = {"_StepFailed": _StepFailed, "_Interrupted": _Interrupted, "update": self._update_signals,
+              "h": self.h, "fail_transfer": self._transfer_failed, "fail_step": self._step_failed,
+              "flush": self._flush_pending}
+        jacobi = self.spec.algorithm == "jacobi"
+        reads, writes, steps = [], [], []
+        for i, st in enumerate(self.steppers):
+            ns[f"st{i}"], ns[f"pend{i}"] = st, st.pending
+            ns[f"do{i}"], ns[f"h{i}"] = functools.partial(st.do_step, st.handle), st.step_size
+            gets, sets = [], []
+            for j, (get, set_, _src) in enumerate(st.transfers):
+                ns[f"get{i}_{j}"], ns[f"set{i}_{j}"] = get, set_
+                gets.append(f"get{i}_{j}()")
+                sets.append(f"set{i}_{j}()")
+            guard = [f"if n % {st.multiple} == 0:"] if st.multiple > 1 else []
+            ind = "    " if guard else ""
+            read = [f"{ind}if ({' | '.join(gets)}) > 1: raise fail_transfer(st{i}, t)"] if gets else []
+            write = [f"{ind}if ({' | '.join(sets)}) > 1: raise fail_transfer(st{i}, t)"] if sets else []
+            write.append(f"{ind}if pend{i}: flush(st{i}, t)")
+            step = [f"{ind}if do{i}(t, h{i}, 1) > 1: raise fail_step(st{i}, t)"]
+            if jacobi:  # all reads at t_n, then all writes, then all steps
+                reads += guard + read
+                writes += guard + write
+                steps += guard + step
+            else:  # Gauss-Seidel: read the freshest values, write, step; component by component
+                exchange = [f"{ind}if ({' | '.join(x + ' | ' + y for x, y in zip(gets, sets))}) > 1: "
+                            f"raise fail_transfer(st{i}, t)"] if gets else []
+                steps += guard + exchange + write[len(write) - 1:] + step
+        body = reads + writes + steps
+        src = "\n".join([
+            "def steps(n0, n1, sig_next):",
+            "    n = n0",
+            "    try:",
+            "        for n in range(n0, n1):",
+            "            if n >= sig_next:",
+            "                sig_next = update(n)",
+            "            t = n * h",
+            *("            " + line for line in body),
+            "    except _StepFailed as exc:",
+            "        exc.n = n",
+            "        raise",
+            "    except KeyboardInterrupt:",
+            "        raise _Interrupted(n) from None",
+            "    return sig_next",
+        ])
+        self.step_source = src
+        exec(compile(src, f"<orchestrator steps: {self.spec.name}>", "exec"), ns)
+        return ns["steps"]
 
     # -- recording -------------------------------------------------------------------
     def _row(self, n: int) -> list:
@@ -449,7 +477,7 @@ class Master:
 
     def _loop(self, writer: ResultWriter, progress) -> tuple[str, int, float]:
         N, every, h = self.n_steps, self.every, self.h
-        steps = self._steps_jacobi if self.spec.algorithm == "jacobi" else self._steps_gauss_seidel
+        steps = self._steps
         status = "completed"
         n = 0
         sig_next = self._update_signals(0)

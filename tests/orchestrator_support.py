@@ -8,6 +8,11 @@ import shutil
 import tempfile
 from pathlib import Path
 
+# Import the installed pythonfmu before any FMU is loaded: a pythonfmu FMU puts its
+# resources/ (with a copy of pythonfmu that lacks the builder's binaries) on sys.path, and
+# a builder imported from there writes FMUs without binaries.
+import pythonfmu.builder  # noqa: F401,E402
+
 TOY_SOURCES = Path(__file__).parent / "toy_fmus"
 
 
