@@ -372,20 +372,27 @@ class Master:
                 ns[f"get{i}_{j}"], ns[f"set{i}_{j}"] = get, set_
                 gets.append(f"get{i}_{j}()")
                 sets.append(f"set{i}_{j}()")
-            guard = [f"if n % {st.multiple} == 0:"] if st.multiple > 1 else []
+            guard = f"if n % {st.multiple} == 0:" if st.multiple > 1 else None
             ind = "    " if guard else ""
-            read = [f"{ind}if ({' | '.join(gets)}) > 1: raise fail_transfer(st{i}, t)"] if gets else []
-            write = [f"{ind}if ({' | '.join(sets)}) > 1: raise fail_transfer(st{i}, t)"] if sets else []
-            write.append(f"{ind}if pend{i}: flush(st{i}, t)")
+
+            def block(lines, guard=guard):
+                return ([guard] if guard and lines else []) + lines
+
+            fail = f"raise fail_transfer(st{i}, t)"
+            read = [f"{ind}if ({' | '.join(gets)}) > 1: {fail}"] if gets else []
+            write = [f"{ind}if ({' | '.join(sets)}) > 1: {fail}"] if sets else []
+            exchange = [f"{ind}if ({' | '.join(g + ' | ' + s for g, s in zip(gets, sets))}) > 1: {fail}"] \
+                if gets else []
+            flush = []
+            if st.multiple > 1 and any(tg.stepper is st for sig in self.signals for tg in sig.targets):
+                flush = [f"{ind}if pend{i}: flush(st{i}, t)"]  # queued signal inputs
             step = [f"{ind}if do{i}(t, h{i}, 1) > 1: raise fail_step(st{i}, t)"]
             if jacobi:  # all reads at t_n, then all writes, then all steps
-                reads += guard + read
-                writes += guard + write
-                steps += guard + step
+                reads += block(read)
+                writes += block(write + flush)
+                steps += block(step)
             else:  # Gauss-Seidel: read the freshest values, write, step; component by component
-                exchange = [f"{ind}if ({' | '.join(x + ' | ' + y for x, y in zip(gets, sets))}) > 1: "
-                            f"raise fail_transfer(st{i}, t)"] if gets else []
-                steps += guard + exchange + write[len(write) - 1:] + step
+                steps += block(exchange + flush + step)
         body = reads + writes + steps
         src = "\n".join([
             "def steps(n0, n1, sig_next):",

@@ -259,3 +259,16 @@ def test_interruption_keeps_the_rows_and_writes_metrics(tmp_path):
     assert m["macro_steps"] == 3
     assert list(r["time"]) == [0.0, STEP, 2 * STEP, 3 * STEP] and m["rows"] == 4
     assert json.loads((tmp_path / "out" / "metrics.json").read_text())["status"] == "interrupted"
+
+
+def test_signal_into_a_multi_rate_component_is_set_when_it_steps(tmp_path):
+    sig = '[signals.s]\ntable = [[0, 0], [0.0015, 1], [0.0025, 2], [0.0075, 3]]\ndrives = "snk.u"\n'
+    path = toy_system(tmp_path, connections=(), signals=sig, snk_multiple=3, stop_time=0.012,
+                      record={"time": '"time"', "s": '"signals.s"', "last_u": '"snk.last_u"',
+                              "u_sets": '"snk.u_sets"', "calls": '"snk.calls"'})
+    _, r = run(path, tmp_path / "out")
+    assert list(r["s"]) == [0, 0, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3]
+    # snk steps at n = 0, 3, 6, 9 with the value at that step
+    assert list(r["last_u"]) == [0, 0, 0, 0, 2, 2, 2, 2, 2, 2, 3, 3, 3]
+    assert r["calls"][-1] == 4
+    assert r["u_sets"][-1] == 3  # at initialization, at n = 3 (1 then 2 queued: one set), at n = 9
