@@ -268,8 +268,7 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
 
     from pythonfmu import FmuBuilder  # noqa: PLC0415 - only needed when building
 
-    (out / ".build").mkdir(exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f"{name}-", dir=out / ".build"))
+    stage = _make_stage(out, name)
     saved_path, saved_modules = list(sys.path), set(sys.modules)
     try:
         script, project_files, doc = _stage(name, digest, stage)
@@ -292,6 +291,17 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
         except OSError:
             pass  # another build is using it
     return target, True
+
+
+def _make_stage(out: Path, name: str) -> Path:
+    """A fresh staging directory in ``out/.build`` (same file system as the target)."""
+    for _ in range(5):  # another build may remove .build between mkdir and mkdtemp
+        (out / ".build").mkdir(exist_ok=True)
+        try:
+            return Path(tempfile.mkdtemp(prefix=f"{name}-", dir=out / ".build"))
+        except FileNotFoundError:
+            continue
+    raise BuildError(f"cannot create a staging directory in {out / '.build'}")
 
 
 def _check(fmu: Path, name: str) -> None:

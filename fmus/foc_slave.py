@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from pmsm_ev import __version__
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import ANGLE_SOURCES, DT_DEFAULT, ControllerParams, EkfParams, MotorParams
+from pmsm_ev.params import DT_DEFAULT, ControllerParams, EkfParams, MotorParams
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
 
 #: relative tolerance on the communication step size after the first step
@@ -89,8 +89,6 @@ class FocSlave(DriveSlave):
         self._dt = None
 
     def _build_unit(self, dt: float) -> None:
-        if self.angle_source not in ANGLE_SOURCES:  # ControlUnit checks it too; say which value
-            raise FmuUsageError(f"angle_source must be one of {ANGLE_SOURCES} (got {self.angle_source!r})")
         self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
                                  self.parameters(ControllerParams), self.parameters(EkfParams), dt)
         self.mark_built()

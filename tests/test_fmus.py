@@ -679,3 +679,72 @@ def test_plant_and_controller_cosimulate_in_libcosim(fmus):
             emulated.append([p.omega_m, p.i_d, p.i_q, p.theta_e, u.estimates[2], u.v_alpha, u.v_beta, u.v_d,
                              u.v_q, u.i_qref])
     assert np.allclose(np.array(rows), np.array(emulated), rtol=1e-9, atol=1e-9)
+
+
+# -- a host that is not Python -------------------------------------------------------------------
+C_HOST = r"""
+#include <dlfcn.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include "fmi2Functions.h"
+static void logger(fmi2ComponentEnvironment e, fmi2String n, fmi2Status s, fmi2String c, fmi2String m, ...)
+{ printf("log %d %s\n", s, m); }
+int main(int argc, char **argv) {
+    void *h = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    if (!h) { printf("dlopen failed: %s\n", dlerror()); return 2; }
+    fmi2InstantiateTYPE *instantiate = dlsym(h, "fmi2Instantiate");
+    fmi2SetupExperimentTYPE *setup = dlsym(h, "fmi2SetupExperiment");
+    fmi2EnterInitializationModeTYPE *enter = dlsym(h, "fmi2EnterInitializationMode");
+    fmi2ExitInitializationModeTYPE *leave = dlsym(h, "fmi2ExitInitializationMode");
+    fmi2SetRealTYPE *set_real = dlsym(h, "fmi2SetReal");
+    fmi2GetRealTYPE *get_real = dlsym(h, "fmi2GetReal");
+    fmi2DoStepTYPE *do_step = dlsym(h, "fmi2DoStep");
+    fmi2TerminateTYPE *terminate = dlsym(h, "fmi2Terminate");
+    fmi2FreeInstanceTYPE *free_instance = dlsym(h, "fmi2FreeInstance");
+    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
+    fmi2Component c = instantiate("plant", fmi2CoSimulation, argv[3], argv[2], &cb, fmi2False, fmi2True);
+    if (!c) { printf("instantiate failed\n"); return 3; }
+    fmi2ValueReference v_ref[2] = {atoi(argv[4]), atoi(argv[5])}, m_ref[1] = {atoi(argv[6])}, i_ref[1] = {atoi(argv[7])};
+    fmi2Real v[2] = {1.0, 0.5}, m_v[1] = {1e12}, i_d;
+    if (setup(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) || enter(c) || set_real(c, m_ref, 1, m_v) || leave(c)
+        || set_real(c, v_ref, 2, v)) return 4;
+    for (int k = 0; k < 1000; k++) if (do_step(c, k * 1e-4, 1e-4, fmi2True)) return 5;
+    if (get_real(c, i_ref, 1, &i_d) || terminate(c)) return 6;
+    free_instance(c);
+    printf("i_d %.17g\n", i_d);
+    return 0;
+}
+"""
+
+
+def test_a_c_host_runs_the_plant_with_libpython_preloaded(fmus, unzipped, tmp_path):
+    """What fmus/README.md tells users of hosts that are not Python."""
+    import shutil
+    import sysconfig
+
+    gcc = shutil.which("gcc")
+    libpython = Path(sysconfig.get_config_var("LIBDIR") or "", sysconfig.get_config_var("LDLIBRARY") or "")
+    if gcc is None or not sysconfig.get_config_var("Py_ENABLE_SHARED") or not libpython.is_file():
+        pytest.skip("needs gcc and a Python built with --enable-shared")
+    (tmp_path / "host.c").write_text(C_HOST)
+    headers = Path(fmpy.__file__).parent / "c-code"
+    subprocess.run([gcc, "-I", str(headers), str(tmp_path / "host.c"), "-o", str(tmp_path / "host"), "-ldl"],
+                   check=True, capture_output=True)
+    root = unzipped["PmsmEvPlant"]
+    md = fmpy.read_model_description(str(root))
+    vr = {v.name: str(v.valueReference) for v in md.modelVariables}
+    args = [str(tmp_path / "host"), str(root / "binaries" / "linux64" / "PmsmEvPlant.so"),
+            (root / "resources").as_uri(), md.guid, vr["v_alpha"], vr["v_beta"], vr["m_v"], vr["i_d"]]
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    r = subprocess.run(args, capture_output=True, text=True, env=env, timeout=60)
+    assert "undefined symbol" in r.stdout and r.returncode == 2  # no libpython: cannot load
+    env.update(LD_PRELOAD=str(libpython), PYTHONHOME=sys.base_prefix)
+    site_packages = str(Path(np.__file__).resolve().parents[1])
+    if not site_packages.startswith(sys.base_prefix):
+        env["PYTHONPATH"] = site_packages
+    r = subprocess.run(args, capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    plant = Plant(vehicle=VehicleParams(m_v=1e12))
+    for _ in range(1000):
+        plant.step(1.0, 0.5, 0.0, DT)
+    assert float(r.stdout.split("i_d ")[-1]) == plant.i_d
