@@ -468,6 +468,32 @@ def test_fmu_state_restores_the_trajectory_exactly(unzipped, angle_source):
         fmu.free()
 
 
+def test_a_restored_state_keeps_the_sample_period(unzipped):
+    """A state saved at a 2e-4 s sample period, restored into a fresh instance, goes on at
+    2e-4 s, exactly as the original; another step size is still refused."""
+    inputs = dict(i_alpha=15.0, i_beta=-4.0, omega_ref=30.0, theta_meas=0.2, omega_meas=1.0)
+    c = Instance(unzipped, "FocEkf5", start={"angle_source": "estimated"})
+    c.set(**inputs)
+    for _ in range(10):
+        c.step(2e-4)
+    blob = c.fmu.serializeFMUstate(c.fmu.getFMUstate())
+    expected = []
+    for _ in range(10):
+        c.step(2e-4)
+        expected.append(c.get(CTRL_OUTPUTS))
+    fresh = Instance(unzipped, "FocEkf5", instance_name="fresh")
+    fresh.fmu.setFMUstate(fresh.fmu.deSerializeFMUstate(blob))
+    fresh.t = 10 * 2e-4
+    got = []
+    for _ in range(10):
+        fresh.step(2e-4)
+        got.append(fresh.get(CTRL_OUTPUTS))
+    assert got == expected
+    with pytest.raises(Exception, match="fmi2DoStep failed"):
+        fresh.step(1e-4)
+    c.free()
+
+
 def test_the_state_holds_the_whole_control_unit(unzipped):
     c = Instance(unzipped, "FocEkf5", start={"angle_source": "estimated"})
     for k in range(50):
