@@ -266,7 +266,14 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
     if not force and target.is_file() and (read_build_info(target) or {}).get("hash") == digest:
         return target, False
 
-    from pythonfmu import FmuBuilder  # noqa: PLC0415 - only needed when building
+    import pythonfmu  # noqa: PLC0415 - only needed when building
+    from pythonfmu import FmuBuilder  # noqa: PLC0415
+
+    # A loaded pythonfmu FMU puts its resources/ (a copy of pythonfmu without the
+    # builder's binaries) on sys.path; building with that copy gives FMUs without binaries.
+    if not (Path(pythonfmu.__file__).parent / "resources" / "binaries").is_dir():
+        raise BuildError(f"pythonfmu imported from {Path(pythonfmu.__file__).parent} has no binaries "
+                         "(an FMU's bundled copy?): build FMUs before loading any in this process")
 
     stage = _make_stage(out, name)
     saved_path, saved_modules = list(sys.path), set(sys.modules)

@@ -59,7 +59,7 @@ def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_
                 t = k * dt
                 delta = delta_of(t)
                 omega_ref = omega_ref_of(t)
-                if k % every == 0:
+                if k % every == 0 or k == n_steps:
                     o = ctrl.observer
                     w.write((t, math.degrees(delta), omega_ref, plant.omega_m, o.omega_hat, plant.theta_e,
                              o.theta_hat, plant.i_d, plant.i_q, o.i_d_hat, o.i_q_hat, plant.T_e,
