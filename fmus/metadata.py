@@ -111,6 +111,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "p0_theta": ("rad2", "EKF initial covariance of the angle"),
     "p0_TL": ("N2.m2", "EKF initial covariance of the load torque (5-state EKFs)"),
     "q_omega_ekf4": ("rad2/s2", "EKF process noise of the speed, per step (EKF4 only)"),
+    "x0_omega": ("rad/s", "EKF initial speed estimate (flying start: set to the plant's initial speed)"),
+    "x0_theta": ("rad", "EKF initial electrical-angle estimate, the observer's guess of theta(0)"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),

@@ -169,7 +169,8 @@ class Ekf5(ExtendedKalmanFilter):
         e = ekf or EkfParams()
         super().__init__(motor, dt,
                          (e.q_i, e.q_i, e.q_omega, e.q_theta, e.q_TL), (e.r_i, e.r_i),
-                         (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta, e.p0_TL), x0)
+                         (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta, e.p0_TL),
+                         x0 if x0 is not None else (0.0, 0.0, e.x0_omega, e.x0_theta, 0.0))
 
     def _predict_state(self, v_d, v_q) -> None:
         x = self._x
@@ -278,7 +279,8 @@ class Ekf4(ExtendedKalmanFilter):
         e = ekf or EkfParams()
         super().__init__(motor, dt,
                          (e.q_i, e.q_i, e.q_omega_ekf4, e.q_theta), (e.r_i, e.r_i),
-                         (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta), x0)
+                         (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta),
+                         x0 if x0 is not None else (0.0, 0.0, e.x0_omega, e.x0_theta))
 
     def _predict_state(self, v_d, v_q) -> None:
         x = self._x

@@ -247,10 +247,18 @@ class EkfParams:
     #: speed random walk of EKF4 [(rad/s)^2 per step]: with dw/dt = 0 the filter can
     #: follow a load-induced acceleration only through this noise.
     q_omega_ekf4: float = 1.0e-2
+    #: initial speed estimate [rad/s]: 0, the drive starts from standstill; set it for a
+    #: flying start (plant started at speed).
+    x0_omega: float = 0.0
+    #: initial electrical-angle estimate [rad]: the observer's own guess of theta(0).
+    x0_theta: float = 0.0
 
     def validate(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
+            if f.name.startswith("x0_"):
+                _require(math.isfinite(value), f"{f.name} must be finite (got {value})")
+                continue
             _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")
         _require(self.r_i > 0, f"r_i must be > 0 A^2 (got {self.r_i})")
 
