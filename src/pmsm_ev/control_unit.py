@@ -48,6 +48,7 @@ class ControlUnit:
         self._advance = self.params.angle_advance * dt * self.motor.N
         self._half_period_n = 0.5 * dt * self.motor.N
         self._zoh = bool(self.params.zoh_compensation)
+        self._delayed = bool(self.params.delay_compensation)
         self.reset()
 
     def reset(self) -> None:
@@ -55,6 +56,7 @@ class ControlUnit:
         self.speed.reset()
         self.current.reset()
         self.v_d = self.v_q = 0.0
+        self.v_prev_d = self.v_prev_q = 0.0  # the command of one period earlier
         self.v_alpha = self.v_beta = 0.0
         self.i_d = self.i_q = 0.0
         self.i_qref = 0.0
@@ -62,7 +64,13 @@ class ControlUnit:
     def step(self, i_alpha: float, i_beta: float, omega_ref: float,
              theta_meas: float = 0.0, omega_meas: float = 0.0) -> None:
         obs = self.observer
-        obs.predict(self.v_d, self.v_q)  # (23)-(24) with the voltage of the last period
+        # (23)-(24) with the voltage applied over the last period: the last command, or
+        # with a one-period actuation delay, the command before it
+        if self._delayed:
+            obs.predict(self.v_prev_d, self.v_prev_q)
+            self.v_prev_d, self.v_prev_q = self.v_d, self.v_q
+        else:
+            obs.predict(self.v_d, self.v_q)
         theta_frame = obs.theta_prior if self._estimated else theta_meas
         i_d, i_q = park(i_alpha, i_beta, theta_frame)
         obs.correct(i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas)  # (25)-(27)
@@ -88,11 +96,12 @@ class ControlUnit:
 
     def get_state(self) -> tuple:
         return ((self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
-                 self.speed.integral) + self.current.get_state() + self.observer.get_state())
+                 self.speed.integral, self.v_prev_d, self.v_prev_q)
+                + self.current.get_state() + self.observer.get_state())
 
     def set_state(self, state) -> None:
         state = tuple(float(v) for v in state)
         (self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
-         self.speed.integral) = state[:8]
-        self.current.set_state(state[8:13])
-        self.observer.set_state(state[13:])
+         self.speed.integral, self.v_prev_d, self.v_prev_q) = state[:10]
+        self.current.set_state(state[10:15])
+        self.observer.set_state(state[15:])

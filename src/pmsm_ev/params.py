@@ -121,13 +121,47 @@ class PlantParams:
     i_d0: float = 0.0  #: initial d current [A]
     i_q0: float = 0.0  #: initial q current [A]
     omega_m0: float = 0.0  #: initial mechanical speed [rad/s] (start-up from standstill)
-    theta_e0: float = 0.0  #: initial electrical angle [rad]
+    theta_e0: float = 0.0  #: initial electrical angle [rad] (the observer has its own guess)
+
+    # -- current sensors (all off by default: the paper's measurements are exact) ------
+    #: white noise on each measured phase current, standard deviation [A]; 0 = off
+    sensor_noise: float = 0.0
+    #: seed of the sensor noise [-]: the same seed gives the same noise sequence
+    sensor_seed: int = 1
+    sensor_offset_a: float = 0.0  #: offset of the phase-a current sensor [A]
+    sensor_offset_b: float = 0.0  #: offset of the phase-b current sensor [A]
+    sensor_gain_a: float = 1.0  #: gain of the phase-a current sensor [-] (1 = exact)
+    sensor_gain_b: float = 1.0  #: gain of the phase-b current sensor [-] (1 = exact)
+    #: ADC resolution [bits]; 0 = no quantisation
+    adc_bits: int = 0
+    #: ADC full scale [A]: the converter spans -adc_range..+adc_range (LSB = 2 range / 2^bits)
+    adc_range: float = 1000.0
+
+    # -- inverter (ideal by default) ---------------------------------------------------
+    #: DC-link voltage [V]; the voltage vector is limited to the linear range v_dc/sqrt(3).
+    #: 0 = ideal inverter, no limit.
+    v_dc: float = 0.0
+    #: actuation delay [communication steps], 0 or 1: with 1 the voltage received at t_k is
+    #: applied over [t_{k+1}, t_{k+2}] (the computation delay of a real drive).
+    inverter_delay: int = 0
 
     def validate(self) -> None:
         _require(self.rk4_substeps >= 1 and float(self.rk4_substeps).is_integer(),
                  f"rk4_substeps must be a whole number >= 1 (got {self.rk4_substeps})")
-        for name in ("i_d0", "i_q0", "omega_m0", "theta_e0"):
+        for name in ("i_d0", "i_q0", "omega_m0", "theta_e0", "sensor_offset_a", "sensor_offset_b"):
             _require(math.isfinite(getattr(self, name)), f"{name} must be finite")
+        _require(math.isfinite(self.sensor_noise) and self.sensor_noise >= 0,
+                 f"sensor_noise must be >= 0 A (got {self.sensor_noise})")
+        _require(float(self.sensor_seed).is_integer() and self.sensor_seed >= 0,
+                 f"sensor_seed must be a whole number >= 0 (got {self.sensor_seed})")
+        for name in ("sensor_gain_a", "sensor_gain_b"):
+            _require(math.isfinite(getattr(self, name)) and getattr(self, name) > 0,
+                     f"{name} must be > 0 (got {getattr(self, name)})")
+        _require(float(self.adc_bits).is_integer() and 0 <= self.adc_bits <= 32,
+                 f"adc_bits must be a whole number in 0..32 (got {self.adc_bits})")
+        _require(math.isfinite(self.adc_range) and self.adc_range > 0, f"adc_range must be > 0 A (got {self.adc_range})")
+        _require(math.isfinite(self.v_dc) and self.v_dc >= 0, f"v_dc must be >= 0 V (got {self.v_dc})")
+        _require(self.inverter_delay in (0, 1), f"inverter_delay must be 0 or 1 (got {self.inverter_delay})")
 
 
 # --- Controller design ------------------------------------------------------------
@@ -192,7 +226,12 @@ class ControllerParams:
     #: voltage angle advance [control periods] [chosen]: the inverter holds v_alpha,
     #: v_beta over a period while the rotor turns omega_e dt; advancing the inverse
     #: Park by half a period makes the period's mean dq voltage equal the command.
+    #: With a one-period actuation delay (plant ``inverter_delay = 1``) use 1.5: the
+    #: vector is applied one period later, and centred half a period after that.
     angle_advance: float = 0.5
+    #: actuation delay the controller accounts for [periods], 0 or 1: with 1 the observer
+    #: is given the voltage commanded one period earlier (the one the inverter is applying).
+    delay_compensation: int = 0
     #: lengthen the held voltage vector by a/sin(a), a = omega_e dt / 2 [chosen: off].
     #: Seen from the rotor, a vector held over a period sweeps an arc of omega_e dt and
     #: its mean is shorter by sin(a)/a (0.03 % at 200 rad/s). Measured: this is not the
@@ -208,6 +247,7 @@ class ControllerParams:
         for name in ("kp_w", "ki_w", "kp_id", "ki_id", "kp_iq", "ki_iq", "angle_advance"):
             _require(getattr(self, name) >= 0, f"{name} must be >= 0 (got {getattr(self, name)})")
         _require(self.T_d > 0, f"T_d must be > 0 s (got {self.T_d})")
+        _require(self.delay_compensation in (0, 1), f"delay_compensation must be 0 or 1 (got {self.delay_compensation})")
         _require(self.i_q_max > 0, f"i_q_max must be > 0 A (got {self.i_q_max})")
         _require(self.u_max > 0, f"u_max must be > 0 V (got {self.u_max})")
         _require(self.decoupling in DECOUPLING_MODES,
