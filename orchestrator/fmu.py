@@ -14,10 +14,13 @@ from __future__ import annotations
 
 import ast
 import ctypes
+import math
+import os
 import re
 import shutil
 import zipfile
 from pathlib import Path
+from xml.etree import ElementTree
 
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
@@ -28,6 +31,10 @@ from fmpy.model_description import ValidationError
 from .errors import CosimError, close_matches, one_line
 
 STATUS = ("OK", "warning", "discard", "error", "fatal", "pending")
+FMI2_ERROR, FMI2_FATAL = 3, 4
+#: instances left alone after fmi2Fatal (FMI 2.0: no further call to any function of
+#: the instance, fmi2FreeInstance included); kept referenced so their callbacks stay alive
+_ABANDONED: list = []
 #: causalities whose value may be set before initialization
 SETTABLE_CAUSALITIES = ("parameter", "input")
 _EXC_REPR = re.compile(r"^([A-Za-z_][A-Za-z0-9_.]*(?:Error|Exception))\((.*)\)$", re.S)
@@ -77,11 +84,38 @@ def variable_unit(sv) -> str:
     return (getattr(dt, "unit", None) or "") if dt is not None else ""
 
 
+def _fmi_version(path: Path, who: str) -> str:
+    """The fmiVersion of an FMU file, after checking that it is a zip with a modelDescription.xml."""
+    if not zipfile.is_zipfile(path):
+        raise CosimError(f"{who}{path}: not an FMU (not a zip archive)")
+    try:
+        with zipfile.ZipFile(path) as z:
+            if "modelDescription.xml" not in z.namelist():
+                raise CosimError(f"{who}{path}: not an FMU (the archive has no modelDescription.xml)")
+            with z.open("modelDescription.xml") as fh:
+                for _event, element in ElementTree.iterparse(fh, events=("start",)):
+                    return str(element.get("fmiVersion") or "")  # the root element
+    except CosimError:
+        raise
+    except ElementTree.ParseError as exc:
+        raise CosimError(f"{who}{path}: modelDescription.xml is not well-formed XML ({one_line(exc)})") from None
+    except (zipfile.BadZipFile, OSError, ValueError, RuntimeError, EOFError) as exc:
+        raise CosimError(f"{who}{path}: not an FMU ({one_line(exc)})") from None
+    return ""
+
+
 def read_description(path: Path, label: str = ""):
-    """fmpy's model description of an FMU file, or a one-line CosimError."""
+    """fmpy's model description of an FMU file, or a one-line CosimError saying what is wrong:
+    missing, not a zip, no modelDescription.xml, not FMI 2.0, no co-simulation interface."""
     who = f"{label}: " if label else ""
+    if path.is_dir():
+        raise CosimError(f"{who}{path}: is a directory, not an .fmu file")
     if not path.is_file():
         raise CosimError(f"{who}FMU not found: {path}")
+    version = _fmi_version(path, who)
+    if version != "2.0":
+        what = f"an FMI {version} FMU" if version else "an FMU without fmiVersion"
+        raise CosimError(f"{who}{path}: {what}; only FMI 2.0 co-simulation FMUs are supported")
     try:
         md = read_model_description(str(path), validate=True)
     except ValidationError as exc:
@@ -90,10 +124,10 @@ def read_description(path: Path, label: str = ""):
         raise CosimError(f"{who}{path}: not an FMU ({one_line(exc)})") from None
     except Exception as exc:  # fmpy raises plain Exceptions for malformed XML
         raise CosimError(f"{who}{path}: cannot read the model description ({one_line(exc)})") from None
-    if md.fmiVersion != "2.0":
-        raise CosimError(f"{who}{path}: FMI {md.fmiVersion} FMU; only FMI 2.0 is supported")
     if md.coSimulation is None:
-        raise CosimError(f"{who}{path}: not a co-simulation FMU (no <CoSimulation> element)")
+        what = "a Model Exchange FMU" if md.modelExchange is not None else "an FMU"
+        raise CosimError(f"{who}{path}: {what} without a co-simulation interface (no <CoSimulation>); "
+                         f"only co-simulation FMUs are supported")
     return md
 
 
@@ -104,7 +138,10 @@ def convert_start(sv, value, where: str):
         if kind == "Real":
             if isinstance(value, bool):
                 raise ValueError
-            return float(value)
+            value = float(value)
+            if not math.isfinite(value):
+                raise CosimError(f"{where}: {value!r} is not a finite Real value")
+            return value
         if kind in ("Integer", "Enumeration"):
             if isinstance(value, bool):
                 raise ValueError
@@ -143,6 +180,7 @@ class FmuInstance:
         self.unzip_dir: str | None = None
         self.handle = None
         self.messages: list[tuple[int, str]] = []  #: (status, text) of every logged message
+        self.worst_status = 0  #: the worst status an FMI call of this instance returned
         self._initialized = False
         self._mark = 0
         self._logger = fmi2CallbackLoggerTYPE(self._log)
@@ -180,7 +218,15 @@ class FmuInstance:
         """Forget older messages for ``last_problem`` (called before each FMI phase)."""
         self._mark = len(self.messages)
 
+    def note_status(self, status: int) -> None:
+        """Remember a failed call's status (``close`` must not call into a fatal instance)."""
+        self.worst_status = max(self.worst_status, int(status))
+
     def _refused(self, action: str, exc: Exception | None = None) -> CosimError:
+        if isinstance(exc, FMICallException):
+            self.note_status(exc.status)
+        elif exc is not None:  # a failed fmi2Instantiate: there is no instance to free
+            self.note_status(FMI2_FATAL)
         reason = self.last_problem()
         if not reason and exc is not None:
             reason = one_line(exc)
@@ -193,11 +239,14 @@ class FmuInstance:
             self.unzip_dir = extract(str(self.path))
         except Exception as exc:
             raise CosimError(f"{self.name}: cannot extract {self.path} ({one_line(exc)})") from None
+        cwd = os.getcwd()
         try:
             self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip_dir,
                                  modelIdentifier=self.model_identifier, instanceName=self.name)
         except Exception as exc:
             raise CosimError(f"{self.name}: cannot load the FMU's binary ({one_line(exc)})") from None
+        finally:
+            os.chdir(cwd)  # fmpy changes to the binary's directory and stays there if loading fails
         try:
             self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
         except Exception as exc:
@@ -256,17 +305,26 @@ class FmuInstance:
             raise self._refused(f"{name} = {value!r}", exc) from None
 
     def close(self) -> None:
-        """Terminate and free the instance, unload the library, delete the extracted files."""
+        """Terminate and free the instance, unload the library, delete the extracted files.
+
+        FMI 2.0: after fmi2Error only fmi2FreeInstance (or fmi2Reset) may be called, after
+        fmi2Fatal nothing at all: such an instance is left as it is. (pythonfmu 0.7.0
+        reports every Python exception as fmi2Fatal and frees its objects itself; freeing
+        the instance once more can crash the process.)
+        """
         if self.fmu is not None:
-            try:
-                if self._initialized:
-                    self.fmu.terminate()
-            except Exception:
-                pass
-            try:
-                self.fmu.freeInstance()
-            except Exception:
-                pass
+            if self.worst_status >= FMI2_FATAL:
+                _ABANDONED.append((self.fmu, self._callbacks, self._logger))
+            else:
+                try:
+                    if self._initialized and self.worst_status < FMI2_ERROR:
+                        self.fmu.terminate()
+                except Exception:
+                    pass
+                try:
+                    self.fmu.freeInstance()
+                except Exception:
+                    pass
             self.fmu = None
             self.handle = None
         if self.unzip_dir is not None:

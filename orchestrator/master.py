@@ -46,7 +46,14 @@ from .system import COLUMN_CONVERSIONS, SystemSpec
 
 #: the longest run of steps between two checks for Ctrl-C / progress updates
 MAX_CHUNK = 2000
+#: signals that stop a run at its next check (a second one stops it at once)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _NEVER = sys.maxsize
+
+
+def _a(word: str) -> str:
+    """``word`` with its indefinite article."""
+    return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"
 
 
 class _StepFailed(Exception):
@@ -94,8 +101,9 @@ class _Stepper:
     step_size: float
     handle: object = None
     do_step: object = None
-    #: [(get, set, source name)]: zero-argument fmi2GetReal of the connected outputs of
-    #: one source instance into a buffer and fmi2SetReal of the inputs from that buffer
+    #: [(get, set, source name, buffer, connections)]: zero-argument fmi2GetReal of the
+    #: connected outputs of one source instance into the buffer and fmi2SetReal of the
+    #: inputs from it
     transfers: list = field(default_factory=list)
     pending: list = field(default_factory=list)  #: queued signal targets (multi-rate)
 
@@ -117,17 +125,27 @@ class Master:
             raise
         self.warnings: list[str] = self._unconnected_inputs()
         self._stop_requested = False
+        self._stop_signal = ""  #: the name of the signal that asked for the stop
+        self._finishing = False
 
     # -- checks at load ----------------------------------------------------------
     def _grid(self) -> tuple[int, int]:
         s, h = self.spec, self.spec.step_size
         where = f"{s.path}: " if s.path else ""
         n = round(s.stop_time / h)
-        if n < 1 or abs(n * h - s.stop_time) > 1e-9 * max(1.0, s.stop_time):
-            raise CosimError(f"{where}stop time {s.stop_time} s is not a whole number of {h} s steps")
+        if n < 1:
+            raise CosimError(f"{where}stop time {s.stop_time:g} s is shorter than one {h:g} s step")
+        if abs(n * h - s.stop_time) > 1e-9 * max(1.0, s.stop_time):
+            below, above = math.floor(s.stop_time / h), math.ceil(s.stop_time / h)
+            hint = " or ".join(f"{k * h:.12g}" for k in sorted({below, above}) if k >= 1)
+            raise CosimError(f"{where}stop time {s.stop_time:g} s is not a whole number of {h:g} s steps "
+                             f"(the nearest that are: {hint} s)")
         every = round(s.output_interval / h)
         if every < 1 or abs(every * h - s.output_interval) > 1e-9 * max(1.0, s.output_interval):
-            raise CosimError(f"{where}output interval {s.output_interval} s is not a multiple of the {h} s step")
+            below, above = max(1, math.floor(s.output_interval / h)), max(1, math.ceil(s.output_interval / h))
+            hint = " or ".join(f"{k * h:.12g}" for k in sorted({below, above}))
+            raise CosimError(f"{where}output interval {s.output_interval:g} s is not a multiple of the {h:g} s "
+                             f"step (the nearest that are: {hint} s)")
         for c in s.components:
             if n % c.step_multiple:
                 raise CosimError(f"{where}stop time {s.stop_time} s is not a multiple of {c.name}'s step "
@@ -142,12 +160,14 @@ class Master:
             src = self.instances[conn.src].variable(conn.src_var, ctx)
             dst = self.instances[conn.dst].variable(conn.dst_var, ctx)
             if src.causality != "output":
-                raise CosimError(f"{ctx}: {conn.src}.{conn.src_var} is a {src.causality}, not an output")
+                raise CosimError(f"{ctx}: {conn.src}.{conn.src_var} is {_a(src.causality)}, not an output "
+                                 f"(a connection goes from an output to an input)")
             if dst.causality != "input":
-                raise CosimError(f"{ctx}: {conn.dst}.{conn.dst_var} is a {dst.causality}, not an input")
+                raise CosimError(f"{ctx}: {conn.dst}.{conn.dst_var} is {_a(dst.causality)}, not an input "
+                                 f"(a connection goes from an output to an input)")
             for ref, sv in ((f"{conn.src}.{conn.src_var}", src), (f"{conn.dst}.{conn.dst_var}", dst)):
                 if sv.type != "Real":
-                    raise CosimError(f"{ctx}: {ref} is {sv.type}; only Real variables can be connected")
+                    raise CosimError(f"{ctx}: {ref} is {_a(sv.type)}; only Real variables can be connected")
             u_src, u_dst = variable_unit(src), variable_unit(dst)
             if u_src and u_dst and u_src != u_dst:
                 raise CosimError(f"{ctx}: units differ ({u_src!r} -> {u_dst!r})")
@@ -156,7 +176,7 @@ class Master:
                 ctx = f"{where}signal {sig.name}"
                 sv = self.instances[inst].variable(var, ctx)
                 if sv.causality != "input" or sv.type != "Real":
-                    raise CosimError(f"{ctx}: {inst}.{var} is a {sv.type} {sv.causality}; "
+                    raise CosimError(f"{ctx}: {inst}.{var} is {_a(sv.type)} {sv.causality}; "
                                      f"a signal drives Real inputs")
                 u = variable_unit(sv)
                 if u and sig.unit and u != sig.unit:
@@ -167,7 +187,8 @@ class Master:
             ctx = f"{where}record.{col.name}"
             sv = self.instances[col.instance].variable(col.variable, ctx)
             if sv.type not in ("Real", "Integer", "Enumeration", "Boolean"):
-                raise CosimError(f"{ctx}: {col.instance}.{col.variable} is a {sv.type}; only numbers can be recorded")
+                raise CosimError(f"{ctx}: {col.instance}.{col.variable} is {_a(sv.type)}; "
+                                 f"only numbers can be recorded")
             if col.unit:
                 need = COLUMN_CONVERSIONS[col.unit][0]
                 u = variable_unit(sv)
@@ -217,7 +238,7 @@ class Master:
             buf = real_array([0.0] * len(conns))
             by_name[dst].transfers.append((functools.partial(si.get_real, si.handle, svr, len(conns), buf),
                                            functools.partial(di.set_real, di.handle, dvr, len(conns), buf),
-                                           src))
+                                           src, buf, conns))
         # scenario signals; their inputs get the value at t = 0 in initialization mode
         self.signals = []
         for spec in s.signals.values():
@@ -310,8 +331,9 @@ class Master:
                     for tg in sig.targets:
                         tg.buf[0] = v
                         if tg.immediate:
-                            if tg.set() > 1:
-                                raise self._set_failed(tg, t)
+                            status = tg.set()
+                            if status > 1:
+                                raise self._set_failed(tg, t, status)
                         elif not tg.queued:
                             tg.queued = True
                             tg.stepper.pending.append(tg)
@@ -327,8 +349,9 @@ class Master:
         """Set the queued signal inputs of a multi-rate component (when it is stepped)."""
         for tg in st.pending:
             tg.queued = False
-            if tg.set() > 1:
-                raise self._set_failed(tg, t)
+            status = tg.set()
+            if status > 1:
+                raise self._set_failed(tg, t, status)
         st.pending.clear()
 
     # -- stepping ---------------------------------------------------------------------
@@ -336,18 +359,30 @@ class Master:
         reason = inst.last_problem()
         return f"{inst.name}: {action} failed at t = {t:.9g} s" + (f": {reason}" if reason else "")
 
-    def _set_failed(self, tg: _SignalTarget, t: float) -> _StepFailed:
+    def _set_failed(self, tg: _SignalTarget, t: float, status: int = 3) -> _StepFailed:
+        tg.stepper.inst.note_status(status)
         return _StepFailed(self._describe(tg.stepper.inst, f"setting {tg.label} = {tg.buf[0]!r}", t))
 
-    def _transfer_failed(self, st: _Stepper, t: float) -> _StepFailed:
-        for get, set_, src in st.transfers:
-            if get() > 1:
-                return _StepFailed(self._describe(self.instances[src], "fmi2GetReal", t))
-            if set_() > 1:
-                return _StepFailed(self._describe(st.inst, f"fmi2SetReal of the inputs from {src}", t))
-        return _StepFailed(f"{st.inst.name}: exchanging values failed at t = {t:.9g} s")
+    def _get_failed(self, st: _Stepper, j: int, t: float, status: int) -> _StepFailed:
+        src = self.instances[st.transfers[j][2]]
+        src.note_status(status)
+        return _StepFailed(self._describe(src, "fmi2GetReal", t))
 
-    def _step_failed(self, st: _Stepper, t: float) -> _StepFailed:
+    def _put_failed(self, st: _Stepper, j: int, t: float, status: int) -> _StepFailed:
+        st.inst.note_status(status)
+        return _StepFailed(self._describe(st.inst, f"fmi2SetReal of the inputs from {st.transfers[j][2]}", t))
+
+    def _check_finite(self, st: _Stepper, j: int, t: float) -> None:
+        """Raise if a value just read for a connection is NaN or infinite (the loop calls this
+        when the sum of the values is not finite, which a finite overflow can also cause)."""
+        _get, _set, _src, buf, conns = st.transfers[j]
+        for k, conn in enumerate(conns):
+            if not math.isfinite(buf[k]):
+                raise _StepFailed(f"{conn.src}.{conn.src_var} is not finite ({buf[k]!r}) at t = {t:.9g} s, "
+                                  f"before it reached {conn.dst}.{conn.dst_var}")
+
+    def _step_failed(self, st: _Stepper, t: float, status: int = 3) -> _StepFailed:
+        st.inst.note_status(status)
         return _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
 
     def _compile_steps(self):
@@ -360,39 +395,39 @@ class Master:
         A failing call raises ``_StepFailed`` carrying the step it failed at.
         """
         ns = {"_StepFailed": _StepFailed, "_Interrupted": _Interrupted, "update": self._update_signals,
-              "h": self.h, "fail_transfer": self._transfer_failed, "fail_step": self._step_failed,
-              "flush": self._flush_pending}
+              "h": self.h, "fail_get": self._get_failed, "fail_set": self._put_failed,
+              "fail_step": self._step_failed, "check_finite": self._check_finite, "flush": self._flush_pending,
+              "vsum": sum}
         jacobi = self.spec.algorithm == "jacobi"
         reads, writes, steps = [], [], []
         for i, st in enumerate(self.steppers):
             ns[f"st{i}"], ns[f"pend{i}"] = st, st.pending
             ns[f"do{i}"], ns[f"h{i}"] = functools.partial(st.do_step, st.handle), st.step_size
-            gets, sets = [], []
-            for j, (get, set_, _src) in enumerate(st.transfers):
-                ns[f"get{i}_{j}"], ns[f"set{i}_{j}"] = get, set_
-                gets.append(f"get{i}_{j}()")
-                sets.append(f"set{i}_{j}()")
             guard = f"if n % {st.multiple} == 0:" if st.multiple > 1 else None
             ind = "    " if guard else ""
 
             def block(lines, guard=guard):
                 return ([guard] if guard and lines else []) + lines
 
-            fail = f"raise fail_transfer(st{i}, t)"
-            read = [f"{ind}if ({' | '.join(gets)}) > 1: {fail}"] if gets else []
-            write = [f"{ind}if ({' | '.join(sets)}) > 1: {fail}"] if sets else []
-            exchange = [f"{ind}if ({' | '.join(g + ' | ' + s for g, s in zip(gets, sets))}) > 1: {fail}"] \
-                if gets else []
+            read, write = [], []
+            for j, (get, set_, _src, buf, _conns) in enumerate(st.transfers):
+                ns[f"get{i}_{j}"], ns[f"set{i}_{j}"], ns[f"buf{i}_{j}"] = get, set_, buf
+                # the status of each call; then NaN or inf in the values read: x - x is 0.0
+                # for a finite sum, NaN otherwise
+                read += [f"{ind}if (s := get{i}_{j}()) > 1: raise fail_get(st{i}, {j}, t, s)",
+                         f"{ind}x = vsum(buf{i}_{j})",
+                         f"{ind}if x - x: check_finite(st{i}, {j}, t)"]
+                write += [f"{ind}if (s := set{i}_{j}()) > 1: raise fail_set(st{i}, {j}, t, s)"]
             flush = []
             if st.multiple > 1 and any(tg.stepper is st for sig in self.signals for tg in sig.targets):
                 flush = [f"{ind}if pend{i}: flush(st{i}, t)"]  # queued signal inputs
-            step = [f"{ind}if do{i}(t, h{i}, 1) > 1: raise fail_step(st{i}, t)"]
+            step = [f"{ind}if (s := do{i}(t, h{i}, 1)) > 1: raise fail_step(st{i}, t, s)"]
             if jacobi:  # all reads at t_n, then all writes, then all steps
                 reads += block(read)
                 writes += block(write + flush)
                 steps += block(step)
             else:  # Gauss-Seidel: read the freshest values, write, step; component by component
-                steps += block(exchange + flush + step)
+                steps += block(read + write + flush + step)
         body = reads + writes + steps
         src = "\n".join([
             "def steps(n0, n1, sig_next):",
@@ -418,7 +453,9 @@ class Master:
     def _row(self, n: int) -> list:
         t = n * self.h
         for fn, handle, vrs, cnt, buf, name in self.record_reads:
-            if fn(handle, vrs, cnt, buf) > 1:
+            status = fn(handle, vrs, cnt, buf)
+            if status > 1:
+                self.instances[name].note_status(status)
                 raise _StepFailed(self._describe(self.instances[name], "reading the recorded variables", t))
         row = []
         for kind, a, b, conv, label in self.row_plan:
@@ -437,49 +474,61 @@ class Master:
         return row
 
     # -- the run -----------------------------------------------------------------------
-    def request_stop(self, *_args) -> None:
-        """Ask the loop to stop at its next check (the SIGINT handler)."""
+    def request_stop(self, signum=None, _frame=None) -> None:
+        """Ask the loop to stop at its next check (the SIGINT and SIGTERM handler)."""
+        if self._finishing:
+            return  # the loop is over: metrics.json is being written
         if self._stop_requested:
-            raise KeyboardInterrupt  # a second Ctrl-C stops at once
+            raise KeyboardInterrupt  # a second Ctrl-C (or SIGTERM) stops at once
         self._stop_requested = True
+        if signum is not None:
+            self._stop_signal = signal.Signals(signum).name
 
     def run(self, out_dir, progress=None, extra_settings: dict | None = None,
             catch_sigint: bool = True) -> dict:
         """Initialize, step to the stop time, stream ``results.csv``, write ``metrics.json``.
 
         Returns the metrics. A CosimError during initialization (a start value refused by
-        an FMU, ...) is re-raised after metrics.json records it; a failure or an
-        interruption during the steps ends the run with that status, rows kept.
+        an FMU, ...) is raised before anything is written: ``out_dir`` is left as it was.
+        Once the FMUs are initialized, ``results.csv`` is (re)created and ``metrics.json``
+        says ``"status": "running"``; a failure or an interruption (SIGINT or SIGTERM, with
+        ``catch_sigint``) during the steps ends the run with that status, the rows kept.
+        metrics.json is written before the FMU instances are freed.
         """
         out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        status, n, init_time, wall = "completed", 0, 0.0, 0.0
-        user_error = None
-        old_handler = None
+        self._finishing = False
+        handlers = {}
         if catch_sigint and threading.current_thread() is threading.main_thread():
-            old_handler = signal.signal(signal.SIGINT, self.request_stop)
-        writer = ResultWriter(out, [c.name for c in self.spec.columns])
+            for signum in STOP_SIGNALS:
+                handlers[signum] = signal.signal(signum, self.request_stop)
+        writer = None
         try:
             t_init = time.perf_counter()
-            try:
-                self._build()
-            except CosimError as exc:
-                user_error = exc
-                status = f"failed: {exc}"
+            self._build()
             init_time = time.perf_counter() - t_init
-            if user_error is None:
+            # from here on, a previous run's files in out_dir are replaced
+            out.mkdir(parents=True, exist_ok=True)
+            writer = ResultWriter(out, [c.name for c in self.spec.columns])
+            write_metrics(out, self._bookkeeping("running", 0, 0.0, init_time, 0, extra_settings))
+            status, n, wall = "interrupted", 0, 0.0
+            try:
                 status, n, wall = self._loop(writer, progress)
+            except Exception as exc:  # e.g. the disk is full: say so in metrics.json too
+                status = f"failed: {type(exc).__name__}: {one_line(exc)}"
+                raise
+            finally:
+                self._finishing = True
+                writer.close()
+                metrics = self._metrics(out, status, n, wall, init_time, writer.rows, extra_settings)
+                write_metrics(out, metrics)
         finally:
-            writer.close()
-            if old_handler is not None:
-                signal.signal(signal.SIGINT, old_handler)
-            self.close()
+            if writer is not None:
+                writer.close()
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
             if progress is not None:
                 progress.close()
-        metrics = self._metrics(out, status, n, wall, init_time, writer.rows, extra_settings)
-        write_metrics(out, metrics)
-        if user_error is not None:
-            raise user_error
+            self.close()
         return metrics
 
     def _loop(self, writer: ResultWriter, progress) -> tuple[str, int, float]:
@@ -529,9 +578,16 @@ class Master:
                 metrics = compute_metrics(read_results(out))
             except Exception as exc:  # a partial or odd result set: keep the bookkeeping
                 metrics["metrics_error"] = one_line(f"{type(exc).__name__}: {exc}")
+        metrics.update(self._bookkeeping(status, n, wall, init_time, rows, extra))
+        return metrics
+
+    def _bookkeeping(self, status: str, n: int, wall: float, init_time: float, rows: int,
+                     extra: dict | None) -> dict:
         s = self.spec
-        metrics.update({
-            "status": status,
+        out = {"status": status}
+        if status == "interrupted" and self._stop_signal:
+            out["stop_signal"] = self._stop_signal
+        out.update({
             "wall_time_s": wall,
             "init_time_s": init_time,
             "macro_steps": n,
@@ -544,7 +600,7 @@ class Master:
             "output_interval": s.output_interval,
             "settings": {**s.settings(), **(extra or {})},
         })
-        return metrics
+        return out
 
     def close(self) -> None:
         for inst in self.instances.values():
