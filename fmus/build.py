@@ -50,6 +50,12 @@ FMUS: dict[str, tuple[str, bool]] = {
     "FocEkf5AB": ("foc_ekf5ab.py", False),
     "FocSensored": ("foc_sensored.py", False),
 }
+#: FMUs for the step-cost benchmark (``orchestrator.bench``), not built by default: the
+#: interface of PmsmEvPlant and FocEkf5 with a ``do_step`` that computes nothing
+BENCH_FMUS: dict[str, tuple[str, bool]] = {
+    "PassThroughPlant": ("passthrough_plant.py", True),
+    "PassThroughFoc": ("passthrough_foc.py", False),
+}
 #: observer of each controller FMU (pmsm_ev.params.OBSERVERS)
 OBSERVER_FMUS = {"ekf5": "FocEkf5", "ekf4": "FocEkf4", "ekf5ab": "FocEkf5AB", "sensored": "FocSensored"}
 
@@ -142,9 +148,18 @@ def _physics_files(script: str) -> list[Path]:
     return sorted(root / f"{name}.py" for name in seen)
 
 
+def _recipe(name: str) -> tuple[str, bool]:
+    """(slave script, variable step size) of a project or benchmark FMU."""
+    if name in FMUS:
+        return FMUS[name]
+    if name in BENCH_FMUS:
+        return BENCH_FMUS[name]
+    raise BuildError(f"unknown FMU {name!r}; choose from {', '.join(FMUS)}")
+
+
 def source_hash(name: str) -> str:
     """SHA-256 over everything an FMU is made of (see the module doc)."""
-    script, variable_step = FMUS[name]
+    script, variable_step = _recipe(name)
     h = hashlib.sha256()
 
     def add(label: str, data: bytes) -> None:
@@ -209,7 +224,7 @@ def is_up_to_date(name: str, out_dir=None) -> bool:
 
 def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]:
     """Write the renamed sources into ``stage``; return (script, project files, doc dir)."""
-    script, variable_step = FMUS[name]
+    script, variable_step = _recipe(name)
     tag = digest[:8]
     physics = stage / f"{PHYSICS_PACKAGE}_{tag}"
     physics.mkdir()
@@ -256,9 +271,9 @@ def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]
 
 
 def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]:
-    """Build one FMU into ``out_dir``; return (path, whether it was (re)built)."""
-    if name not in FMUS:
-        raise BuildError(f"unknown FMU {name!r}; choose from {', '.join(FMUS)}")
+    """Build one FMU (of ``FMUS`` or ``BENCH_FMUS``) into ``out_dir``; return (path, whether
+    it was (re)built)."""
+    _recipe(name)
     out = Path(out_dir or default_out_dir())
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"{name}.fmu"
@@ -282,7 +297,7 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
         built = FmuBuilder.build_FMU(
             script, dest=stage / f"{name}.fmu", project_files=project_files, documentation_folder=doc,
             canGetAndSetFMUstate=True, canSerializeFMUstate=True,
-            canHandleVariableCommunicationStepSize=FMUS[name][1])
+            canHandleVariableCommunicationStepSize=_recipe(name)[1])
         _check(built, name)
         os.replace(built, target)
     finally:

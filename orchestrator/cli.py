@@ -164,6 +164,12 @@ def cmd_build(a) -> int:
     return 0
 
 
+def cmd_bench(a) -> int:
+    from .bench import run_from_args  # noqa: PLC0415
+
+    return run_from_args(a)
+
+
 def cmd_info(a) -> int:
     from .fmu import read_description, variable_unit  # noqa: PLC0415
 
@@ -252,6 +258,16 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--force", action="store_true", help="rebuild even when up to date")
     b.add_argument("names", nargs="*", metavar="NAME", help="build only these FMUs (default: all)")
     b.set_defaults(func=cmd_build)
+
+    from .bench import add_arguments as bench_arguments  # noqa: PLC0415
+
+    bn = sub.add_parser("bench", help="measure the co-simulation's cost per step",
+                        description="Measure the wall time per macro step on a slice of scenario 1: "
+                                    "(a) the master with the project's FMUs, (b) with pass-through FMUs "
+                                    "that compute nothing, (c) the monolithic reference, (d) libcosim "
+                                    "with the same FMUs; then the peak memory of 100 s and 350 s runs.")
+    bench_arguments(bn)
+    bn.set_defaults(func=cmd_bench)
 
     i = sub.add_parser("info", help="list an FMU's variables",
                        description="Print an FMU's model information and its variables with causality, "

@@ -1,0 +1,20 @@
+"""Slave of PassThroughPlant.fmu, for the step-cost benchmark (``pmsm-cosim bench``):
+PmsmEvPlant's interface, parameters and FMI plumbing, but ``do_step`` computes nothing
+(the outputs keep their initial values). It measures the floor of FMI calls plus
+pythonfmu under the plant's interface."""
+
+from __future__ import annotations
+
+from pmsm_ev_fmus.pmsm_ev_plant import PmsmEvPlant
+
+
+class PassThroughPlant(PmsmEvPlant):
+    """PmsmEvPlant without physics in the step."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.description = ("Benchmark unit: the interface of PmsmEvPlant; fmi2DoStep computes nothing, "
+                            "the outputs keep their initial values.")
+
+    def do_step(self, current_time, step_size):
+        return True
