@@ -13,7 +13,9 @@ wall time per macro step of
     value changes, as the master does (its loop is a Python ``for`` over ``execution.step()``;
     nothing is recorded);
 
-and prints one table with the ratios a/b and d/a. (a)-(c) include the recording of a row
+and prints one table with the ratios a/b and d/a, in wall time (what a user waits) and in
+CPU time of the process (less sensitive to other load on the machine; for libcosim it
+includes its worker threads). (a)-(c) include the recording of a row
 every 10 ms, as in a normal run. With ``memory`` it also runs ``pmsm-cosim run scenario1``
 (figures included) for 100 s and for the full 350 s, each in a fresh process, and prints
 their wall time and peak resident memory (``wait4`` of that process): memory must not grow
@@ -72,30 +74,32 @@ def _spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None)
 
 
 def cosim_us_per_step(stop_time: float, work: Path, plant: Path | None = None,
-                      ctrl: Path | None = None) -> float:
-    """(a) or (b): the master's loop wall time per macro step (metrics ``us_per_step``)."""
+                      ctrl: Path | None = None) -> tuple[float, float]:
+    """(a) or (b): the master's loop (wall, CPU) time per macro step [us]."""
     from .master import Master  # noqa: PLC0415
 
     out = Path(tempfile.mkdtemp(prefix="cosim-", dir=work))
-    m = Master(_spec(stop_time, plant, ctrl)).run(out, catch_sigint=False)
+    master = Master(_spec(stop_time, plant, ctrl))
+    m = master.run(out, catch_sigint=False)
     if m["status"] != "completed":
         raise CosimError(f"benchmark run did not complete: {m['status']}")
-    return m["us_per_step"]
+    return m["us_per_step"], 1e6 * master.loop_cpu_time / m["macro_steps"]
 
 
-def reference_us_per_step(stop_time: float, work: Path) -> float:
-    """(c): the monolithic reference's loop wall time per step."""
+def reference_us_per_step(stop_time: float, work: Path) -> tuple[float, float]:
+    """(c): the monolithic reference's loop (wall, CPU) time per step [us]."""
     from pmsm_ev.reference import run_reference  # noqa: PLC0415
 
     out = Path(tempfile.mkdtemp(prefix="ref-", dir=work))
     m = run_reference(out, 1, stop_time=stop_time)
     if m["status"] != "completed":
         raise CosimError(f"reference run did not complete: {m['status']}")
-    return m["us_per_step"]
+    return m["us_per_step"], 1e6 * m["cpu_time_s"] / m["macro_steps"]
 
 
-def libcosim_us_per_step(stop_time: float, plant: Path, ctrl: Path) -> float | None:
-    """(d): libcosim's fixed-step execution of the same system; None without libcosimpy."""
+def libcosim_us_per_step(stop_time: float, plant: Path, ctrl: Path) -> tuple[float, float] | None:
+    """(d): libcosim's fixed-step execution of the same system, (wall, CPU of all the
+    process's threads) per step [us]; None without libcosimpy."""
     try:
         from libcosimpy.CosimExecution import CosimExecution  # noqa: PLC0415
         from libcosimpy.CosimLogging import CosimLogLevel, log_output_level  # noqa: PLC0415
@@ -129,7 +133,7 @@ def libcosim_us_per_step(stop_time: float, plant: Path, ctrl: Path) -> float | N
         ex.real_initial_value(slave, ref, value)
     n_steps = round(stop_time / h)
     step, override = ex.step, manipulator.slave_real_values
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     for n in range(n_steps):
         t = n * h
         for k, (profile, slave, ref) in enumerate(targets):
@@ -139,8 +143,8 @@ def libcosim_us_per_step(stop_time: float, plant: Path, ctrl: Path) -> float | N
                 override(slave, [ref], [v])
         if not step():
             raise CosimError(f"libcosim step {n} failed")
-    wall = time.perf_counter() - t0
-    return 1e6 * wall / n_steps
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+    return 1e6 * wall / n_steps, 1e6 * cpu / n_steps
 
 
 def passthrough_fmus(out_dir: Path) -> dict[str, Path]:
@@ -201,13 +205,19 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
             ("(c) monolithic reference (no FMUs)", results["c"]),
             ("(d) libcosim + PmsmEvPlant/FocEkf5 FMUs", results["d"]),
         ]
-        say(f"{'case':<46}{'us/step':>10}")
+        say(f"{'case':<46}{'us/step wall':>14}{'us/step CPU':>13}")
         for label, value in rows:
-            say(f"{label:<46}" + (f"{value:>10.2f}" if value is not None else
-                                  f"{'n/a':>10}  (" + ("libcosimpy not installed)" if libcosim else "skipped)")))
-        say(f"{'a/b':<46}{results['a'] / results['b']:>10.2f}")
+            if value is None:
+                say(f"{label:<46}{'n/a':>14}  (" + ("libcosimpy not installed)" if libcosim else "skipped)"))
+            else:
+                say(f"{label:<46}{value[0]:>14.2f}{value[1]:>13.2f}")
+
+        def ratio(label, x, y):
+            say(f"{label:<46}{x[0] / y[0]:>14.2f}{x[1] / y[1]:>13.2f}")
+
+        ratio("a/b", results["a"], results["b"])
         if results["d"] is not None:
-            say(f"{'d/a':<46}{results['d'] / results['a']:>10.2f}")
+            ratio("d/a", results["d"], results["a"])
         say(f"load average at end: {load_average()}")
         if memory:
             say()

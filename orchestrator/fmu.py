@@ -6,12 +6,14 @@ then extracts the FMU, loads its library and runs instantiate, setupExperiment, 
 start values, enterInitializationMode; :meth:`exit_initialization` completes the
 initialization. For the stepping loop it exposes the raw ctypes entry points
 (``get_real``, ``set_real``, ``do_step``) and the instance handle ``handle``: they
-are called with preallocated value-reference and value arrays, no per-call wrapping.
+are called with preallocated value-reference and value arrays, no per-call wrapping;
+and leaner copies of the three (``lean``, see :class:`LeanCalls`) for the hot loop.
 The FMU's log messages are collected so a refusal can be reported in one line.
 """
 
 from __future__ import annotations
 
+import _ctypes
 import ast
 import ctypes
 import math
@@ -39,6 +41,8 @@ _ABANDONED: list = []
 SETTABLE_CAUSALITIES = ("parameter", "input")
 _EXC_REPR = re.compile(r"^([A-Za-z_][A-Za-z0-9_.]*(?:Error|Exception))\((.*)\)$", re.S)
 _EXC_TEXT = re.compile(r"(?:^|: )([A-Za-z_][A-Za-z0-9_]*(?:Error|Exception)): (.*)$")
+#: generationTool prefix of Python FMUs, whose every call holds the GIL anyway
+PYTHONFMU_TOOL = "PythonFMU"
 #: exception classes whose text alone says it all
 PLAIN_EXCEPTIONS = ("ValueError", "ParameterError", "ProfileError")
 
@@ -190,6 +194,7 @@ class FmuInstance:
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         # raw ctypes entry points, set by instantiate()
         self.get_real = self.set_real = self.get_integer = self.get_boolean = self.do_step = None
+        self.lean: LeanCalls | None = None
 
     # -- model description look-ups ----------------------------------------------
     def variable(self, name: str, context: str = ""):
@@ -256,6 +261,7 @@ class FmuInstance:
         self.get_real, self.set_real = f["fmi2GetReal"], f["fmi2SetReal"]
         self.get_integer, self.get_boolean = f["fmi2GetInteger"], f["fmi2GetBoolean"]
         self.do_step = f["fmi2DoStep"]
+        self.lean = LeanCalls(self.fmu, (self.md.generationTool or "").startswith(PYTHONFMU_TOOL))
         try:
             self.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
         except FMICallException as exc:
@@ -327,9 +333,62 @@ class FmuInstance:
                     pass
             self.fmu = None
             self.handle = None
+        if self.lean is not None:
+            self.lean.close()
+            self.lean = None
         if self.unzip_dir is not None:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
             self.unzip_dir = None
+
+
+class LeanCalls:
+    """fmi2GetReal, fmi2SetReal and fmi2DoStep of a loaded FMU, for the stepping loop.
+
+    fmpy's function objects declare ``argtypes``, and ctypes then checks and converts every
+    argument on every call (for the pointer arguments that is the larger part of a call's
+    cost). These copies have no ``argtypes`` for get/set and are called with arguments that
+    already have their C types: the handle ``handle`` (``c_void_p``), a value-reference
+    array, a ``c_size_t`` count (:meth:`count`) and a value array. ``do_step`` keeps
+    ``argtypes`` (its time arguments are Python floats).
+
+    For a Python FMU (``python_fmu``: pythonfmu) they come from a ``ctypes.PyDLL`` handle on
+    the same library: the GIL is not released around the call, which the FMU would take back
+    at once to run its Python code. Other FMUs keep the usual release.
+    """
+
+    def __init__(self, fmu, python_fmu: bool):
+        dll = fmu.dll
+        self._extra_handle = None
+        if python_fmu:
+            lib = ctypes.PyDLL(dll._name)  # the same library, one more reference to it
+            self._extra_handle = lib._handle
+        else:
+            lib = ctypes.CDLL(dll._name, handle=dll._handle)
+        self.handle = ctypes.c_void_p(fmu.component)
+        self.get_real = self._function(lib, "fmi2GetReal", None)
+        self.set_real = self._function(lib, "fmi2SetReal", None)
+        self.do_step = self._function(lib, "fmi2DoStep",
+                                      [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int])
+
+    @staticmethod
+    def _function(lib, name, argtypes):
+        f = getattr(lib, name)
+        f.restype = ctypes.c_int
+        f.argtypes = argtypes
+        return f
+
+    @staticmethod
+    def count(n: int) -> ctypes.c_size_t:
+        return ctypes.c_size_t(n)
+
+    def close(self) -> None:
+        """Drop this object's reference to the library (fmpy frees its own)."""
+        if self._extra_handle is not None:
+            handle, self._extra_handle = self._extra_handle, None
+            try:
+                _ctypes.dlclose(handle)
+            except OSError:
+                pass
 
 
 def real_array(values) -> ctypes.Array:
