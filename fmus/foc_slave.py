@@ -135,16 +135,9 @@ class FocSlave(DriveSlave):
         try:
             if step_size != self._dt:
                 self._fix_sample_period(step_size)
-            u = self._unit
-            u.step(self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
-            self.v_alpha = u.v_alpha
-            self.v_beta = u.v_beta
-            self.v_d = u.v_d
-            self.v_q = u.v_q
-            self.i_d = u.i_d
-            self.i_q = u.i_q
-            self.i_qref = u.i_qref
-            self.i_d_hat, self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat = u.estimates
+            (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
+             self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
+                self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
         except Exception as exc:
             self._fail("fmi2DoStep", exc)
             raise

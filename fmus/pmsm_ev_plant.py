@@ -103,20 +103,11 @@ class PmsmEvPlant(DriveSlave):
         try:
             if not self._initialized:
                 raise FmuUsageError("fmi2DoStep before fmi2ExitInitializationMode")
-            p = self._plant
-            p.step(self.v_alpha, self.v_beta, self.delta, step_size)
-            self.i_alpha = p.i_alpha
-            self.i_beta = p.i_beta
-            self.i_d = p.i_d
-            self.i_q = p.i_q
-            self.omega_m = p.omega_m
-            self.theta_e = p.theta_e
-            self.T_e = p.T_e
-            self.T_L_mech = p.T_L_mech
-            self.v_vehicle = p.v_vehicle
-            if not math.isfinite(p.omega_m + p.i_d + p.i_q):
+            (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta, self.T_e,
+             self.T_L_mech, self.v_vehicle) = self._plant.step(self.v_alpha, self.v_beta, self.delta, step_size)
+            if not math.isfinite(self.omega_m + self.i_d + self.i_q):
                 raise SimulationError(f"plant state is not finite at t = {current_time + step_size!r} s "
-                                    f"(omega_m={p.omega_m!r}, i_d={p.i_d!r}, i_q={p.i_q!r})")
+                                      f"(omega_m={self.omega_m!r}, i_d={self.i_d!r}, i_q={self.i_q!r})")
         except Exception as exc:
             self._fail("fmi2DoStep", exc)
             raise

@@ -52,12 +52,10 @@ def load_average() -> str:
 
 
 def jit_mode() -> str:
-    """How the physics kernels run in this process (``pmsm_ev.kernels``), if known."""
-    try:
-        from pmsm_ev import kernels  # noqa: PLC0415
-    except ImportError:
-        return "plain Python"
-    return kernels.describe()
+    """How the physics kernels run in this process (``pmsm_ev.accel``)."""
+    from pmsm_ev import accel  # noqa: PLC0415
+
+    return accel.describe()
 
 
 # -- the cases -----------------------------------------------------------------------------

@@ -597,6 +597,8 @@ def test_freeing_failed_instances_does_not_crash_the_host(fmus, tmp_path):
 # -- self-contained ------------------------------------------------------------------------------
 ISOLATED_SCRIPT = """
 import importlib.util, json, sys
+if sys.argv[3] == "no-numba":
+    sys.modules["numba"] = None  # import numba fails: a host without numba
 assert importlib.util.find_spec("pmsm_ev") is None, "the project is importable"
 assert importlib.util.find_spec("pmsm_ev_fmus") is None, "the project is importable"
 import fmpy, numpy as np
@@ -614,21 +616,29 @@ print(json.dumps({"i_d": float(r["i_d"][-1]), "v_q": float(q["v_q"][-1]), "modul
 """
 
 
-def test_fmus_run_where_the_project_is_not_installed(fmus, tmp_path):
+@pytest.mark.parametrize("host", ["numba", "no-numba"])
+def test_fmus_run_where_the_project_is_not_installed(fmus, tmp_path, host):
     """``python -S``: no site processing, so the project's editable install is invisible; the
-    PYTHONPATH holds only the site-packages directory (numpy, fmpy)."""
+    PYTHONPATH holds only the site-packages directory (numpy, fmpy, numba). Without numba
+    the FMUs run their kernels as plain Python, with the same numbers."""
     site_packages = str(Path(np.__file__).resolve().parents[1])
     assert not (Path(site_packages) / "pmsm_ev").exists()
     script = tmp_path / "isolated.py"
     script.write_text(ISOLATED_SCRIPT)
     env = {"PATH": os.environ.get("PATH", ""), "PYTHONPATH": site_packages, "HOME": str(tmp_path)}
-    r = subprocess.run([sys.executable, "-S", str(script), str(fmus["PmsmEvPlant"]), str(fmus["FocEkf5"])],
-                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
+    r = subprocess.run([sys.executable, "-S", str(script), str(fmus["PmsmEvPlant"]), str(fmus["FocEkf5"]), host],
+                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
     tags = {fmu_build.read_build_info(fmus[n])["tag"] for n in ("PmsmEvPlant", "FocEkf5")}
     assert {f"pmsm_ev_{tag}" for tag in tags} <= set(out["modules"])
-    assert all("/resources/" in f and "/work/" not in f.replace(str(tmp_path), "") for f in out["files"])
+    # the bundled code, or (compiled with numba) the copy of the bundled kernels.py that
+    # pmsm_ev.accel keeps in the user's cache (here under HOME = tmp_path)
+    cache = tmp_path / ".cache" / "pmsm-ev-cosim"
+    compiled = [f for f in out["files"] if Path(f).parent == cache]
+    assert all("/resources/" in f and "/work/" not in f.replace(str(tmp_path), "")
+               for f in out["files"] if f not in compiled)
+    assert len(compiled) == (1 if host == "numba" else 0), out["files"]
     # the numbers of this process (fmpy's steps are t_next - t: round-off in h)
     plant = Plant(vehicle=VehicleParams(m_v=1e12), plant=PlantParams(theta_e0=0.3))
     for _ in range(100):

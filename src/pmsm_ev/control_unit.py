@@ -12,19 +12,41 @@ Per control period, at t_k, with the plant's measured currents at t_k:
    ``angle_advance`` periods of omega_hat, to v_alpha, v_beta held until t_{k+1}; with
    ``zoh_compensation`` the held vector is lengthened by a/sin(a), a = omega_e dt/2, so
    that its mean over the period, seen from the turning rotor, equals the command.
+
+The step is ``pmsm_ev.kernels.control_step`` (compiled with numba when available, see
+``pmsm_ev.accel``) on one state vector that the observer and the controllers share.
 """
 
 from __future__ import annotations
 
-import math
-
+from . import accel
+from . import kernels as _k
 from .controller import CurrentController, SpeedController
 from .observers import make_observer
 from .params import ANGLE_SOURCES, ControllerParams, EkfParams, MotorParams, ParameterError
-from .transforms import inverse_park, park
+
+
+def _slot(index: int, doc: str) -> property:
+    def get(self) -> float:
+        return float(self._s[index])
+
+    def set_(self, value: float) -> None:
+        self._s[index] = float(value)
+
+    return property(get, set_, doc=doc)
 
 
 class ControlUnit:
+    v_d = _slot(_k.S_V_D, "commanded d voltage (eq 19, limited) [V]")
+    v_q = _slot(_k.S_V_Q, "commanded q voltage (eq 20, limited) [V]")
+    v_prev_d = _slot(_k.S_V_PREV_D, "the d command of one period earlier [V]")
+    v_prev_q = _slot(_k.S_V_PREV_Q, "the q command of one period earlier [V]")
+    v_alpha = _slot(_k.S_V_ALPHA, "voltage held until the next step, alpha axis [V]")
+    v_beta = _slot(_k.S_V_BETA, "voltage held until the next step, beta axis [V]")
+    i_d = _slot(_k.S_I_D, "d current in the control frame [A]")
+    i_q = _slot(_k.S_I_Q, "q current in the control frame [A]")
+    i_qref = _slot(_k.S_I_QREF, "q current reference (eq 14) [A]")
+
     def __init__(self, observer: str = "ekf5", angle_source: str = "measured",
                  motor: MotorParams | None = None, controller: ControllerParams | None = None,
                  ekf: EkfParams | None = None, dt: float = 1e-4):
@@ -39,16 +61,21 @@ class ControlUnit:
             raise ParameterError(f"dt must be > 0 s (got {dt})")
         self.dt = dt
         self.observer_name = observer
-        self.observer = make_observer(observer, self.motor, dt, self.ekf_params)
+        self._kernels = accel.kernels()
+        self._s = accel.vector(_k.UNIT_STATE)
+        self._c = accel.vector(_k.UNIT_PARAMS)
+        self.observer = make_observer(observer, self.motor, dt, self.ekf_params, state=self._s, params=self._c)
         # the sensored baseline has no angle estimate of its own: always the measured angle
         self.angle_source = "measured" if observer == "sensored" else angle_source
-        self._estimated = self.angle_source == "estimated"
-        self.speed = SpeedController(self.params, dt)
-        self.current = CurrentController(self.params, self.motor, dt)
-        self._advance = self.params.angle_advance * dt * self.motor.N
-        self._half_period_n = 0.5 * dt * self.motor.N
-        self._zoh = bool(self.params.zoh_compensation)
-        self._delayed = bool(self.params.delay_compensation)
+        self.speed = SpeedController(self.params, dt, state=self._s, params=self._c)
+        self.current = CurrentController(self.params, self.motor, dt, state=self._s, params=self._c)
+        c = self._c
+        c[_k.C_I_D_REF] = float(self.params.i_d_ref)
+        c[_k.C_ADVANCE] = self.params.angle_advance * dt * self.motor.N
+        c[_k.C_HALF_PERIOD_N] = 0.5 * dt * self.motor.N
+        c[_k.C_ZOH] = 1.0 if self.params.zoh_compensation else 0.0
+        c[_k.C_DELAYED] = 1.0 if self.params.delay_compensation else 0.0
+        c[_k.C_ESTIMATED] = 1.0 if self.angle_source == "estimated" else 0.0
         self.reset()
 
     def reset(self) -> None:
@@ -62,31 +89,13 @@ class ControlUnit:
         self.i_qref = 0.0
 
     def step(self, i_alpha: float, i_beta: float, omega_ref: float,
-             theta_meas: float = 0.0, omega_meas: float = 0.0) -> None:
-        obs = self.observer
-        # (23)-(24) with the voltage applied over the last period: the last command, or
-        # with a one-period actuation delay, the command before it
-        if self._delayed:
-            obs.predict(self.v_prev_d, self.v_prev_q)
-            self.v_prev_d, self.v_prev_q = self.v_d, self.v_q
-        else:
-            obs.predict(self.v_d, self.v_q)
-        theta_frame = obs.theta_prior if self._estimated else theta_meas
-        i_d, i_q = park(i_alpha, i_beta, theta_frame)
-        obs.correct(i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas)  # (25)-(27)
-        if self._estimated:
-            theta_ctrl = obs.theta_hat
-            i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
-        else:
-            theta_ctrl = theta_meas
-        omega_hat = obs.omega_hat
-        self.i_d, self.i_q = i_d, i_q
-        self.i_qref = self.speed.step(omega_ref, omega_hat)  # (14)
-        self.v_d, self.v_q = self.current.step(self.params.i_d_ref, self.i_qref, i_d, i_q, omega_hat)  # (15)-(20)
-        half_arc = self._half_period_n * omega_hat  # a = omega_e dt / 2
-        gain = half_arc / math.sin(half_arc) if self._zoh and abs(half_arc) > 1e-6 else 1.0
-        self.v_alpha, self.v_beta = inverse_park(gain * self.v_d, gain * self.v_q,
-                                                 theta_ctrl + self._advance * omega_hat)
+             theta_meas: float = 0.0, omega_meas: float = 0.0) -> tuple:
+        """One control period with the measured currents at t_k (see the module doc).
+
+        Returns (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref, i_d_hat, i_q_hat, omega_hat,
+        theta_hat, T_L_hat), which are also the attributes of the same names (the estimates
+        via ``estimates``)."""
+        return self._kernels.control_step(self._s, self._c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas)
 
     # outputs of the observer, for recording
     @property

@@ -9,16 +9,20 @@ Optional realism, all off by default (``PlantParams``): current sensors with whi
 noise, offset, gain error and ADC quantisation per phase (two phase sensors, a and b;
 the truth outputs stay clean), and an inverter with a DC-link voltage limit and a
 one-step actuation delay.
+
+The RK4 step, the model (eqs 8-13, 29) and the outputs are ``pmsm_ev.kernels.plant_step``
+(compiled with numba when available, see ``pmsm_ev.accel``); this class holds the state
+and the parameters and adds the optional sensors and inverter.
 """
 
 from __future__ import annotations
 
 import math
 
+from . import accel
+from . import kernels as _k
 from .params import MotorParams, PlantParams, VehicleParams, equivalent_inertia
-from .pmsm import current_derivatives, electromagnetic_torque, friction_torque
-from .transforms import clarke, inverse_park, wrap_angle
-from .vehicle import load_torque, vehicle_speed
+from .transforms import clarke, wrap_angle
 
 
 class Plant:
@@ -37,6 +41,17 @@ class Plant:
                          or p.sensor_gain_a != 1 or p.sensor_gain_b != 1 or p.adc_bits > 0)
         self._lsb = 2.0 * p.adc_range / 2 ** int(p.adc_bits) if p.adc_bits else 0.0
         self._u_lim = p.v_dc / math.sqrt(3.0)
+        self._kernels = accel.kernels()
+        m, v = self.motor, self.vehicle
+        values = {_k.P_R_S: m.R_s, _k.P_L_D: m.L_d, _k.P_L_Q: m.L_q, _k.P_PSI: m.psi, _k.P_N: m.N,
+                  _k.P_B_M: m.B_m, _k.P_T_M0: m.T_m0, _k.P_OMEGA_EPS: m.omega_eps, _k.P_J_EQ: self.J_eq,
+                  _k.P_M_V: v.m_v, _k.P_G: v.g, _k.P_C_R: v.c_r, _k.P_RHO_A: v.rho_a, _k.P_C_D: v.c_d,
+                  _k.P_A_F: v.A_f, _k.P_R_W: v.r_w, _k.P_ETA: v.eta, _k.P_N_G: v.n_g, _k.P_V_A: v.v_a,
+                  _k.P_V_EPS: v.v_eps, _k.P_PAPER: 1.0 if v.load_model == "paper" else 0.0,
+                  _k.P_SUBSTEPS: p.rk4_substeps}
+        self._pp = accel.vector(_k.PLANT_PARAMS)
+        for slot, value in values.items():
+            self._pp[slot] = float(value)
         self.reset()
 
     def reset(self) -> None:
@@ -65,21 +80,13 @@ class Plant:
 
     def derivatives(self, i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta):
         """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage."""
-        m = self.motor
-        c = math.cos(theta_e)
-        s = math.sin(theta_e)
-        v_d = c * v_alpha + s * v_beta  # Park at the true angle
-        v_q = -s * v_alpha + c * v_beta
-        did, diq = current_derivatives(i_d, i_q, omega_m, v_d, v_q, m)  # (10), (11)
-        t_e = electromagnetic_torque(i_d, i_q, m)  # (12)
-        t_l = load_torque(omega_m, delta, self.vehicle)  # (29)
-        t_f = friction_torque(omega_m, m, self.vehicle.load_model)  # (8): B_m w + T_m0
-        dw = (t_e - t_f - t_l) / self.J_eq  # (9) = (28)
-        dth = m.N * omega_m  # (13)
-        return did, diq, dw, dth
+        return _k.plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, self._pp)
 
-    def step(self, v_alpha: float, v_beta: float, delta: float, dt: float) -> None:
-        """Advance by dt with the voltage and elevation held (RK4, ``rk4_substeps``)."""
+    def step(self, v_alpha: float, v_beta: float, delta: float, dt: float) -> tuple:
+        """Advance by dt with the voltage and elevation held (RK4, ``rk4_substeps``).
+
+        Returns (i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle)
+        after the step, also set as attributes (i_alpha, i_beta as measured)."""
         self.delta = delta
         p = self.params
         if p.inverter_delay:
@@ -90,46 +97,37 @@ class Plant:
                 v_alpha *= self._u_lim / mag
                 v_beta *= self._u_lim / mag
         self.v_alpha_applied, self.v_beta_applied = v_alpha, v_beta
-        n = self.params.rk4_substeps
-        h = dt / n
-        x0, x1, x2, x3 = self.i_d, self.i_q, self.omega_m, self.theta_e
-        f = self.derivatives
-        for _ in range(n):
-            k1 = f(x0, x1, x2, x3, v_alpha, v_beta, delta)
-            k2 = f(x0 + 0.5 * h * k1[0], x1 + 0.5 * h * k1[1], x2 + 0.5 * h * k1[2],
-                   x3 + 0.5 * h * k1[3], v_alpha, v_beta, delta)
-            k3 = f(x0 + 0.5 * h * k2[0], x1 + 0.5 * h * k2[1], x2 + 0.5 * h * k2[2],
-                   x3 + 0.5 * h * k2[3], v_alpha, v_beta, delta)
-            k4 = f(x0 + h * k3[0], x1 + h * k3[1], x2 + h * k3[2], x3 + h * k3[3],
-                   v_alpha, v_beta, delta)
-            x0 += h / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
-            x1 += h / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
-            x2 += h / 6.0 * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
-            x3 += h / 6.0 * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
-        self.i_d, self.i_q, self.omega_m = x0, x1, x2
-        self.theta_e = wrap_angle(x3)
-        self._update_outputs()
+        out = self._kernels.plant_step(self.i_d, self.i_q, self.omega_m, self.theta_e,
+                                       v_alpha, v_beta, delta, dt, self._pp)
+        (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta,
+         self.T_e, self.T_L_mech, self.v_vehicle) = out
+        self.i_alpha_true, self.i_beta_true = self.i_alpha, self.i_beta
+        self.samples += 1
+        if self._sensors:
+            self.i_alpha, self.i_beta = self._measure(self.i_alpha, self.i_beta, self.samples - 1)
+            out = out[:4] + (self.i_alpha, self.i_beta) + out[6:]
+        return out
 
     def _update_outputs(self) -> None:
-        m = self.motor
-        self.i_alpha, self.i_beta = inverse_park(self.i_d, self.i_q, self.theta_e)
+        """The outputs of the present state (after a reset or a restored state)."""
+        (self.i_alpha, self.i_beta, self.T_e, self.T_L_mech,
+         self.v_vehicle) = self._kernels.plant_outputs(self.i_d, self.i_q, self.omega_m, self.theta_e,
+                                                       self.delta, self._pp)
         self.i_alpha_true, self.i_beta_true = self.i_alpha, self.i_beta
         if self._sensors:
-            self.i_alpha, self.i_beta = self._measure(self.i_alpha, self.i_beta)
+            self.i_alpha, self.i_beta = self._measure(self.i_alpha, self.i_beta, self.samples)
         self.samples += 1
-        self.T_e = electromagnetic_torque(self.i_d, self.i_q, m)
-        self.T_L_mech = load_torque(self.omega_m, self.delta, self.vehicle)
-        self.v_vehicle = vehicle_speed(self.omega_m, self.vehicle)
 
-    def _measure(self, i_alpha: float, i_beta: float) -> tuple[float, float]:
-        """Phase currents a, b through the sensors and the ADC, back to alpha-beta."""
+    def _measure(self, i_alpha: float, i_beta: float, sample: int) -> tuple[float, float]:
+        """Phase currents a, b through the sensors and the ADC (noise of sample ``sample``),
+        back to alpha-beta."""
         p = self.params
         i_a = i_alpha
         i_b = -0.5 * i_alpha + 0.5 * math.sqrt(3.0) * i_beta
         m_a = p.sensor_gain_a * i_a + p.sensor_offset_a
         m_b = p.sensor_gain_b * i_b + p.sensor_offset_b
         if p.sensor_noise > 0:
-            n_a, n_b = gaussian_pair(int(p.sensor_seed), self.samples)
+            n_a, n_b = gaussian_pair(int(p.sensor_seed), sample)
             m_a += p.sensor_noise * n_a
             m_b += p.sensor_noise * n_b
         if self._lsb:

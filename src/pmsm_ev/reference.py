@@ -67,8 +67,9 @@ def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_
                              ctrl.v_alpha, ctrl.v_beta, ctrl.i_qref, plant.v_vehicle))
                 if k == n_steps:
                     break
-                ctrl.step(plant.i_alpha, plant.i_beta, omega_ref, plant.theta_e, plant.omega_m)
-                plant.step(ctrl.v_alpha, ctrl.v_beta, delta, dt)
+                v_alpha, v_beta = ctrl.step(plant.i_alpha, plant.i_beta, omega_ref, plant.theta_e,
+                                            plant.omega_m)[:2]
+                plant.step(v_alpha, v_beta, delta, dt)
                 if not math.isfinite(plant.omega_m + plant.i_d + plant.i_q):
                     raise FloatingPointError(f"plant state is not finite at t = {(k + 1) * dt:.6g} s")
         except KeyboardInterrupt:

@@ -1,12 +1,16 @@
 """Clarke and Park transforms (amplitude-invariant), as used around eqs 10-20.
 
 The plant's terminals are in the stationary alpha-beta frame; eqs 10-13 and the
-controller work in the rotor (dq) frame at electrical angle theta.
+controller work in the rotor (dq) frame at electrical angle theta. ``park``,
+``inverse_park`` and ``wrap_angle`` run at every step: they are written in
+``pmsm_ev.kernels`` and exported here.
 """
 
 from __future__ import annotations
 
 import math
+
+from .kernels import inverse_park, park, wrap_angle  # noqa: F401
 
 _SQRT3 = math.sqrt(3.0)
 
@@ -24,22 +28,3 @@ def inverse_clarke(alpha: float, beta: float) -> tuple[float, float, float]:
     b = -0.5 * alpha + 0.5 * _SQRT3 * beta
     c = -0.5 * alpha - 0.5 * _SQRT3 * beta
     return a, b, c
-
-
-def park(alpha: float, beta: float, theta: float) -> tuple[float, float]:
-    """alpha-beta -> dq at electrical angle theta (d axis on the magnet)."""
-    c = math.cos(theta)
-    s = math.sin(theta)
-    return c * alpha + s * beta, -s * alpha + c * beta
-
-
-def inverse_park(d: float, q: float, theta: float) -> tuple[float, float]:
-    """dq -> alpha-beta at electrical angle theta."""
-    c = math.cos(theta)
-    s = math.sin(theta)
-    return c * d - s * q, s * d + c * q
-
-
-def wrap_angle(theta: float) -> float:
-    """Wrap an angle to [-pi, pi)."""
-    return (theta + math.pi) % (2.0 * math.pi) - math.pi

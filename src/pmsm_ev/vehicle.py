@@ -2,12 +2,13 @@
 
 Forces act on the vehicle along the road; the gear (eqs 6-7) reflects them to the
 motor shaft. Speeds: v_v [m/s] vehicle, omega_w [rad/s] wheel, omega_m [rad/s] motor.
+The road-load formulas that run at every step (eqs 2-4, 29) are in ``pmsm_ev.kernels``;
+these functions take the parameters as a ``VehicleParams``.
 """
 
 from __future__ import annotations
 
-import math
-
+from . import kernels as _k
 from .params import VehicleParams
 
 
@@ -18,7 +19,7 @@ def inertia_force(a_v: float, p: VehicleParams) -> float:
 
 def gradient_force(delta: float, p: VehicleParams) -> float:
     """f_g = m_v g sin(delta) [N] (eq 2); delta is the road elevation angle [rad]."""
-    return p.m_v * p.g * math.sin(delta)
+    return _k.gradient_force(delta, p.m_v, p.g)
 
 
 def rolling_force(v_v: float, delta: float, p: VehicleParams) -> float:
@@ -27,10 +28,7 @@ def rolling_force(v_v: float, delta: float, p: VehicleParams) -> float:
     ``load_model="paper"``: as printed, it always pushes back, even at standstill.
     ``"physical"``: it opposes motion, times tanh(v_v / v_eps).
     """
-    f = p.c_r * p.m_v * p.g * math.cos(delta)
-    if p.load_model == "paper":
-        return f
-    return f * math.tanh(v_v / p.v_eps)
+    return _k.rolling_force(v_v, delta, p.c_r, p.m_v, p.g, p.v_eps, p.load_model == "paper")
 
 
 def aero_force(v_v: float, p: VehicleParams) -> float:
@@ -38,11 +36,7 @@ def aero_force(v_v: float, p: VehicleParams) -> float:
 
     ``"physical"`` keeps the sign of the relative air speed: (v+v_a)|v+v_a|.
     """
-    v_rel = v_v + p.v_a
-    k = 0.5 * p.rho_a * p.c_d * p.A_f
-    if p.load_model == "paper":
-        return k * v_rel * v_rel
-    return k * v_rel * abs(v_rel)
+    return _k.aero_force(v_v, p.rho_a, p.c_d, p.A_f, p.v_a, p.load_model == "paper")
 
 
 def wheel_torque(f_i: float, f_g: float, f_f: float, f_a: float, p: VehicleParams) -> float:
@@ -67,6 +61,5 @@ def motor_side_torque(t_w: float, p: VehicleParams) -> float:
 
 def load_torque(omega_m: float, delta: float, p: VehicleParams) -> float:
     """T_L-mech = r_w / (eta n_g) (f_g + f_f + f_a) [N m] (eq 29): the road load on the shaft."""
-    v_v = p.r_w * omega_m / p.n_g
-    forces = gradient_force(delta, p) + rolling_force(v_v, delta, p) + aero_force(v_v, p)
-    return p.r_w / (p.eta * p.n_g) * forces
+    return _k.load_torque(omega_m, delta, p.m_v, p.g, p.c_r, p.rho_a, p.c_d, p.A_f, p.r_w, p.eta, p.n_g,
+                          p.v_a, p.v_eps, p.load_model == "paper")

@@ -1,0 +1,155 @@
+"""How the per-step kernels (``pmsm_ev.kernels``) run: compiled with numba when it is
+importable, plain Python otherwise.
+
+``kernels()`` returns the module to call. With numba it is ``kernels.py`` compiled, loaded
+from a copy named after the SHA-256 of its source, ``<cache dir>/kernels_<hash>.py``:
+
+* numba's on-disk cache (``__pycache__`` next to that copy) is keyed on the copy's path and
+  time stamp, both fixed by the content, so compiled code is reused by every later process,
+  and by every FMU: a Python FMU is extracted to a new temporary directory per instance, so
+  a cache keyed on its own files would never be hit;
+* in one process the reference run and all the FMUs (each bundles its own copy of this
+  package under another name) share one compiled module.
+
+The cache directory is ``$PMSM_EV_CACHE_DIR`` or ``$XDG_CACHE_HOME/pmsm-ev-cosim``
+(``~/.cache/pmsm-ev-cosim``). If it cannot be written, the kernels are compiled without a
+cache (each process compiles them, a few seconds). ``PMSM_EV_JIT=0`` forces plain Python.
+So does a Python embedded in a host that is not a Python program (``sys.orig_argv`` empty,
+e.g. an FMU in a C/C++ tool): there numba's LLVM is torn down at exit before pythonfmu
+finalizes the interpreter, which crashes the process. Both ways give the same numbers
+(see ``pmsm_ev.kernels``).
+
+Vectors handed to the kernels come from ``vector(n)``: a float64 numpy array when compiled,
+a list of floats otherwise (fast to index from plain Python).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from . import kernels as _source  # the plain-Python module (and the source to compile)
+
+ENV_JIT = "PMSM_EV_JIT"
+ENV_CACHE_DIR = "PMSM_EV_CACHE_DIR"
+#: the time stamp given to the cached copies (numba checks it against its cache index)
+_STAMP = 1_000_000_000
+
+_loaded = None  # (module, description)
+
+
+def jit_requested() -> bool:
+    return os.environ.get(ENV_JIT, "1").strip().lower() not in ("0", "false", "no", "off")
+
+
+def cache_dir() -> Path:
+    env = os.environ.get(ENV_CACHE_DIR)
+    if env:
+        return Path(env).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "pmsm-ev-cosim"
+
+
+def _stable_copy(source: bytes, digest: str) -> Path | None:
+    """``<cache dir>/kernels_<digest>.py`` with ``source`` and a fixed time stamp, or None."""
+    try:
+        directory = cache_dir()
+        directory.mkdir(parents=True, exist_ok=True)
+        path = directory / f"kernels_{digest}.py"
+        try:
+            current = path.read_bytes()
+        except OSError:
+            current = None
+        if current != source:
+            fd, tmp = tempfile.mkstemp(prefix=".kernels-", suffix=".tmp", dir=directory)
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(source)
+            os.utime(tmp, (_STAMP, _STAMP))
+            os.replace(tmp, path)
+        elif int(path.stat().st_mtime) != _STAMP:
+            os.utime(path, (_STAMP, _STAMP))
+        return path
+    except OSError:
+        return None
+
+
+def _exec(name: str, path: Path, cache: bool):
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    module.JIT, module.CACHE = True, cache
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)  # compiles (or loads from the cache) the kernels
+    except BaseException:
+        del sys.modules[name]
+        raise
+    return module
+
+
+def _compiled_description(module, version: str) -> str:
+    where = f"cache {Path(module.__file__).parent}" if module.CACHE else "no cache"
+    return f"numba {version}, {where}"
+
+
+def _load():
+    if not jit_requested():
+        return _source, f"plain Python ({ENV_JIT}=0)"
+    if not getattr(sys, "orig_argv", None):
+        # Python embedded in a host that is not Python (an FMU in a C/C++ tool): pythonfmu
+        # finalizes the interpreter from a C++ static destructor, after LLVM's own were run at
+        # exit, and the process dies in free(); compiled code is for Python processes only
+        return _source, "plain Python (embedded interpreter)"
+    try:
+        import numba
+    except Exception:  # not installed, or broken (e.g. an llvmlite that does not load)
+        return _source, "plain Python (numba not available)"
+    source = Path(_source.__file__).read_bytes()
+    digest = hashlib.sha256(source + f"numba {numba.__version__}".encode()).hexdigest()[:16]
+    name = f"pmsm_ev_kernels_{digest}"
+    module = sys.modules.get(name)
+    if module is not None:  # compiled already, for another copy of this package (an FMU's)
+        return module, _compiled_description(module, numba.__version__)
+    path = _stable_copy(source, digest)
+    try:
+        module = None
+        if path is not None:
+            try:
+                module = _exec(name, path, True)
+            except RuntimeError:  # numba found no writable cache location
+                module = None
+        if module is None:
+            module = _exec(name, Path(_source.__file__), False)
+        return module, _compiled_description(module, numba.__version__)
+    except Exception as exc:  # a numba that cannot compile them: run them as Python
+        return _source, f"plain Python (numba failed: {type(exc).__name__}: {exc})"
+
+
+def kernels():
+    """The kernels module to call (loaded, and compiled, once per process)."""
+    global _loaded
+    if _loaded is None:
+        _loaded = _load()
+    return _loaded[0]
+
+
+def describe() -> str:
+    """How the kernels run in this process, e.g. ``numba 0.60.0, cache /home/u/.cache/...``."""
+    kernels()
+    return _loaded[1]
+
+
+def compiled() -> bool:
+    return kernels() is not _source
+
+
+def vector(n: int):
+    """A zeroed vector of n floats for the kernels."""
+    if compiled():
+        import numpy as np
+
+        return np.zeros(n)
+    return [0.0] * n

@@ -1,0 +1,491 @@
+"""The per-step numerics of the drive, written once, in a form numba can compile.
+
+Every equation that runs at each control period lives here: the PMSM (eqs 10-13), the
+road load (eqs 2-4, 8, 29), the plant's RK4 step, the controller (eqs 14-20), the EKFs
+(eqs 23-27, A2-A33) and the control unit's step. The functions take floats and flat
+float vectors (a numpy float64 array when compiled, a list of floats otherwise) whose
+slots are named by the constants below; they allocate nothing.
+
+``pmsm_ev.accel`` loads this module either as plain Python (this file as it is) or
+compiled with numba (``JIT = True`` set before the module body runs), so the reference run,
+the FMUs and the tests share one implementation whether numba is there or not. The other
+modules keep the readable, dataclass-based interface (``pmsm.current_derivatives(..., m)``,
+``Plant``, ``ControlUnit``, the observer classes) on top of these functions.
+
+Floating-point results are the same compiled or not: the operations are written in the
+order of the plain-Python formulas they replaced (numba does not reorder or fuse them
+without fastmath), and only functions that numba and CPython compute identically are
+used (sin, cos, tanh, sqrt, %; not math.hypot, whose CPython 3.10+ algorithm differs in
+the last bit).
+"""
+
+from __future__ import annotations
+
+import math
+
+#: set to True by pmsm_ev.accel (in the module's namespace, before this body runs) to
+#: compile the kernels with numba; CACHE likewise enables numba's on-disk cache
+JIT = globals().get("JIT", False)
+CACHE = globals().get("CACHE", False)
+
+if JIT:
+    from numba import njit
+
+    def kernel(signature=None):
+        """Compile with numba: eagerly for ``signature`` (a top-level kernel), else lazily
+        when a compiled caller first needs it."""
+        def wrap(fn):
+            options = {"cache": CACHE}
+            return njit(signature, **options)(fn) if signature else njit(**options)(fn)
+        return wrap
+else:
+    def kernel(signature=None):
+        """Plain Python: the function as written."""
+        def wrap(fn):
+            return fn
+        return wrap
+
+_TWO_PI = 2.0 * math.pi
+_F = "float64"
+_V = "float64[::1]"
+
+
+def _sig(result: str, *args: str) -> str:
+    return f"{result}({', '.join(args)})"
+
+
+# -- parameter vector of the plant ----------------------------------------------------------------
+(P_R_S, P_L_D, P_L_Q, P_PSI, P_N, P_B_M, P_T_M0, P_OMEGA_EPS, P_J_EQ,
+ P_M_V, P_G, P_C_R, P_RHO_A, P_C_D, P_A_F, P_R_W, P_ETA, P_N_G, P_V_A, P_V_EPS, P_PAPER,
+ P_SUBSTEPS) = range(22)
+PLANT_PARAMS = 22
+
+# -- state vector of the control unit (controller + observer) ----------------------------------------
+# unit: last command, the command before it, the voltage held, the currents in the control
+# frame and the q-current reference
+S_V_D, S_V_Q, S_V_PREV_D, S_V_PREV_Q, S_V_ALPHA, S_V_BETA, S_I_D, S_I_Q, S_I_QREF = range(9)
+S_W_INT = 9  #: speed PI integral [A]
+S_INT_D, S_INT_Q, S_I_DL, S_I_QL, S_SAT = range(10, 15)  #: current PIs, decoupling filters, limited
+S_X = 15  #: observer estimates: i_d, i_q, omega_m, theta_e, T_L (EKF4: T_L stays 0)
+S_THETA_PRIOR = 20  #: the observer's predicted angle
+S_P = 21  #: EKF covariance, n x n row by row (n = 4 or 5)
+S_PHT = 46  #: scratch: P H^T, n x 2
+S_K = 56  #: scratch: Kalman gain, n x 2
+S_A = 66  #: scratch: J_f P, n x n (J_f itself when P = I)
+UNIT_STATE = 91
+
+# -- parameter vector of the control unit ------------------------------------------------------
+C_DT = 0
+C_KP_W, C_KI_W, C_I_Q_MAX = 1, 2, 3
+C_KP_ID, C_KI_ID, C_KP_IQ, C_KI_IQ, C_T_D, C_U_MAX = range(4, 10)
+C_N, C_L_D, C_L_Q, C_PSI, C_PAPER_SIGNS = range(10, 15)  #: the controller's motor model
+C_I_D_REF, C_ADVANCE, C_HALF_PERIOD_N, C_ZOH, C_DELAYED, C_ESTIMATED, C_OBSERVER = range(15, 22)
+(C_A_RD, C_A_RQ, C_C_WQ, C_C_WD, C_C_WPSI, C_C_VD, C_C_VQ, C_C_TPSI, C_C_TDQ, C_C_TL, C_C_TH,
+ C_R0, C_R1) = range(22, 35)  #: EKF model constants (A2-A32) and R
+C_Q = 35  #: EKF Q diagonal, n entries
+UNIT_PARAMS = 40
+
+#: observers (``C_OBSERVER``)
+OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
+OBSERVER_CODES = {"ekf5": OBS_EKF5, "ekf4": OBS_EKF4, "ekf5ab": OBS_EKF5AB, "sensored": OBS_SENSORED}
+
+
+# -- transforms ------------------------------------------------------------------------------
+@kernel()
+def park(alpha, beta, theta):
+    """alpha-beta -> dq at electrical angle theta (d axis on the magnet)."""
+    c = math.cos(theta)
+    s = math.sin(theta)
+    return c * alpha + s * beta, -s * alpha + c * beta
+
+
+@kernel()
+def inverse_park(d, q, theta):
+    """dq -> alpha-beta at electrical angle theta."""
+    c = math.cos(theta)
+    s = math.sin(theta)
+    return c * d - s * q, s * d + c * q
+
+
+@kernel()
+def wrap_angle(theta):
+    """Wrap an angle to [-pi, pi)."""
+    return (theta + math.pi) % _TWO_PI - math.pi
+
+
+# -- PMSM, eqs 10-13 ---------------------------------------------------------------------------
+@kernel()
+def current_derivatives(i_d, i_q, omega_m, v_d, v_q, R_s, L_d, L_q, psi, N):
+    """(di_d/dt, di_q/dt) [A/s] of eqs 10-11; omega_m is mechanical [rad/s]."""
+    w_e = N * omega_m
+    did = (-R_s * i_d + w_e * L_q * i_q + v_d) / L_d  # (10)
+    diq = (-R_s * i_q - w_e * L_d * i_d - w_e * psi + v_q) / L_q  # (11)
+    return did, diq
+
+
+@kernel()
+def electromagnetic_torque(i_d, i_q, psi, L_d, L_q, N):
+    """T_e = N psi i_q + N L_d i_d i_q - N L_q i_q i_d [N m] (eq 12)."""
+    return N * (psi * i_q + (L_d - L_q) * i_d * i_q)
+
+
+@kernel()
+def friction_torque(omega_m, B_m, T_m0, omega_eps, paper):
+    """B_m omega_m + T_m0 [N m] (eq 8); not ``paper``: T_m0 tanh(omega_m / omega_eps)."""
+    if paper:
+        return B_m * omega_m + T_m0
+    return B_m * omega_m + T_m0 * math.tanh(omega_m / omega_eps)
+
+
+# -- road load, eqs 2-4 and 29 ---------------------------------------------------------------
+@kernel()
+def gradient_force(delta, m_v, g):
+    """f_g = m_v g sin(delta) [N] (eq 2)."""
+    return m_v * g * math.sin(delta)
+
+
+@kernel()
+def rolling_force(v_v, delta, c_r, m_v, g, v_eps, paper):
+    """f_f = c_r m_v g cos(delta) [N] (eq 3); not ``paper``: times tanh(v_v / v_eps)."""
+    f = c_r * m_v * g * math.cos(delta)
+    if paper:
+        return f
+    return f * math.tanh(v_v / v_eps)
+
+
+@kernel()
+def aero_force(v_v, rho_a, c_d, A_f, v_a, paper):
+    """f_a = 0.5 rho_a c_d A_f (v_v + v_a)^2 [N] (eq 4); not ``paper``: (v+v_a)|v+v_a|."""
+    v_rel = v_v + v_a
+    k = 0.5 * rho_a * c_d * A_f
+    if paper:
+        return k * v_rel * v_rel
+    return k * v_rel * abs(v_rel)
+
+
+@kernel()
+def load_torque(omega_m, delta, m_v, g, c_r, rho_a, c_d, A_f, r_w, eta, n_g, v_a, v_eps, paper):
+    """T_L-mech = r_w / (eta n_g) (f_g + f_f + f_a) [N m] (eq 29): the road load on the shaft."""
+    v_v = r_w * omega_m / n_g
+    forces = (gradient_force(delta, m_v, g) + rolling_force(v_v, delta, c_r, m_v, g, v_eps, paper)
+              + aero_force(v_v, rho_a, c_d, A_f, v_a, paper))
+    return r_w / (eta * n_g) * forces
+
+
+# -- the plant ---------------------------------------------------------------------------------
+@kernel()
+def plant_load_torque(omega_m, delta, pp):
+    """Eq 29 with the plant's parameter vector."""
+    return load_torque(omega_m, delta, pp[P_M_V], pp[P_G], pp[P_C_R], pp[P_RHO_A], pp[P_C_D], pp[P_A_F],
+                       pp[P_R_W], pp[P_ETA], pp[P_N_G], pp[P_V_A], pp[P_V_EPS], pp[P_PAPER] != 0.0)
+
+
+@kernel()
+def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
+    """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage."""
+    c = math.cos(theta_e)
+    s = math.sin(theta_e)
+    v_d = c * v_alpha + s * v_beta  # Park at the true angle
+    v_q = -s * v_alpha + c * v_beta
+    N = pp[P_N]
+    did, diq = current_derivatives(i_d, i_q, omega_m, v_d, v_q,
+                                   pp[P_R_S], pp[P_L_D], pp[P_L_Q], pp[P_PSI], N)  # (10), (11)
+    t_e = electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12)
+    t_l = plant_load_torque(omega_m, delta, pp)  # (29)
+    t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], pp[P_PAPER] != 0.0)  # (8)
+    dw = (t_e - t_f - t_l) / pp[P_J_EQ]  # (9) = (28)
+    dth = N * omega_m  # (13)
+    return did, diq, dw, dth
+
+
+@kernel(_sig(f"UniTuple({_F}, 5)", _F, _F, _F, _F, _F, _V))
+def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
+    """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state."""
+    i_alpha, i_beta = inverse_park(i_d, i_q, theta_e)
+    t_e = electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N])  # (12)
+    t_l = plant_load_torque(omega_m, delta, pp)  # (29)
+    v_v = pp[P_R_W] * omega_m / pp[P_N_G]  # (1), (6)
+    return i_alpha, i_beta, t_e, t_l, v_v
+
+
+@kernel(_sig(f"UniTuple({_F}, 9)", _F, _F, _F, _F, _F, _F, _F, _F, _V))
+def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp):
+    """Advance the state by dt with the voltage and elevation held (RK4, ``P_SUBSTEPS``
+    sub-steps); return the new (i_d, i_q, omega_m, theta_e) and the outputs at the new
+    state: (i_alpha, i_beta) (clean), T_e, T_L_mech at ``delta``, v_vehicle."""
+    n = int(pp[P_SUBSTEPS])
+    h = dt / n
+    x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
+    for _ in range(n):
+        a0, a1, a2, a3 = plant_derivatives(x0, x1, x2, x3, v_alpha, v_beta, delta, pp)
+        b0, b1, b2, b3 = plant_derivatives(x0 + 0.5 * h * a0, x1 + 0.5 * h * a1, x2 + 0.5 * h * a2,
+                                           x3 + 0.5 * h * a3, v_alpha, v_beta, delta, pp)
+        c0, c1, c2, c3 = plant_derivatives(x0 + 0.5 * h * b0, x1 + 0.5 * h * b1, x2 + 0.5 * h * b2,
+                                           x3 + 0.5 * h * b3, v_alpha, v_beta, delta, pp)
+        d0, d1, d2, d3 = plant_derivatives(x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3,
+                                           v_alpha, v_beta, delta, pp)
+        x0 += h / 6.0 * (a0 + 2.0 * b0 + 2.0 * c0 + d0)
+        x1 += h / 6.0 * (a1 + 2.0 * b1 + 2.0 * c1 + d1)
+        x2 += h / 6.0 * (a2 + 2.0 * b2 + 2.0 * c2 + d2)
+        x3 += h / 6.0 * (a3 + 2.0 * b3 + 2.0 * c3 + d3)
+    x3 = wrap_angle(x3)
+    i_alpha, i_beta, t_e, t_l, v_v = plant_outputs(x0, x1, x2, x3, delta, pp)
+    return x0, x1, x2, x3, i_alpha, i_beta, t_e, t_l, v_v
+
+
+# -- controller, eqs 14-20 -----------------------------------------------------------------------
+@kernel(_sig(_F, _V, _V, _F, _F))
+def speed_step(s, c, omega_ref, omega_est):
+    """Speed PI, eq 14, i_qref limited to +-i_q_max, with conditional integration."""
+    i_q_max = c[C_I_Q_MAX]
+    e = omega_ref - omega_est
+    unsat = c[C_KP_W] * e + s[S_W_INT]  # (14)
+    i_qref = min(max(unsat, -i_q_max), i_q_max)
+    # anti-windup: integrate unless the output is clamped and e pushes further out
+    if i_qref == unsat or (unsat > i_q_max) != (e > 0):
+        s[S_W_INT] += c[C_KI_W] * e * c[C_DT]
+    return i_qref
+
+
+@kernel(_sig(f"UniTuple({_F}, 2)", _V, _V, _F, _F, _F, _F, _F))
+def current_step(s, c, i_dref, i_qref, i_d, i_q, omega_est):
+    """Current PIs (15-16), decoupling filters (17-18) and terms (19-20); the voltage
+    vector limited to u_max, the integrators held while it is limited."""
+    dt = c[C_DT]
+    e_d = i_dref - i_d
+    e_q = i_qref - i_q
+    u_d = c[C_KP_ID] * e_d + s[S_INT_D]  # (15)
+    u_q = c[C_KP_IQ] * e_q + s[S_INT_Q]  # (16)
+    w_e = c[C_N] * omega_est
+    v_d = u_d - w_e * c[C_L_Q] * s[S_I_QL]  # (19)
+    if c[C_PAPER_SIGNS] != 0.0:
+        v_q = u_q - w_e * c[C_L_D] * s[S_I_DL] - w_e * c[C_PSI]  # (20) as printed
+    else:
+        v_q = u_q + w_e * c[C_L_D] * s[S_I_DL] + w_e * c[C_PSI]  # (20) corrected to cancel (11)
+    s[S_I_DL] += dt / c[C_T_D] * (i_dref - s[S_I_DL])  # (17)
+    s[S_I_QL] += dt / c[C_T_D] * (i_qref - s[S_I_QL])  # (18)
+    u_max = c[C_U_MAX]
+    mag = math.sqrt(v_d * v_d + v_q * v_q)
+    if mag > u_max:
+        s[S_SAT] = 1.0
+        scale = u_max / mag
+        v_d *= scale
+        v_q *= scale
+    else:
+        s[S_SAT] = 0.0
+        s[S_INT_D] += c[C_KI_ID] * e_d * dt
+        s[S_INT_Q] += c[C_KI_IQ] * e_q * dt
+    return v_d, v_q
+
+
+# -- observers, eqs 23-27 ------------------------------------------------------------------------
+@kernel()
+def ekf5_predict(s, c, v_d, v_q):
+    """EKF5 time update (23)-(24): x^f = f(x^e), P^f = J_f P J_f^T + Q, J_f at x^e (A8-A32).
+
+    J_f rows: r0 = [f00 f01 f02 0 0], r1 = [f10 f11 f12 0 0], r2 = [f20 f21 1 0 f24],
+    r3 = [0 0 f32 1 0], r4 = [0 0 0 0 1].
+    """
+    i_d = s[S_X]
+    i_q = s[S_X + 1]
+    w = s[S_X + 2]
+    th = s[S_X + 3]
+    t_l = s[S_X + 4]
+    c_wq, c_wd, c_wpsi = c[C_C_WQ], c[C_C_WD], c[C_C_WPSI]
+    c_tpsi, c_tdq, c_th = c[C_C_TPSI], c[C_C_TDQ], c[C_C_TH]
+    f00, f01, f02 = c[C_A_RD], c_wq * w, c_wq * i_q  # (A8-A10)
+    f10, f11, f12 = -c_wd * w, c[C_A_RQ], -c_wd * i_d - c_wpsi  # (A13-A15)
+    f20, f21, f24 = c_tdq * i_q, c_tpsi + c_tdq * i_d, c[C_C_TL]  # (A18, A19, A22)
+    f32 = c_th  # (A25)
+    s[S_X] = c[C_A_RD] * i_d + c_wq * w * i_q + c[C_C_VD] * v_d  # (A2)
+    s[S_X + 1] = c[C_A_RQ] * i_q - c_wd * w * i_d - c_wpsi * w + c[C_C_VQ] * v_q  # (A3)
+    s[S_X + 2] = w + c_tpsi * i_q + c_tdq * i_d * i_q + c[C_C_TL] * t_l  # (A4)
+    s[S_X + 3] = th + c_th * w  # (A5); T_L: (A6)
+    for j in range(5):  # A = J_f P, column by column
+        p0 = s[S_P + j]
+        p1 = s[S_P + 5 + j]
+        p2 = s[S_P + 10 + j]
+        p3 = s[S_P + 15 + j]
+        p4 = s[S_P + 20 + j]
+        s[S_A + j] = f00 * p0 + f01 * p1 + f02 * p2
+        s[S_A + 5 + j] = f10 * p0 + f11 * p1 + f12 * p2
+        s[S_A + 10 + j] = f20 * p0 + f21 * p1 + p2 + f24 * p4
+        s[S_A + 15 + j] = f32 * p2 + p3
+        s[S_A + 20 + j] = p4
+    for i in range(5):  # P^f = A J_f^T + Q: column k of A J_f^T is A (row k of J_f)
+        a0 = s[S_A + 5 * i]
+        a1 = s[S_A + 5 * i + 1]
+        a2 = s[S_A + 5 * i + 2]
+        a3 = s[S_A + 5 * i + 3]
+        a4 = s[S_A + 5 * i + 4]
+        r = S_P + 5 * i
+        s[r] = f00 * a0 + f01 * a1 + f02 * a2
+        s[r + 1] = f10 * a0 + f11 * a1 + f12 * a2
+        s[r + 2] = f20 * a0 + f21 * a1 + a2 + f24 * a4
+        s[r + 3] = f32 * a2 + a3
+        s[r + 4] = a4
+        s[r + i] += c[C_Q + i]
+    s[S_THETA_PRIOR] = s[S_X + 3]
+
+
+@kernel()
+def ekf4_predict(s, c, v_d, v_q):
+    """EKF4 time update: the EKF5 model without T_L, omega a random walk (dw/dt = 0).
+
+    J_f rows: r0 = [f00 f01 f02 0], r1 = [f10 f11 f12 0], r2 = [0 0 1 0], r3 = [0 0 f32 1].
+    """
+    i_d = s[S_X]
+    i_q = s[S_X + 1]
+    w = s[S_X + 2]
+    th = s[S_X + 3]
+    c_wq, c_wd, c_wpsi, c_th = c[C_C_WQ], c[C_C_WD], c[C_C_WPSI], c[C_C_TH]
+    f00, f01, f02 = c[C_A_RD], c_wq * w, c_wq * i_q
+    f10, f11, f12 = -c_wd * w, c[C_A_RQ], -c_wd * i_d - c_wpsi
+    f32 = c_th
+    s[S_X] = c[C_A_RD] * i_d + c_wq * w * i_q + c[C_C_VD] * v_d  # (A2)
+    s[S_X + 1] = c[C_A_RQ] * i_q - c_wd * w * i_d - c_wpsi * w + c[C_C_VQ] * v_q  # (A3)
+    s[S_X + 3] = th + c_th * w  # (A5)
+    for j in range(4):
+        p0 = s[S_P + j]
+        p1 = s[S_P + 4 + j]
+        p2 = s[S_P + 8 + j]
+        p3 = s[S_P + 12 + j]
+        s[S_A + j] = f00 * p0 + f01 * p1 + f02 * p2
+        s[S_A + 4 + j] = f10 * p0 + f11 * p1 + f12 * p2
+        s[S_A + 8 + j] = p2
+        s[S_A + 12 + j] = f32 * p2 + p3
+    for i in range(4):
+        a0 = s[S_A + 4 * i]
+        a1 = s[S_A + 4 * i + 1]
+        a2 = s[S_A + 4 * i + 2]
+        a3 = s[S_A + 4 * i + 3]
+        r = S_P + 4 * i
+        s[r] = f00 * a0 + f01 * a1 + f02 * a2
+        s[r + 1] = f10 * a0 + f11 * a1 + f12 * a2
+        s[r + 2] = a2
+        s[r + 3] = f32 * a2 + a3
+        s[r + i] += c[C_Q + i]
+    s[S_THETA_PRIOR] = s[S_X + 3]
+
+
+@kernel()
+def ekf_update(s, n, s00, s01, s11, y0, y1):
+    """Eqs 25-27 from P H^T (at ``S_PHT``), S = H P H^T + R and the innovation y."""
+    det = s00 * s11 - s01 * s01
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det  # S^-1
+    for i in range(n):  # (25): K = P H^T S^-1; (26)
+        a = s[S_PHT + 2 * i]
+        b = s[S_PHT + 2 * i + 1]
+        k0 = a * i00 + b * i01
+        k1 = a * i01 + b * i11
+        s[S_K + 2 * i] = k0
+        s[S_K + 2 * i + 1] = k1
+        s[S_X + i] += k0 * y0 + k1 * y1
+    # (27): P - K (P H^T)^T, symmetric by construction; computed on the upper half
+    for i in range(n):
+        k0 = s[S_K + 2 * i]
+        k1 = s[S_K + 2 * i + 1]
+        for j in range(i, n):
+            v = s[S_P + n * i + j] - k0 * s[S_PHT + 2 * j] - k1 * s[S_PHT + 2 * j + 1]
+            s[S_P + n * i + j] = v
+            s[S_P + n * j + i] = v
+    s[S_X + 3] = wrap_angle(s[S_X + 3])
+
+
+@kernel()
+def ekf_correct_dq(s, c, n, i_d, i_q):
+    """Eqs 25-27 with z = [i_d, i_q], h(x) = [x0, x1], J_h = [I_2 0] (A33)."""
+    for i in range(n):
+        s[S_PHT + 2 * i] = s[S_P + n * i]
+        s[S_PHT + 2 * i + 1] = s[S_P + n * i + 1]
+    ekf_update(s, n, s[S_P] + c[C_R0], s[S_P + 1], s[S_P + n + 1] + c[C_R1], i_d - s[S_X], i_q - s[S_X + 1])
+
+
+@kernel()
+def ekf5ab_correct(s, c, i_alpha, i_beta):
+    """Eqs 25-27 with z = [i_alpha, i_beta], h(x) = inverse Park of (i_d, i_q) at theta.
+
+    J_h rows: [c, -s, 0, h03, 0], [s, c, 0, h13, 0].
+    """
+    th = s[S_X + 3]
+    cs, sn = math.cos(th), math.sin(th)
+    xd = s[S_X]
+    xq = s[S_X + 1]
+    h03 = -sn * xd - cs * xq
+    h13 = cs * xd - sn * xq
+    for i in range(5):
+        r = S_P + 5 * i
+        s[S_PHT + 2 * i] = cs * s[r] - sn * s[r + 1] + h03 * s[r + 3]
+        s[S_PHT + 2 * i + 1] = sn * s[r] + cs * s[r + 1] + h13 * s[r + 3]
+    s00 = cs * s[S_PHT] - sn * s[S_PHT + 2] + h03 * s[S_PHT + 6] + c[C_R0]
+    s01 = cs * s[S_PHT + 1] - sn * s[S_PHT + 3] + h03 * s[S_PHT + 7]
+    s11 = sn * s[S_PHT + 1] + cs * s[S_PHT + 3] + h13 * s[S_PHT + 7] + c[C_R1]
+    ekf_update(s, 5, s00, s01, s11, i_alpha - (cs * xd - sn * xq), i_beta - (sn * xd + cs * xq))
+
+
+@kernel(_sig("none", _V, _V, _F, _F))
+def observer_predict(s, c, v_d, v_q):
+    """The time update of the observer ``C_OBSERVER`` (none for the sensored baseline)."""
+    kind = c[C_OBSERVER]
+    if kind == OBS_EKF4:
+        ekf4_predict(s, c, v_d, v_q)
+    elif kind != OBS_SENSORED:
+        ekf5_predict(s, c, v_d, v_q)
+
+
+@kernel(_sig("none", _V, _V, _F, _F, _F, _F, _F, _F))
+def observer_correct(s, c, i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas):
+    """The measurement update of the observer ``C_OBSERVER``; the sensored baseline takes
+    the measured currents, speed and angle."""
+    kind = c[C_OBSERVER]
+    if kind == OBS_EKF5:
+        ekf_correct_dq(s, c, 5, i_d, i_q)
+    elif kind == OBS_EKF4:
+        ekf_correct_dq(s, c, 4, i_d, i_q)
+    elif kind == OBS_EKF5AB:
+        ekf5ab_correct(s, c, i_alpha, i_beta)
+    else:
+        s[S_X] = i_d
+        s[S_X + 1] = i_q
+        s[S_X + 2] = omega_meas
+        s[S_X + 3] = theta_meas
+        s[S_THETA_PRIOR] = theta_meas
+
+
+# -- the control unit ----------------------------------------------------------------------------
+@kernel(_sig(f"UniTuple({_F}, 12)", _V, _V, _F, _F, _F, _F, _F))
+def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
+    """One control period (see ``pmsm_ev.control_unit``); returns (v_alpha, v_beta, v_d,
+    v_q, i_d, i_q, i_qref, i_d_hat, i_q_hat, omega_hat, theta_hat, T_L_hat)."""
+    # (23)-(24) with the voltage applied over the last period: the last command, or with a
+    # one-period actuation delay, the command before it
+    if c[C_DELAYED] != 0.0:
+        observer_predict(s, c, s[S_V_PREV_D], s[S_V_PREV_Q])
+        s[S_V_PREV_D] = s[S_V_D]
+        s[S_V_PREV_Q] = s[S_V_Q]
+    else:
+        observer_predict(s, c, s[S_V_D], s[S_V_Q])
+    estimated = c[C_ESTIMATED] != 0.0
+    theta_frame = s[S_THETA_PRIOR] if estimated else theta_meas
+    i_d, i_q = park(i_alpha, i_beta, theta_frame)
+    observer_correct(s, c, i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas)  # (25)-(27)
+    if estimated:
+        theta_ctrl = s[S_X + 3]
+        i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
+    else:
+        theta_ctrl = theta_meas
+    omega_hat = s[S_X + 2]
+    i_qref = speed_step(s, c, omega_ref, omega_hat)  # (14)
+    v_d, v_q = current_step(s, c, c[C_I_D_REF], i_qref, i_d, i_q, omega_hat)  # (15)-(20)
+    half_arc = c[C_HALF_PERIOD_N] * omega_hat  # a = omega_e dt / 2
+    gain = half_arc / math.sin(half_arc) if c[C_ZOH] != 0.0 and abs(half_arc) > 1e-6 else 1.0
+    v_alpha, v_beta = inverse_park(gain * v_d, gain * v_q, theta_ctrl + c[C_ADVANCE] * omega_hat)
+    s[S_I_D] = i_d
+    s[S_I_Q] = i_q
+    s[S_I_QREF] = i_qref
+    s[S_V_D] = v_d
+    s[S_V_Q] = v_q
+    s[S_V_ALPHA] = v_alpha
+    s[S_V_BETA] = v_beta
+    return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
+            s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4])
