@@ -10,6 +10,7 @@ unit's outputs as last computed (at t_{k-1}), i.e. before step k is taken.
 
 from __future__ import annotations
 
+import array
 import json
 import math
 import os
@@ -63,14 +64,21 @@ class ResultWriter:
 
 
 def read_results(path) -> dict[str, np.ndarray]:
-    """results.csv (or its directory) -> {column: array}. Tolerates a cut last line."""
+    """results.csv (or its directory) -> {column: array}. Tolerates a cut last line.
+
+    Read line by line into one array of doubles: memory is the size of the numbers (8
+    bytes each), not of the text and its Python objects, whatever the length of the run."""
     path = Path(path)
     if path.is_dir():
         path = path / "results.csv"
     with open(path, encoding="ascii") as fh:
         header = fh.readline().strip().split(",")
-        lines = [ln for ln in fh.read().split("\n") if ln.count(",") == len(header) - 1]
-    data = np.array([[float(x) for x in ln.split(",")] for ln in lines]).reshape(-1, len(header))
+        commas = len(header) - 1
+        values = array.array("d")
+        for line in fh:
+            if line.count(",") == commas:
+                values.extend(map(float, line.split(",")))
+    data = np.frombuffer(values, dtype=float).reshape(-1, len(header))
     return {name: data[:, i] for i, name in enumerate(header)}
 
 
