@@ -10,8 +10,10 @@ top of pythonfmu 0.7.0:
   start values that round-trip exactly (``repr``), ModelStructure with the output
   dependencies (none: every output is computed inside ``do_step``) and the
   InitialUnknowns with their dependencies;
-* lean Real access: ``get_real``/``set_real`` index a tuple of bound getters/setters
-  instead of pythonfmu's dict look-up and type test per variable;
+* lean Real access: ``get_real`` reads the attributes named by a list indexed by value
+  reference, ``set_real`` writes inputs straight into the instance dict (parameters and
+  wrong references go through checked setters), instead of pythonfmu's dict look-up and
+  type test per variable;
 * the physics is built from the parameters (and validated by the dataclasses) at
   ``exit_initialization_mode``; a ``ParameterError`` is logged and raised;
 * the FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``, JSON-serialisable) holds every
@@ -80,6 +82,10 @@ class DriveSlave(Fmi2Slave):
         self.parameter_notes: dict[str, str] = {}  # name -> text appended to the description
         self._real_getters: list = []
         self._real_setters: list = []
+        #: by value reference: the attribute of a Real variable (get_real), None otherwise
+        self._real_names: list = []
+        #: by value reference: the attribute of a Real input (set_real writes it), None otherwise
+        self._real_inputs: list = []
         self._initialized = False
         self._stale = True  # parameters changed since the physics was built
         self._built_with = None  # parameter values the physics was built with
@@ -98,6 +104,9 @@ class DriveSlave(Fmi2Slave):
         vr = len(self.vars)
         self.register_variable(var, nested=False)
         assert var.value_reference == vr == len(self._real_getters)
+        is_input = isinstance(var, Real) and var.causality == Fmi2Causality.input
+        self._real_names.append(name if isinstance(var, Real) else None)
+        self._real_inputs.append(name if is_input else None)
         if isinstance(var, Real):
             self._real_getters.append(var.getter)
             if var.causality == Fmi2Causality.output:
@@ -215,20 +224,39 @@ class DriveSlave(Fmi2Slave):
         try:
             if self._stale:  # only before initialisation: outputs calculated from parameters
                 self.build()
-            getters = self._real_getters
-            return [getters[vr]() for vr in vrs]
+            names = self._real_names
+            return [getattr(self, names[vr]) for vr in vrs]
         except Exception as exc:
+            exc = self._checked_access(self._real_getters, vrs, exc)
             self._fail("fmi2GetReal", exc)
-            raise
+            raise exc from None
 
     def set_real(self, vrs, values):
         try:
-            setters = self._real_setters
+            inputs, attributes = self._real_inputs, self.__dict__
             for vr, value in zip(vrs, values):
-                setters[vr](value)
+                name = inputs[vr]
+                if name is None:  # a parameter (fixed after initialisation) or an error
+                    self._real_setters[vr](value)
+                else:
+                    attributes[name] = value
         except Exception as exc:
             self._fail("fmi2SetReal", exc)
             raise
+
+    @staticmethod
+    def _checked_access(accessors, vrs, exc: Exception) -> Exception:
+        """The error of the first value reference that is unknown or of the wrong type
+        (its accessor raises FmuUsageError), else ``exc``."""
+        for vr in vrs:
+            if not 0 <= vr < len(accessors):
+                return FmuUsageError(f"no variable has the value reference {vr}")
+            if isinstance(accessors[vr], functools.partial) and accessors[vr].func is _wrong_access:
+                try:
+                    accessors[vr]()
+                except FmuUsageError as usage:
+                    return usage
+        return exc
 
     def get_integer(self, vrs):
         return self._guarded("fmi2GetInteger", super().get_integer, vrs)
