@@ -1,0 +1,44 @@
+"""The step-cost benchmark's parts (no timing here: figures are printed by the benchmark)."""
+
+from __future__ import annotations
+
+import fmpy
+import pytest
+
+from orchestrator import bench
+from orchestrator.cli import main
+from orchestrator.master import Master
+from orchestrator_support import project_fmus
+from pmsm_ev.results import read_results
+
+
+def test_bench_refuses_a_short_slice(capsys):
+    assert main(["bench", "--slice", "5", "--no-memory"]) == 2
+    assert "--slice must be" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def passthrough(tmp_path_factory):
+    return bench.passthrough_fmus(tmp_path_factory.mktemp("passthrough"))
+
+
+def _interface(path):
+    md = fmpy.read_model_description(str(path))
+    return [(v.name, v.causality, v.variability, v.type, v.valueReference) for v in md.modelVariables]
+
+
+def test_passthrough_fmus_have_the_interface_of_the_real_ones(passthrough):
+    real = project_fmus()
+    assert _interface(passthrough["PassThroughPlant"]) == _interface(real["PmsmEvPlant"])
+    assert _interface(passthrough["PassThroughFoc"]) == _interface(real["FocEkf5"])
+
+
+def test_passthrough_fmus_compute_nothing(passthrough, tmp_path):
+    spec = bench._spec(0.01, passthrough["PassThroughPlant"], passthrough["PassThroughFoc"])
+    spec.output_interval = 1e-3
+    m = Master(spec).run(tmp_path / "out", catch_sigint=False)
+    assert m["status"] == "completed" and m["macro_steps"] == 100
+    r = read_results(tmp_path / "out")
+    assert r["omega_ref"][-1] > 0.0  # the signal reached the controller...
+    for col in ("v_alpha", "v_beta", "v_q", "omega_hat", "omega_m", "i_d", "T_e"):
+        assert (r[col] == r[col][0]).all(), col  # ...which computed nothing, nor did the plant
