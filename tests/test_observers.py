@@ -9,6 +9,7 @@ from pmsm_ev.controller import CurrentController, SpeedController
 from pmsm_ev.observers import Ekf4, Ekf5, Ekf5AlphaBeta, Sensored
 from pmsm_ev.params import ControllerParams, EkfParams, MotorParams
 from pmsm_ev.pmsm import current_derivatives
+from pmsm_ev.transforms import inverse_park, park
 
 M = MotorParams()
 DT = 1e-4
@@ -77,7 +78,9 @@ def test_ekf5ab_measurement_is_inverse_park():
 
 
 def _simulate_open_loop(ekf_cls, steps=4000, t_l=40.0, omega=150.0):
-    """Feed an EKF with the exact currents of a motor at constant speed and voltage."""
+    """Feed an EKF with the exact currents of a motor at constant speed and voltage
+    (dq observers get the dq voltage, the stationary-frame EKF5 the alpha-beta vector
+    at mid-period)."""
     m = M
     i_q = t_l / (m.N * m.psi)
     i_d = 0.0
@@ -87,7 +90,10 @@ def _simulate_open_loop(ekf_cls, steps=4000, t_l=40.0, omega=150.0):
     ekf = ekf_cls(m, DT)
     theta = 0.4
     for _ in range(steps):
-        ekf.predict(v_d, v_q)
+        if ekf.voltage_frame == "alpha_beta":
+            ekf.predict(*inverse_park(v_d, v_q, theta + 0.5 * w_e * DT))
+        else:
+            ekf.predict(v_d, v_q)
         theta += w_e * DT
         c, s = math.cos(theta), math.sin(theta)
         ekf.correct(c * i_d - s * i_q, s * i_d + c * i_q, i_d, i_q, theta, omega)
@@ -184,10 +190,11 @@ class DenseEkf:
         self.R = np.diag([ekf.r0, ekf.r1])
         self.I = np.eye(n)
 
-    def step(self, v_d, v_q, z):
-        F = self.e.jacobian_f(self.x, v_d, v_q)
-        self.x = self.e.f(self.x, v_d, v_q)  # (23)
-        self.P = F @ self.P @ F.T + self.Q  # (24)
+    def step(self, v_d, v_q, z, predict=True):
+        if predict:
+            F = self.e.jacobian_f(self.x, v_d, v_q)
+            self.x = self.e.f(self.x, v_d, v_q)  # (23)
+            self.P = F @ self.P @ F.T + self.Q  # (24)
         H = self.e.jacobian_h(self.x)
         K = self.P @ H.T @ np.linalg.inv(H @ self.P @ H.T + self.R)  # (25), J_h^T
         self.x = self.x + K @ (z - self.e.h(self.x))  # (26)
@@ -207,9 +214,12 @@ def test_scalar_filter_equals_dense_eqs_23_to_27(cls):
         c, s = math.cos(theta), math.sin(theta)
         i_a, i_b = c * i_d - s * i_q, s * i_d + c * i_q
         z = np.array([i_a, i_b]) if cls is Ekf5AlphaBeta else np.array([i_d, i_q])
+        if cls is Ekf5AlphaBeta:  # its input: the stationary-frame vector of the period
+            v_d, v_q = inverse_park(v_d, v_q, theta - 400.0 * DT)
         ekf.predict(v_d, v_q)
         ekf.correct(i_a, i_b, i_d, i_q)
-        dense.step(v_d, v_q, z)
+        # the stationary-frame EKF5's x0 is at the first sample: no time update before it
+        dense.step(v_d, v_q, z, predict=not (k == 0 and cls is Ekf5AlphaBeta))
         dense.x[3] = (dense.x[3] + math.pi) % (2 * math.pi) - math.pi
     np.testing.assert_allclose(ekf.x, dense.x, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(ekf.P, dense.P, rtol=1e-7, atol=1e-12)

@@ -2,7 +2,9 @@
 
 Per control period, at t_k, with the plant's measured currents at t_k:
 
-1. observer time update with the dq voltage held over [t_{k-1}, t_k] (eqs 23-24);
+1. observer time update with the voltage held over [t_{k-1}, t_k] (eqs 23-24): the dq
+   command, or the stationary-frame vector (v_alpha, v_beta) actually sent to the
+   inverter for the stationary-frame EKF5, which turns it into its own frame;
 2. the frame angle: the measured rotor angle ("measured", the paper's own simulation,
    whose EKF is fed dq currents in the true frame) or the observer's predicted angle
    ("estimated", truly sensorless); Park of the measured currents at that angle;
@@ -49,6 +51,7 @@ class ControlUnit:
         self._half_period_n = 0.5 * dt * self.motor.N
         self._zoh = bool(self.params.zoh_compensation)
         self._delayed = bool(self.params.delay_compensation)
+        self._ab_voltage = self.observer.voltage_frame == "alpha_beta"
         self.reset()
 
     def reset(self) -> None:
@@ -56,7 +59,8 @@ class ControlUnit:
         self.speed.reset()
         self.current.reset()
         self.v_d = self.v_q = 0.0
-        self.v_prev_d = self.v_prev_q = 0.0  # the command of one period earlier
+        # the observer's voltage input of one period earlier (dq, or alpha-beta)
+        self.u_prev0 = self.u_prev1 = 0.0
         self.v_alpha = self.v_beta = 0.0
         self.i_d = self.i_q = 0.0
         self.i_qref = 0.0
@@ -66,11 +70,15 @@ class ControlUnit:
         obs = self.observer
         # (23)-(24) with the voltage applied over the last period: the last command, or
         # with a one-period actuation delay, the command before it
-        if self._delayed:
-            obs.predict(self.v_prev_d, self.v_prev_q)
-            self.v_prev_d, self.v_prev_q = self.v_d, self.v_q
+        if self._ab_voltage:
+            u0, u1 = self.v_alpha, self.v_beta
         else:
-            obs.predict(self.v_d, self.v_q)
+            u0, u1 = self.v_d, self.v_q
+        if self._delayed:
+            obs.predict(self.u_prev0, self.u_prev1)
+            self.u_prev0, self.u_prev1 = u0, u1
+        else:
+            obs.predict(u0, u1)
         theta_frame = obs.theta_prior if self._estimated else theta_meas
         i_d, i_q = park(i_alpha, i_beta, theta_frame)
         obs.correct(i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas)  # (25)-(27)
@@ -96,12 +104,12 @@ class ControlUnit:
 
     def get_state(self) -> tuple:
         return ((self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
-                 self.speed.integral, self.v_prev_d, self.v_prev_q)
+                 self.speed.integral, self.u_prev0, self.u_prev1)
                 + self.current.get_state() + self.observer.get_state())
 
     def set_state(self, state) -> None:
         state = tuple(float(v) for v in state)
         (self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
-         self.speed.integral, self.v_prev_d, self.v_prev_q) = state[:10]
+         self.speed.integral, self.u_prev0, self.u_prev1) = state[:10]
         self.current.set_state(state[10:15])
         self.observer.set_state(state[15:])

@@ -2,8 +2,10 @@
 
 Every observer is called once per control period by the control unit:
 
-1. ``predict(v_d, v_q)``: time update with the dq voltage commanded over the period
-   that just ended (eqs 23-24). Afterwards ``theta_prior`` is the predicted angle.
+1. ``predict(u0, u1)``: time update with the voltage held over the period that just
+   ended (eqs 23-24): the dq command (v_d, v_q), or for observers whose
+   ``voltage_frame`` is "alpha_beta" the stationary-frame vector (v_alpha, v_beta) the
+   inverter applied. Afterwards ``theta_prior`` is the predicted angle.
 2. ``correct(i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas)``: measurement update
    (eqs 25-27). ``i_d, i_q`` are the measured currents in the controller's frame (true
    angle in paper mode, ``theta_prior`` when truly sensorless); each observer takes the
@@ -48,6 +50,8 @@ class ExtendedKalmanFilter:
     """
 
     n_states = 0
+    #: the voltage predict() takes: "dq" (the controller's dq command) or "alpha_beta"
+    voltage_frame = "dq"
 
     def __init__(self, motor: MotorParams, dt: float, q_diag, r_diag, p0_diag, x0=None):
         self.motor = motor
@@ -242,7 +246,118 @@ class Ekf5AlphaBeta(Ekf5):
 
     h(x) = inverse Park of (i_d, i_q) at theta, so theta enters the measurement and is
     observable from the currents alone: the physically sensorless form.
+
+    Its input is the stationary-frame voltage (v_alpha, v_beta) the inverter held over
+    the period, not a dq command: ``predict(v_alpha, v_beta)``. The model turns it into
+    the rotor frame at the filter's *own* angle, at mid-period,
+
+        (v_d, v_q) = Park(v_alpha, v_beta, theta + N omega_m dt / 2),
+
+    and then steps A2-A6 as the EKF5 does. Two reasons, both physics:
+
+    * The angle information of a sensorless drive is the direction of the applied
+      voltage against the back-EMF. A dq voltage handed over as fixed numbers makes
+      the model blind to it (df/dtheta = 0): a wrong theta could then only show up by
+      rotating the measured current vector, which carries no angle information while the
+      currents are small. Here df/dtheta = (dt/L) dPark/dtheta v (entries (0,3), (1,3)),
+      the path by which a stationary-frame EKF recovers an unknown initial angle.
+    * The voltage is the one the inverter applied, so the model does not depend on the
+      frame the controller computed it in (with a measured angle the controller's frame
+      is the true one, not the filter's; a dq command would then be misread by the angle
+      error).
+
+    The mid-period angle is the consistent choice for the forward-Euler step: against the
+    exact map of a vector held in the stationary frame over a turning rotor, the residual
+    is of order (omega_e dt)^2 times the current (0.0064 at 200 rad/s, 10 kHz).
+
+    ``x0`` is the estimate at the first sample: the first ``predict`` (the period before
+    the first sample, when the inverter held no vector yet) is no time update. Stepping
+    the model over it with zero volts would model a short-circuited motor: started at
+    speed (a flying start), the filter would predict N omega psi dt / L_q = 25 A of
+    braking current at 200 rad/s against the measured 0 A and take the mismatch out on
+    its speed estimate (200 -> 90 rad/s in one step).
     """
+
+    #: predict() takes the stationary-frame voltage held over the period
+    voltage_frame = "alpha_beta"
+
+    def __init__(self, motor: MotorParams, dt: float, ekf: EkfParams | None = None, x0=None):
+        self._c_mid = 0.5 * motor.N * dt  # d(theta at mid-period)/d(omega_m)
+        super().__init__(motor, dt, ekf, x0)
+
+    def reset(self) -> None:
+        super().reset()
+        self._started = False  # no predict() before the first sample
+
+    def get_state(self) -> tuple:
+        return super().get_state() + (float(self._started),)
+
+    def set_state(self, state) -> None:
+        super().set_state(state[:-1])
+        self._started = bool(state[-1])
+
+    def _predict_state(self, v_alpha, v_beta) -> None:
+        x = self._x
+        th_m = x[TH] + self._c_mid * x[W]
+        c, s = math.cos(th_m), math.sin(th_m)
+        Ekf5._predict_state(self, c * v_alpha + s * v_beta, -s * v_alpha + c * v_beta)
+
+    def _voltage_entries(self, v_alpha, v_beta):
+        """(v_d, v_q) at mid-period and the extra J_f entries d f_{0,1} / d theta."""
+        x = self._x
+        th_m = x[TH] + self._c_mid * x[W]
+        c, s = math.cos(th_m), math.sin(th_m)
+        v_d, v_q = c * v_alpha + s * v_beta, -s * v_alpha + c * v_beta
+        # d v_d / d theta = v_q, d v_q / d theta = -v_d
+        return self._c_vd * v_q, -self._c_vq * v_d
+
+    def jacobian_f(self, x, v_alpha, v_beta) -> np.ndarray:
+        saved = self._x
+        self._x = [float(v) for v in x]
+        try:
+            f03, f13 = self._voltage_entries(v_alpha, v_beta)
+        finally:
+            self._x = saved
+        F = Ekf5.jacobian_f(self, x, v_alpha, v_beta)
+        F[0, 3] = f03
+        F[1, 3] = f13
+        F[0, 2] += f03 * self._c_mid  # theta_mid depends on omega too
+        F[1, 2] += f13 * self._c_mid
+        return F
+
+    def predict(self, v_alpha: float, v_beta: float) -> None:
+        """Eqs 23-24 with the stationary-frame voltage (see the class notes)."""
+        if not self._started:  # x0 is the estimate at the first sample
+            self._started = True
+            return
+        i_d, i_q, w = self._x[0], self._x[1], self._x[2]
+        f03, f13 = self._voltage_entries(v_alpha, v_beta)
+        # J_f rows: r0 = [f00 f01 f02 f03 0], r1 = [f10 f11 f12 f13 0],
+        # r2 = [f20 f21 1 0 f24], r3 = [0 0 f32 1 0], r4 = [0 0 0 0 1]
+        f00, f01, f02 = self._a_rd, self._c_wq * w, self._c_wq * i_q + f03 * self._c_mid
+        f10, f11, f12 = -self._c_wd * w, self._a_rq, -self._c_wd * i_d - self._c_wpsi + f13 * self._c_mid
+        f20, f21, f24 = self._c_tdq * i_q, self._c_tpsi + self._c_tdq * i_d, self._c_tl
+        f32 = self._c_th
+        self._predict_state(v_alpha, v_beta)  # (23)
+        P0, P1, P2, P3, P4 = self._P
+        A0 = [f00 * a + f01 * b + f02 * c + f03 * d for a, b, c, d in zip(P0, P1, P2, P3)]
+        A1 = [f10 * a + f11 * b + f12 * c + f13 * d for a, b, c, d in zip(P0, P1, P2, P3)]
+        A2 = [f20 * a + f21 * b + c + f24 * e for a, b, c, e in zip(P0, P1, P2, P4)]
+        A3 = [f32 * c + d for c, d in zip(P2, P3)]
+        A4 = P4
+        rows = []
+        for A in (A0, A1, A2, A3, A4):
+            a0, a1, a2, a3, a4 = A
+            rows.append([f00 * a0 + f01 * a1 + f02 * a2 + f03 * a3,
+                         f10 * a0 + f11 * a1 + f12 * a2 + f13 * a3,
+                         f20 * a0 + f21 * a1 + a2 + f24 * a4,
+                         f32 * a2 + a3,
+                         a4])
+        q = self.q
+        for i in range(5):
+            rows[i][i] += q[i]
+        self._P = rows  # (24)
+        self.theta_prior = self._x[TH]
 
     def correct(self, i_alpha, i_beta, i_d, i_q, theta_meas=0.0, omega_meas=0.0) -> None:
         x, P = self._x, self._P
@@ -328,6 +443,7 @@ class Sensored:
     """Baseline: passes the measured speed and angle through; currents as measured."""
 
     n_states = 0
+    voltage_frame = "dq"
 
     def __init__(self, motor: MotorParams | None = None, dt: float = 0.0, ekf=None, x0=None):
         self.reset()
