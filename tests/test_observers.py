@@ -77,6 +77,37 @@ def test_ekf5ab_measurement_is_inverse_park():
     assert (a, b) == pytest.approx((c * x[0] - s * x[1], s * x[0] + c * x[1]))
 
 
+def test_ekf5ab_steps_the_applied_stationary_voltage_in_its_own_frame():
+    """f(x, v_alpha, v_beta) = the EKF5 model with the voltage Parked at the filter's angle
+    at mid-period; the angle therefore enters J_f through the voltage (df/dtheta != 0)."""
+    ab, dq = Ekf5AlphaBeta(M, DT), Ekf5(M, DT)
+    x = STATES[Ekf5AlphaBeta]
+    v_alpha, v_beta = 40.0, -65.0
+    th_mid = x[3] + 0.5 * M.N * x[2] * DT
+    v_d, v_q = park(v_alpha, v_beta, th_mid)
+    np.testing.assert_allclose(ab.f(x, v_alpha, v_beta), dq.f(x, v_d, v_q), rtol=1e-14)
+    F = ab.jacobian_f(x, v_alpha, v_beta)
+    assert F[0, 3] == pytest.approx(DT / M.L_d * v_q)  # d v_d / d theta = v_q
+    assert F[1, 3] == pytest.approx(-DT / M.L_q * v_d)  # d v_q / d theta = -v_d
+
+
+def test_ekf5ab_initial_guess_is_the_state_at_the_first_sample():
+    """No time update before the first sample; then the usual one; the flag is state."""
+    ekf = Ekf5AlphaBeta(M, DT, EkfParams(x0_omega=200.0, x0_theta=0.3))
+    x0, p0 = ekf.x, ekf.P
+    ekf.predict(0.0, 0.0)
+    np.testing.assert_array_equal(ekf.x, x0)
+    np.testing.assert_array_equal(ekf.P, p0)
+    saved = ekf.get_state()
+    ekf.predict(0.0, 0.0)  # 0 V at 200 rad/s: the back-EMF drives i_q negative
+    assert ekf.i_q_hat == pytest.approx(-M.N * 200.0 * M.psi * DT / M.L_q)
+    ekf.set_state(saved)
+    assert ekf.get_state() == saved
+    ekf.reset()
+    ekf.predict(0.0, 0.0)
+    np.testing.assert_array_equal(ekf.x, x0)
+
+
 def _simulate_open_loop(ekf_cls, steps=4000, t_l=40.0, omega=150.0):
     """Feed an EKF with the exact currents of a motor at constant speed and voltage
     (dq observers get the dq voltage, the stationary-frame EKF5 the alpha-beta vector
