@@ -507,3 +507,252 @@ def test_a_run_refused_at_load_leaves_the_previous_results(fmus, tmp_path, capsy
     code, _, _ = cli(["run", "scenario2", "--stop-time", 0.01, "--out", out, "--quiet", "--no-figures"], capsys)
     assert code == 0
     assert len(csv_lines(out)) == 3 and metrics(out)["stop_time"] == 0.01
+
+
+# --- property-based: the scenario CSV reader and the system-file loader -------------------------
+# Random bytes and near-valid content: always a clean one-line error of the project's own
+# type or a valid load, never another exception. Example counts stay modest (the suite's time).
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from orchestrator.errors import CosimError  # noqa: E402
+from orchestrator.system import SystemSpec, load_system  # noqa: E402
+from pmsm_ev.scenarios import Profile, ProfileError, load_profile_csv  # noqa: E402
+
+PROPERTY = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("properties")
+
+
+def load_csv_cleanly(path: Path) -> Profile | None:
+    """The reader's contract: a valid Profile, or a one-line ProfileError naming the file."""
+    try:
+        prof = load_profile_csv(path)
+    except ProfileError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith(str(path)), str(exc)
+        return None
+    assert len(prof.times) == len(prof.values) >= 1
+    assert all(math.isfinite(x) for x in prof.times + prof.values)
+    assert all(b > a for a, b in zip(prof.times, prof.times[1:]))
+    return prof
+
+
+def mutate(data: bytes, draw) -> bytes:
+    """A few random byte edits: delete, insert or replace a byte, cut the file, duplicate
+    or drop a line."""
+    for _ in range(draw(st.integers(1, 3))):
+        kind = draw(st.sampled_from(["delete", "insert", "replace", "cut", "dup-line", "drop-line"]))
+        i = draw(st.integers(0, max(len(data) - 1, 0)))
+        byte = bytes([draw(st.sampled_from(b',."\n\r -+e0123456789[]{}=#\'\\xab\x00\xff'))])
+        if kind == "delete":
+            data = data[:i] + data[i + 1:]
+        elif kind == "insert":
+            data = data[:i] + byte + data[i:]
+        elif kind == "replace":
+            data = data[:i] + byte + data[i + 1:]
+        elif kind == "cut":
+            data = data[:i]
+        else:
+            lines = data.split(b"\n")
+            j = draw(st.integers(0, len(lines) - 1))
+            lines[j:j + 1] = [lines[j]] * (2 if kind == "dup-line" else 0)
+            data = b"\n".join(lines)
+    return data
+
+
+@PROPERTY
+@given(data=st.binary(max_size=400))
+def test_csv_reader_on_random_bytes(scratch, data):
+    path = scratch / "random.csv"
+    path.write_bytes(data)
+    load_csv_cleanly(path)
+
+
+CSV_CELLS = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.integers(-10**6, 10**6).map(str),
+    st.sampled_from(["", " ", "nan", "inf", "-inf", "1e999", "abc", '"3"', '"', "0x10", "1_000", "\u0663",
+                     "\t2", "1e", "--1", "1,5", "\x00"]),
+    st.text(max_size=6),
+)
+
+
+@PROPERTY
+@given(header=st.sampled_from(["time,value", "t,deg", "time", "", "0,0", "time,value,note", "\ufefftime,value"]),
+       rows=st.lists(st.lists(CSV_CELLS, max_size=4), max_size=8),
+       eol=st.sampled_from(["\n", "\r\n", "\r"]))
+def test_csv_reader_on_near_valid_tables(scratch, header, rows, eol):
+    path = scratch / "near.csv"
+    path.write_bytes(eol.join([header] + [",".join(r) for r in rows]).encode("utf-8", "surrogatepass"))
+    load_csv_cleanly(path)
+
+
+@PROPERTY
+@given(points=st.lists(st.tuples(st.floats(-1e6, 1e6), st.floats(allow_nan=False, allow_infinity=False)),
+                       min_size=1, max_size=8, unique_by=lambda p: p[0]),
+       data=st.data())
+def test_csv_reader_on_mutated_valid_files(scratch, points, data):
+    points = sorted(points)
+    text = "time,value\n" + "".join(f"{t!r},{v!r}\n" for t, v in points)
+    path = scratch / "valid.csv"
+    path.write_text(text, encoding="utf-8")
+    prof = load_csv_cleanly(path)  # the valid file is read exactly (repr round trip)
+    assert prof is not None and prof.times == tuple(t for t, _ in points)
+    assert prof.values == tuple(v for _, v in points)
+    path.write_bytes(mutate(text.encode("utf-8"), data.draw))
+    load_csv_cleanly(path)
+
+
+# A system file whose values are slots: each keeps its valid literal or gets a random TOML value.
+SYSTEM_TEMPLATE = """\
+name = {name}
+description = {description}
+connections = {connections}
+
+[experiment]
+step_size = {step_size}
+stop_time = {stop_time}
+output_interval = {output_interval}
+algorithm = {algorithm}
+
+[[components]]
+name = {comp_a}
+fmu = {fmu_a}
+start = {start}
+
+[[components]]
+name = "b"
+fmu = {fmu_b}
+step_multiple = {step_multiple}
+
+[signals.s]
+unit = {unit}
+interpolation = {interpolation}
+table = {table}
+drives = {drives}
+
+[signals.r]
+csv = {csv}
+drives = ["a.u"]
+
+[record]
+time = "time"
+{column} = {record_y}
+s_deg = {record_s}
+"""
+VALID_SLOTS = {
+    "name": '"prop"', "description": '"property test"', "connections": '["a.y -> b.u", "b.z -> a.v"]',
+    "step_size": "0.001", "stop_time": "1.0", "output_interval": "0.01", "algorithm": '"jacobi"',
+    "comp_a": '"a"', "fmu_a": '"A.fmu"', "start": '{ k = 2.5, flag = true, label = "x" }',
+    "fmu_b": '"{fmus}/B.fmu"', "step_multiple": "2", "unit": '"deg"', "interpolation": '"linear"',
+    "table": "[[0, 0], [0.5, 3]]", "drives": '"b.w"', "csv": '"route.csv"', "column": "y", "record_y": '"a.y"',
+    "record_s": '{ from = "signals.s", unit = "deg" }',
+}
+#: values a user could plausibly write in each slot, each of them wrong
+TRICKY_SLOTS = [
+    ("name", '"runs/../x"'), ("name", '"a\\b"'), ("name", '"tab\there"'), ("name", "3"), ("name", '".."'),
+    ("description", "[1, 2]"), ("connections", '"a.y -> b.u"'), ("connections", '["a.y -> b.u -> a.v"]'),
+    ("connections", '["a.y -> b"]'), ("step_size", "0"), ("step_size", "-1e-3"), ("step_size", "nan"),
+    ("step_size", '"1e-3"'), ("stop_time", "inf"), ("stop_time", "true"), ("output_interval", "-0.0"),
+    ("algorithm", '"newton"'), ("algorithm", "[]"), ("comp_a", '"b"'), ("comp_a", '"time"'), ("comp_a", '"a-b"'),
+    ("fmu_a", '"~nobody_here_at_all/x.fmu"'), ("fmu_a", '"A\u0000.fmu"'), ("fmu_a", '""'), ("fmu_a", "1"),
+    ("fmu_b", '"{fmus}/\u0000"'), ("start", "[1]"), ("start", "{ k = [1] }"), ("start", "{ k = 1979-05-27 }"),
+    ("start", "{ k = { x = 1 } }"), ("step_multiple", "0"), ("step_multiple", "1.5"), ("step_multiple", "true"),
+    ("unit", "[1]"), ("unit", "{ x = 1 }"), ("interpolation", '"cubic"'), ("interpolation", "[1]"),
+    ("table", "[]"), ("table", "[[0]]"), ("table", "[[1, 0], [0, 1]]"), ("table", "[[0, nan]]"),
+    ("table", "[[0, inf]]"), ("table", '[["0", 1]]'), ("table", "[[true, 1]]"), ("table", "0"),
+    ("drives", "[1]"), ("drives", '"bw"'), ("drives", '"c.w"'), ("drives", '"a.u"'), ("drives", '"b.u"'),
+    ("csv", '"missing.csv"'), ("csv", '"~nobody_here_at_all/r.csv"'), ("csv", '"r\u0000.csv"'), ("csv", "1"),
+    ("csv", '"."'), ("column", '"x,y"'), ("column", '"x\"y"'), ("column", '"caf\u00e9"'), ("column", '"a\nb"'),
+    ("column", '" "'), ("column", '"time"'), ("record_y", '"signals.nope"'), ("record_y", '"c.y"'),
+    ("record_y", "1"), ("record_y", '"a"'), ("record_y", '{ from = "a.y", unit = "rpm" }'),
+    ("record_y", '{ from = "a.y", unit = [1] }'), ("record_y", '{ from = "a.y", unit = { k = 1 } }'),
+    ("record_y", '{ unit = "deg" }'), ("record_y", '{ from = "time", unit = "deg" }'),
+    ("record_s", '{ from = "signals.s", unit = 3 }'),
+]
+
+
+@pytest.mark.parametrize("slot, value", TRICKY_SLOTS)
+def test_system_loader_on_plausible_mistakes(tmp_path, slot, value):
+    """Each a one-line CosimError naming the system file or the file it refers to."""
+    (tmp_path / "route.csv").write_text("time,value\n0,1\n2,3\n", encoding="utf-8")
+    path = tmp_path / "system.toml"
+    path.write_text(SYSTEM_TEMPLATE.format(**{**VALID_SLOTS, slot: value}), encoding="utf-8")
+    with pytest.raises(CosimError) as exc:
+        load_system(path)
+    assert "\n" not in str(exc.value)
+    assert str(tmp_path) in str(exc.value)
+
+
+def _toml_float(x: float) -> str:
+    return "nan" if math.isnan(x) else ("inf" if x > 0 else "-inf") if math.isinf(x) else repr(x)
+
+
+TOML_SCALARS = st.one_of(
+    st.integers(-2**63, 2**63 - 1).map(str),
+    st.floats().map(_toml_float),
+    st.booleans().map(lambda b: "true" if b else "false"),
+    st.text(max_size=12).map(lambda s: json.dumps(s)),
+    st.sampled_from(['"a.y"', '"signals.s"', '"time"', '"a"', '"b.w -> a.y"', '"~nobody_here/x.fmu"',
+                     '"A.fmu\\u0000"', '"sub/../A.fmu"', '"deg"', '"previous"', '"gauss-seidel"', "1979-05-27",
+                     '"route.csv"', '"x,y"', '"\\n"']),
+)
+TOML_VALUES = st.recursive(
+    TOML_SCALARS,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=3).map(lambda xs: "[" + ", ".join(xs) + "]"),
+        st.dictionaries(st.sampled_from(["from", "unit", "k", "x", "1"]), inner, max_size=2).map(
+            lambda d: "{ " + ", ".join(f'"{k}" = {v}' for k, v in d.items()) + " }"),
+    ),
+    max_leaves=4,
+)
+
+
+def load_system_cleanly(path: Path) -> SystemSpec | None:
+    try:
+        spec = load_system(path)
+    except CosimError as exc:
+        assert "\n" not in str(exc), str(exc)
+        return None
+    assert isinstance(spec, SystemSpec) and spec.components and spec.columns
+    assert spec.step_size > 0 and spec.stop_time > 0 and spec.output_interval > 0
+    return spec
+
+
+@PROPERTY
+@given(data=st.binary(max_size=400))
+def test_system_loader_on_random_bytes(scratch, data):
+    path = scratch / "random.toml"
+    path.write_bytes(data)
+    load_system_cleanly(path)
+
+
+@PROPERTY
+@given(changes=st.one_of(
+    st.dictionaries(st.sampled_from(sorted(VALID_SLOTS)), TOML_VALUES, min_size=1, max_size=2),
+    st.lists(st.sampled_from(TRICKY_SLOTS), min_size=2, max_size=3).map(dict)))
+def test_system_loader_on_near_valid_values(scratch, changes):
+    """One or two values of a valid system file replaced by random TOML values."""
+    (scratch / "route.csv").write_text("time,value\n0,1\n2,3\n", encoding="utf-8")
+    path = scratch / "near.toml"
+    path.write_text(SYSTEM_TEMPLATE.format(**VALID_SLOTS), encoding="utf-8")
+    spec = load_system_cleanly(path)
+    assert spec is not None and spec.signals["r"].profile.values == (1.0, 3.0)
+    path.write_text(SYSTEM_TEMPLATE.format(**{**VALID_SLOTS, **changes}), encoding="utf-8", errors="surrogatepass")
+    load_system_cleanly(path)
+
+
+@PROPERTY
+@given(data=st.data())
+def test_system_loader_on_mutated_valid_files(scratch, data):
+    (scratch / "route.csv").write_text("time,value\n0,1\n2,3\n", encoding="utf-8")
+    text = SYSTEM_TEMPLATE.format(**VALID_SLOTS).encode("utf-8")
+    path = scratch / "mutated.toml"
+    path.write_bytes(text)
+    assert load_system_cleanly(path) is not None
+    path.write_bytes(mutate(text, data.draw))
+    load_system_cleanly(path)
