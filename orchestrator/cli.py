@@ -106,9 +106,9 @@ def cmd_run(a) -> int:
 
     spec = load_system(a.system)
     if a.plant:
-        spec.set_fmu(PLANT_INSTANCE, a.plant)
+        spec.set_fmu(PLANT_INSTANCE, a.plant, "--plant")
     if a.controller:
-        spec.set_fmu(CONTROLLER_INSTANCE, a.controller)
+        spec.set_fmu(CONTROLLER_INSTANCE, a.controller, "--controller")
     for assignment in a.fmu or ():
         inst, sep, path = assignment.partition("=")
         if not sep or not path:

@@ -130,12 +130,12 @@ class SystemSpec:
     path: Path | None = None  #: the system file (None when built in code)
 
     # -- look-ups ---------------------------------------------------------------
-    def component(self, name: str) -> ComponentSpec:
+    def component(self, name: str, context: str = "") -> ComponentSpec:
         for c in self.components:
             if c.name == name:
                 return c
         names = [c.name for c in self.components]
-        where = f"{self.path}: " if self.path else ""
+        where = f"{context}: " if context else (f"{self.path}: " if self.path else "")
         raise CosimError(f"{where}unknown instance {name!r}{close_matches(name, names)}; "
                          f"instances: {', '.join(names)}")
 
@@ -146,10 +146,11 @@ class SystemSpec:
         if not sep:
             raise CosimError(f"--set {assignment!r}: expected INSTANCE.VAR=VALUE")
         inst, var = split_reference(target.strip(), f"--set {assignment!r}")
-        self.component(inst).start[var] = value.strip()
+        self.component(inst, f"--set {assignment!r}").start[var] = value.strip()
 
-    def set_fmu(self, instance: str, path) -> None:
-        comp = self.component(instance)
+    def set_fmu(self, instance: str, path, context: str = "") -> None:
+        """Replace the FMU of an instance (``--fmu INSTANCE=FMU``, ``--plant``, ``--controller``)."""
+        comp = self.component(instance, context or f"--fmu {instance}={path}")
         comp.fmu, comp.fmu_text = user_path(str(path), where=f"--fmu {instance}"), str(path)
 
     def set_signal_csv(self, assignment: str) -> None:
