@@ -103,6 +103,8 @@ class PmsmEvPlant(DriveSlave):
         try:
             if not self._initialized:
                 raise FmuUsageError("fmi2DoStep before fmi2ExitInitializationMode")
+            if not step_size > 0.0:
+                raise FmuUsageError(f"communication step size must be > 0 s (got {step_size!r})")
             p = self._plant
             p.step(self.v_alpha, self.v_beta, self.delta, step_size)
             self.i_alpha = p.i_alpha

@@ -106,9 +106,9 @@ def cmd_run(a) -> int:
 
     spec = load_system(a.system)
     if a.plant:
-        spec.set_fmu(PLANT_INSTANCE, a.plant)
+        spec.set_fmu(PLANT_INSTANCE, a.plant, "--plant")
     if a.controller:
-        spec.set_fmu(CONTROLLER_INSTANCE, a.controller)
+        spec.set_fmu(CONTROLLER_INSTANCE, a.controller, "--controller")
     for assignment in a.fmu or ():
         inst, sep, path = assignment.partition("=")
         if not sep or not path:
@@ -215,12 +215,19 @@ def cmd_plot(a) -> int:
 
 # --- parser ------------------------------------------------------------------------------
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's error format: one line ``error: ...``, exit code 2."""
+
+    def error(self, message):
+        self.exit(EXIT_USER_ERROR, f"error: {one_line(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = _Parser(
         prog="pmsm-cosim",
         description="Co-simulate the PMSM EV drive FMUs (FMI 2.0) with a fixed-step master.",
         epilog="Run 'pmsm-cosim COMMAND --help' for the options of a command.")
-    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
 
     r = sub.add_parser("run", help="co-simulate a scenario or a system file",
                        description="Co-simulate a shipped scenario (scenario1, scenario2) or a system file "

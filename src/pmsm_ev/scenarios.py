@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import bisect
 import csv
+import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -105,42 +106,82 @@ def speed_reference(p: ScenarioParams | None = None) -> Profile:
     return Profile((0.0,), (p.omega_ref,), "previous", "omega_ref", "rad/s")
 
 
+def _show(text: str, limit: int = 40) -> str:
+    """``repr`` of a piece of a file, on one line and cut to ``limit`` characters."""
+    text = text.strip()
+    return repr(text if len(text) <= limit else text[:limit] + "...")
+
+
+def _csv_number(text: str, path, lineno: int, column: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ProfileError(f"{path}:{lineno}: {column} is not a number: {_show(text)}") from None
+    if not math.isfinite(value):
+        raise ProfileError(f"{path}:{lineno}: {column} is not finite: {_show(text)}")
+    return value
+
+
 def load_profile_csv(path, interpolation: str = "previous", name: str | None = None,
                      scale: float = 1.0, unit: str = "") -> Profile:
     """Read a two-column CSV (header row, then ``time,value`` rows) into a Profile.
 
-    ``scale`` multiplies the values (e.g. pi/180 for a file in degrees). Errors name the
-    file and line.
+    The header names the two columns (e.g. ``time,delta_deg``); each following row is a
+    breakpoint, times strictly increasing, values finite; blank lines are skipped, a UTF-8
+    byte-order mark is accepted. ``scale`` multiplies the values (e.g. pi/180 for a file
+    in degrees). Every error is a :class:`ProfileError` naming the file and, where there
+    is one, the line (``route.csv:7: time does not increase ...``).
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise ProfileError(f"{path}: profile file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ProfileError(f"{path}: cannot read profile ({exc})") from None
-    rows = list(csv.reader(text.splitlines()))
-    if not rows:
-        raise ProfileError(f"{path}: empty profile file")
-    header = [h.strip() for h in rows[0]]
-    if len(header) < 2:
-        raise ProfileError(f"{path}:1: header needs two columns (time, value), got {header}")
+    except IsADirectoryError:
+        raise ProfileError(f"{path}: is a directory, not a profile file") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise ProfileError(f"{path}: cannot read profile ({type(exc).__name__}: {exc})") from None
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    header = None
     times, values = [], []
-    for lineno, row in enumerate(rows[1:], start=2):
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) < 2:
-            raise ProfileError(f"{path}:{lineno}: missing column (need time, value)")
-        try:
-            t, v = float(row[0]), float(row[1])
-        except ValueError:
-            raise ProfileError(f"{path}:{lineno}: not a number: {row[:2]}") from None
-        if not (math.isfinite(t) and math.isfinite(v)):
-            raise ProfileError(f"{path}:{lineno}: value is not finite: {row[:2]}")
-        if times and not t > times[-1]:
-            raise ProfileError(f"{path}:{lineno}: time does not increase ({t} after {times[-1]})")
-        times.append(t)
-        values.append(v * scale)
+    try:
+        for row in reader:
+            lineno = reader.line_num
+            if not row or all(not c.strip() for c in row):
+                continue
+            if header is None:
+                header = [h.strip() for h in row]
+                if len(header) < 2:
+                    raise ProfileError(f"{path}:{lineno}: the header needs two columns (time, value), "
+                                       f"got {_show(','.join(row))}")
+                if _is_number(header[0]) and _is_number(header[1]):
+                    raise ProfileError(f"{path}:{lineno}: the first line must be a header naming the columns "
+                                       f"(e.g. time,value), got numbers {_show(','.join(row))}")
+                continue
+            if len(row) < 2:
+                raise ProfileError(f"{path}:{lineno}: missing column: need time,value, got {_show(','.join(row))}")
+            t = _csv_number(row[0], path, lineno, "time")
+            v = _csv_number(row[1], path, lineno, "value")
+            if times and not t > times[-1]:
+                raise ProfileError(f"{path}:{lineno}: time does not increase ({t!r} after {times[-1]!r})")
+            times.append(t)
+            values.append(v * scale)
+    except csv.Error as exc:
+        raise ProfileError(f"{path}:{reader.line_num}: not valid CSV ({exc})") from None
+    if header is None:
+        raise ProfileError(f"{path}:1: empty profile file (expected a header row, then time,value rows)")
     if not times:
-        raise ProfileError(f"{path}: no data rows")
-    return Profile(tuple(times), tuple(values), interpolation, name or header[1], unit)
+        raise ProfileError(f"{path}:{reader.line_num + 1}: no data rows after the header")
+    label = name or header[1] or "value"
+    try:
+        return Profile(tuple(times), tuple(values), interpolation, label, unit)
+    except ProfileError as exc:  # e.g. a value that overflows once scaled
+        raise ProfileError(f"{path}: {exc}") from None
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
