@@ -64,9 +64,9 @@ class RouteProfile(DriveSlave):
         else:
             resources = Path(self.resources or ".").resolve()
             path = (resources / name).resolve()
-            if not name or resources not in path.parents:
+            if not name or resources not in path.parents or not path.is_file():
                 raise FmuUsageError(f"profile {name!r}: choose {', '.join(PACKAGED_ROUTES)} or a route file "
-                                    f"inside resources/")
+                                    f"inside resources/ (no such file there)")
             route = load_route(path)
         self._delta, self._omega_ref = route["delta"], route["omega_ref"]
         self.mark_built()
