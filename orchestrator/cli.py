@@ -1,4 +1,4 @@
-"""``pmsm-cosim``: run, build, inspect and plot co-simulations.
+"""``pmsm-cosim``: run, build, inspect and plot co-simulations; export a system as an SSP package.
 
 Every user error (missing file, bad system file, unknown variable, a value an FMU
 refuses, ...) ends in one line ``error: ...`` on stderr and exit code 2.
