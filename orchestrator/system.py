@@ -122,9 +122,9 @@ class SystemSpec:
     connections: list[Connection]
     signals: dict[str, SignalSpec]
     columns: list[ColumnSpec]
-    step_size: float
-    stop_time: float
-    output_interval: float
+    step_size: float | None  #: None only from an SSP package that declares none (the CLI's --step)
+    stop_time: float | None  #: None only from an SSP package that declares none (--stop-time)
+    output_interval: float | None  #: None: the step size
     algorithm: str = "gauss-seidel"
     description: str = ""
     path: Path | None = None  #: the system file (None when built in code)
@@ -324,8 +324,13 @@ def _parse_column(name: str, value, where: str) -> ColumnSpec:
 
 
 def load_system(path) -> SystemSpec:
-    """Read and check a system file (or a packaged scenario name)."""
+    """Read and check a system file, a packaged scenario name or an SSP package (``.ssp``,
+    :func:`orchestrator.ssp.load_ssp`)."""
     path = Path(path)
+    if path.suffix.lower() == ".ssp":
+        from .ssp import load_ssp  # noqa: PLC0415
+
+        return load_ssp(path)
     if path.suffix == "" and str(path) in PACKAGED_SCENARIOS:
         path = packaged_scenario(str(path))
     elif path.suffix == "" and not path.exists():

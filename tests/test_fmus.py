@@ -122,7 +122,7 @@ def omega_ramp(t):
 
 # -- build -----------------------------------------------------------------------------
 def test_build_writes_every_fmu_with_its_hash(fmus):
-    assert set(fmus) == set(pmsm_ev_fmus.FMUS) == {"PmsmEvPlant", *CONTROLLERS}
+    assert set(fmus) == set(pmsm_ev_fmus.FMUS) == {"PmsmEvPlant", *CONTROLLERS, "RouteProfile"}
     for name, path in fmus.items():
         assert path.name == f"{name}.fmu" and path.is_file()
         info = fmu_build.read_build_info(path)

@@ -8,6 +8,10 @@ read here as 0 deg for 0-50 s, then alternating 22 deg / 0 deg every 30 s up to 
 which keeps the 350 s length of scenario 1 and the 30 s plateaus of both texts.
 
 Speed reference (Fig. 8): 200 rad/s, reached from standstill by a ramp.
+
+A *route* is the pair of profiles that drives a run, ``delta`` [rad] and ``omega_ref``
+[rad/s] (``ROUTE_SIGNALS``); a route file is their JSON form (``route_to_json``,
+``load_route``), the table the RouteProfile FMU carries in its resources.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from __future__ import annotations
 import bisect
 import csv
 import io
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -185,3 +190,70 @@ def _is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+# -- routes: the profiles of a run, as one JSON file ----------------------------------
+#: the signals of a route and their units
+ROUTE_SIGNALS: dict[str, str] = {"delta": "rad", "omega_ref": "rad/s"}
+ROUTE_FORMAT = "pmsm-ev-cosim route 1"
+#: the routes known by name (``scenario_route``)
+PACKAGED_ROUTES = ("scenario1", "scenario2")
+
+
+def scenario_route(scenario: int | str, p: ScenarioParams | None = None) -> dict[str, Profile]:
+    """The route of scenario 1 or 2: its elevation and the speed reference."""
+    return {"delta": elevation_profile(scenario), "omega_ref": speed_reference(p)}
+
+
+def route_to_json(route: dict[str, Profile], name: str = "route") -> str:
+    """A route as JSON; floats are written exactly (``repr``), so ``route_from_json``
+    gives back the same profiles bit for bit."""
+    check_route(route, name)
+    signals = {key: {"unit": ROUTE_SIGNALS[key], "interpolation": route[key].interpolation,
+                     "times": list(route[key].times), "values": list(route[key].values)}
+               for key in ROUTE_SIGNALS}
+    return json.dumps({"format": ROUTE_FORMAT, "name": name, "signals": signals}, indent=1) + "\n"
+
+
+def check_route(route: dict[str, Profile], where: str = "route") -> None:
+    """A route has exactly the signals of ``ROUTE_SIGNALS``, in their units (or unitless)."""
+    if set(route) != set(ROUTE_SIGNALS):
+        raise ProfileError(f"{where}: a route has the signals {', '.join(ROUTE_SIGNALS)} "
+                           f"(got {', '.join(route) or 'none'})")
+    for key, unit in ROUTE_SIGNALS.items():
+        if route[key].unit not in ("", unit):
+            raise ProfileError(f"{where}: signal {key!r} must be in {unit!r} (got {route[key].unit!r})")
+
+
+def route_from_json(text: str, where: str = "route") -> dict[str, Profile]:
+    """The profiles of a route file's text (see ``route_to_json``); errors name ``where``."""
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise ProfileError(f"{where}: not a route file (invalid JSON: {exc})") from None
+    if not isinstance(data, dict) or data.get("format") != ROUTE_FORMAT or not isinstance(data.get("signals"), dict):
+        raise ProfileError(f"{where}: not a route file (expected \"format\": \"{ROUTE_FORMAT}\" and \"signals\")")
+    route = {}
+    for key, sig in data["signals"].items():
+        if not isinstance(sig, dict):
+            raise ProfileError(f"{where}: signal {key!r} must be an object")
+        times, values = sig.get("times"), sig.get("values")
+        if not isinstance(times, list) or not isinstance(values, list) or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in times + values):
+            raise ProfileError(f"{where}: signal {key!r} needs lists of numbers 'times' and 'values'")
+        route[key] = Profile(tuple(float(t) for t in times), tuple(float(v) for v in values),
+                             sig.get("interpolation", "previous"), key, sig.get("unit", ""))
+    check_route(route, where)
+    return route
+
+
+def load_route(path) -> dict[str, Profile]:
+    """Read a route file (JSON, see ``route_to_json``)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ProfileError(f"{path}: route file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProfileError(f"{path}: cannot read route file ({exc})") from None
+    return route_from_json(text, str(path))
