@@ -34,8 +34,10 @@ import math
 import os
 import re
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -265,14 +267,19 @@ def _label(value) -> str:
 
 
 def run_id(index: int, params: dict, width: int = 4) -> str:
-    """``0003_q_TL=1e-05``: the index (unique) and the parameters, short and file-name safe."""
+    """``0003_q_TL=1e-05``: the index (unique) and the parameters (as many as fit in
+    MAX_ID_LENGTH characters), short and file-name safe."""
     names = list(params)
     short = [n.split(".", 1)[1] if "." in n else n for n in names]
     if len(set(short)) < len(short):
         short = names
-    text = f"{index:0{width}d}" + "".join(f"_{s}={_label(params[n])}" for s, n in zip(short, names))
-    text = re.sub(r"[^A-Za-z0-9._+=-]", "-", text)
-    return text[:MAX_ID_LENGTH]
+    text = f"{index:0{width}d}"
+    for s, n in zip(short, names):  # as many whole parameters as fit
+        part = re.sub(r"[^A-Za-z0-9._+=-]", "-", f"_{s}={_label(params[n])}")
+        if len(text) + len(part) > MAX_ID_LENGTH:
+            break
+        text += part
+    return text
 
 
 def parse_sweep(data: dict, path: Path | None = None, base_dir: Path | None = None) -> SweepSpec:
@@ -786,6 +793,46 @@ def _check_workers(client) -> None:
               file=sys.stderr)
 
 
+def _submit(client, sweep: SweepSpec, todo: list[PreparedRun]) -> dict:
+    """Ship the FMUs (once per worker) and submit one task per run: {future: run}."""
+    _check_workers(client)
+    blobs: dict[str, bytes] = {}
+    for run in todo:
+        for c in run.spec.components:
+            if run.fmus[c.name] not in blobs:
+                blobs[run.fmus[c.name]] = c.fmu.read_bytes()
+    shipped = client.scatter(blobs, broadcast=True, hash=False)
+    futures = {}
+    for run in todo:
+        task = {"id": run.plan.id, "spec": run.spec, "fmus": run.fmus, "figures": sweep.figures,
+                "sweep": {"name": sweep.name, "run": run.plan.id, "index": run.plan.index,
+                          "parameters": run.plan.params, "signature": run.signature}}
+        needed = {sha: shipped[sha] for sha in set(run.fmus.values())}
+        key = f"pmsm-cosim-run-{run.plan.id}-{run.signature[:8]}-{time.time_ns()}"
+        futures[client.submit(execute_run, task, needed, pure=False, key=key)] = run
+    return futures
+
+
+def _collect(futures: dict, finished) -> None:
+    """``finished(run, result)`` for each run as it completes; a task that raised (a worker
+    that died, a task that could not be sent, ...) is a failed run."""
+    from distributed import as_completed  # noqa: PLC0415
+
+    for fut in as_completed(list(futures)):
+        run = futures[fut]
+        try:
+            res = fut.result()
+        except Exception as exc:  # noqa: BLE001
+            res = {"id": run.plan.id, "status": "failed", "error": one_line(f"{type(exc).__name__}: {exc}"),
+                   "files": {}}
+        finished(run, res)
+        fut.release()
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
 def run_sweep(sweep: SweepSpec, out, *, scheduler: str | None = None, workers: int | None = None,
               client=None, quiet: bool = False, stream=None) -> SweepOutcome:
     """Run the sweep's runs that are not done yet into ``out``; write summary.csv and summary.png.
@@ -819,72 +866,64 @@ def run_sweep(sweep: SweepSpec, out, *, scheduler: str | None = None, workers: i
         say(f"{skipped} of {total} runs already completed in {out}; running {len(todo)}")
     interrupted = False
     done = skipped
-    if todo:
-        bar = CountBar(total) if CountBar.wanted(quiet) else None
-        n_workers = workers or min(len(todo), cpu_count())  # no idle processes for a short sweep
-        ctx = contextlib.nullcontext(client) if client is not None else dask_client(scheduler, n_workers)
-        futures = []
-        try:
-            with ctx as cl:
-                _check_workers(cl)
-                from distributed import as_completed  # noqa: PLC0415
 
-                blobs: dict[str, bytes] = {}
-                for run in todo:
-                    for c in run.spec.components:
-                        sha = run.fmus[c.name]
-                        if sha not in blobs:
-                            blobs[sha] = c.fmu.read_bytes()
-                shipped = cl.scatter(blobs, broadcast=True, hash=False)
-                by_key = {}
-                for run in todo:
-                    task = {"id": run.plan.id, "spec": run.spec, "fmus": run.fmus, "figures": sweep.figures,
-                            "sweep": {"name": sweep.name, "run": run.plan.id, "index": run.plan.index,
-                                      "parameters": run.plan.params, "signature": run.signature}}
-                    needed = {sha: shipped[sha] for sha in set(run.fmus.values())}
-                    fut = cl.submit(execute_run, task, needed, pure=False, key=f"pmsm-cosim-run-{run.plan.id}-"
-                                    f"{run.signature[:8]}-{time.time_ns()}")
-                    futures.append(fut)
-                    by_key[fut.key] = run
+    def finished(run: PreparedRun, res: dict) -> None:
+        """Write a run's files and its summary row (the summary after every run)."""
+        nonlocal done
+        run_dir = runs_dir / run.plan.id
+        if res["files"]:  # written beside, then put in place: never half a run in run_dir
+            staging = runs_dir / f".{run.plan.id}.partial"
+            shutil.rmtree(staging, ignore_errors=True)
+            for rel, data in res["files"].items():
+                target = staging / rel
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_bytes(data)
+            if run_dir.exists():
+                shutil.rmtree(run_dir)
+            os.replace(staging, run_dir)
+        row = _row(sweep, run.plan, res["status"], res["error"], _read_metrics(run_dir) if res["files"] else None)
+        rows[run.plan.index] = row
+        done += 1
+        write_summary(sweep, list(rows.values()), out)
+        if res["status"] == "completed":
+            tail = f", {sweep.metrics[0]} = {row[sweep.metrics[0]]:.6g}"
+        else:
+            tail = f": {res['error']}" if res["error"] else ""
+        if bar:
+            bar.close()
+        say(f"[{done}/{total}] {run.plan.id}: {res['status']}{tail}")
+        if bar:
+            bar.update(done, force=True)
+
+    bar = CountBar(total) if todo and CountBar.wanted(quiet) else None
+    old_term = None
+    if todo and threading.current_thread() is threading.main_thread():  # SIGTERM stops the sweep like Ctrl-C
+        old_term = signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        if todo:
+            n_workers = workers or min(len(todo), cpu_count())  # no idle processes for a short sweep
+            ctx = contextlib.nullcontext(client) if client is not None else dask_client(scheduler, n_workers)
+            with ctx as cl:
+                futures = _submit(cl, sweep, todo)
                 if bar:
                     bar.update(done, force=True)
-                for fut in as_completed(futures):
-                    run = by_key[fut.key]
-                    try:
-                        res = fut.result()
-                    except Exception as exc:  # noqa: BLE001 - a worker died, a task could not be sent, ...
-                        res = {"id": run.plan.id, "status": "failed",
-                               "error": one_line(f"{type(exc).__name__}: {exc}"), "files": {}}
-                    run_dir = runs_dir / run.plan.id
-                    if res["files"]:
-                        if run_dir.exists():
-                            shutil.rmtree(run_dir)
-                        for rel, data in res["files"].items():
-                            target = run_dir / rel
-                            target.parent.mkdir(parents=True, exist_ok=True)
-                            target.write_bytes(data)
-                    metrics = _read_metrics(run_dir) if res["files"] else None
-                    row = _row(sweep, run.plan, res["status"], res["error"], metrics)
-                    rows[run.plan.index] = row
-                    done += 1
-                    write_summary(sweep, list(rows.values()), out)
-                    if bar:
-                        bar.close()
-                    value = row[sweep.metrics[0]]
-                    tail = f", {sweep.metrics[0]} = {value:.6g}" if res["status"] == "completed" else \
-                        (f": {res['error']}" if res["error"] else "")
-                    say(f"[{done}/{total}] {run.plan.id}: {res['status']}{tail}")
-                    if bar:
-                        bar.update(done, force=True)
-                    fut.release()
-        except KeyboardInterrupt:
-            interrupted = True
-            for fut in futures:
-                fut.cancel()
-        finally:
-            if bar:
-                bar.close()
+                try:
+                    _collect(futures, finished)
+                except KeyboardInterrupt:
+                    interrupted = True
+                    with contextlib.suppress(Exception):
+                        cl.cancel(list(futures))
+    except KeyboardInterrupt:  # while the cluster starts or stops
+        interrupted = True
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+        if bar:
+            bar.close()
+    if interrupted:
+        say(f"interrupted: {sum(r['status'] == 'not run' for r in rows.values())} runs not run; "
+            f"run the same sweep again to complete them")
     summary = write_summary(sweep, list(rows.values()), out)
     figure = plot_summary(sweep, sorted(rows.values(), key=lambda r: r["index"]), out / "summary.png")
-    return SweepOutcome(sorted(rows.values(), key=lambda r: r["index"]), len(todo), skipped, summary, figure,
+    return SweepOutcome(sorted(rows.values(), key=lambda r: r["index"]), done - skipped, skipped, summary, figure,
                         interrupted)

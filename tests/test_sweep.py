@@ -290,3 +290,34 @@ def test_count_bar():
     assert text.count("\r[") == 2 and "3/8 runs" in text and "0/8 runs" in text
     bar.close()
     assert stream.getvalue().endswith("\r")
+
+
+def test_sigterm_stops_the_sweep_keeping_finished_runs(tmp_path):
+    """SIGTERM (like Ctrl-C) ends the sweep: exit code 130, the finished runs and the
+    summary kept, the rest 'not run' (and run by the next call)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    project_fmus()
+    path = write_sweep(tmp_path, '[grid]\n"ctrl.q_TL" = [1e-3, 1e-2, 1e-1]\n', name="long",
+                       header='system = "scenario2"\nstop_time = 5.0\n')
+    log = tmp_path / "log.txt"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "sweep", str(path), "--workers", "1",
+                                 "--out", str(tmp_path / "out")], stdout=fh, stderr=subprocess.STDOUT)
+    try:
+        deadline = time.monotonic() + 120
+        while "[1/3]" not in log.read_text() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(proc.pid, signal.SIGTERM)
+        assert proc.wait(timeout=60) == 130, log.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    rows = read_summary(tmp_path / "out" / "summary.csv")
+    assert [r["status"] for r in rows] == ["completed", "not run", "not run"], log.read_text()
+    assert "interrupted: 2 runs not run" in log.read_text()
+    assert sorted(p.name for p in (tmp_path / "out" / "runs").iterdir()) == [rows[0]["run"]]
