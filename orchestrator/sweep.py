@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from pmsm_ev.params import ParameterError
-from pmsm_ev.results import SUMMARY_METRICS, summary_metrics
+from pmsm_ev.results import SUMMARY_METRICS, SUMMARY_UNITS, summary_metrics
 from pmsm_ev.scenarios import ProfileError
 
 from .errors import CosimError, close_matches, one_line
@@ -104,6 +104,7 @@ class SweepSpec:
     samples: int = 0
     seed: int = 0
     log_scale: dict[str, bool] = field(default_factory=dict)  #: for the summary figure
+    units: dict[str, str] = field(default_factory=dict)  #: of the swept variables (from the FMUs)
     runs: list[RunPlan] = field(default_factory=list)
 
     @property
@@ -469,7 +470,7 @@ def prepare_runs(sweep: SweepSpec, quiet: bool = True) -> list[PreparedRun]:
     """Each run's system, its FMUs built and checked: instances, variables (close matches),
     settable, values of the variable's type; FMU files readable. Nothing is launched."""
     from .cli import ensure_fmus  # noqa: PLC0415
-    from .fmu import FmuInstance, convert_start  # noqa: PLC0415
+    from .fmu import FmuInstance, convert_start, variable_unit  # noqa: PLC0415
     from .master import Master  # noqa: PLC0415
 
     where = sweep.where
@@ -518,7 +519,8 @@ def prepare_runs(sweep: SweepSpec, quiet: bool = True) -> list[PreparedRun]:
                     raise CosimError(f"{ctx}: {exc}") from None
             for name, param in params.items():  # the sweep's variables, named where they are set
                 if param.kind == "start":
-                    instances[param.instance].check_settable(param.variable, origin(name))
+                    sv = instances[param.instance].check_settable(param.variable, origin(name))
+                    sweep.units.setdefault(name, variable_unit(sv))
             try:
                 Master(spec).close()  # the system's own wiring and start values against its FMUs
             except CosimError as exc:
@@ -708,10 +710,14 @@ def plot_summary(sweep: SweepSpec, rows: list[dict], path: Path) -> Path | None:
                 ax.set_xticks(range(len(cats)), cats, rotation=20)
             ax.grid(True, which="major", alpha=0.4)
             if j == 0:
-                ax.set_ylabel(metric)
+                unit = SUMMARY_UNITS.get(metric) or ("s" if metric == "wall_time_s" else "")
+                ax.set_ylabel(f"{metric} [{unit}]" if unit and metric != "wall_time_s" else metric)
             if i == len(metrics) - 1:
-                ax.set_xlabel(name)
+                unit = sweep.units.get(name)
+                ax.set_xlabel(f"{name} [{unit}]" if unit else name)
     title = f"{sweep.name}: {len(rows)} runs"
+    if sweep.stop_time is not None:
+        title += f" of {sweep.stop_time:g} s"
     if n_failed:
         title += f", {n_failed} not completed (x)"
     fig.suptitle(title, fontsize=10)

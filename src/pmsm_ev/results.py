@@ -136,6 +136,12 @@ SUMMARY_METRICS = (
     "max_speed_deviation", "max_settling_time", "T_L_hat_error_max",
 )
 
+#: their units
+SUMMARY_UNITS = {
+    "speed_rms_error": "rad/s", "omega_hat_rms_error": "rad/s", "theta_error_rms": "rad", "theta_error_max": "rad",
+    "max_speed_deviation": "rad/s", "max_settling_time": "s", "T_L_hat_error_max": "N m",
+}
+
 
 def summary_metrics(m: dict) -> dict[str, float]:
     """One number per figure of merit of a run's metrics (e.g. a metrics.json), for tables
