@@ -478,6 +478,7 @@ def prepare_runs(sweep: SweepSpec, quiet: bool = True) -> list[PreparedRun]:
     hashes: dict[Path, str] = {}
     checked: dict[tuple, dict[str, FmuInstance]] = {}
     prepared = []
+    built = False
 
     def origin(name: str) -> str:
         table = "set" if name in sweep.fixed else ("grid" if name in sweep.grid else "random")
@@ -505,10 +506,12 @@ def prepare_runs(sweep: SweepSpec, quiet: bool = True) -> list[PreparedRun]:
                 raise CosimError(f"{origin(name)}: {exc}") from None
         key = (system, tuple((c.name, str(c.fmu)) for c in spec.components))
         if key not in checked:
-            try:
-                ensure_fmus(spec, quiet)
-            except CosimError as exc:
-                raise CosimError(f"{where}: {exc}") from None
+            if not built or any(not c.fmu.is_file() for c in spec.components):
+                try:
+                    ensure_fmus(spec, quiet)  # builds (or finds up to date) all the project's FMUs
+                except CosimError as exc:
+                    raise CosimError(f"{where}: {exc}") from None
+                built = built or any(c.fmu.parent == project_fmu_dir() for c in spec.components)
             instances = {}
             for comp in spec.components:  # the model descriptions only
                 ctx = next((origin(n) for n, p in params.items() if p.kind == "fmu" and p.instance == comp.name),
@@ -527,10 +530,11 @@ def prepare_runs(sweep: SweepSpec, quiet: bool = True) -> list[PreparedRun]:
                 raise CosimError(f"{where}: run {plan.id}: {exc}") from None
             checked[key] = instances
         instances = checked[key]
-        for name, param in params.items():
+        for name, param in params.items():  # in the variable's type: 1 and 1.0 are one run
             if param.kind == "start":
                 sv = instances[param.instance].variables[param.variable]
-                convert_start(sv, values[name], f"{origin(name)} = {values[name]!r}")
+                spec.component(param.instance).start[param.variable] = convert_start(
+                    sv, values[name], f"{origin(name)} = {values[name]!r}")
         for c in spec.components:
             if c.fmu not in hashes:
                 hashes[c.fmu] = _sha256(c.fmu)
@@ -546,8 +550,14 @@ def _scratch_root() -> Path:
     try:
         from distributed import get_worker  # noqa: PLC0415
         return Path(get_worker().local_directory) / "pmsm-cosim"
-    except (ImportError, ValueError, AttributeError):
-        return Path(tempfile.gettempdir()) / f"pmsm-cosim-sweep-{os.getpid()}"
+    except (ImportError, ValueError, AttributeError):  # called outside a Dask worker
+        global _SCRATCH
+        if _SCRATCH is None:
+            _SCRATCH = tempfile.TemporaryDirectory(prefix="pmsm-cosim-sweep-")  # removed at exit
+        return Path(_SCRATCH.name)
+
+
+_SCRATCH: tempfile.TemporaryDirectory | None = None
 
 
 def _worker_address() -> str | None:

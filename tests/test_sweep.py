@@ -321,3 +321,16 @@ def test_sigterm_stops_the_sweep_keeping_finished_runs(tmp_path):
     assert [r["status"] for r in rows] == ["completed", "not run", "not run"], log.read_text()
     assert "interrupted: 2 runs not run" in log.read_text()
     assert sorted(p.name for p in (tmp_path / "out" / "runs").iterdir()) == [rows[0]["run"]]
+
+
+def test_run_signature_follows_values_not_spelling(tmp_path):
+    from orchestrator.sweep import prepare_runs
+
+    project_fmus()
+    a = prepare_runs(load_sweep(write_sweep(tmp_path, '[grid]\n"ctrl.q_i" = [1, 2]\n', name="a")))
+    b = prepare_runs(load_sweep(write_sweep(tmp_path, '[grid]\n"ctrl.q_i" = [1.0, 2e0]\n', name="b")))
+    c = prepare_runs(load_sweep(write_sweep(tmp_path, '[grid]\n"ctrl.q_i" = [1.0, 2.0000001]\n', name="c")))
+    assert [r.signature for r in a] == [r.signature for r in b]
+    assert a[0].signature == c[0].signature and a[1].signature != c[1].signature
+    assert a[0].spec.component("ctrl").start["q_i"] == 1.0 and isinstance(a[0].spec.component("ctrl").start["q_i"],
+                                                                           float)
