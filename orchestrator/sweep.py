@@ -780,15 +780,16 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
 
 def local_cluster(workers: int | None = None):
     """A distributed LocalCluster of ``workers`` (default: one per core) worker processes of
-    one thread each (a run holds the GIL), quiet, without a dashboard (its HTTP server on a
-    free port)."""
+    one thread each (a run holds the GIL), without a dashboard (its HTTP server on a free
+    port), silent: a failed run is reported through its task; what the cluster itself
+    logs (e.g. a heartbeat missed while it shuts down) is noise to the sweep."""
     import logging  # noqa: PLC0415
 
     from distributed import LocalCluster  # noqa: PLC0415
 
     return LocalCluster(n_workers=workers or cpu_count(), threads_per_worker=1, processes=True,
                         dashboard_address=None, scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
-                        silence_logs=logging.ERROR)
+                        silence_logs=logging.CRITICAL)
 
 
 def _check_workers(client) -> None:
