@@ -1,8 +1,9 @@
-"""``pmsm-cosim``: run, build, inspect and plot co-simulations; export a system as an SSP package.
+"""``pmsm-cosim``: run, sweep, build, inspect and plot co-simulations; export a system as an SSP package.
 
 Every user error (missing file, bad system file, unknown variable, a value an FMU
 refuses, ...) ends in one line ``error: ...`` on stderr and exit code 2.
-Exit codes of ``run``: 0 completed, 1 failed during the steps, 130 interrupted (Ctrl-C).
+Exit codes of ``run``: 0 completed, 1 failed during the steps, 130 interrupted (Ctrl-C);
+of ``sweep``: 0 every run completed, 1 some run did not, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -43,6 +44,16 @@ def _positive(text: str) -> float:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
     if not value > 0 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0 (got {text})")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (got {text})")
     return value
 
 
@@ -186,6 +197,32 @@ def cmd_export_ssp(a) -> int:
     return 0
 
 
+def cmd_sweep(a) -> int:
+    from .sweep import load_sweep, prepare_runs, run_sweep  # noqa: PLC0415
+
+    if a.workers is not None and a.scheduler:
+        raise CosimError("--workers sizes the local cluster; with --scheduler the cluster's own workers are used")
+    sweep = load_sweep(a.sweep)
+    if a.stop_time is not None:
+        sweep.stop_time = a.stop_time
+    out = Path(a.out) if a.out else Path("runs") / sweep.name
+    if a.dry_run:
+        prepare_runs(sweep, a.quiet)  # every check, nothing launched
+        names = sweep.swept
+        print(f"{sweep.name}: {len(sweep.runs)} runs into {out / 'runs'}")
+        for plan in sweep.runs:
+            print(f"  {plan.id}: " + ", ".join(f"{n} = {plan.params[n]!r}" for n in names))
+        return 0
+    outcome = run_sweep(sweep, out, scheduler=a.scheduler, workers=a.workers, quiet=a.quiet)
+    where = f"{outcome.summary}" + (f", {outcome.figure}" if outcome.figure else "")
+    completed = sum(r["status"] == "completed" for r in outcome.rows)
+    print(f"{'interrupted' if outcome.interrupted else 'done'}: {completed} of {len(outcome.rows)} runs completed "
+          f"({outcome.ran} run now, {outcome.skipped} already done), {outcome.failed} not completed; {where}")
+    if outcome.interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED if outcome.failed else 0
+
+
 def cmd_build(a) -> int:
     build_all = _load_builder()
     if build_all is None:
@@ -310,6 +347,23 @@ def build_parser() -> argparse.ArgumentParser:
     _system_options(e)
     e.add_argument("--quiet", "-q", action="store_true", help="no notes")
     e.set_defaults(func=cmd_export_ssp)
+
+    w = sub.add_parser("sweep", help="run a parameter sweep or Monte-Carlo study on Dask",
+                       description="Run the runs of a sweep file (TOML, see docs/sweeps.md; or a shipped sweep: "
+                                   "ekf5_load_noise) on a Dask cluster: OUT/runs/<run>/ (results.csv, "
+                                   "metrics.json), OUT/summary.csv, OUT/summary.png. Completed runs of the same "
+                                   "parameters already in OUT are skipped. Exit code 1 if a run did not complete.")
+    w.add_argument("sweep", metavar="SWEEP_FILE", help="a sweep file, or the name of a shipped sweep")
+    w.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="use this Dask scheduler (its workers need pmsm-ev-cosim installed) instead of a local "
+                        "cluster")
+    w.add_argument("--workers", type=_count, metavar="N",
+                   help="worker processes of the local cluster (default: one per core, at most one per run)")
+    w.add_argument("--out", metavar="DIR", help="output directory (default: runs/<sweep name>)")
+    w.add_argument("--stop-time", type=_positive, metavar="S", help="stop time of every run [s] (overrides the file)")
+    w.add_argument("--dry-run", action="store_true", help="check the sweep against the FMUs and list its runs")
+    w.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no per-run lines")
+    w.set_defaults(func=cmd_sweep)
 
     b = sub.add_parser("build", help="build the project's FMUs into fmus/",
                        description="Build the project's FMUs (pmsm_ev_fmus.build.build_all); "
