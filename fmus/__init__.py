@@ -3,9 +3,12 @@ their build (``build_all``, ``main``; see ``pmsm_ev_fmus.build``).
 
 FMUs: ``PmsmEvPlant`` (vehicle + PMSM) and one controller-plus-observer FMU per observer,
 all with one interface: ``FocEkf5`` (the paper's EKF), ``FocEkf4``, ``FocEkf5AB``,
-``FocSensored``.
+``FocSensored``; ``RouteProfile``, the scenario signals (road elevation and speed
+reference) from a route table in its resources.
 """
 
-from .build import FMUS, OBSERVER_FMUS, BuildError, build_all, build_fmu, default_out_dir, main
+from .build import (FMUS, OBSERVER_FMUS, ROUTE_FMU, BuildError, build_all, build_fmu, default_out_dir, main,
+                    write_route_fmu)
 
-__all__ = ["FMUS", "OBSERVER_FMUS", "BuildError", "build_all", "build_fmu", "default_out_dir", "main"]
+__all__ = ["FMUS", "OBSERVER_FMUS", "ROUTE_FMU", "BuildError", "build_all", "build_fmu", "default_out_dir", "main",
+           "write_route_fmu"]

@@ -49,6 +49,7 @@ FMUS: dict[str, tuple[str, bool]] = {
     "FocEkf4": ("foc_ekf4.py", False),
     "FocEkf5AB": ("foc_ekf5ab.py", False),
     "FocSensored": ("foc_sensored.py", False),
+    "RouteProfile": ("route_profile.py", True),
 }
 #: FMUs for the step-cost benchmark (``orchestrator.bench``), not built by default: the
 #: interface of PmsmEvPlant and FocEkf5 with a ``do_step`` that computes nothing
@@ -58,6 +59,11 @@ BENCH_FMUS: dict[str, tuple[str, bool]] = {
 }
 #: observer of each controller FMU (pmsm_ev.params.OBSERVERS)
 OBSERVER_FMUS = {"ekf5": "FocEkf5", "ekf4": "FocEkf4", "ekf5ab": "FocEkf5AB", "sensored": "FocSensored"}
+#: the FMU of the scenario signals, and the route file it reads by default (resources/)
+ROUTE_FMU = "RouteProfile"
+ROUTE_FILE = "route.json"
+#: the route RouteProfile.fmu is built with
+DEFAULT_ROUTE = "scenario1"
 
 
 class BuildError(RuntimeError):
@@ -255,6 +261,12 @@ def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]
         "python_built_with": sys.version.split()[0],
         "files_sha256": files,
     }
+    if name == ROUTE_FMU:
+        from pmsm_ev.scenarios import route_to_json, scenario_route  # noqa: PLC0415
+
+        route = stage / ROUTE_FILE
+        route.write_text(route_to_json(scenario_route(DEFAULT_ROUTE), DEFAULT_ROUTE), encoding="utf-8")
+        project_files.append(route)
     info_path = stage / BUILD_INFO
     info_path.write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
     project_files.append(info_path)
@@ -332,6 +344,28 @@ def _check(fmu: Path, name: str) -> None:
     problems = validate_fmu(str(fmu))
     if problems:
         raise BuildError(f"{name}.fmu does not validate: " + "; ".join(problems))
+
+
+def write_route_fmu(route_json: str, dest, source=None) -> Path:
+    """A copy of RouteProfile.fmu (``source``, default: the one in ``default_out_dir()``,
+    built if needed) whose default route, ``resources/route.json``, is ``route_json`` (the
+    text of ``pmsm_ev.scenarios.route_to_json``): the route chosen when the FMU is
+    packaged. The model description is unchanged."""
+    from pmsm_ev.scenarios import route_from_json  # noqa: PLC0415
+
+    route_from_json(route_json, "route")  # refuse a malformed route here, not in the FMU
+    source = Path(source) if source is not None else build_fmu(ROUTE_FMU)[0]
+    dest = Path(dest)
+    target = f"resources/{ROUTE_FILE}"
+    tmp = dest.with_name(dest.name + ".tmp")
+    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
+        if target not in zin.namelist():
+            raise BuildError(f"{source}: not a RouteProfile FMU (no {target})")
+        for item in zin.infolist():
+            data = route_json.encode("utf-8") if item.filename == target else zin.read(item)
+            zout.writestr(item, data)
+    os.replace(tmp, dest)
+    return dest
 
 
 def build_all(out_dir=None, force: bool = False, names=None) -> dict[str, Path]:

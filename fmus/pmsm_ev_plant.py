@@ -103,6 +103,8 @@ class PmsmEvPlant(DriveSlave):
         try:
             if not self._initialized:
                 raise FmuUsageError("fmi2DoStep before fmi2ExitInitializationMode")
+            if not step_size > 0.0:
+                raise FmuUsageError(f"communication step size must be > 0 s (got {step_size!r})")
             (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta, self.T_e,
              self.T_L_mech, self.v_vehicle) = self._plant.step(self.v_alpha, self.v_beta, self.delta, step_size)
             if not math.isfinite(self.omega_m + self.i_d + self.i_q):

@@ -16,6 +16,7 @@ top of pythonfmu 0.7.0:
   type test per variable;
 * the physics is built from the parameters (and validated by the dataclasses) at
   ``exit_initialization_mode``; a ``ParameterError`` is logged and raised;
+* ``fmi2SetupExperiment`` with a stop time before the start time is refused;
 * the FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``, JSON-serialisable) holds every
   variable plus the full state of the wrapped physics (subclass hooks).
 
@@ -211,6 +212,14 @@ class DriveSlave(Fmi2Slave):
                  Fmi2Status.error)
         for obj in (self, self.log_queue, type(self)):
             ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        try:
+            if stop_time is not None and not stop_time >= start_time:
+                raise FmuUsageError(f"stop time {stop_time!r} s is before the start time {start_time!r} s")
+        except Exception as exc:
+            self._fail("fmi2SetupExperiment", exc)
+            raise
 
     def exit_initialization_mode(self):
         try:

@@ -7,8 +7,10 @@ columns; :mod:`orchestrator.master` runs it with Gauss-Seidel or Jacobi coupling
 streams ``results.csv`` / ``metrics.json``; :mod:`orchestrator.cli` is ``pmsm-cosim``.
 
 Modules: ``errors`` (the one user-error type), ``system`` (system-file parsing and
-overrides), ``fmu`` (one FMU instance on fmpy's FMI 2 API), ``master`` (the stepping
-loop, recording, metrics), ``progress`` (the stderr progress bar), ``cli``.
+overrides), ``ssp`` (SSP 1.0 packages: export, and import as a system), ``fmu`` (one FMU
+instance on fmpy's FMI 2 API), ``master`` (the stepping loop, recording, metrics),
+``progress`` (the stderr progress bars), ``sweep`` (parameter sweeps and Monte-Carlo runs
+on Dask distributed), ``cli``.
 """
 
 from .errors import CosimError

@@ -1,8 +1,9 @@
-"""``pmsm-cosim``: run, build, inspect and plot co-simulations.
+"""``pmsm-cosim``: run, sweep, build, inspect and plot co-simulations; export a system as an SSP package.
 
 Every user error (missing file, bad system file, unknown variable, a value an FMU
 refuses, ...) ends in one line ``error: ...`` on stderr and exit code 2.
-Exit codes of ``run``: 0 completed, 1 failed during the steps, 130 interrupted (Ctrl-C).
+Exit codes of ``run``: 0 completed, 1 failed during the steps, 130 interrupted (Ctrl-C);
+of ``sweep``: 0 every run completed, 1 some run did not, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -43,6 +44,16 @@ def _positive(text: str) -> float:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
     if not value > 0 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0 (got {text})")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (got {text})")
     return value
 
 
@@ -100,15 +111,13 @@ def draw_figures(run_dir: Path, scenario_label, quiet: bool = False) -> list[Pat
 
 # --- commands --------------------------------------------------------------------------
 
-def cmd_run(a) -> int:
-    from .master import Master  # noqa: PLC0415
-    from .progress import ProgressBar  # noqa: PLC0415
-
+def _load_with_overrides(a):
+    """The system of ``a.system`` with the command line's FMU, time-grid and value overrides."""
     spec = load_system(a.system)
     if a.plant:
-        spec.set_fmu(PLANT_INSTANCE, a.plant)
+        spec.set_fmu(PLANT_INSTANCE, a.plant, "--plant")
     if a.controller:
-        spec.set_fmu(CONTROLLER_INSTANCE, a.controller)
+        spec.set_fmu(CONTROLLER_INSTANCE, a.controller, "--controller")
     for assignment in a.fmu or ():
         inst, sep, path = assignment.partition("=")
         if not sep or not path:
@@ -126,6 +135,14 @@ def cmd_run(a) -> int:
         spec.set_start(assignment)
     for assignment in a.profile or ():
         spec.set_signal_csv(assignment)
+    return spec
+
+
+def cmd_run(a) -> int:
+    from .master import Master  # noqa: PLC0415
+    from .progress import ProgressBar  # noqa: PLC0415
+
+    spec = _load_with_overrides(a)
     out = Path(a.out) if a.out else Path("runs") / spec.name
     ensure_fmus(spec, a.quiet)
     master = Master(spec)
@@ -144,6 +161,66 @@ def cmd_run(a) -> int:
     if m["status"] == "completed":
         return 0
     return EXIT_INTERRUPTED if m["status"] == "interrupted" else EXIT_FAILED
+
+
+def route_fmu(quiet: bool = False) -> Path:
+    """The project's RouteProfile FMU (built or brought up to date first)."""
+    from pmsm_ev_fmus.build import ROUTE_FMU  # noqa: PLC0415
+
+    fmu_dir = project_fmu_dir()
+    path = fmu_dir / f"{ROUTE_FMU}.fmu"
+    build_all = _load_builder()
+    if build_all is None:
+        if not path.is_file():
+            raise CosimError(f"{path}: RouteProfile FMU not found (and the project's FMU build, "
+                             f"pmsm_ev_fmus.build, is not importable)")
+        return path
+    if not path.is_file():
+        _note(f"building {ROUTE_FMU}.fmu into {fmu_dir} ...", quiet)
+    try:
+        return build_all(out_dir=fmu_dir, names=[ROUTE_FMU])[ROUTE_FMU]
+    except Exception as exc:
+        raise CosimError(f"building {ROUTE_FMU}.fmu failed: {type(exc).__name__}: {exc}") from None
+
+
+def cmd_export_ssp(a) -> int:
+    from .ssp import export_ssp  # noqa: PLC0415
+
+    spec = _load_with_overrides(a)
+    if not a.output.lower().endswith(".ssp"):
+        raise CosimError(f"-o {a.output}: an SSP package file name ends in .ssp")
+    ensure_fmus(spec, a.quiet)
+    summary = export_ssp(spec, Path(a.output), route_fmu(a.quiet) if spec.signals else None)
+    print(f"wrote {summary.path}: components {', '.join(summary.components)}; {summary.connections} connections; "
+          f"{summary.parameters} parameter values; step {spec.step_size:g} s, stop {spec.stop_time:g} s, "
+          f"{spec.algorithm}")
+    return 0
+
+
+def cmd_sweep(a) -> int:
+    from .sweep import load_sweep, prepare_runs, run_sweep  # noqa: PLC0415
+
+    if a.workers is not None and a.scheduler:
+        raise CosimError("--workers sizes the local cluster; with --scheduler the cluster's own workers are used")
+    sweep = load_sweep(a.sweep)
+    if a.stop_time is not None:
+        sweep.stop_time = a.stop_time
+    out = Path(a.out) if a.out else Path("runs") / sweep.name
+    if a.dry_run:
+        prepare_runs(sweep, a.quiet)  # every check, nothing launched
+        names = sweep.swept
+        print(f"{sweep.name}: {len(sweep.runs)} runs into {out / 'runs'}")
+        for plan in sweep.runs:
+            print(f"  {plan.id}: " + ", ".join(f"{n} = {plan.params[n]!r}" for n in names))
+        return 0
+    outcome = run_sweep(sweep, out, scheduler=a.scheduler, workers=a.workers, quiet=a.quiet)
+    where = f"{outcome.summary}" + (f", {outcome.figure}" if outcome.figure else "")
+    completed = sum(r["status"] == "completed" for r in outcome.rows)
+    print(f"{'interrupted' if outcome.interrupted else 'done'}: {completed} of {len(outcome.rows)} runs completed "
+          f"({outcome.ran} run now, {outcome.skipped} already done), {outcome.failed} not completed; {where}")
+    if outcome.interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED if outcome.failed else 0
 
 
 def cmd_build(a) -> int:
@@ -221,36 +298,78 @@ def cmd_plot(a) -> int:
 
 # --- parser ------------------------------------------------------------------------------
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's error format: one line ``error: ...``, exit code 2."""
+
+    def error(self, message):
+        self.exit(EXIT_USER_ERROR, f"error: {one_line(message)} (see {self.prog} --help)\n")
+
+
+def _system_options(p: argparse.ArgumentParser) -> None:
+    """The options that change a system before it is run or exported."""
+    p.add_argument("--plant", metavar="FMU", help=f"FMU of the instance '{PLANT_INSTANCE}'")
+    p.add_argument("--controller", metavar="FMU",
+                   help=f"FMU of the instance '{CONTROLLER_INSTANCE}' (e.g. fmus/FocEkf4.fmu swaps the observer)")
+    p.add_argument("--fmu", action="append", metavar="INSTANCE=FMU", help="FMU of any instance (repeatable)")
+    p.add_argument("--stop-time", type=_positive, metavar="S", help="stop time [s] (default: the system file's)")
+    p.add_argument("--step", type=_positive, metavar="S", help="base communication step [s]")
+    p.add_argument("--algorithm", choices=ALGORITHMS, help="coupling (default: the system file's, gauss-seidel)")
+    p.add_argument("--output-interval", type=_positive, metavar="S", help="recording interval [s]")
+    p.add_argument("--set", action="extend", nargs="+", metavar="INSTANCE.VAR=VALUE",
+                   help="start value of an FMU variable, e.g. ctrl.angle_source=estimated plant.omega_m0=200")
+    p.add_argument("--profile", action="append", metavar="SIGNAL=CSV",
+                   help="take a scenario signal from a (time, value) CSV file in the signal's unit, "
+                        "e.g. delta=route.csv (repeatable)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = _Parser(
         prog="pmsm-cosim",
         description="Co-simulate the PMSM EV drive FMUs (FMI 2.0) with a fixed-step master.",
         epilog="Run 'pmsm-cosim COMMAND --help' for the options of a command.")
-    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
 
-    r = sub.add_parser("run", help="co-simulate a scenario or a system file",
-                       description="Co-simulate a shipped scenario (scenario1, scenario2) or a system file "
-                                   "(TOML, see docs/system-file.md); write OUT/results.csv, OUT/metrics.json "
-                                   "and OUT/figures/*.png. Missing project FMUs are built first.")
+    r = sub.add_parser("run", help="co-simulate a scenario, a system file or an SSP package",
+                       description="Co-simulate a shipped scenario (scenario1, scenario2), a system file "
+                                   "(TOML, see docs/system-file.md) or an SSP 1.0 package (.ssp); write "
+                                   "OUT/results.csv, OUT/metrics.json and OUT/figures/*.png. Missing project "
+                                   "FMUs are built first.")
     r.add_argument("system", metavar="SCENARIO_OR_SYSTEM",
-                   help=f"{' or '.join(PACKAGED_SCENARIOS)}, or the path of a system file")
-    r.add_argument("--plant", metavar="FMU", help=f"FMU of the instance '{PLANT_INSTANCE}'")
-    r.add_argument("--controller", metavar="FMU",
-                   help=f"FMU of the instance '{CONTROLLER_INSTANCE}' (e.g. fmus/FocEkf4.fmu swaps the observer)")
-    r.add_argument("--fmu", action="append", metavar="INSTANCE=FMU", help="FMU of any instance (repeatable)")
-    r.add_argument("--stop-time", type=_positive, metavar="S", help="stop time [s] (default: the system file's)")
-    r.add_argument("--step", type=_positive, metavar="S", help="base communication step [s]")
-    r.add_argument("--algorithm", choices=ALGORITHMS, help="coupling (default: the system file's, gauss-seidel)")
-    r.add_argument("--output-interval", type=_positive, metavar="S", help="recording interval [s]")
-    r.add_argument("--set", action="extend", nargs="+", metavar="INSTANCE.VAR=VALUE",
-                   help="start value of an FMU variable, e.g. ctrl.angle_source=estimated plant.omega_m0=200")
-    r.add_argument("--profile", action="append", metavar="SIGNAL=CSV",
-                   help="take a scenario signal from a (time, value) CSV file in the signal's unit, "
-                        "e.g. delta=route.csv (repeatable)")
+                   help=f"{' or '.join(PACKAGED_SCENARIOS)}, or the path of a system file or .ssp package")
+    _system_options(r)
     r.add_argument("--out", metavar="DIR", help="output directory (default: runs/<scenario name>)")
     r.add_argument("--no-figures", action="store_true", help="do not draw figures")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes")
     r.set_defaults(func=cmd_run)
+
+    e = sub.add_parser("export-ssp", help="write a system as an SSP 1.0 package for other tools",
+                       description="Write a scenario or system file as an SSP 1.0 package: SystemStructure.ssd, "
+                                   "the FMUs (the signals as a RouteProfile FMU carrying the system's route) and "
+                                   "the start values as .ssv parameter sets. libcosim, fmpy and other SSP "
+                                   "tools run it; so does 'pmsm-cosim run FILE.ssp'.")
+    e.add_argument("system", metavar="SCENARIO_OR_SYSTEM",
+                   help=f"{' or '.join(PACKAGED_SCENARIOS)}, or the path of a system file or .ssp package")
+    e.add_argument("-o", "--output", required=True, metavar="FILE.ssp", help="the package to write")
+    _system_options(e)
+    e.add_argument("--quiet", "-q", action="store_true", help="no notes")
+    e.set_defaults(func=cmd_export_ssp)
+
+    w = sub.add_parser("sweep", help="run a parameter sweep or Monte-Carlo study on Dask",
+                       description="Run the runs of a sweep file (TOML, see docs/sweeps.md; or a shipped sweep: "
+                                   "ekf5_load_noise) on a Dask cluster: OUT/runs/<run>/ (results.csv, "
+                                   "metrics.json), OUT/summary.csv, OUT/summary.png. Completed runs of the same "
+                                   "parameters already in OUT are skipped. Exit code 1 if a run did not complete.")
+    w.add_argument("sweep", metavar="SWEEP_FILE", help="a sweep file, or the name of a shipped sweep")
+    w.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="use this Dask scheduler (its workers need pmsm-ev-cosim installed) instead of a local "
+                        "cluster")
+    w.add_argument("--workers", type=_count, metavar="N",
+                   help="worker processes of the local cluster (default: one per core, at most one per run)")
+    w.add_argument("--out", metavar="DIR", help="output directory (default: runs/<sweep name>)")
+    w.add_argument("--stop-time", type=_positive, metavar="S", help="stop time of every run [s] (overrides the file)")
+    w.add_argument("--dry-run", action="store_true", help="check the sweep against the FMUs and list its runs")
+    w.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no per-run lines")
+    w.set_defaults(func=cmd_sweep)
 
     b = sub.add_parser("build", help="build the project's FMUs into fmus/",
                        description="Build the project's FMUs (pmsm_ev_fmus.build.build_all); "

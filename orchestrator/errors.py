@@ -14,7 +14,11 @@ class CosimError(Exception):
 
 def close_matches(name: str, candidates, n: int = 3) -> str:
     """`` (did you mean: a, b?)`` for the closest candidates, or ``""``."""
-    found = difflib.get_close_matches(name, list(candidates), n=n, cutoff=0.6)
+    candidates = list(candidates)
+    found = difflib.get_close_matches(name, candidates, n=n, cutoff=0.6)
+    if not found:  # q_tl -> q_TL
+        lower = {c.lower(): c for c in candidates}
+        found = [lower[c] for c in difflib.get_close_matches(name.lower(), list(lower), n=n, cutoff=0.6)]
     return f" (did you mean: {', '.join(found)}?)" if found else ""
 
 

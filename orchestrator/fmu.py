@@ -288,7 +288,7 @@ class FmuInstance:
         ok = sv.causality in SETTABLE_CAUSALITIES or (
             sv.initial in ("exact", "approx") and sv.causality not in ("calculatedParameter", "independent"))
         if not ok or sv.variability == "constant":
-            raise CosimError(f"{context}: {self.name}.{name} is {sv.variability} {sv.causality} "
+            raise CosimError(f"{context}: {self.name}.{name} is a {sv.variability} {sv.causality} "
                              f"and cannot be set")
         return sv
 

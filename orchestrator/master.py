@@ -136,6 +136,12 @@ class Master:
     def _grid(self) -> tuple[int, int]:
         s, h = self.spec, self.spec.step_size
         where = f"{s.path}: " if s.path else ""
+        if h is None:  # an SSP package need not declare one
+            raise CosimError(f"{where}no communication step size is given (give one with --step)")
+        if s.stop_time is None:
+            raise CosimError(f"{where}no stop time is given (give one with --stop-time)")
+        if s.output_interval is None:
+            s.output_interval = h
         n = round(s.stop_time / h)
         if n < 1:
             raise CosimError(f"{where}stop time {s.stop_time:g} s is shorter than one {h:g} s step")

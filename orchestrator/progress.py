@@ -1,4 +1,5 @@
-"""A one-line progress bar on stderr: simulated time, simulated s per wall s, ETA."""
+"""One-line progress bars on stderr: :class:`ProgressBar` (simulated time, simulated s per
+wall s, ETA) for a run, :class:`CountBar` (finished runs, ETA) for a sweep."""
 
 from __future__ import annotations
 
@@ -58,3 +59,30 @@ class ProgressBar:
             self.stream.write("\r" + " " * 78 + "\r")
             self.stream.flush()
             self.drawn = False
+
+
+class CountBar(ProgressBar):
+    """Counts finished items (the runs of a sweep): ``update(done)``; ``force`` redraws at once
+    (after a line was printed over the bar)."""
+
+    def __init__(self, total: int, unit: str = "runs", stream=None, rate: float = 4.0, width: int = 30):
+        super().__init__(float(total), stream, rate, width)
+        self.total = total
+        self.unit = unit
+        self.done = 0
+
+    def update(self, done: int, force: bool = False) -> None:
+        self.done = done
+        now = time.monotonic()
+        if not force and now - self.last < self.min_interval:
+            return
+        self.last = now
+        elapsed = now - self.start
+        frac = min(max(done / self.total, 0.0), 1.0) if self.total > 0 else 1.0
+        eta = elapsed * (self.total - done) / done if done > 0 else float("nan")
+        filled = int(round(frac * self.width))
+        bar = "#" * filled + "." * (self.width - filled)
+        self.stream.write(f"\r[{bar}] {done}/{self.total} {self.unit}  elapsed {_duration(elapsed)}  "
+                          f"ETA {_duration(eta)}  ")
+        self.stream.flush()
+        self.drawn = True

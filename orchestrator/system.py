@@ -21,7 +21,7 @@ from typing import Any
 
 from pmsm_ev.scenarios import INTERPOLATIONS, Profile, ProfileError, load_profile_csv
 
-from .errors import CosimError, close_matches
+from .errors import CosimError, close_matches, one_line
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 #: names that cannot be instance names (they are column sources of their own)
@@ -122,20 +122,20 @@ class SystemSpec:
     connections: list[Connection]
     signals: dict[str, SignalSpec]
     columns: list[ColumnSpec]
-    step_size: float
-    stop_time: float
-    output_interval: float
+    step_size: float | None  #: None only from an SSP package that declares none (the CLI's --step)
+    stop_time: float | None  #: None only from an SSP package that declares none (--stop-time)
+    output_interval: float | None  #: None: the step size
     algorithm: str = "gauss-seidel"
     description: str = ""
     path: Path | None = None  #: the system file (None when built in code)
 
     # -- look-ups ---------------------------------------------------------------
-    def component(self, name: str) -> ComponentSpec:
+    def component(self, name: str, context: str = "") -> ComponentSpec:
         for c in self.components:
             if c.name == name:
                 return c
         names = [c.name for c in self.components]
-        where = f"{self.path}: " if self.path else ""
+        where = f"{context}: " if context else (f"{self.path}: " if self.path else "")
         raise CosimError(f"{where}unknown instance {name!r}{close_matches(name, names)}; "
                          f"instances: {', '.join(names)}")
 
@@ -146,12 +146,12 @@ class SystemSpec:
         if not sep:
             raise CosimError(f"--set {assignment!r}: expected INSTANCE.VAR=VALUE")
         inst, var = split_reference(target.strip(), f"--set {assignment!r}")
-        self.component(inst).start[var] = value.strip()
+        self.component(inst, f"--set {assignment!r}").start[var] = value.strip()
 
-    def set_fmu(self, instance: str, path) -> None:
-        path = Path(path).expanduser()
-        comp = self.component(instance)
-        comp.fmu, comp.fmu_text = path.resolve(), str(path)
+    def set_fmu(self, instance: str, path, context: str = "") -> None:
+        """Replace the FMU of an instance (``--fmu INSTANCE=FMU``, ``--plant``, ``--controller``)."""
+        comp = self.component(instance, context or f"--fmu {instance}={path}")
+        comp.fmu, comp.fmu_text = user_path(str(path), where=f"--fmu {instance}"), str(path)
 
     def set_signal_csv(self, assignment: str) -> None:
         """Apply ``SIGNAL=CSV``: the signal's values come from a (time, value) CSV file."""
@@ -163,7 +163,7 @@ class SystemSpec:
             raise CosimError(f"--profile: unknown signal {name!r}{close_matches(name, self.signals)}; "
                              f"signals: {', '.join(self.signals) or '(none)'}")
         sig = self.signals[name]
-        sig.profile = _csv_profile(Path(path.strip()).expanduser(), name, sig.written_unit,
+        sig.profile = _csv_profile(user_path(path.strip(), where=f"--profile {name}"), name, sig.written_unit,
                                    sig.profile.interpolation)
         sig.origin = str(path.strip())
 
@@ -211,13 +211,26 @@ def _number(value, where: str, positive: bool = True) -> float:
     return value
 
 
-def resolve_fmu_path(text: str, base_dir: Path) -> Path:
+def user_path(text: str, base_dir: Path | None = None, where: str = "path") -> Path:
+    """A path as written by the user: ``~`` expanded, relative to ``base_dir`` (if given),
+    resolved; a one-line CosimError for what no file system accepts (NUL, unknown ``~user``)."""
+    if "\x00" in text:
+        raise CosimError(f"{where}: {text!r} is not a valid path (it contains a NUL character)")
+    try:
+        path = Path(text).expanduser()
+        if base_dir is not None and not path.is_absolute():
+            path = base_dir / path
+        return path.resolve()
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise CosimError(f"{where}: {text!r} is not a usable path ({exc})") from None
+
+
+def resolve_fmu_path(text: str, base_dir: Path, where: str = "fmu") -> Path:
     """``{fmus}/X.fmu`` -> the project's FMU directory; relative paths -> the file's directory."""
     if text.startswith(FMU_DIR_PLACEHOLDER):
         rest = text[len(FMU_DIR_PLACEHOLDER):].lstrip("/\\")
-        return project_fmu_dir() / rest
-    path = Path(text).expanduser()
-    return (path if path.is_absolute() else base_dir / path).resolve()
+        return user_path(str(project_fmu_dir() / rest), where=where)
+    return user_path(text, base_dir, where)
 
 
 def _csv_profile(path: Path, name: str, written_unit: str, interpolation: str) -> Profile:
@@ -259,8 +272,7 @@ def _parse_signal(name: str, table, where: str, base_dir: Path) -> SignalSpec:
     if has_csv:
         if not isinstance(table["csv"], str):
             raise CosimError(f"{where}.csv must be a path string")
-        csv_path = Path(table["csv"]).expanduser()
-        csv_path = csv_path if csv_path.is_absolute() else base_dir / csv_path
+        csv_path = user_path(table["csv"], base_dir, f"{where}.csv")
         profile = _csv_profile(csv_path, name, written_unit, interpolation)
         origin = str(csv_path)
     else:
@@ -291,13 +303,16 @@ def _parse_column(name: str, value, where: str) -> ColumnSpec:
             raise CosimError(f"{where}: needs 'from'")
         unit = value.get("unit", "")
         value = value["from"]
+        if not isinstance(unit, str):
+            raise CosimError(f"{where}.unit must be a string (got {unit!r})")
         if unit and unit not in COLUMN_CONVERSIONS:
             raise CosimError(f"{where}.unit: only {', '.join(COLUMN_CONVERSIONS)} can be converted to "
                              f"(got {unit!r})")
     if not isinstance(value, str):
         raise CosimError(f"{where}: source must be \"time\", \"signals.NAME\" or \"INSTANCE.VAR\"")
-    if "," in name or not name.strip():
-        raise CosimError(f"{where}: column name must be non-empty and contain no comma")
+    if not name.strip() or not (name.isascii() and name.isprintable()) or any(c in name for c in ',"'):
+        raise CosimError(f"{where}: a column name must be non-empty printable ASCII without commas or quotes "
+                         f"(got {name!r})")
     if value == "time":
         if unit:
             raise CosimError(f"{where}: time cannot be converted")
@@ -309,8 +324,13 @@ def _parse_column(name: str, value, where: str) -> ColumnSpec:
 
 
 def load_system(path) -> SystemSpec:
-    """Read and check a system file (or a packaged scenario name)."""
+    """Read and check a system file, a packaged scenario name or an SSP package (``.ssp``,
+    :func:`orchestrator.ssp.load_ssp`)."""
     path = Path(path)
+    if path.suffix.lower() == ".ssp":
+        from .ssp import load_ssp  # noqa: PLC0415
+
+        return load_ssp(path)
     if path.suffix == "" and str(path) in PACKAGED_SCENARIOS:
         path = packaged_scenario(str(path))
     elif path.suffix == "" and not path.exists():
@@ -320,8 +340,8 @@ def load_system(path) -> SystemSpec:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise CosimError(f"{path}: system file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CosimError(f"{path}: cannot read system file ({exc})") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise CosimError(f"{path}: cannot read system file ({one_line(exc)})") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -377,9 +397,9 @@ def parse_system(data: dict, path: Path | None = None, base_dir: Path | None = N
         if not isinstance(start, dict):
             raise CosimError(f"{cw}.start must be a table of variable = value")
         for var, val in start.items():
-            if isinstance(val, (dict, list)):
-                raise CosimError(f"{cw}.start.{var} must be a number, boolean or string")
-        components.append(ComponentSpec(name, resolve_fmu_path(fmu, base_dir), mult, dict(start), fmu))
+            if not isinstance(val, (bool, int, float, str)):
+                raise CosimError(f"{cw}.start.{var} must be a number, boolean or string (got {val!r})")
+        components.append(ComponentSpec(name, resolve_fmu_path(fmu, base_dir, f"{cw}.fmu"), mult, dict(start), fmu))
 
     connections: list[Connection] = []
     conns_raw = data.get("connections", [])
@@ -408,9 +428,16 @@ def parse_system(data: dict, path: Path | None = None, base_dir: Path | None = N
         raise CosimError(f"{where}: needs a [record] table (column = \"source\")")
     columns = [_parse_column(name, value, f"{where}: record.{name}") for name, value in rec_raw.items()]
 
+    name = data.get("name") or (path.stem if path else "system")
+    if not isinstance(name, str) or not name.isprintable() or any(c in name for c in "/\\") \
+            or name.strip() in (".", ".."):
+        raise CosimError(f"{where}: name must be a string without slashes, it names the output directory "
+                         f"runs/<name> (got {name!r})")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise CosimError(f"{where}: description must be a string")
     spec = SystemSpec(
-        name=str(data.get("name") or (path.stem if path else "system")),
-        description=str(data.get("description", "")),
+        name=name, description=description,
         components=components, connections=connections, signals=signals, columns=columns,
         step_size=step, stop_time=stop, output_interval=interval, algorithm=algorithm, path=path,
     )

@@ -122,7 +122,7 @@ def omega_ramp(t):
 
 # -- build -----------------------------------------------------------------------------
 def test_build_writes_every_fmu_with_its_hash(fmus):
-    assert set(fmus) == set(pmsm_ev_fmus.FMUS) == {"PmsmEvPlant", *CONTROLLERS}
+    assert set(fmus) == set(pmsm_ev_fmus.FMUS) == {"PmsmEvPlant", *CONTROLLERS, "RouteProfile"}
     for name, path in fmus.items():
         assert path.name == f"{name}.fmu" and path.is_file()
         info = fmu_build.read_build_info(path)
@@ -398,6 +398,43 @@ def test_cosimulation_reproduces_run_reference(unzipped, tmp_path, observer, ang
         co = dict(zip(CTRL_OUTPUTS, c.get(CTRL_OUTPUTS)))
         p.set(v_alpha=co["v_alpha"], v_beta=co["v_beta"], delta=0.0)  # scenario 2 is level before 50 s
         p.step(dt)
+
+
+def test_foc_ekf5ab_recovers_an_unknown_initial_angle_like_the_reference(unzipped, tmp_path):
+    """FocEkf5AB sensorless from a 200 rad/s flying start, its angle guess 0.5 rad wrong,
+    sigma = 0.1 A current noise: step for step equal to run_reference with the same
+    settings (tests/test_realism.py checks the physics over 1.2 s), and recovered."""
+    stop, dt, theta0, w0 = 0.2, DT, 1.0, 200.0
+    plant_start = {"omega_m0": w0, "theta_e0": theta0, "sensor_noise": 0.1, "sensor_seed": 5}
+    ctrl_start = {"angle_source": "estimated", "x0_omega": w0, "x0_theta": theta0 + 0.5}
+    params = DriveParams(plant=PlantParams(**plant_start), ekf=EkfParams(x0_omega=w0, x0_theta=theta0 + 0.5),
+                         scenario=ScenarioParams(startup_time=0.0))
+    run_reference(tmp_path, scenario=1, stop_time=stop, observer="ekf5ab", angle_source="estimated",
+                  params=params, output_interval=dt)
+    ref = read_results(tmp_path)
+    p = Instance(unzipped, "PmsmEvPlant", instance_name="plant", start=plant_start)
+    c = Instance(unzipped, "FocEkf5AB", instance_name="ctrl", start=ctrl_start)
+    n = round(stop / dt)
+    for k in range(n + 1):
+        po = dict(zip(PLANT_OUTPUTS, p.get(PLANT_OUTPUTS)))
+        co = dict(zip(CTRL_OUTPUTS, c.get(CTRL_OUTPUTS)))
+        for col in ("omega_m", "theta_e", "i_alpha", "i_beta"):
+            assert po[col] == ref[col][k], (k, col)
+        for col in ("omega_hat", "theta_hat", "T_L_hat", "v_alpha", "v_beta"):
+            assert co[col] == ref[col][k], (k, col)
+        if k == n:
+            break
+        c.set(i_alpha=po["i_alpha"], i_beta=po["i_beta"], omega_ref=w0, theta_meas=po["theta_e"],
+              omega_meas=po["omega_m"])
+        c.step(dt)
+        co = dict(zip(CTRL_OUTPUTS, c.get(CTRL_OUTPUTS)))
+        p.set(v_alpha=co["v_alpha"], v_beta=co["v_beta"], delta=0.0)
+        p.step(dt)
+    # theta_hat was computed one period before the plant's theta_e: propagate it
+    err = co["theta_hat"] + MotorParams().N * co["omega_hat"] * dt - po["theta_e"]
+    assert abs((err + math.pi) % (2 * math.pi) - math.pi) < 2e-3
+    p.free()
+    c.free()
 
 
 def test_two_plant_instances_do_not_share_state(unzipped):

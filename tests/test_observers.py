@@ -9,6 +9,7 @@ from pmsm_ev.controller import CurrentController, SpeedController
 from pmsm_ev.observers import Ekf4, Ekf5, Ekf5AlphaBeta, Sensored
 from pmsm_ev.params import ControllerParams, EkfParams, MotorParams
 from pmsm_ev.pmsm import current_derivatives
+from pmsm_ev.transforms import inverse_park, park
 
 M = MotorParams()
 DT = 1e-4
@@ -76,8 +77,41 @@ def test_ekf5ab_measurement_is_inverse_park():
     assert (a, b) == pytest.approx((c * x[0] - s * x[1], s * x[0] + c * x[1]))
 
 
+def test_ekf5ab_steps_the_applied_stationary_voltage_in_its_own_frame():
+    """f(x, v_alpha, v_beta) = the EKF5 model with the voltage Parked at the filter's angle
+    at mid-period; the angle therefore enters J_f through the voltage (df/dtheta != 0)."""
+    ab, dq = Ekf5AlphaBeta(M, DT), Ekf5(M, DT)
+    x = STATES[Ekf5AlphaBeta]
+    v_alpha, v_beta = 40.0, -65.0
+    th_mid = x[3] + 0.5 * M.N * x[2] * DT
+    v_d, v_q = park(v_alpha, v_beta, th_mid)
+    np.testing.assert_allclose(ab.f(x, v_alpha, v_beta), dq.f(x, v_d, v_q), rtol=1e-14)
+    F = ab.jacobian_f(x, v_alpha, v_beta)
+    assert F[0, 3] == pytest.approx(DT / M.L_d * v_q)  # d v_d / d theta = v_q
+    assert F[1, 3] == pytest.approx(-DT / M.L_q * v_d)  # d v_q / d theta = -v_d
+
+
+def test_ekf5ab_initial_guess_is_the_state_at_the_first_sample():
+    """No time update before the first sample; then the usual one; the flag is state."""
+    ekf = Ekf5AlphaBeta(M, DT, EkfParams(x0_omega=200.0, x0_theta=0.3))
+    x0, p0 = ekf.x, ekf.P
+    ekf.predict(0.0, 0.0)
+    np.testing.assert_array_equal(ekf.x, x0)
+    np.testing.assert_array_equal(ekf.P, p0)
+    saved = ekf.get_state()
+    ekf.predict(0.0, 0.0)  # 0 V at 200 rad/s: the back-EMF drives i_q negative
+    assert ekf.i_q_hat == pytest.approx(-M.N * 200.0 * M.psi * DT / M.L_q)
+    ekf.set_state(saved)
+    assert ekf.get_state() == saved
+    ekf.reset()
+    ekf.predict(0.0, 0.0)
+    np.testing.assert_array_equal(ekf.x, x0)
+
+
 def _simulate_open_loop(ekf_cls, steps=4000, t_l=40.0, omega=150.0):
-    """Feed an EKF with the exact currents of a motor at constant speed and voltage."""
+    """Feed an EKF with the exact currents of a motor at constant speed and voltage
+    (dq observers get the dq voltage, the stationary-frame EKF5 the alpha-beta vector
+    at mid-period)."""
     m = M
     i_q = t_l / (m.N * m.psi)
     i_d = 0.0
@@ -87,7 +121,10 @@ def _simulate_open_loop(ekf_cls, steps=4000, t_l=40.0, omega=150.0):
     ekf = ekf_cls(m, DT)
     theta = 0.4
     for _ in range(steps):
-        ekf.predict(v_d, v_q)
+        if ekf.voltage_frame == "alpha_beta":
+            ekf.predict(*inverse_park(v_d, v_q, theta + 0.5 * w_e * DT))
+        else:
+            ekf.predict(v_d, v_q)
         theta += w_e * DT
         c, s = math.cos(theta), math.sin(theta)
         ekf.correct(c * i_d - s * i_q, s * i_d + c * i_q, i_d, i_q, theta, omega)
@@ -184,10 +221,11 @@ class DenseEkf:
         self.R = np.diag([ekf.r0, ekf.r1])
         self.I = np.eye(n)
 
-    def step(self, v_d, v_q, z):
-        F = self.e.jacobian_f(self.x, v_d, v_q)
-        self.x = self.e.f(self.x, v_d, v_q)  # (23)
-        self.P = F @ self.P @ F.T + self.Q  # (24)
+    def step(self, v_d, v_q, z, predict=True):
+        if predict:
+            F = self.e.jacobian_f(self.x, v_d, v_q)
+            self.x = self.e.f(self.x, v_d, v_q)  # (23)
+            self.P = F @ self.P @ F.T + self.Q  # (24)
         H = self.e.jacobian_h(self.x)
         K = self.P @ H.T @ np.linalg.inv(H @ self.P @ H.T + self.R)  # (25), J_h^T
         self.x = self.x + K @ (z - self.e.h(self.x))  # (26)
@@ -207,9 +245,12 @@ def test_scalar_filter_equals_dense_eqs_23_to_27(cls):
         c, s = math.cos(theta), math.sin(theta)
         i_a, i_b = c * i_d - s * i_q, s * i_d + c * i_q
         z = np.array([i_a, i_b]) if cls is Ekf5AlphaBeta else np.array([i_d, i_q])
+        if cls is Ekf5AlphaBeta:  # its input: the stationary-frame vector of the period
+            v_d, v_q = inverse_park(v_d, v_q, theta - 400.0 * DT)
         ekf.predict(v_d, v_q)
         ekf.correct(i_a, i_b, i_d, i_q)
-        dense.step(v_d, v_q, z)
+        # the stationary-frame EKF5's x0 is at the first sample: no time update before it
+        dense.step(v_d, v_q, z, predict=not (k == 0 and cls is Ekf5AlphaBeta))
         dense.x[3] = (dense.x[3] + math.pi) % (2 * math.pi) - math.pi
     np.testing.assert_allclose(ekf.x, dense.x, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(ekf.P, dense.P, rtol=1e-7, atol=1e-12)

@@ -15,8 +15,8 @@ from orchestrator.progress import ProgressBar
 from orchestrator_support import toy_fmus, toy_system
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["build", "--help"], ["info", "--help"],
-                                  ["plot", "--help"]])
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["export-ssp", "--help"], ["build", "--help"],
+                                  ["info", "--help"], ["plot", "--help"]])
 def test_help_on_every_command(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)

@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import ControllerParams, ParameterError, PlantParams, VehicleParams
+from pmsm_ev.params import (ControllerParams, DriveParams, EkfParams, MotorParams, ParameterError, PlantParams,
+                            ScenarioParams, VehicleParams)
 from pmsm_ev.plant import Plant, gaussian_pair
+from pmsm_ev.reference import run_reference
+from pmsm_ev.results import read_results
 
 LOCKED = VehicleParams(m_v=1e15)  # rotor held: the true currents are known exactly
 
@@ -120,3 +123,97 @@ def test_state_restore_continues_the_noise_sequence():
 def test_rejects_nonphysical_realism(bad):
     with pytest.raises(ParameterError):
         Plant(plant=PlantParams(**bad))
+
+
+# -- unknown initial angle: the stationary-frame EKF5 at 200 rad/s ----------------------
+#
+# A flying start: the plant turns at 200 rad/s (omega_e dt = 4 * 200 * 1e-4 = 0.08 rad per
+# period) with its rotor at THETA0, the observer knows the speed but guesses the angle
+# wrong. A row of results.csv at t_k holds the control unit's outputs computed at t_{k-1}
+# (the results contract), so theta_hat there is the estimate of theta(t_{k-1}); it is
+# propagated one period, + N omega_hat dt, to compare it with theta_e(t_k). Without that,
+# every observer shows a -omega_e dt = -0.08 rad "error" that is only the row's timing.
+
+W0 = 200.0  # [rad/s]
+THETA0 = 1.0  # true electrical angle at t = 0 [rad]
+N_POLE_PAIRS = MotorParams().N
+#: bound on the steady angle error at 200 rad/s [rad]. The EKF5ab's model is the forward-
+#: Euler step of eqs 10-13 with the held stationary-frame voltage turned into its frame at
+#: mid-period; against the sampled drive its residual is of order (omega_e dt)^2 = 0.0064
+#: times a small factor (measured -1.5e-4 rad, shrinking 4x per halved dt). 5e-4 rad is
+#: 1/160 of omega_e dt: any one-period timing mismatch (0.08 rad) fails it by far.
+STEADY_BOUND = 5.0e-4
+#: bound after recovery with sigma = 0.1 A current noise [rad] (measured 6.3e-4 rad)
+NOISY_BOUND = 2.0e-3
+
+
+def flying_start(out_dir, angle_error, angle_source="estimated", stop_time=1.2, dt=1e-4, **plant):
+    """Reference run of the EKF5ab from a 200 rad/s flying start; (results, angle error)."""
+    params = DriveParams(plant=PlantParams(omega_m0=W0, theta_e0=THETA0, **plant),
+                         ekf=EkfParams(x0_omega=W0, x0_theta=THETA0 + angle_error),
+                         scenario=ScenarioParams(startup_time=0.0), dt=dt)  # omega_ref = 200 from t = 0
+    run_reference(out_dir, scenario=1, stop_time=stop_time, observer="ekf5ab", angle_source=angle_source,
+                  params=params, output_interval=1e-3)  # scenario 1 is level for 50 s
+    r = read_results(out_dir)
+    err = r["theta_hat"] + N_POLE_PAIRS * r["omega_hat"] * dt - r["theta_e"]
+    return r, (err + math.pi) % (2 * math.pi) - math.pi
+
+
+@pytest.mark.parametrize("angle_source", ["estimated", "measured"])
+@pytest.mark.parametrize("angle_error", [0.5, -0.5])
+def test_ekf5ab_recovers_initial_angle_error_at_200_rad_s(tmp_path, angle_error, angle_source):
+    """+-0.5 rad wrong at a 200 rad/s flying start: below STEADY_BOUND from 0.1 s to the end
+    (1.2 s), i.e. recovered well within 1 s and staying there; the drive keeps its speed."""
+    r, err = flying_start(tmp_path, angle_error, angle_source)
+    t = r["time"]
+    assert r["theta_hat"][0] - r["theta_e"][0] == pytest.approx(angle_error)  # the guess at t = 0
+    assert np.max(np.abs(err[t >= 0.1])) < STEADY_BOUND
+    assert np.max(np.abs(r["omega_m"] - W0)) < 2.0  # no loss of control during the recovery
+    assert abs(r["omega_hat"][-1] - r["omega_m"][-1]) < 0.1
+
+
+def test_ekf5ab_steady_angle_error_is_a_dt_squared_residual(tmp_path):
+    """Steady angle error at 200 rad/s, no initial error: within STEADY_BOUND, and it shrinks
+    like dt^2 (ratio > 3 when dt halves; a timing mismatch would be O(dt), ratio 2). The
+    recorded theta_hat - theta_e without the one-period propagation is -omega_e dt."""
+    means = []
+    for dt in (1e-4, 5e-5):
+        r, err = flying_start(tmp_path / str(dt), 0.0, stop_time=0.6, dt=dt)
+        late = r["time"] >= 0.3
+        assert np.max(np.abs(err[late])) < STEADY_BOUND
+        means.append(np.mean(err[late]))
+        recorded = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
+        omega_e_dt = N_POLE_PAIRS * W0 * dt
+        assert np.mean(recorded[late]) == pytest.approx(-omega_e_dt, abs=STEADY_BOUND)
+    assert means[0] / means[1] > 3.0
+
+
+@pytest.mark.parametrize("angle_error", [0.5, -0.5])
+def test_ekf5ab_recovers_initial_angle_under_current_noise(tmp_path, angle_error):
+    """The same, sensorless, with sigma = 0.1 A white noise on each phase current."""
+    r, err = flying_start(tmp_path, angle_error, sensor_noise=0.1, sensor_seed=5)
+    t = r["time"]
+    assert np.max(np.abs(err[t >= 0.1])) < NOISY_BOUND
+    assert abs(np.mean(err[t >= 0.5])) < STEADY_BOUND  # the noise adds no bias
+    assert np.max(np.abs(r["omega_m"] - W0)) < 2.0
+
+
+def test_ekf5ab_with_compensated_actuation_delay(tmp_path):
+    """A one-period inverter delay the controller compensates (delay_compensation = 1,
+    angle_advance = 1.5): the observer is given the voltage the inverter applied, so the
+    recovery and the steady error are those without delay. Uncompensated, the observer
+    steps its model with the wrong period's voltage: a one-period error, ~omega_e dt."""
+    comp = DriveParams(plant=PlantParams(omega_m0=W0, theta_e0=THETA0, inverter_delay=1),
+                       controller=ControllerParams(delay_compensation=1, angle_advance=1.5),
+                       ekf=EkfParams(x0_omega=W0, x0_theta=THETA0 + 0.5), scenario=ScenarioParams(startup_time=0.0))
+    for sub, params in (("comp", comp), ("uncomp", DriveParams(
+            plant=comp.plant, ekf=comp.ekf, scenario=comp.scenario))):
+        run_reference(tmp_path / sub, scenario=1, stop_time=0.6, observer="ekf5ab", angle_source="estimated",
+                      params=params, output_interval=1e-3)
+    errors = {}
+    for sub in ("comp", "uncomp"):
+        r = read_results(tmp_path / sub)
+        e = r["theta_hat"] + N_POLE_PAIRS * r["omega_hat"] * 1e-4 - r["theta_e"]
+        errors[sub] = ((e + math.pi) % (2 * math.pi) - math.pi)[r["time"] >= 0.1]
+    assert np.max(np.abs(errors["comp"])) < STEADY_BOUND
+    assert np.mean(errors["uncomp"]) == pytest.approx(N_POLE_PAIRS * W0 * 1e-4, rel=0.1)

@@ -40,6 +40,11 @@ ENV_CACHE_DIR = "PMSM_EV_CACHE_DIR"
 _STAMP = 1_000_000_000
 
 _loaded = None  # (module, description)
+#: the kernels' source, read now: every FMU bundles this package under one content-hashed
+#: name shared by all its instances in a process (sys.modules), and the instance whose
+#: extracted files it was imported from may be freed, its directory deleted, before
+#: another instance first calls ``kernels()``
+_SOURCE = Path(_source.__file__).read_bytes()
 
 
 def jit_requested() -> bool:
@@ -107,7 +112,7 @@ def _load():
         import numba
     except Exception:  # not installed, or broken (e.g. an llvmlite that does not load)
         return _source, "plain Python (numba not available)"
-    source = Path(_source.__file__).read_bytes()
+    source = _SOURCE
     digest = hashlib.sha256(source + f"numba {numba.__version__}".encode()).hexdigest()[:16]
     name = f"pmsm_ev_kernels_{digest}"
     module = sys.modules.get(name)

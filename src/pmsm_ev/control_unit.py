@@ -2,7 +2,9 @@
 
 Per control period, at t_k, with the plant's measured currents at t_k:
 
-1. observer time update with the dq voltage held over [t_{k-1}, t_k] (eqs 23-24);
+1. observer time update with the voltage held over [t_{k-1}, t_k] (eqs 23-24): the dq
+   command, or the stationary-frame vector (v_alpha, v_beta) actually sent to the
+   inverter for the stationary-frame EKF5, which turns it into its own frame;
 2. the frame angle: the measured rotor angle ("measured", the paper's own simulation,
    whose EKF is fed dq currents in the true frame) or the observer's predicted angle
    ("estimated", truly sensorless); Park of the measured currents at that angle;
@@ -39,8 +41,8 @@ def _slot(index: int, doc: str) -> property:
 class ControlUnit:
     v_d = _slot(_k.S_V_D, "commanded d voltage (eq 19, limited) [V]")
     v_q = _slot(_k.S_V_Q, "commanded q voltage (eq 20, limited) [V]")
-    v_prev_d = _slot(_k.S_V_PREV_D, "the d command of one period earlier [V]")
-    v_prev_q = _slot(_k.S_V_PREV_Q, "the q command of one period earlier [V]")
+    u_prev0 = _slot(_k.S_U_PREV_0, "the observer's voltage input of one period earlier, d or alpha [V]")
+    u_prev1 = _slot(_k.S_U_PREV_1, "the observer's voltage input of one period earlier, q or beta [V]")
     v_alpha = _slot(_k.S_V_ALPHA, "voltage held until the next step, alpha axis [V]")
     v_beta = _slot(_k.S_V_BETA, "voltage held until the next step, beta axis [V]")
     i_d = _slot(_k.S_I_D, "d current in the control frame [A]")
@@ -83,7 +85,8 @@ class ControlUnit:
         self.speed.reset()
         self.current.reset()
         self.v_d = self.v_q = 0.0
-        self.v_prev_d = self.v_prev_q = 0.0  # the command of one period earlier
+        # the observer's voltage input of one period earlier (dq, or alpha-beta)
+        self.u_prev0 = self.u_prev1 = 0.0
         self.v_alpha = self.v_beta = 0.0
         self.i_d = self.i_q = 0.0
         self.i_qref = 0.0
@@ -105,12 +108,12 @@ class ControlUnit:
 
     def get_state(self) -> tuple:
         return ((self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
-                 self.speed.integral, self.v_prev_d, self.v_prev_q)
+                 self.speed.integral, self.u_prev0, self.u_prev1)
                 + self.current.get_state() + self.observer.get_state())
 
     def set_state(self, state) -> None:
         state = tuple(float(v) for v in state)
         (self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
-         self.speed.integral, self.v_prev_d, self.v_prev_q) = state[:10]
+         self.speed.integral, self.u_prev0, self.u_prev1) = state[:10]
         self.current.set_state(state[10:15])
         self.observer.set_state(state[15:])

@@ -61,9 +61,10 @@ def _sig(result: str, *args: str) -> str:
 PLANT_PARAMS = 22
 
 # -- state vector of the control unit (controller + observer) ----------------------------------------
-# unit: last command, the command before it, the voltage held, the currents in the control
-# frame and the q-current reference
-S_V_D, S_V_Q, S_V_PREV_D, S_V_PREV_Q, S_V_ALPHA, S_V_BETA, S_I_D, S_I_Q, S_I_QREF = range(9)
+# unit: last command, the observer's voltage input of one period earlier (dq, or alpha-beta
+# for the stationary-frame EKF5; used with a one-period actuation delay), the voltage held,
+# the currents in the control frame and the q-current reference
+S_V_D, S_V_Q, S_U_PREV_0, S_U_PREV_1, S_V_ALPHA, S_V_BETA, S_I_D, S_I_Q, S_I_QREF = range(9)
 S_W_INT = 9  #: speed PI integral [A]
 S_INT_D, S_INT_Q, S_I_DL, S_I_QL, S_SAT = range(10, 15)  #: current PIs, decoupling filters, limited
 S_X = 15  #: observer estimates: i_d, i_q, omega_m, theta_e, T_L (EKF4: T_L stays 0)
@@ -72,7 +73,8 @@ S_P = 21  #: EKF covariance, n x n row by row (n = 4 or 5)
 S_PHT = 46  #: scratch: P H^T, n x 2
 S_K = 56  #: scratch: Kalman gain, n x 2
 S_A = 66  #: scratch: J_f P, n x n (J_f itself when P = I)
-UNIT_STATE = 91
+S_STARTED = 91  #: stationary-frame EKF5: 1.0 once past its first sample (x0 is the estimate there)
+UNIT_STATE = 92
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -83,7 +85,8 @@ C_I_D_REF, C_ADVANCE, C_HALF_PERIOD_N, C_ZOH, C_DELAYED, C_ESTIMATED, C_OBSERVER
 (C_A_RD, C_A_RQ, C_C_WQ, C_C_WD, C_C_WPSI, C_C_VD, C_C_VQ, C_C_TPSI, C_C_TDQ, C_C_TL, C_C_TH,
  C_R0, C_R1) = range(22, 35)  #: EKF model constants (A2-A32) and R
 C_Q = 35  #: EKF Q diagonal, n entries
-UNIT_PARAMS = 40
+C_C_MID = 40  #: stationary-frame EKF5: d(mid-period angle)/d(omega_m) = N dt / 2
+UNIT_PARAMS = 41
 
 #: observers (``C_OBSERVER``)
 OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
@@ -268,6 +271,9 @@ def current_step(s, c, i_dref, i_qref, i_d, i_q, omega_est):
     mag = math.sqrt(v_d * v_d + v_q * v_q)
     if mag > u_max:
         s[S_SAT] = 1.0
+        if mag == math.inf:  # the squares overflowed (|v| > 1e154 V): the length of the
+            big = max(abs(v_d), abs(v_q))  # scaled vector; NaN if a component is infinite
+            mag = big * math.sqrt((v_d / big) * (v_d / big) + (v_q / big) * (v_q / big))
         scale = u_max / mag
         v_d *= scale
         v_q *= scale
@@ -280,11 +286,13 @@ def current_step(s, c, i_dref, i_qref, i_d, i_q, omega_est):
 
 # -- observers, eqs 23-27 ------------------------------------------------------------------------
 @kernel()
-def ekf5_predict(s, c, v_d, v_q):
+def ekf5_time_update(s, c, v_d, v_q, f03, f13, c_mid):
     """EKF5 time update (23)-(24): x^f = f(x^e), P^f = J_f P J_f^T + Q, J_f at x^e (A8-A32).
 
-    J_f rows: r0 = [f00 f01 f02 0 0], r1 = [f10 f11 f12 0 0], r2 = [f20 f21 1 0 f24],
-    r3 = [0 0 f32 1 0], r4 = [0 0 0 0 1].
+    J_f rows: r0 = [f00 f01 f02 f03 0], r1 = [f10 f11 f12 f13 0], r2 = [f20 f21 1 0 f24],
+    r3 = [0 0 f32 1 0], r4 = [0 0 0 0 1]. f03, f13 (the voltage's dependence on theta) and
+    c_mid (that of its angle on omega) are zero for the dq EKF5, whose voltage input does
+    not depend on its state; see ``ekf5ab_predict``.
     """
     i_d = s[S_X]
     i_q = s[S_X + 1]
@@ -293,8 +301,8 @@ def ekf5_predict(s, c, v_d, v_q):
     t_l = s[S_X + 4]
     c_wq, c_wd, c_wpsi = c[C_C_WQ], c[C_C_WD], c[C_C_WPSI]
     c_tpsi, c_tdq, c_th = c[C_C_TPSI], c[C_C_TDQ], c[C_C_TH]
-    f00, f01, f02 = c[C_A_RD], c_wq * w, c_wq * i_q  # (A8-A10)
-    f10, f11, f12 = -c_wd * w, c[C_A_RQ], -c_wd * i_d - c_wpsi  # (A13-A15)
+    f00, f01, f02 = c[C_A_RD], c_wq * w, c_wq * i_q + f03 * c_mid  # (A8-A10)
+    f10, f11, f12 = -c_wd * w, c[C_A_RQ], -c_wd * i_d - c_wpsi + f13 * c_mid  # (A13-A15)
     f20, f21, f24 = c_tdq * i_q, c_tpsi + c_tdq * i_d, c[C_C_TL]  # (A18, A19, A22)
     f32 = c_th  # (A25)
     s[S_X] = c[C_A_RD] * i_d + c_wq * w * i_q + c[C_C_VD] * v_d  # (A2)
@@ -307,8 +315,8 @@ def ekf5_predict(s, c, v_d, v_q):
         p2 = s[S_P + 10 + j]
         p3 = s[S_P + 15 + j]
         p4 = s[S_P + 20 + j]
-        s[S_A + j] = f00 * p0 + f01 * p1 + f02 * p2
-        s[S_A + 5 + j] = f10 * p0 + f11 * p1 + f12 * p2
+        s[S_A + j] = f00 * p0 + f01 * p1 + f02 * p2 + f03 * p3
+        s[S_A + 5 + j] = f10 * p0 + f11 * p1 + f12 * p2 + f13 * p3
         s[S_A + 10 + j] = f20 * p0 + f21 * p1 + p2 + f24 * p4
         s[S_A + 15 + j] = f32 * p2 + p3
         s[S_A + 20 + j] = p4
@@ -319,13 +327,36 @@ def ekf5_predict(s, c, v_d, v_q):
         a3 = s[S_A + 5 * i + 3]
         a4 = s[S_A + 5 * i + 4]
         r = S_P + 5 * i
-        s[r] = f00 * a0 + f01 * a1 + f02 * a2
-        s[r + 1] = f10 * a0 + f11 * a1 + f12 * a2
+        s[r] = f00 * a0 + f01 * a1 + f02 * a2 + f03 * a3
+        s[r + 1] = f10 * a0 + f11 * a1 + f12 * a2 + f13 * a3
         s[r + 2] = f20 * a0 + f21 * a1 + a2 + f24 * a4
         s[r + 3] = f32 * a2 + a3
         s[r + 4] = a4
         s[r + i] += c[C_Q + i]
     s[S_THETA_PRIOR] = s[S_X + 3]
+
+
+@kernel()
+def ekf5_predict(s, c, v_d, v_q):
+    """The paper's EKF5 time update with the dq voltage command of the period."""
+    ekf5_time_update(s, c, v_d, v_q, 0.0, 0.0, 0.0)
+
+
+@kernel()
+def ekf5ab_predict(s, c, v_alpha, v_beta):
+    """Stationary-frame EKF5 time update with the alpha-beta vector the inverter held over
+    the period, turned into the filter's own frame at mid-period,
+    (v_d, v_q) = Park(v_alpha, v_beta, theta + N omega dt / 2), then A2-A6 as the EKF5.
+    The angle thus enters J_f through the voltage: d v_d/d theta = v_q, d v_q/d theta = -v_d
+    (f03, f13), and via the mid-period angle also d/d omega (c_mid). x0 is the estimate at
+    the first sample, so the first call (the period before it) is no time update; see
+    ``pmsm_ev.observers.Ekf5AlphaBeta``."""
+    if s[S_STARTED] == 0.0:
+        s[S_STARTED] = 1.0
+        return
+    c_mid = c[C_C_MID]
+    v_d, v_q = park(v_alpha, v_beta, s[S_X + 3] + c_mid * s[S_X + 2])
+    ekf5_time_update(s, c, v_d, v_q, c[C_C_VD] * v_q, -c[C_C_VQ] * v_d, c_mid)
 
 
 @kernel()
@@ -424,13 +455,16 @@ def ekf5ab_correct(s, c, i_alpha, i_beta):
 
 
 @kernel(_sig("none", _V, _V, _F, _F))
-def observer_predict(s, c, v_d, v_q):
-    """The time update of the observer ``C_OBSERVER`` (none for the sensored baseline)."""
+def observer_predict(s, c, u0, u1):
+    """The time update of the observer ``C_OBSERVER`` (none for the sensored baseline) with
+    the voltage of the period: (v_d, v_q), or (v_alpha, v_beta) for the stationary-frame EKF5."""
     kind = c[C_OBSERVER]
-    if kind == OBS_EKF4:
-        ekf4_predict(s, c, v_d, v_q)
-    elif kind != OBS_SENSORED:
-        ekf5_predict(s, c, v_d, v_q)
+    if kind == OBS_EKF5:
+        ekf5_predict(s, c, u0, u1)
+    elif kind == OBS_EKF4:
+        ekf4_predict(s, c, u0, u1)
+    elif kind == OBS_EKF5AB:
+        ekf5ab_predict(s, c, u0, u1)
 
 
 @kernel(_sig("none", _V, _V, _F, _F, _F, _F, _F, _F))
@@ -458,13 +492,20 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     """One control period (see ``pmsm_ev.control_unit``); returns (v_alpha, v_beta, v_d,
     v_q, i_d, i_q, i_qref, i_d_hat, i_q_hat, omega_hat, theta_hat, T_L_hat)."""
     # (23)-(24) with the voltage applied over the last period: the last command, or with a
-    # one-period actuation delay, the command before it
-    if c[C_DELAYED] != 0.0:
-        observer_predict(s, c, s[S_V_PREV_D], s[S_V_PREV_Q])
-        s[S_V_PREV_D] = s[S_V_D]
-        s[S_V_PREV_Q] = s[S_V_Q]
+    # one-period actuation delay, the command before it; the dq command, or for the
+    # stationary-frame EKF5 the alpha-beta vector sent to the inverter
+    if c[C_OBSERVER] == OBS_EKF5AB:
+        u0 = s[S_V_ALPHA]
+        u1 = s[S_V_BETA]
     else:
-        observer_predict(s, c, s[S_V_D], s[S_V_Q])
+        u0 = s[S_V_D]
+        u1 = s[S_V_Q]
+    if c[C_DELAYED] != 0.0:
+        observer_predict(s, c, s[S_U_PREV_0], s[S_U_PREV_1])
+        s[S_U_PREV_0] = u0
+        s[S_U_PREV_1] = u1
+    else:
+        observer_predict(s, c, u0, u1)
     estimated = c[C_ESTIMATED] != 0.0
     theta_frame = s[S_THETA_PRIOR] if estimated else theta_meas
     i_d, i_q = park(i_alpha, i_beta, theta_frame)

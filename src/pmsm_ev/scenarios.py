@@ -8,12 +8,18 @@ read here as 0 deg for 0-50 s, then alternating 22 deg / 0 deg every 30 s up to 
 which keeps the 350 s length of scenario 1 and the 30 s plateaus of both texts.
 
 Speed reference (Fig. 8): 200 rad/s, reached from standstill by a ramp.
+
+A *route* is the pair of profiles that drives a run, ``delta`` [rad] and ``omega_ref``
+[rad/s] (``ROUTE_SIGNALS``); a route file is their JSON form (``route_to_json``,
+``load_route``), the table the RouteProfile FMU carries in its resources.
 """
 
 from __future__ import annotations
 
 import bisect
 import csv
+import io
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -105,42 +111,149 @@ def speed_reference(p: ScenarioParams | None = None) -> Profile:
     return Profile((0.0,), (p.omega_ref,), "previous", "omega_ref", "rad/s")
 
 
+def _show(text: str, limit: int = 40) -> str:
+    """``repr`` of a piece of a file, on one line and cut to ``limit`` characters."""
+    text = text.strip()
+    return repr(text if len(text) <= limit else text[:limit] + "...")
+
+
+def _csv_number(text: str, path, lineno: int, column: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ProfileError(f"{path}:{lineno}: {column} is not a number: {_show(text)}") from None
+    if not math.isfinite(value):
+        raise ProfileError(f"{path}:{lineno}: {column} is not finite: {_show(text)}")
+    return value
+
+
 def load_profile_csv(path, interpolation: str = "previous", name: str | None = None,
                      scale: float = 1.0, unit: str = "") -> Profile:
     """Read a two-column CSV (header row, then ``time,value`` rows) into a Profile.
 
-    ``scale`` multiplies the values (e.g. pi/180 for a file in degrees). Errors name the
-    file and line.
+    The header names the two columns (e.g. ``time,delta_deg``); each following row is a
+    breakpoint, times strictly increasing, values finite; blank lines are skipped, a UTF-8
+    byte-order mark is accepted. ``scale`` multiplies the values (e.g. pi/180 for a file
+    in degrees). Every error is a :class:`ProfileError` naming the file and, where there
+    is one, the line (``route.csv:7: time does not increase ...``).
     """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise ProfileError(f"{path}: profile file not found") from None
+    except IsADirectoryError:
+        raise ProfileError(f"{path}: is a directory, not a profile file") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise ProfileError(f"{path}: cannot read profile ({type(exc).__name__}: {exc})") from None
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    header = None
+    times, values = [], []
+    try:
+        for row in reader:
+            lineno = reader.line_num
+            if not row or all(not c.strip() for c in row):
+                continue
+            if header is None:
+                header = [h.strip() for h in row]
+                if len(header) < 2:
+                    raise ProfileError(f"{path}:{lineno}: the header needs two columns (time, value), "
+                                       f"got {_show(','.join(row))}")
+                if _is_number(header[0]) and _is_number(header[1]):
+                    raise ProfileError(f"{path}:{lineno}: the first line must be a header naming the columns "
+                                       f"(e.g. time,value), got numbers {_show(','.join(row))}")
+                continue
+            if len(row) < 2:
+                raise ProfileError(f"{path}:{lineno}: missing column: need time,value, got {_show(','.join(row))}")
+            t = _csv_number(row[0], path, lineno, "time")
+            v = _csv_number(row[1], path, lineno, "value")
+            if times and not t > times[-1]:
+                raise ProfileError(f"{path}:{lineno}: time does not increase ({t!r} after {times[-1]!r})")
+            times.append(t)
+            values.append(v * scale)
+    except csv.Error as exc:
+        raise ProfileError(f"{path}:{reader.line_num}: not valid CSV ({exc})") from None
+    if header is None:
+        raise ProfileError(f"{path}:1: empty profile file (expected a header row, then time,value rows)")
+    if not times:
+        raise ProfileError(f"{path}:{reader.line_num + 1}: no data rows after the header")
+    label = name or header[1] or "value"
+    try:
+        return Profile(tuple(times), tuple(values), interpolation, label, unit)
+    except ProfileError as exc:  # e.g. a value that overflows once scaled
+        raise ProfileError(f"{path}: {exc}") from None
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+# -- routes: the profiles of a run, as one JSON file ----------------------------------
+#: the signals of a route and their units
+ROUTE_SIGNALS: dict[str, str] = {"delta": "rad", "omega_ref": "rad/s"}
+ROUTE_FORMAT = "pmsm-ev-cosim route 1"
+#: the routes known by name (``scenario_route``)
+PACKAGED_ROUTES = ("scenario1", "scenario2")
+
+
+def scenario_route(scenario: int | str, p: ScenarioParams | None = None) -> dict[str, Profile]:
+    """The route of scenario 1 or 2: its elevation and the speed reference."""
+    return {"delta": elevation_profile(scenario), "omega_ref": speed_reference(p)}
+
+
+def route_to_json(route: dict[str, Profile], name: str = "route") -> str:
+    """A route as JSON; floats are written exactly (``repr``), so ``route_from_json``
+    gives back the same profiles bit for bit."""
+    check_route(route, name)
+    signals = {key: {"unit": ROUTE_SIGNALS[key], "interpolation": route[key].interpolation,
+                     "times": list(route[key].times), "values": list(route[key].values)}
+               for key in ROUTE_SIGNALS}
+    return json.dumps({"format": ROUTE_FORMAT, "name": name, "signals": signals}, indent=1) + "\n"
+
+
+def check_route(route: dict[str, Profile], where: str = "route") -> None:
+    """A route has exactly the signals of ``ROUTE_SIGNALS``, in their units (or unitless)."""
+    if set(route) != set(ROUTE_SIGNALS):
+        raise ProfileError(f"{where}: a route has the signals {', '.join(ROUTE_SIGNALS)} "
+                           f"(got {', '.join(route) or 'none'})")
+    for key, unit in ROUTE_SIGNALS.items():
+        if route[key].unit not in ("", unit):
+            raise ProfileError(f"{where}: signal {key!r} must be in {unit!r} (got {route[key].unit!r})")
+
+
+def route_from_json(text: str, where: str = "route") -> dict[str, Profile]:
+    """The profiles of a route file's text (see ``route_to_json``); errors name ``where``."""
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise ProfileError(f"{where}: not a route file (invalid JSON: {exc})") from None
+    if not isinstance(data, dict) or data.get("format") != ROUTE_FORMAT or not isinstance(data.get("signals"), dict):
+        raise ProfileError(f"{where}: not a route file (expected \"format\": \"{ROUTE_FORMAT}\" and \"signals\")")
+    route = {}
+    for key, sig in data["signals"].items():
+        if not isinstance(sig, dict):
+            raise ProfileError(f"{where}: signal {key!r} must be an object")
+        times, values = sig.get("times"), sig.get("values")
+        if not isinstance(times, list) or not isinstance(values, list) or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in times + values):
+            raise ProfileError(f"{where}: signal {key!r} needs lists of numbers 'times' and 'values'")
+        route[key] = Profile(tuple(float(t) for t in times), tuple(float(v) for v in values),
+                             sig.get("interpolation", "previous"), key, sig.get("unit", ""))
+    check_route(route, where)
+    return route
+
+
+def load_route(path) -> dict[str, Profile]:
+    """Read a route file (JSON, see ``route_to_json``)."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise ProfileError(f"{path}: profile file not found") from None
+        raise ProfileError(f"{path}: route file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ProfileError(f"{path}: cannot read profile ({exc})") from None
-    rows = list(csv.reader(text.splitlines()))
-    if not rows:
-        raise ProfileError(f"{path}: empty profile file")
-    header = [h.strip() for h in rows[0]]
-    if len(header) < 2:
-        raise ProfileError(f"{path}:1: header needs two columns (time, value), got {header}")
-    times, values = [], []
-    for lineno, row in enumerate(rows[1:], start=2):
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) < 2:
-            raise ProfileError(f"{path}:{lineno}: missing column (need time, value)")
-        try:
-            t, v = float(row[0]), float(row[1])
-        except ValueError:
-            raise ProfileError(f"{path}:{lineno}: not a number: {row[:2]}") from None
-        if not (math.isfinite(t) and math.isfinite(v)):
-            raise ProfileError(f"{path}:{lineno}: value is not finite: {row[:2]}")
-        if times and not t > times[-1]:
-            raise ProfileError(f"{path}:{lineno}: time does not increase ({t} after {times[-1]})")
-        times.append(t)
-        values.append(v * scale)
-    if not times:
-        raise ProfileError(f"{path}: no data rows")
-    return Profile(tuple(times), tuple(values), interpolation, name or header[1], unit)
+        raise ProfileError(f"{path}: cannot read route file ({exc})") from None
+    return route_from_json(text, str(path))

@@ -3,8 +3,9 @@
 Inputs u, w; at each fmi2DoStep: last_u = u, last_w = w, acc += u * h, calls += 1.
 u_sets counts the fmi2SetReal calls that reached u. Parameters of each FMI type are
 echoed as Real outputs (echo_gain, echo_count, echo_flag, echo_label_len). With
-fail_at = k > 0, the k-th fmi2DoStep returns False (a failed step, no exception: a plain
-pythonfmu FMU must not raise).
+fail_at = k > 0, the k-th fmi2DoStep returns False (a failed step, no exception). With
+raise_at = k > 0, the k-th fmi2DoStep raises an exception (pythonfmu 0.7.0 reports it as
+fmi2Fatal with the exception's repr in the log; the instance is gone after that).
 """
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
@@ -24,6 +25,7 @@ class ToySink(Fmi2Slave):
         self.flag = False
         self.label = "x"
         self.fail_at = 0
+        self.raise_at = 0
         for name in ("last_u", "last_w", "acc", "calls", "last_t", "last_h", "u_sets",
                      "echo_gain", "echo_count", "echo_flag", "echo_label_len"):
             setattr(self, name, 0.0)
@@ -33,6 +35,7 @@ class ToySink(Fmi2Slave):
         self.register_variable(Integer("count", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         self.register_variable(Boolean("flag", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         self.register_variable(Integer("fail_at", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
+        self.register_variable(Integer("raise_at", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         self.register_variable(String("label", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         for name in ("last_u", "last_w", "acc", "calls", "last_t", "last_h", "u_sets",
                      "echo_gain", "echo_count", "echo_flag", "echo_label_len"):
@@ -49,6 +52,8 @@ class ToySink(Fmi2Slave):
         self.echo_label_len = float(len(self.label))
 
     def do_step(self, current_time, step_size):
+        if self.raise_at and self.calls + 1 >= self.raise_at:
+            raise RuntimeError(f"toy failure: step {self.raise_at} raises on purpose")
         if self.fail_at and self.calls + 1 >= self.fail_at:
             self.log(f"step {self.fail_at} fails on purpose", Fmi2Status.error)
             return False

@@ -1,0 +1,114 @@
+"""Slave of RouteProfile.fmu: the scenario signals of a run, road elevation ``delta`` [rad]
+and speed reference ``omega_ref`` [rad/s], as an FMI 2.0 co-simulation unit, so that a
+whole scenario runs in any master. The profiles are ``pmsm_ev.scenarios.Profile`` objects
+(the orchestrator's own signal evaluation), read from a route file in ``resources/``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pythonfmu import String
+
+from pmsm_ev import __version__
+from pmsm_ev.scenarios import PACKAGED_ROUTES, load_route, scenario_route
+from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
+
+#: the route file in resources/ used by default: scenario 1 as built, the system's route
+#: in an SSP package written by ``pmsm-cosim export-ssp``
+DEFAULT_ROUTE = "route.json"
+#: a communication point within this fraction of the first step h0 of the grid t0 + k h0 is on it
+GRID_TOLERANCE = 1e-6
+
+DESCRIPTION = (
+    "Scenario signals of a sensorless EV drive (Wicaksono, Harini, Yusivar, 'Sensorless PMSM "
+    "Control using Fifth Order EKF in Electric Vehicle Application'): road elevation delta and "
+    "speed reference omega_ref from a route table (piecewise-constant or linear between "
+    "breakpoints, first value before the first breakpoint, last value after the last). "
+    "The outputs after fmi2DoStep(t, h) are the profiles at t + h; before the first step, at "
+    "the start time. A communication point t + h within 1e-6 h0 of the grid start + k h0 "
+    "(h0: the first step size) is taken as exactly start + k h0, so that a master's time "
+    "arithmetic (an accumulated sum, differences of integer nanoseconds) changes no value "
+    "and moves no breakpoint by a step. No inputs. Parameter 'profile': "
+    "'scenario1', 'scenario2' (the paper's scenarios) or the name of a route file in "
+    "resources/ (default route.json: scenario 1, or the route an SSP package was written "
+    "with). A Python FMU (pythonfmu): it needs a Python 3 interpreter with numpy."
+)
+
+
+class RouteProfile(DriveSlave):
+    """FMU slave evaluating a route's profiles at the communication points."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.description = DESCRIPTION
+        self.version = __version__
+        at_start = "; before the first step: the profile at the start time"
+        self.add_output("delta", "rad", "road elevation angle, uphill positive, at the end of the last step"
+                        + at_start, start=None, start_dependencies=("profile",), display_unit="deg")
+        self.add_output("omega_ref", "rad/s", "speed reference at the end of the last step" + at_start,
+                        start=None, start_dependencies=("profile",), display_unit="rpm")
+        self.add_parameter("profile", DEFAULT_ROUTE, String,
+                           description="route: 'scenario1', 'scenario2' or a route file (JSON, "
+                                       "pmsm_ev.scenarios.route_to_json) in resources/")
+        self._delta = self._omega_ref = None
+        self._t0 = 0.0  # start time (fmi2SetupExperiment)
+        self._t = 0.0  # time of the outputs
+        self._h0 = None  # size of the first step: the grid t0 + k h0 of the communication points
+
+    # -- physics hooks ---------------------------------------------------------------
+    def build(self) -> None:
+        name = self.profile
+        if name in PACKAGED_ROUTES:
+            route = scenario_route(name)
+        else:
+            resources = Path(self.resources or ".").resolve()
+            path = (resources / name).resolve()
+            if not name or resources not in path.parents or not path.is_file():
+                raise FmuUsageError(f"profile {name!r}: choose {', '.join(PACKAGED_ROUTES)} or a route file "
+                                    f"inside resources/ (no such file there)")
+            route = load_route(path)
+        self._delta, self._omega_ref = route["delta"], route["omega_ref"]
+        self.mark_built()
+        self._t, self._h0 = self._t0, None
+        self._evaluate()
+
+    def physics_state(self):
+        return [self._t, self._h0]
+
+    def restore_physics(self, snapshot) -> None:
+        if self._delta is None or self.needs_rebuild():
+            self.build()
+        self._t, self._h0 = float(snapshot[0]), snapshot[1]
+        self._evaluate()
+
+    def forget_physics(self) -> None:
+        self._delta = self._omega_ref = None
+
+    def _evaluate(self) -> None:
+        t = self._t
+        self.delta = self._delta(t)
+        self.omega_ref = self._omega_ref(t)
+
+    # -- FMI -------------------------------------------------------------------------
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        self._t0 = float(start_time)
+
+    def do_step(self, current_time, step_size):
+        try:
+            if not self._initialized:
+                raise FmuUsageError("fmi2DoStep before fmi2ExitInitializationMode")
+            h0 = self._h0
+            if h0 is None:
+                h0 = self._h0 = step_size
+            t = current_time + step_size
+            k = round((t - self._t0) / h0)
+            if abs(t - self._t0 - k * h0) <= GRID_TOLERANCE * h0:
+                t = self._t0 + k * h0  # on the grid: exactly t_n = n h, as the master's own signals
+            self._t = t
+            self.delta = self._delta(t)
+            self.omega_ref = self._omega_ref(t)
+        except Exception as exc:
+            self._fail("fmi2DoStep", exc)
+            raise
+        return True

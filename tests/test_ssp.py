@@ -1,0 +1,373 @@
+"""SSP 1.0 packages: ``pmsm-cosim export-ssp`` and ``pmsm-cosim run FILE.ssp``.
+
+* The package's SystemStructure.ssd and .ssv files validate against the SSP 1.0 schemas
+  fmpy ships, and fmpy's own SSP reader accepts them.
+* libcosim (``CosimExecution.from_ssp_file``) runs the scenario-2 package for 2 s; its
+  trajectories equal the orchestrator's Jacobi run of the same system (signals, no
+  RouteProfile) to 1e-9, also with a start value from the package's .ssv (angle source
+  estimated) that libcosim must apply for the equality to hold.
+* fmpy's ``simulate_ssp`` runs the package too and equals the same Jacobi run; but it
+  does not apply the package's parameter bindings (nor can it set a String parameter),
+  which the tests below pin down.
+* Round trip: ``run FILE.ssp`` equals the run of the system it was exported from, value
+  for value (Gauss-Seidel and Jacobi, the paper's route and a user's CSV route).
+* A bad package or an SSP feature the orchestrator does not implement: a one-line error.
+"""
+
+from __future__ import annotations
+
+import math
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orchestrator.cli import main
+from orchestrator.errors import CosimError
+from orchestrator.master import Master
+from orchestrator.ssp import export_ssp, load_ssp, schema_errors
+from orchestrator.system import load_system
+from orchestrator_support import project_fmus
+from pmsm_ev.results import ALL_COLUMNS, read_results
+
+RTOL = ATOL = 1e-9
+STEP = 1e-4
+
+
+@pytest.fixture(scope="module")
+def fmus():
+    return project_fmus()
+
+
+def scenario2(fmus, *starts, stop_time=None, algorithm=None, profile=None):
+    spec = load_system("scenario2")
+    spec.set_fmu("ctrl", fmus["FocEkf5"])
+    spec.set_fmu("plant", fmus["PmsmEvPlant"])
+    for assignment in starts:
+        spec.set_start(assignment)
+    if profile:
+        spec.set_signal_csv(profile)
+    if stop_time is not None:
+        spec.stop_time = stop_time
+    if algorithm is not None:
+        spec.algorithm = algorithm
+    return spec
+
+
+def export(fmus, path, *starts, profile=None) -> Path:
+    export_ssp(scenario2(fmus, *starts, profile=profile), path, route_fmu=fmus["RouteProfile"])
+    return path
+
+
+def run(spec, out: Path, stop_time=None, algorithm=None, output_interval=None) -> dict:
+    if stop_time is not None:
+        spec.stop_time = stop_time
+    if algorithm is not None:
+        spec.algorithm = algorithm
+    if output_interval is not None:
+        spec.output_interval = output_interval
+    m = Master(spec).run(out, catch_sigint=False)
+    assert m["status"] == "completed", m["status"]
+    return read_results(out)
+
+
+@pytest.fixture(scope="module")
+def package(fmus, tmp_path_factory):
+    return export(fmus, tmp_path_factory.mktemp("ssp") / "scenario2.ssp")
+
+
+# -- the package ------------------------------------------------------------------------------------
+def test_package_layout_and_contents(package):
+    with zipfile.ZipFile(package) as z:
+        names = set(z.namelist())
+        ssd = z.read("SystemStructure.ssd").decode()
+        ssv = z.read("resources/ctrl.ssv").decode()
+    assert names == {"SystemStructure.ssd", "resources/FocEkf5.fmu", "resources/PmsmEvPlant.fmu",
+                     "resources/RouteProfile.fmu", "resources/ctrl.ssv"}
+    assert 'startElement="route" startConnector="delta" endElement="plant" endConnector="delta"' in ssd
+    assert 'startElement="route" startConnector="omega_ref" endElement="ctrl" endConnector="omega_ref"' in ssd
+    assert '<ssd:DefaultExperiment startTime="0.0" stopTime="350.0">' in ssd
+    assert '<osp:FixedStepAlgorithm baseStepSize="0.0001" />' in ssd
+    assert '<ssc:Real unit="rad/s" />' in ssd and '<ssc:BaseUnit kg="1" m="2" s="-3" A="-1" />' in ssd  # V
+    assert '<ssv:Parameter name="angle_source">' in ssv and '<ssv:String value="measured" />' in ssv
+
+
+def test_ssd_and_ssv_validate_against_the_ssp_schemas_fmpy_ships(package):
+    from fmpy.ssp.ssd import read_ssd
+
+    with zipfile.ZipFile(package) as z:
+        assert schema_errors(z.read("SystemStructure.ssd"), "SystemStructureDescription.xsd") == []
+        assert schema_errors(z.read("resources/ctrl.ssv"), "SystemStructureParameterValues.xsd") == []
+        broken = z.read("SystemStructure.ssd").replace(b' kind="output"', b' kind="sideways"', 1)
+    assert schema_errors(broken, "SystemStructureDescription.xsd")  # the validation can fail
+    ssd = read_ssd(str(package), validate=True)  # fmpy's reader, with its schema validation
+    assert [e.name for e in ssd.system.elements] == ["ctrl", "plant", "route"]
+    assert len(ssd.system.connections) == 8
+    (binding,) = ssd.system.elements[0].parameterBindings
+    assert [(p.name, p.type, p.value) for p in binding.parameterValues[0].parameters] == \
+        [("angle_source", "String", "measured")]
+
+
+def test_the_package_reads_back_as_the_same_system(package, fmus):
+    spec, orig = load_ssp(package), scenario2(fmus)
+    assert (spec.name, spec.algorithm, spec.step_size, spec.stop_time, spec.output_interval) == \
+        ("scenario2", "gauss-seidel", 1e-4, 350.0, 0.01)
+    assert [c.name for c in spec.components] == ["ctrl", "plant", "route"]  # the route is stepped last
+    assert [c.start for c in spec.components] == [{"angle_source": "measured"}, {}, {}]
+    assert [str(c) for c in spec.connections] == [str(c) for c in orig.connections] + [
+        "route.delta -> plant.delta", "route.omega_ref -> ctrl.omega_ref"]
+    assert [c.name for c in spec.columns] == [c.name for c in orig.columns]
+    assert spec.signals == {}
+
+
+# -- libcosim ------------------------------------------------------------------------------------------
+def run_libcosim_ssp(package: Path, stop_time: float, every: int) -> dict:
+    """The package in libcosim's fixed-step master, as read by its SSP loader (step size from
+    the package); rows every ``every`` steps from t_1 on, as the last-value observer sees them."""
+    pytest.importorskip("libcosimpy")
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+
+    log_output_level(CosimLogLevel.WARNING)
+    ex = CosimExecution.from_ssp_file(str(package))
+    index = {s.name.decode(): s.index for s in ex.slave_infos()}
+    assert set(index) == {"ctrl", "plant", "route"}
+    refs = {n: {v.name.decode(): v.reference for v in ex.slave_variables(i)} for n, i in index.items()}
+    observer = CosimObserver.create_last_value()
+    assert ex.add_observer(observer)
+    spec = load_ssp(package)  # the recorded columns the package declares
+    rows = {c.name: [] for c in spec.columns}
+    n_steps = round(stop_time / STEP)
+    for n in range(n_steps):
+        assert ex.step(), f"libcosim step {n} failed"
+        if (n + 1) % every == 0:
+            rows["time"].append((n + 1) * STEP)
+            for c in spec.columns[1:]:
+                (value,) = observer.last_real_values(index[c.instance], [refs[c.instance][c.variable]])
+                rows[c.name].append(math.degrees(value) if c.unit == "deg" else value)
+    status = ex.status()
+    assert status.error_code == 0 and status.current_time == n_steps * 100_000
+    return {name: np.array(values) for name, values in rows.items()}
+
+
+@pytest.mark.parametrize("angle_source", ["measured", "estimated"])
+def test_libcosim_runs_the_package_as_the_orchestrators_jacobi_run(fmus, tmp_path, angle_source):
+    stop = 2.0
+    package = export(fmus, tmp_path / "s2.ssp", f"ctrl.angle_source={angle_source}")
+    b = run_libcosim_ssp(package, stop, every=100)
+    a = run(scenario2(fmus, f"ctrl.angle_source={angle_source}"), tmp_path / "jacobi", stop, "jacobi")
+    a = {k: v[1:] for k, v in a.items()}  # libcosim's observer sees t_1 onwards
+    assert list(a) == list(b) == list(ALL_COLUMNS)
+    for col in ALL_COLUMNS:
+        np.testing.assert_allclose(a[col], b[col], rtol=RTOL, atol=ATOL, err_msg=col)
+    worst = max(float(np.max(np.abs(a[c] - b[c]))) for c in ALL_COLUMNS)
+    print(f"libcosim vs orchestrator Jacobi, {stop} s, angle_source={angle_source}: max |diff| = {worst:.3g}")
+    assert b["omega_ref"][-1] == 40.0 and b["omega_m"][-1] > 30.0  # 2 s into the ramp: the drive follows
+    # the .ssv start value reached libcosim: the two angle sources give different runs
+    other = run(scenario2(fmus, "ctrl.angle_source=" + ("estimated" if angle_source == "measured" else "measured")),
+                tmp_path / "other", 0.5, "jacobi")
+    assert np.max(np.abs(other["v_q"][1:51] - b["v_q"][:50])) > 1e-6
+
+
+# -- fmpy ------------------------------------------------------------------------------------------------
+def run_fmpy_ssp(package: Path, stop_time: float, **kwargs):
+    from fmpy.ssp.simulation import simulate_ssp
+
+    return simulate_ssp(str(package), stop_time=stop_time, step_size=STEP, **kwargs)
+
+
+def test_fmpy_simulate_ssp_runs_the_package(package, fmus, tmp_path):
+    """fmpy's loop (Jacobi: every component steps with the inputs of the last exchange, its
+    time an accumulated sum) gives row k the outputs after the step from t_k, i.e. at t_{k+1}.
+    The package's only parameter value equals the FMU's default, so fmpy not applying it (see
+    below) changes nothing here."""
+    stop = 0.5
+    r = run_fmpy_ssp(package, stop)
+    a = run(scenario2(fmus), tmp_path / "jacobi", stop, "jacobi", output_interval=STEP)
+    n = round(stop / STEP)
+    assert len(r) >= n
+    ctrl_default = {v.name: v.start for v in __import__("fmpy").read_model_description(
+        str(fmus["FocEkf5"])).modelVariables}["angle_source"]
+    assert ctrl_default == "measured"
+    worst = 0.0
+    for col in ALL_COLUMNS[1:]:
+        spec_col = next(c for c in load_ssp(package).columns if c.name == col)
+        values = r[f"{spec_col.instance}.{spec_col.variable}"][:n]
+        if spec_col.unit == "deg":
+            values = np.degrees(values)
+        np.testing.assert_allclose(values, a[col][1:n + 1], rtol=RTOL, atol=ATOL, err_msg=col)
+        worst = max(worst, float(np.max(np.abs(values - a[col][1:n + 1]))))
+    print(f"fmpy simulate_ssp vs orchestrator Jacobi, {stop} s: max |diff| = {worst:.3g}")
+    assert a["omega_m"][n] > 5.0
+
+
+def test_fmpy_simulate_ssp_ignores_the_packages_parameter_values(fmus, tmp_path):
+    """fmpy 0.3's simulate_ssp reads the ParameterBindings (read_ssd) but never applies them:
+    it sets only a parameter_set its caller passes. A package asking for the estimated angle
+    source runs with the FMU's default (measured) in fmpy."""
+    stop = 0.2
+    package = export(fmus, tmp_path / "estimated.ssp", "ctrl.angle_source=estimated")
+    r = run_fmpy_ssp(package, stop)
+    n = round(stop / STEP)
+    measured = run(scenario2(fmus), tmp_path / "measured", stop, "jacobi", output_interval=STEP)
+    estimated = run(scenario2(fmus, "ctrl.angle_source=estimated"), tmp_path / "estimated", stop, "jacobi",
+                    output_interval=STEP)
+    np.testing.assert_allclose(r["ctrl.v_q"][:n], measured["v_q"][1:n + 1], rtol=RTOL, atol=ATOL)
+    assert np.max(np.abs(r["ctrl.v_q"][:n] - estimated["v_q"][1:n + 1])) > 1e-6
+
+
+def test_fmpy_simulate_ssp_cannot_set_a_string_parameter(package):
+    """Passing the values itself (system-level names, as fmpy expects) fails in fmpy's
+    set_value, which knows Real, Integer, Enumeration and Boolean only."""
+    from fmpy.ssp.ssd import Parameter, ParameterSet
+
+    values = ParameterSet(parameters=[Parameter(name="ctrl.angle_source", type="String", value="estimated")])
+    with pytest.raises(Exception, match="^Unsupported type: String$"):
+        run_fmpy_ssp(package, 0.01, parameter_set=values)
+
+
+# -- round trip ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+def test_round_trip_equals_the_original_run_value_for_value(package, fmus, tmp_path, algorithm):
+    stop = 1.0
+    a = run(load_ssp(package), tmp_path / "ssp", stop, algorithm)
+    b = run(scenario2(fmus), tmp_path / "toml", stop, algorithm)
+    assert list(a) == list(b) == list(ALL_COLUMNS)
+    for col in ALL_COLUMNS:
+        np.testing.assert_array_equal(a[col], b[col], err_msg=col)
+    assert len(a["time"]) == 101 and a["omega_ref"][-1] == 20.0
+
+
+def test_round_trip_of_a_user_route_from_csv(fmus, tmp_path):
+    """export-ssp --profile delta=CSV: the route written into the packaged RouteProfile FMU;
+    elevation steps every 0.1 s (not binary fractions) cross the boundary on the same step."""
+    csv = tmp_path / "route.csv"
+    csv.write_text("time,delta_deg\n" + "".join(f"{0.1 * k!r},{(0, 8.5, -3, 22)[k % 4]}\n" for k in range(6)))
+    package = export(fmus, tmp_path / "user.ssp", profile=f"delta={csv}")
+    a = run(load_ssp(package), tmp_path / "ssp", 0.5, output_interval=STEP)
+    b = run(scenario2(fmus, profile=f"delta={csv}"), tmp_path / "toml", 0.5, output_interval=STEP)
+    for col in ALL_COLUMNS:
+        np.testing.assert_array_equal(a[col], b[col], err_msg=col)
+    assert set(np.round(a["delta_deg"], 9)) == {0.0, 8.5, -3.0, 22.0}
+
+
+def test_cli_export_and_run(fmus, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    args = ["--plant", str(fmus["PmsmEvPlant"]), "--controller", str(fmus["FocEkf5"])]
+    assert main(["export-ssp", "scenario2", "-o", "s2.ssp", "--stop-time", "0.3", "--set", "plant.m_v=1200",
+                 *args]) == 0
+    out = capsys.readouterr().out
+    assert "wrote s2.ssp: components ctrl, plant, route; 8 connections; 2 parameter values" in out
+    with zipfile.ZipFile("s2.ssp") as z:
+        assert b'<ssv:Real value="1200.0" />' in z.read("resources/plant.ssv")
+    assert main(["run", "s2.ssp", "--out", "a", "--no-figures", "-q"]) == 0
+    assert main(["run", "scenario2", "--stop-time", "0.3", "--set", "plant.m_v=1200", "--out", "b",
+                 "--no-figures", "-q", *args]) == 0
+    assert (tmp_path / "a/results.csv").read_bytes() == (tmp_path / "b/results.csv").read_bytes()
+
+
+# -- errors ----------------------------------------------------------------------------------------------
+def one_line_error(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith("error: ")
+    return err[0]
+
+
+def rewrite(package: Path, dest: Path, old: str = "", new: str = "", member: str = "SystemStructure.ssd",
+            drop: str | None = None) -> Path:
+    """A copy of ``package`` with ``old`` replaced by ``new`` in ``member`` and ``drop`` left out."""
+    with zipfile.ZipFile(package) as zin, zipfile.ZipFile(dest, "w") as zout:
+        for item in zin.infolist():
+            if item.filename == drop:
+                continue
+            data = zin.read(item)
+            if item.filename == member and old:
+                text = data.decode()
+                assert old in text, old
+                data = text.replace(old, new, 1).encode()
+            zout.writestr(item, data)
+    return dest
+
+
+SUB_SYSTEM = '<ssd:System name="inner" />\n    </ssd:Elements>'
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ('</ssd:Elements>', SUB_SYSTEM, "unsupported SSP feature: sub-system (nested ssd:System)"),
+    ('endConnector="i_alpha" />', 'endConnector="i_alpha"><ssc:LinearTransformation factor="2.0" /></ssd:Connection>',
+     "connection plant.i_alpha -> ctrl.i_alpha: unsupported SSP feature: LinearTransformation"),
+    ('startElement="plant" startConnector="i_beta" ', 'startConnector="i_beta" ',
+     "unsupported SSP feature: connection to a connector of the system itself"),
+    ('implementation="CoSimulation"', 'implementation="ModelExchange"',
+     "ctrl: unsupported SSP feature: implementation=\"ModelExchange\""),
+    ('<ssd:ParameterBinding type=', '<ssd:ParameterBinding prefix="ctrl." type=',
+     "ctrl: unsupported SSP feature: parameter binding prefix 'ctrl.'"),
+    ('startTime="0.0"', 'startTime="1.5"', "unsupported SSP feature: DefaultExperiment startTime 1.5"),
+    ('source="resources/PmsmEvPlant.fmu"', 'source="resources/Nope.fmu"', "plant: resources/Nope.fmu is not in the package"),
+    ('source="resources/PmsmEvPlant.fmu"', 'source="http://example.org/P.fmu"', "outside the package"),
+    ('version="1.0"', 'version="2.0"', "SSP version '2.0' is not supported (SSP 1.0)"),
+    (' kind="output"', ' kind="sideways"', "not valid SSP 1.0 (SystemStructureDescription.xsd): line"),
+    ('<ssd:Elements>', '<ssd:Elements', "SystemStructure.ssd: not well-formed XML"),
+])
+def test_unsupported_or_broken_ssd_is_a_one_line_error(package, tmp_path, capsys, old, new, message):
+    bad = rewrite(package, tmp_path / "bad.ssp", old, new)
+    assert main(["run", str(bad), "--out", str(tmp_path / "out"), "-q"]) == 2
+    assert message in one_line_error(capsys)
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_parameter_values_and_packages(package, tmp_path, capsys):
+    bad = rewrite(package, tmp_path / "enum.ssp", '<ssv:String value="measured" />',
+                  '<ssv:Enumeration value="measured" />', member="resources/ctrl.ssv")
+    assert main(["run", str(bad), "-q"]) == 2
+    assert "parameter 'angle_source' of type Enumeration" in one_line_error(capsys)
+    bad = rewrite(package, tmp_path / "value.ssp", '<ssv:String value="measured" />',
+                  '<ssv:String value="sideways" />', member="resources/ctrl.ssv")
+    assert main(["run", str(bad), "-q", "--out", str(tmp_path / "o")]) == 2
+    assert "angle_source" in one_line_error(capsys)
+    bad = rewrite(package, tmp_path / "nossv.ssp", drop="resources/ctrl.ssv")
+    assert main(["run", str(bad), "-q"]) == 2
+    assert "resources/ctrl.ssv is not in the package" in one_line_error(capsys)
+    not_zip = tmp_path / "text.ssp"
+    not_zip.write_text("hello")
+    assert main(["run", str(not_zip), "-q"]) == 2
+    assert "not an SSP package (not a zip archive)" in one_line_error(capsys)
+    no_ssd = rewrite(package, tmp_path / "nossd.ssp", drop="SystemStructure.ssd")
+    assert main(["run", str(no_ssd), "-q"]) == 2
+    assert "not an SSP package (no SystemStructure.ssd at its root)" in one_line_error(capsys)
+    assert main(["run", str(tmp_path / "missing.ssp"), "-q"]) == 2
+    assert "SSP package not found" in one_line_error(capsys)
+
+
+def test_a_package_without_step_or_annotation_needs_step_and_runs_jacobi(package, fmus, tmp_path, capsys):
+    """A package from another tool: no base step, no pmsm-ev-cosim annotation: --step is
+    needed, the coupling is Jacobi and every output connector is recorded."""
+    with zipfile.ZipFile(package) as z:
+        ssd = z.read("SystemStructure.ssd").decode()
+    start = ssd.index("  <ssd:Annotations>\n    <ssc:Annotation type=\"org.pmsm-ev-cosim\">")
+    end = ssd.index("</ssd:Annotations>", start) + len("</ssd:Annotations>\n")
+    bare = rewrite(package, tmp_path / "bare.ssp", ssd[start:end], "")
+    bare = rewrite(bare, tmp_path / "bare2.ssp", '<osp:FixedStepAlgorithm baseStepSize="0.0001" />', "")
+    assert main(["run", str(bare), "--stop-time", "0.01", "-q", "--out", str(tmp_path / "o")]) == 2
+    assert "no communication step size is given (give one with --step)" in one_line_error(capsys)
+    spec = load_ssp(bare)
+    assert spec.algorithm == "jacobi" and spec.step_size is None
+    assert [c.name for c in spec.columns][:3] == ["time", "ctrl.v_alpha", "ctrl.v_beta"]
+    assert main(["run", str(bare), "--stop-time", "0.05", "--step", "1e-4", "--no-figures", "-q",
+                 "--out", str(tmp_path / "bare_run")]) == 0
+    a = read_results(tmp_path / "bare_run")
+    b = run(scenario2(fmus), tmp_path / "jacobi", 0.05, "jacobi", output_interval=STEP)
+    np.testing.assert_array_equal(a["plant.omega_m"], b["omega_m"])
+    np.testing.assert_array_equal(a["route.omega_ref"], b["omega_ref"])
+
+
+def test_export_refuses_signals_the_route_cannot_carry(fmus, tmp_path):
+    spec = scenario2(fmus)
+    spec.signals["load"] = spec.signals.pop("omega_ref")
+    spec.signals["load"].name = "load"
+    with pytest.raises(CosimError, match="the signals must be delta and omega_ref"):
+        export_ssp(spec, tmp_path / "x.ssp", route_fmu=fmus["RouteProfile"])
+    assert not (tmp_path / "x.ssp").exists()
