@@ -1,4 +1,4 @@
-"""``pmsm-cosim``: run, build, inspect and plot co-simulations.
+"""``pmsm-cosim``: run, build, inspect, plot and compare co-simulations.
 
 Every user error (missing file, bad system file, unknown variable, a value an FMU
 refuses, ...) ends in one line ``error: ...`` on stderr and exit code 2.
@@ -213,6 +213,17 @@ def cmd_plot(a) -> int:
     return 0
 
 
+def cmd_compare(a) -> int:
+    from .compare import compare  # noqa: PLC0415
+
+    out = Path(a.out)
+    result = compare(a.dirs, out, labels=a.labels, t_from=a.t_from, figures=not a.no_figures)
+    print(result["markdown"].read_text(encoding="utf-8"), end="")
+    print(f"table: {result['markdown']}, {result['csv']}"
+          + (f"; figures: {', '.join(str(p) for p in result['figures'])}" if result["figures"] else ""))
+    return 0
+
+
 # --- parser ------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
@@ -267,6 +278,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", metavar="LABEL",
                    help="scenario1/scenario2 names the figures after the paper's (default: from metrics.json)")
     p.set_defaults(func=cmd_plot)
+
+    c = sub.add_parser("compare", help="overlay runs and tabulate their metrics",
+                       description="Overlay finished runs (speed, angle error, torque estimate vs T_L_mech) "
+                                   "as OUT/compare_*.png and write one metrics table across them as "
+                                   "OUT/metrics.md and OUT/metrics.csv.")
+    c.add_argument("dirs", nargs="+", metavar="RUN_DIR", help="run directories (results.csv, metrics.json)")
+    c.add_argument("--out", metavar="DIR", default="runs/compare", help="output directory (default: runs/compare)")
+    c.add_argument("--labels", nargs="+", metavar="LABEL", help="one label per run (default: directory names)")
+    c.add_argument("--from", dest="t_from", type=float, default=20.0, metavar="S",
+                   help="start of the window of the 'after' figures [s] (default: 20, past the start-up ramp)")
+    c.add_argument("--no-figures", action="store_true", help="only the table")
+    c.set_defaults(func=cmd_compare)
     return ap
 
 

@@ -78,6 +78,15 @@ def _wrap(x):
     return (x + math.pi) % (2 * math.pi) - math.pi
 
 
+def angle_error_unwrapped(r: dict[str, np.ndarray]) -> np.ndarray:
+    """theta_hat - theta_e [rad], continuous across rows: wrapped to (-pi, pi] at the first
+    row, then unwrapped, so that an estimate slipping by whole electrical turns shows as
+    a steadily growing error (k 2 pi after k slips) instead of a saw-tooth. Valid while
+    the error changes by less than pi between two recorded rows."""
+    err = _wrap(r["theta_hat"] - r["theta_e"])
+    return np.unwrap(err) if len(err) else err
+
+
 def _rms(x) -> float:
     return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float("nan")
 
