@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev.results import CONTRACT_COLUMNS, angle_error_unwrapped, compute_metrics, read_results
+from pmsm_ev.results import (CONTRACT_COLUMNS, angle_error_unwrapped, compute_metrics, eq31_load_torque,
+                             read_results)
 
 from .errors import CosimError, one_line
 
@@ -49,6 +50,7 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("theta_max_after", "θ̂ err max after t_from [rad]", ".3f"),
     ("theta_drift", "θ̂ drift t_from→end [rad]", ".2f"),
     ("T_L_err_max", "T̂_L − T_L,mech, max over plateaus [N m]", ".2f"),
+    ("T_L_eq31_rms_after", "T̂_L − eq 31, RMS after t_from [N m]", ".2f"),
 )
 
 
@@ -130,10 +132,13 @@ def summarize(run: Run, t_from: float = T_FROM_DEFAULT) -> dict:
             "theta_rms_after": mw["theta_error_rms"],
             "theta_max_after": mw["theta_error_max"],
             "theta_drift": float(err[-1] - err[0]),
+            # eq 31: what a load estimate built on J_m alone should show (None without one)
+            "T_L_eq31_rms_after": (float(np.sqrt(np.mean((r["T_L_hat"] - eq31_load_torque(r))[w] ** 2)))
+                                   if np.any(r["T_L_hat"]) else None),
         })
     else:
         row.update({k: None for k in ("speed_rms_after", "omega_hat_rms_after", "theta_rms_after",
-                                      "theta_max_after", "theta_drift")})
+                                      "theta_max_after", "theta_drift", "T_L_eq31_rms_after")})
     plateaus = m.get("plateaus") or []
     if plateaus and any(p["T_L_hat_mean"] != 0.0 for p in plateaus):
         row["T_L_err_max"] = max(abs(p["T_L_hat_mean"] - p["T_L_mech_mean"]) for p in plateaus)

@@ -16,6 +16,7 @@ from orchestrator.cli import main
 from orchestrator.compare import COLUMNS, format_value
 from orchestrator.system import PACKAGED_SCENARIOS, load_system
 from orchestrator_support import project_fmus
+from pmsm_ev.params import MotorParams, VehicleParams
 from pmsm_ev.results import read_results
 
 T_STEP = 0.3  # [s] elevation step of the test runs
@@ -88,7 +89,15 @@ def test_compare_table_equals_the_runs_metrics(two_runs, capsys):
     assert float(rows[0]["T_L_err_max"]) == pytest.approx(
         max(abs(p["T_L_hat_mean"] - p["T_L_mech_mean"]) for p in m5["plateaus"]), rel=1e-12)
     assert abs(plateau["T_L_hat_mean"] - plateau["T_L_mech_mean"]) < 5.0 < plateau["T_L_mech_mean"] / 5
-    assert rows[1]["T_L_err_max"] == "" and md_lines[-1].rstrip().endswith("| - |")
+    assert rows[1]["T_L_err_max"] == rows[1]["T_L_eq31_rms_after"] == "" and md_lines[-1].rstrip().endswith("| - | - |")
+    # eq 31 (T_L_mech + B_m w + T_m0 + (J_eq - J_m) dw/dt), recomputed here
+    r = read_results(runs["ekf5"])
+    mp, vp = MotorParams(), VehicleParams()
+    eq31 = r["T_L_mech"] + mp.B_m * r["omega_m"] + mp.T_m0 + vp.reflected_inertia * np.gradient(r["omega_m"], r["time"])
+    w = r["time"] >= T_FROM
+    rms = math.sqrt(np.mean((r["T_L_hat"] - eq31)[w] ** 2))
+    assert float(rows[0]["T_L_eq31_rms_after"]) == pytest.approx(rms, rel=1e-12)
+    assert rms < 0.5  # after the step's transient the estimate follows eq 31 closely
     # the two observers give different numbers (the table is not one run twice)
     assert rows[0]["omega_hat_rms_after"] != rows[1]["omega_hat_rms_after"]
     for name in ("compare_speed.png", "compare_angle_error.png", "compare_torque.png"):
