@@ -16,7 +16,7 @@ from orchestrator_support import toy_fmus, toy_system
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["build", "--help"], ["info", "--help"],
-                                  ["plot", "--help"]])
+                                  ["plot", "--help"], ["compare", "--help"], ["report", "--help"]])
 def test_help_on_every_command(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)
