@@ -223,24 +223,43 @@ def _series(run: Run, kind: str):
 
 
 def plot_overlay(runs: list[Run], kind: str, path: Path, window: tuple[float, float] | None = None,
-                 title: str | None = None, size=FIGSIZE, skip_zero: bool = True) -> Path:
+                 title: str | None = None, size=FIGSIZE, skip_zero: bool = True, robust: bool | None = None) -> Path:
     """One PNG overlaying ``kind`` (a key of :data:`PLOTS`) of every run. ``window``
     restricts the time axis (all rows shown there, no thinning); references (dashed
     black) are drawn once per scenario. With ``skip_zero``, a run whose torque estimate
-    is identically 0 (no load state) is left out of the torque plot."""
+    is identically 0 (no load state) is left out of the torque plot. With ``robust``, the
+    y axis spans the median of the runs' ranges (padded) when a run goes far beyond it (a
+    diverged estimate would flatten every other line); that run is labelled "off scale".
+    Default: robust, except for the angle error, whose slips of whole turns are the point."""
+    if robust is None:
+        robust = kind != "angle_error"
     ylabel, _, ref_col, default_title = PLOTS[kind]
     fig, ax = _figure(size)
     refs_drawn: set[str] = set()
+    lines = []
     for i, run in enumerate(runs):
         t = run.r["time"]
         y = _series(run, kind)
         if kind == "torque" and skip_zero and not np.any(y):
             continue
         sel = slice(None) if window is None else (t >= window[0]) & (t <= window[1])
+        if window is not None and not np.any(sel):
+            continue
+        lines.append((i, run, t, y, sel))
+    limits = None
+    if robust and len(lines) >= 3:
+        ranges = [(float(np.nanmin(y[sel])), float(np.nanmax(y[sel]))) for _, _, _, y, sel in lines]
+        lo, hi = float(np.median([r[0] for r in ranges])), float(np.median([r[1] for r in ranges]))
+        pad = 0.25 * max(hi - lo, 1e-9)
+        lo, hi = lo - pad, hi + pad
+        if any(r[0] < lo - 2 * (hi - lo) or r[1] > hi + 2 * (hi - lo) for r in ranges):
+            limits = (lo, hi)
+    for i, run, t, y, sel in lines:
         ts, ys = t[sel], y[sel]
         if window is None:
             ts, ys = _envelope(ts, ys)
-        ax.plot(ts, ys, lw=1.0, color=f"C{i % 10}", label=run.label)
+        off = limits is not None and (np.nanmin(ys) < limits[0] or np.nanmax(ys) > limits[1])
+        ax.plot(ts, ys, lw=1.0, color=f"C{i % 10}", label=run.label + (" (off scale)" if off else ""))
         if ref_col and run.scenario not in refs_drawn:
             refs_drawn.add(run.scenario)
             tr, yr = t[sel], run.r[ref_col][sel]
@@ -249,6 +268,8 @@ def plot_overlay(runs: list[Run], kind: str, path: Path, window: tuple[float, fl
             ax.plot(tr, yr, lw=1.0, ls="--", color="k", alpha=0.7)
     if window is not None:
         ax.set_xlim(*window)
+    if limits is not None:
+        ax.set_ylim(*limits)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(ylabel)
     ax.set_title(title or default_title, fontsize=10)
