@@ -385,7 +385,36 @@ def _figures(data: Data, fig_dir: Path) -> list[Path]:
                                  title=f"Scenario 2, {desc}: angle error θ̂ − θ (unwrapped)"))
         made.append(plot_overlay(rs, "speed_error", fig_dir / f"s2_{short}_speed_error.png",
                                  title=f"Scenario 2, {desc}: speed error ω_ref − ω_m"))
+        if short == "noisy1A":
+            made.append(plot_overlay(rs, "torque", fig_dir / f"s2_{short}_torque.png",
+                                     title=f"Scenario 2, {desc}: load-torque estimate T̂_L (dashed: T_L,mech)"))
+        if short == "angle":
+            made.append(plot_overlay(rs, "angle_error", fig_dir / f"s2_{short}_angle_error_start.png",
+                                     window=(0.0, 3.0),
+                                     title=f"Scenario 2, {desc}: angle error over the first 3 s"))
     return made
+
+
+#: an angle error below this counts as recovered [rad]
+RECOVERED = 0.2
+
+
+def recovery(run: Run) -> dict:
+    """Angle error (wrapped) at the start, at 1 s, at the end, and the first time it is below
+    ``RECOVERED`` and stays there for the next second (None: never)."""
+    r = run.r
+    t = r["time"]
+    err = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
+    ok = np.abs(err) < RECOVERED
+    t_rec = None
+    for i in np.nonzero(ok)[0]:
+        window = (t >= t[i]) & (t <= t[i] + 1.0)
+        if t[i] + 1.0 <= t[-1] and np.all(ok[window]):
+            t_rec = float(t[i])
+            break
+    at1 = np.nonzero(t >= 1.0)[0]
+    return {"start": float(err[0]), "at_1s": float(err[at1[0]]) if len(at1) else None,
+            "end": float(err[-1]), "t_recovered": t_rec}
 
 
 def _param_lines(t_from: float) -> list[str]:
@@ -625,9 +654,24 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
     L += parts
     L.append("")
     L.append(f"Without the variant (scenario 2 above) the same four give drifts "
-             + " / ".join(d.v(f"s2-{k}", "theta_drift") for k in REALISM_SETUPS) + " rad.\n")
+             + " / ".join(d.v(f"s2-{k}", "theta_drift") for k in REALISM_SETUPS) + " rad, angle error max "
+             + " / ".join(d.v(f"s2-{k}", "theta_max_after", ".3f") for k in REALISM_SETUPS) + " rad.\n")
+    rec_lines = []
+    for k in REALISM_SETUPS:
+        run = d.runs.get(f"s2-angle-{k}")
+        if run is None:
+            continue
+        rc = recovery(run)
+        rec_lines.append(f"| {run.label} | {rc['start']:.3f} | {_f(rc['at_1s'], '.3f')} | "
+                         f"{'never' if rc['t_recovered'] is None else format(rc['t_recovered'], '.2f')} | "
+                         f"{rc['end']:.3f} |")
+    if rec_lines:
+        L.append(f"Initial angle error: the wrapped error θ̂ − θ at the start, at 1 s and at the end, and when it "
+                 f"first falls below {RECOVERED:g} rad for at least 1 s:\n")
+        L.append("| run | error at 0 s [rad] | at 1 s [rad] | below " + f"{RECOVERED:g}" + " rad from [s] | "
+                 "at the end [rad] |\n|---|---:|---:|---:|---:|\n" + "\n".join(rec_lines) + "\n")
     for short, _, _ in REALISM_SCENARIOS:
-        for kind in ("angle_error", "speed_error"):
+        for kind in ("angle_error", "angle_error_start", "speed_error", "torque"):
             name = f"s2_{short}_{kind}"
             if name in fig_names:
                 L.append(f"![{name}](results/{name}.png)\n")
