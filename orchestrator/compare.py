@@ -259,13 +259,15 @@ def plot_overlay(runs: list[Run], kind: str, path: Path, window: tuple[float, fl
         if window is None:
             ts, ys = _envelope(ts, ys)
         off = limits is not None and (np.nanmin(ys) < limits[0] or np.nanmax(ys) > limits[1])
-        ax.plot(ts, ys, lw=1.0, color=f"C{i % 10}", label=run.label + (" (off scale)" if off else ""))
+        # the first runs on top: a hunting or diverged run drawn later does not hide them
+        ax.plot(ts, ys, lw=1.0, color=f"C{i % 10}", label=run.label + (" (off scale)" if off else ""),
+                zorder=2 + len(lines) - i)
         if ref_col and run.scenario not in refs_drawn:
             refs_drawn.add(run.scenario)
             tr, yr = t[sel], run.r[ref_col][sel]
             if window is None:
                 tr, yr = _envelope(tr, yr)
-            ax.plot(tr, yr, lw=1.0, ls="--", color="k", alpha=0.7)
+            ax.plot(tr, yr, lw=1.0, ls="--", color="k", alpha=0.7, zorder=3 + len(lines))
     if window is not None:
         ax.set_xlim(*window)
     if limits is not None:
