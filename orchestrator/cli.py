@@ -1,4 +1,4 @@
-"""``pmsm-cosim``: run, sweep, build, inspect and plot co-simulations; export a system as an SSP package.
+"""``pmsm-cosim``: run, sweep, build, inspect, plot and compare co-simulations; report; export a system as an SSP package.
 
 Every user error (missing file, bad system file, unknown variable, a value an FMU
 refuses, ...) ends in one line ``error: ...`` on stderr and exit code 2.
@@ -296,6 +296,32 @@ def cmd_plot(a) -> int:
     return 0
 
 
+def cmd_compare(a) -> int:
+    from .compare import compare  # noqa: PLC0415
+
+    out = Path(a.out)
+    result = compare(a.dirs, out, labels=a.labels, t_from=a.t_from, figures=not a.no_figures)
+    print(result["markdown"].read_text(encoding="utf-8"), end="")
+    print(f"table: {result['markdown']}, {result['csv']}"
+          + (f"; figures: {', '.join(str(p) for p in result['figures'])}" if result["figures"] else ""))
+    return 0
+
+
+def cmd_report(a) -> int:
+    from . import report  # noqa: PLC0415
+
+    if a.list:
+        for c in report.CONFIGS:
+            print(f"{c.id}: {c.scenario}, {c.label}")
+        return 0
+    if a.jobs < 1:
+        raise CosimError(f"--jobs must be >= 1 (got {a.jobs})")
+    command = "pmsm-cosim report" + (f" --stop-time {a.stop_time:g}" if a.stop_time else "")
+    report.generate(out=a.out, runs_dir=a.runs, jobs=a.jobs, stop_time=a.stop_time, only=a.only,
+                    force=a.force, log=lambda msg: print(msg, file=sys.stderr, flush=True), command=command)
+    return 0
+
+
 # --- parser ------------------------------------------------------------------------------
 
 class _Parser(argparse.ArgumentParser):
@@ -402,6 +428,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", metavar="LABEL",
                    help="scenario1/scenario2 names the figures after the paper's (default: from metrics.json)")
     p.set_defaults(func=cmd_plot)
+
+    c = sub.add_parser("compare", help="overlay runs and tabulate their metrics",
+                       description="Overlay finished runs (speed, angle error, torque estimate vs T_L_mech) "
+                                   "as OUT/compare_*.png and write one metrics table across them as "
+                                   "OUT/metrics.md and OUT/metrics.csv.")
+    c.add_argument("dirs", nargs="+", metavar="RUN_DIR", help="run directories (results.csv, metrics.json)")
+    c.add_argument("--out", metavar="DIR", default="runs/compare", help="output directory (default: runs/compare)")
+    c.add_argument("--labels", nargs="+", metavar="LABEL", help="one label per run (default: directory names)")
+    c.add_argument("--from", dest="t_from", type=float, default=20.0, metavar="S",
+                   help="start of the window of the 'after' figures [s] (default: 20, past the start-up ramp)")
+    c.add_argument("--no-figures", action="store_true", help="only the table")
+    c.set_defaults(func=cmd_compare)
+
+    rp = sub.add_parser("report", help="run the observer comparison and write docs/results.md",
+                        description="Co-simulate every configuration of the observer comparison (both paper "
+                                    "scenarios x EKF5 paper mode / sensorless, stationary-frame EKF5, EKF4 paper "
+                                    "mode / sensorless, sensored; scenario 2 under sensor noise, offsets and an "
+                                    "initial angle error), JOBS runs at a time, and write OUT/results.md with "
+                                    "its figures in OUT/results/. A run in RUNS whose metrics.json is "
+                                    "'completed' with the same settings and FMU builds is reused.")
+    rp.add_argument("--out", metavar="DIR", default="docs", help="where results.md goes (default: docs)")
+    rp.add_argument("--runs", "--reuse", dest="runs", metavar="DIR", default="runs/report",
+                    help="run directories, reused when up to date (default: runs/report)")
+    rp.add_argument("--jobs", "-j", type=int, default=2, metavar="N", help="runs at a time (default: 2)")
+    rp.add_argument("--stop-time", type=_positive, metavar="S",
+                    help="stop time of every run [s] (default: the scenarios' 350 s); short for a quick look")
+    rp.add_argument("--only", nargs="+", metavar="PATTERN",
+                    help="(re)run only the configurations whose id contains PATTERN (or matches it as a "
+                         "glob), e.g. ekf5ab; the others are taken from RUNS as they are")
+    rp.add_argument("--force", action="store_true", help="rerun the (selected) configurations even when up to date")
+    rp.add_argument("--list", action="store_true", help="list the configuration ids and exit")
+    rp.set_defaults(func=cmd_report)
     return ap
 
 

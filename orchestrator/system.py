@@ -32,8 +32,21 @@ SIGNAL_CONVERSIONS = {"deg": ("rad", math.radians)}
 COLUMN_CONVERSIONS = {"deg": ("rad", math.degrees)}
 #: the placeholder for the project's FMU directory in ``fmu`` paths
 FMU_DIR_PLACEHOLDER = "{fmus}"
-#: the scenarios shipped with the package (``orchestrator/scenarios/<name>.toml``)
-PACKAGED_SCENARIOS = ("scenario1", "scenario2")
+
+
+def _packaged_scenarios() -> tuple[str, ...]:
+    """Names of the system files shipped in ``orchestrator/scenarios/``: the paper's two
+    scenarios first, then their variants in name order."""
+    names = sorted(p.name[:-len(".toml")] for p in (resources.files("orchestrator") / "scenarios").iterdir()
+                   if p.name.endswith(".toml"))
+    return tuple(sorted(names, key=lambda n: (n not in ("scenario1", "scenario2"), n)))
+
+
+#: the scenarios shipped with the package (``orchestrator/scenarios/<name>.toml``): the
+#: paper's scenario1 and scenario2, and variants of scenario 2 with sensor noise, offsets
+#: and an unknown initial angle (scenario2-noisy, scenario2-noisy1A, scenario2-offset,
+#: scenario2-angle-error)
+PACKAGED_SCENARIOS = _packaged_scenarios()
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -52,7 +65,7 @@ def project_fmu_dir() -> Path:
 
 
 def packaged_scenario(name: str) -> Path:
-    """Path of a shipped scenario file (``scenario1``, ``scenario2``)."""
+    """Path of a shipped scenario file (``scenario1``, ``scenario2``, ``scenario2-noisy``, ...)."""
     if name not in PACKAGED_SCENARIOS:
         raise CosimError(f"unknown scenario {name!r}{close_matches(name, PACKAGED_SCENARIOS)}; "
                          f"choose one of {', '.join(PACKAGED_SCENARIOS)} or give a system file")
@@ -331,7 +344,7 @@ def load_system(path) -> SystemSpec:
         from .ssp import load_ssp  # noqa: PLC0415
 
         return load_ssp(path)
-    if path.suffix == "" and str(path) in PACKAGED_SCENARIOS:
+    if str(path) in PACKAGED_SCENARIOS:
         path = packaged_scenario(str(path))
     elif path.suffix == "" and not path.exists():
         raise CosimError(f"no scenario or system file {str(path)!r}{close_matches(str(path), PACKAGED_SCENARIOS)}; "

@@ -16,7 +16,8 @@ from orchestrator_support import toy_fmus, toy_system
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["export-ssp", "--help"], ["build", "--help"],
-                                  ["info", "--help"], ["plot", "--help"]])
+                                  ["info", "--help"], ["plot", "--help"], ["compare", "--help"], ["report", "--help"],
+                                  ["sweep", "--help"]])
 def test_help_on_every_command(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)

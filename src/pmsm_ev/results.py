@@ -86,6 +86,28 @@ def _wrap(x):
     return (x + math.pi) % (2 * math.pi) - math.pi
 
 
+def angle_error_unwrapped(r: dict[str, np.ndarray]) -> np.ndarray:
+    """theta_hat - theta_e [rad], continuous across rows: wrapped to (-pi, pi] at the first
+    row, then unwrapped, so that an estimate slipping by whole electrical turns shows as
+    a steadily growing error (k 2 pi after k slips) instead of a saw-tooth. Valid while
+    the error changes by less than pi between two recorded rows."""
+    err = _wrap(r["theta_hat"] - r["theta_e"])
+    return np.unwrap(err) if len(err) else err
+
+
+def eq31_load_torque(r: dict[str, np.ndarray], motor=None, vehicle=None) -> np.ndarray:
+    """What the EKF5's T_L state converges to (eqs 30-31): its mechanical model carries
+    J_m only, so T_L_hat absorbs friction and the reflected vehicle inertia:
+    T_L_mech + B_m omega + T_m0 + (J_eq - J_m) d(omega)/dt [N m], d(omega)/dt by central
+    differences of the recorded speed. Default parameters unless given."""
+    from .params import MotorParams, VehicleParams  # noqa: PLC0415
+
+    motor, vehicle = motor or MotorParams(), vehicle or VehicleParams()
+    w, t = r["omega_m"], r["time"]
+    dw = np.gradient(w, t) if len(t) >= 2 else np.zeros_like(w)
+    return r["T_L_mech"] + motor.B_m * w + motor.T_m0 + vehicle.reflected_inertia * dw
+
+
 def _rms(x) -> float:
     return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float("nan")
 

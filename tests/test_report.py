@@ -1,0 +1,125 @@
+"""pmsm-cosim report on a tiny configuration (two configurations, 1.5 s runs): the
+numbers in docs/results.md are the runs' metrics; runs are reused when their settings
+are unchanged and rerun when they change; --only reruns only its configurations."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from orchestrator import report
+from orchestrator.cli import main
+from orchestrator.compare import format_value
+from orchestrator_support import project_fmus
+from pmsm_ev.results import read_results
+
+STOP = 1.5
+T_FROM = 0.5
+TINY = [c for c in report.CONFIGS if c.id in ("s2-ekf5-paper", "s2-ekf5ab")]
+
+
+def table_row(text: str, heading: str, label: str) -> list[str]:
+    """Cells of the row ``label`` in the first table after ``heading``."""
+    part = text[text.index(heading):]
+    for line in part.splitlines():
+        if line.startswith(f"| {label} |"):
+            return [c.strip() for c in line.strip().strip("|").split("|")]
+    raise AssertionError(f"no row {label!r} after {heading!r}")
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    project_fmus()
+    base = tmp_path_factory.mktemp("report")
+    logs = []
+    path = report.generate(out=base / "docs", runs_dir=base / "runs", jobs=2, stop_time=STOP, configs=TINY,
+                           log=logs.append, t_from=T_FROM)
+    return base, path, logs
+
+
+def test_report_tables_are_the_runs_metrics(tiny):
+    base, path, logs = tiny
+    assert "0 runs reused, 2 to run, 2 at a time" in logs[0]
+    text = path.read_text(encoding="utf-8")
+    assert "pmsm-cosim report" in text and f"stop time {STOP:g} s" in text
+    keys = report.TABLE_KEYS
+    for cfg in TINY:
+        run_dir = base / "runs" / cfg.id
+        m = json.loads((run_dir / "metrics.json").read_text())
+        assert m["status"] == "completed" and m["stop_time"] == STOP
+        r = read_results(run_dir)
+        cells = dict(zip(keys, table_row(text, "## Scenario 2", cfg.label)))
+        assert cells["status"] == "completed"
+        # whole run: metrics.json's figure
+        assert cells["speed_rms_error"] == format(m["speed_rms_error"], ".3f")
+        # after T_FROM: recomputed here from results.csv
+        w = r["time"] >= T_FROM
+        assert cells["speed_rms_after"] == format(math.sqrt(np.mean((r["omega_ref"] - r["omega_m"])[w] ** 2)), ".3f")
+        assert cells["omega_hat_rms_after"] == format(
+            math.sqrt(np.mean((r["omega_hat"] - r["omega_m"])[w] ** 2)), ".3f")
+        err = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
+        assert cells["theta_max_after"] == format(np.max(np.abs(err[w])), ".3f")
+        assert cells["step_dev_max"] == "-"  # no elevation step in 1.5 s
+        # the run was made with the configuration's settings
+        settings = m["settings"]
+        ctrl = next(c for c in settings["components"] if c["name"] == "ctrl")
+        assert ctrl["fmu"].endswith(report.OBSERVER_FMUS[cfg.setup.observer] + ".fmu")
+        assert ctrl["start"]["angle_source"] == cfg.setup.angle_source
+        if cfg.setup.flying:  # flying start at 200 rad/s, constant reference
+            assert r["omega_m"][0] == 200.0 and np.all(r["omega_ref"] == 200.0) and r["omega_hat"][0] == 200.0
+            assert abs(r["omega_m"][-1] - 200.0) < 5.0
+        else:  # the start-up ramp, 20 rad/s^2
+            assert r["omega_m"][0] == 0.0 and r["omega_ref"][-1] == pytest.approx(20.0 * STOP)
+    # the two configurations are different runs
+    a, b = (table_row(text, "## Scenario 2", c.label) for c in TINY)
+    assert a[2:] != b[2:]
+    # the prose quotes the same numbers as the table
+    assert f"ω̂ RMS err after {T_FROM:g} s" in text
+    theta = dict(zip(keys, table_row(text, "## Scenario 2", "EKF5 paper mode")))["theta_drift"]
+    assert f"{theta} rad (scenario 2)" in text
+    figs = sorted((base / "docs" / "results").glob("*.png"))
+    assert {p.stem for p in figs} >= {"s2_speed", "s2_angle_error", "s2_torque"}
+    for p in figs:
+        assert 0 < p.stat().st_size < 150_000
+        assert f"(results/{p.name})" in text
+
+
+def test_report_reuses_and_reruns(tiny):
+    base, path, _ = tiny
+    runs = base / "runs"
+    stamp = {c.id: (runs / c.id / "metrics.json").stat().st_mtime_ns for c in TINY}
+    logs = []
+    report.generate(out=base / "docs", runs_dir=runs, stop_time=STOP, configs=TINY, log=logs.append, t_from=T_FROM)
+    assert "2 runs reused, 0 to run" in logs[0]
+    assert {c.id: (runs / c.id / "metrics.json").stat().st_mtime_ns for c in TINY} == stamp
+    # --only: only the selected configuration reruns
+    logs = []
+    report.generate(out=base / "docs", runs_dir=runs, stop_time=STOP, configs=TINY, log=logs.append,
+                    only=["ekf5ab"], force=True, t_from=T_FROM)
+    assert "1 runs reused, 1 to run" in logs[0] and any(m.startswith("s2-ekf5ab: completed") for m in logs)
+    assert (runs / "s2-ekf5-paper" / "metrics.json").stat().st_mtime_ns == stamp["s2-ekf5-paper"]
+    assert (runs / "s2-ekf5ab" / "metrics.json").stat().st_mtime_ns != stamp["s2-ekf5ab"]
+    # an interrupted run (or one with other settings) is not reused
+    m = json.loads((runs / "s2-ekf5-paper" / "metrics.json").read_text())
+    m["status"] = "interrupted"
+    (runs / "s2-ekf5-paper" / "metrics.json").write_text(json.dumps(m))
+    key = report._key(TINY[0], STOP, runs / "omega_ref_flying.csv", report._fmu_hashes({"FocEkf5", "PmsmEvPlant"}))
+    assert not report.reusable(runs / "s2-ekf5-paper", key)
+    assert not report.reusable(runs / "s2-ekf5ab", report._key(TINY[1], 2 * STOP, runs / "x.csv", {
+        "FocEkf5AB": "?", "PmsmEvPlant": "?"}), ignore_hashes=True)
+    assert report.reusable(runs / "s2-ekf5ab", report._key(TINY[1], STOP, runs / "x.csv", {
+        "FocEkf5AB": "?", "PmsmEvPlant": "?"}), ignore_hashes=True)
+
+
+def test_report_cli_errors(tmp_path, capsys):
+    assert main(["report", "--only", "nosuchconfig", "--runs", str(tmp_path / "r"), "--out",
+                 str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --only nosuchconfig: matches no configuration")
+    assert main(["report", "--jobs", "0", "--runs", str(tmp_path / "r")]) == 2
+    assert main(["report", "--list"]) == 0
+    ids = capsys.readouterr().out.split()
+    assert "s1-ekf5-paper:" in ids and "s2-angle-ekf5ab:" in ids and len(report.CONFIGS) == 28
