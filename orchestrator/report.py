@@ -72,8 +72,10 @@ REALISM_SCENARIOS = (
     ("noisy", "scenario2-noisy", "current-sensor noise σ = 0.1 A"),
     ("noisy1A", "scenario2-noisy1A", "current-sensor noise σ = 1 A"),
     ("offset", "scenario2-offset", "sensor offsets +2 A (a), −1 A (b)"),
-    ("theta0", "scenario2-angle-error", "initial angle error −0.5 rad"),
+    ("angle", "scenario2-angle-error", "initial angle error −0.5 rad"),
 )
+#: file-name part of the variants' figures
+FIG_NAMES = {"noisy": "noisy", "noisy1A": "noisy1A", "offset": "offset", "angle": "initial_angle"}
 REALISM_SETUPS = ("ekf5-paper", "ekf5-sensorless", "ekf5ab", "ekf4-paper")
 
 
@@ -386,15 +388,15 @@ def _figures(data: Data, fig_dir: Path) -> list[Path]:
         rs = runs(ids)
         if not rs:
             continue
-        made.append(plot_overlay(rs, "angle_error", fig_dir / f"s2_{short}_angle_error.png",
+        made.append(plot_overlay(rs, "angle_error", fig_dir / f"s2_{FIG_NAMES[short]}_angle_error.png",
                                  title=f"Scenario 2, {desc}: angle error θ̂ − θ (unwrapped)"))
-        made.append(plot_overlay(rs, "speed_error", fig_dir / f"s2_{short}_speed_error.png",
+        made.append(plot_overlay(rs, "speed_error", fig_dir / f"s2_{FIG_NAMES[short]}_speed_error.png",
                                  title=f"Scenario 2, {desc}: speed error ω_ref − ω_m"))
         if short == "noisy1A":
-            made.append(plot_overlay(rs, "torque", fig_dir / f"s2_{short}_torque.png",
+            made.append(plot_overlay(rs, "torque", fig_dir / f"s2_{FIG_NAMES[short]}_torque.png",
                                      title=f"Scenario 2, {desc}: load-torque estimate T̂_L (dashed: T_L,mech)"))
-        if short == "theta0":
-            made.append(plot_overlay(rs, "angle_error", fig_dir / f"s2_{short}_angle_error_start.png",
+        if short == "angle":
+            made.append(plot_overlay(rs, "angle_error", fig_dir / f"s2_{FIG_NAMES[short]}_angle_error_start.png",
                                      window=(0.0, 3.0),
                                      title=f"Scenario 2, {desc}: angle error over the first 3 s"))
     return made
@@ -674,7 +676,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
     L.append("")
     rec_lines = []
     for k in REALISM_SETUPS:
-        run = d.runs.get(f"s2-theta0-{k}")
+        run = d.runs.get(f"s2-angle-{k}")
         if run is None:
             continue
         rc = recovery(run)
@@ -688,7 +690,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
                  "at the end [rad] |\n|---|---:|---:|---:|---:|\n" + "\n".join(rec_lines) + "\n")
     for short, _, _ in REALISM_SCENARIOS:
         for kind in ("angle_error", "angle_error_start", "speed_error", "torque"):
-            name = f"s2_{short}_{kind}"
+            name = f"s2_{FIG_NAMES[short]}_{kind}"
             if name in fig_names:
                 L.append(f"![{name}](results/{name}.png)\n")
 
