@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -123,3 +124,36 @@ def test_report_cli_errors(tmp_path, capsys):
     assert main(["report", "--list"]) == 0
     ids = capsys.readouterr().out.split()
     assert "s1-ekf5-paper:" in ids and "s2-angle-ekf5ab:" in ids and len(report.CONFIGS) == 28
+
+
+def synthetic_run(t, theta_err, delta_deg, omega_m):
+    """A Run whose angle error, elevation and speed are given (other columns zero)."""
+    from orchestrator.compare import Run
+
+    z = np.zeros_like(t)
+    theta_e = (7.0 * t + math.pi) % (2 * math.pi) - math.pi
+    r = {"time": t, "theta_e": theta_e, "theta_hat": theta_e + theta_err, "delta_deg": delta_deg,
+         "omega_m": omega_m, "omega_ref": z + 200.0, "omega_hat": omega_m, "T_L_hat": z, "T_L_mech": z}
+    return Run("synthetic", Path("."), {}, r)
+
+
+def test_recovery_needs_the_error_to_stay_small():
+    t = np.arange(0.0, 60.0, 0.01)
+    zero = np.zeros_like(t)
+    converging = synthetic_run(t, -0.5 * np.exp(-t / 0.2), zero, zero + 200.0)
+    rc = report.recovery(converging)
+    assert rc["start"] == pytest.approx(-0.5) and abs(rc["at_1s"]) < 0.01
+    assert rc["t_recovered"] == pytest.approx(0.2 * math.log(0.5 / report.RECOVERED), abs=0.011)
+    drifting = synthetic_run(t, -0.5 - 0.2 * t, zero, zero + 200.0)  # crosses the band, never stays
+    assert report.recovery(drifting)["t_recovered"] is None
+
+
+def test_load_split_sums_drift_per_plateau_kind():
+    t = np.arange(0.0, 90.0, 0.01)
+    delta = np.where((t >= 30) & (t < 60), 22.0, 0.0)
+    err = np.cumsum(np.where(delta == 0, -0.001, 0.0))  # -0.1 rad/s on level plateaus
+    omega = 200.0 + np.where(delta == 0, 5.0 * np.sin(t), 0.0)
+    sp = report.load_split(synthetic_run(t, err, delta, omega), t_from=20.0)
+    assert sp["level_drift"] == pytest.approx(-0.1 * (10 + 30), abs=0.01)  # 20-30 s and 60-90 s
+    assert sp["inclined_drift"] == pytest.approx(0.0, abs=1e-12)
+    assert sp["level_ptp"] == pytest.approx(10.0, abs=0.01) and sp["inclined_ptp"] == 0.0
