@@ -39,7 +39,6 @@ import sys
 import tempfile
 import threading
 import time
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -50,7 +49,8 @@ from pmsm_ev.results import SUMMARY_METRICS, SUMMARY_UNITS, summary_metrics
 from pmsm_ev.scenarios import ProfileError
 
 from .errors import CosimError, close_matches, one_line
-from .system import PACKAGED_SCENARIOS, SystemSpec, load_system, project_fmu_dir, resolve_fmu_path, split_reference
+from .system import (PACKAGED_SCENARIOS, SystemSpec, load_system, project_fmu_dir, read_toml, resolve_fmu_path,
+                     split_reference)
 
 #: the sweeps shipped with the package (``orchestrator/sweeps/<name>.toml``)
 PACKAGED_SWEEPS = ("ekf5_load_noise",)
@@ -386,16 +386,7 @@ def load_sweep(path) -> SweepSpec:
         else:
             raise CosimError(f"no sweep file {str(path)!r}{close_matches(str(path), PACKAGED_SWEEPS)}; "
                              f"shipped sweeps: {', '.join(PACKAGED_SWEEPS)}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CosimError(f"{path}: sweep file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CosimError(f"{path}: cannot read sweep file ({exc})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CosimError(f"{path}: not valid TOML ({exc})") from None
+    data = read_toml(path, "sweep file")
     return parse_sweep(data, path)
 
 

@@ -349,17 +349,22 @@ def load_system(path) -> SystemSpec:
     elif path.suffix == "" and not path.exists():
         raise CosimError(f"no scenario or system file {str(path)!r}{close_matches(str(path), PACKAGED_SCENARIOS)}; "
                          f"shipped scenarios: {', '.join(PACKAGED_SCENARIOS)}")
+    return parse_system(read_toml(path, "system file"), path)
+
+
+def read_toml(path: Path, what: str) -> dict:
+    """The table of a TOML file; a one-line CosimError naming ``path`` and ``what`` it is
+    (e.g. "system file") if it is missing, unreadable or not valid TOML."""
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise CosimError(f"{path}: system file not found") from None
+        raise CosimError(f"{path}: {what} not found") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise CosimError(f"{path}: cannot read system file ({one_line(exc)})") from None
+        raise CosimError(f"{path}: cannot read {what} ({one_line(exc)})") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CosimError(f"{path}: not valid TOML ({exc})") from None
-    return parse_system(data, path)
 
 
 def parse_system(data: dict, path: Path | None = None, base_dir: Path | None = None) -> SystemSpec:
