@@ -617,7 +617,10 @@ for i in range(40):
     except Exception:
         assert i % 2
     fmu.freeInstance()
-print("survived")
+print("survived", flush=True)
+# leave before the native teardown (pythonfmu binaries + numba's LLVM), which can abort in
+# free() after the interpreter is gone: see orchestrator.cli.entry_point
+import os; os._exit(0)
 """
 
 
@@ -649,7 +652,9 @@ signals = np.array([(0.0, 20.0, -5.0, 100.0, 0.4, 10.0)],
 q = fmpy.simulate_fmu(ctrl, stop_time=0.01, step_size=1e-4, output_interval=1e-4, input=signals)
 physics = sorted(m for m in sys.modules if m.startswith("pmsm_ev"))
 files = sorted({sys.modules[m].__file__ for m in physics})
-print(json.dumps({"i_d": float(r["i_d"][-1]), "v_q": float(q["v_q"][-1]), "modules": physics, "files": files}))
+print(json.dumps({"i_d": float(r["i_d"][-1]), "v_q": float(q["v_q"][-1]), "modules": physics, "files": files}),
+      flush=True)
+import os; os._exit(0)  # before the native teardown, see orchestrator.cli.entry_point
 """
 
 
