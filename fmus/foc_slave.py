@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from pmsm_ev import __version__
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import DT_DEFAULT, ControllerParams, EkfParams, MotorParams
+from pmsm_ev.params import SENSORLESS_EKF, DT_DEFAULT, ControllerParams, EkfParams, MotorParams, StartupParams
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
 
 #: relative tolerance on the communication step size after the first step
@@ -78,8 +78,16 @@ class FocSlave(DriveSlave):
         self.add_output("i_qref", "A", "q-current reference from the speed PI (eq 14), limited to i_q_max"
                         + hold, discrete=True)
 
-        self.add_parameters(ControllerParams, EkfParams, MotorParams)
-        self.add_parameter("angle_source", "measured")
+        self.add_output("mode", None, "operating mode: 0 alignment at standstill, 1 I-f (current-frequency) "
+                                      "drive, 2 FOC on the observer's angle and speed (only the sensorless "
+                                      "unit has modes 0 and 1; the others are always 2)" + hold,
+                        discrete=True, start=0.0 if observer == "sensorless" else 2.0)
+        self._sensorless = observer == "sensorless"
+        if self._sensorless:
+            self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams)
+        else:
+            self.add_parameters(ControllerParams, EkfParams, MotorParams)
+            self.add_parameter("angle_source", "measured")
         self._unit = None
         self._dt = None  # sample period, fixed by the first do_step
 
@@ -89,8 +97,13 @@ class FocSlave(DriveSlave):
         self._dt = None
 
     def _build_unit(self, dt: float) -> None:
-        self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
-                                 self.parameters(ControllerParams), self.parameters(EkfParams), dt)
+        if self._sensorless:
+            self._unit = ControlUnit(self._observer, "estimated", self.parameters(MotorParams),
+                                     self.parameters(ControllerParams), self.parameters(EkfParams), dt,
+                                     self.parameters(StartupParams))
+        else:
+            self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
+                                     self.parameters(ControllerParams), self.parameters(EkfParams), dt)
         self.mark_built()
         self._copy_outputs()
 
@@ -118,6 +131,7 @@ class FocSlave(DriveSlave):
         self.i_q = u.i_q
         self.i_qref = u.i_qref
         self.i_d_hat, self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat = u.estimates
+        self.mode = u.mode
 
     def _fix_sample_period(self, step_size: float) -> None:
         if not self._initialized:
@@ -135,6 +149,11 @@ class FocSlave(DriveSlave):
         try:
             if step_size != self._dt:
                 self._fix_sample_period(step_size)
+            if self._sensorless:  # never reads theta_meas, omega_meas
+                (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
+                 self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode) = self._unit.step(
+                    self.i_alpha, self.i_beta, self.omega_ref)
+                return True
             (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
              self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
                 self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)

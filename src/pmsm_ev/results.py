@@ -26,6 +26,9 @@ CONTRACT_COLUMNS = (
 #: extra columns the project's runs add
 EXTRA_COLUMNS = ("i_alpha", "i_beta", "v_alpha", "v_beta", "i_qref", "v_vehicle")
 ALL_COLUMNS = CONTRACT_COLUMNS + EXTRA_COLUMNS
+#: what runs of the sensorless unit add: the vehicle position [m] (roll-back) and the mode
+#: (0 alignment, 1 I-f, 2 closed loop on the observer; ``pmsm_ev.control_unit.MODES``)
+SENSORLESS_COLUMNS = ("x_vehicle", "mode")
 
 #: speed band for settling times [rad/s]
 SETTLING_BAND = 1.0
