@@ -550,16 +550,18 @@ _HALF_PI = 0.5 * math.pi
 
 
 @kernel()
-def seat_current_pis(s, c, v_alpha, v_beta, theta, i_dref, i_qref, i_d, i_q, omega_est):
+def seat_current_pis(s, c, theta, turn, i_dref, i_qref, i_d, i_q, omega_est):
     """Set the current PIs' integrators and decoupling filters so that ``current_step`` in the
     frame at ``theta`` (with these references, currents and speed) first returns the voltage
-    (v_alpha, v_beta) now held: a change of frame without a voltage jump."""
-    v_d, v_q = park(v_alpha, v_beta, theta)
-    s[S_I_DL] = i_d
-    s[S_I_QL] = i_q
+    held now, turned on by ``turn`` [rad] (the angle a rotor-synchronous vector turns in a
+    period): a change of frame without a voltage jump. The filters start at the references,
+    so that only the integrators carry the change (bumpless transfer)."""
+    v_d, v_q = park(s[S_V_ALPHA], s[S_V_BETA], theta - turn)
+    s[S_I_DL] = i_dref
+    s[S_I_QL] = i_qref
     w_e = c[C_N] * omega_est
-    s[S_INT_D] = v_d + w_e * c[C_L_Q] * i_q - c[C_KP_ID] * (i_dref - i_d)  # (15), (19)
-    back_emf = w_e * c[C_L_D] * i_d + w_e * c[C_PSI]
+    s[S_INT_D] = v_d + w_e * c[C_L_Q] * i_qref - c[C_KP_ID] * (i_dref - i_d)  # (15), (19)
+    back_emf = w_e * c[C_L_D] * i_dref + w_e * c[C_PSI]
     if c[C_PAPER_SIGNS] != 0.0:
         s[S_INT_Q] = v_q + back_emf - c[C_KP_IQ] * (i_qref - i_q)  # (16), (20) as printed
     else:
@@ -634,7 +636,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         s[S_I_TGT] = max(c[C_IF_MARGIN] * i_mag, c[C_I_IF])
         s[S_OMEGA_IF] = omega_hat
         s[S_AGREE] = 0.0
-        seat_current_pis(s, c, s[S_V_ALPHA], s[S_V_BETA], s[S_PHI] + c[C_ADVANCE] * omega_hat,
+        seat_current_pis(s, c, s[S_PHI] + c[C_ADVANCE] * omega_hat, c[C_N] * omega_hat * dt,
                          i_mag, 0.0, i_mag, 0.0, 0.0)
         mode = MODE_IF
     if mode == MODE_IF:
@@ -657,7 +659,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             theta = s[S_X + 3]
             i_d, i_q = park(i_alpha, i_beta, theta)
             s[S_W_INT] = i_q - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_q now
-            seat_current_pis(s, c, s[S_V_ALPHA], s[S_V_BETA], theta + c[C_ADVANCE] * omega_hat,
+            seat_current_pis(s, c, theta + c[C_ADVANCE] * omega_hat, c[C_N] * s[S_OMEGA_IF] * dt,
                              c[C_I_D_REF], i_q, i_d, i_q, omega_hat)
             s[S_AGREE] = 0.0
             mode = MODE_EKF
