@@ -142,6 +142,11 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "agree_tol": (None, "handover up: relative agreement of omega_hat with the I-f speed"),
     "agree_time": ("s", "handover up: how long omega_hat must agree with the I-f speed"),
     "if_margin": (None, "I-f current after a handover down, times the present current"),
+    "if_damping": (None, "damping ratio of the rotor's swing on the I-f vector (0 = plain I-f)"),
+    "if_damping_filter": ("s", "time constant of the low-pass filter on omega_hat - omega_if before the I-f "
+                                "damping (0 = none)"),
+    "p0_omega_aligned": ("rad2/s2", "EKF covariance of the speed at its restart after the alignment"),
+    "p0_theta_aligned": ("rad2", "EKF covariance of the angle at its restart after the alignment"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),

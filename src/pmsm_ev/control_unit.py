@@ -26,6 +26,8 @@ never reads theta_meas or omega_meas, and it returns the mode as a 13th output.
 
 from __future__ import annotations
 
+import math
+
 from . import accel
 from . import kernels as _k
 from .controller import CurrentController, SpeedController
@@ -42,7 +44,8 @@ _STARTUP_SLOTS = (
     ("omega_up", _k.C_W_UP), ("omega_down", _k.C_W_DOWN), ("agree_tol", _k.C_AGREE_TOL),
     ("agree_time", _k.C_AGREE_TIME), ("if_margin", _k.C_IF_MARGIN))
 #: state slots of the sensorless start-up, saved and restored with the unit
-_STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE)
+_STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
+                  _k.S_SLIP)
 
 
 def _slot(index: int, doc: str) -> property:
@@ -101,6 +104,15 @@ class ControlUnit:
         c[_k.C_ESTIMATED] = 1.0 if self.angle_source == "estimated" else 0.0
         for name, slot in _STARTUP_SLOTS:
             c[slot] = float(getattr(self.startup, name))
+        # the EKF's restart after the alignment: its P0, with the speed and angle known
+        st = self.startup
+        e = self.ekf_params
+        for i, p0 in enumerate((e.p0_i, e.p0_i, st.p0_omega_aligned, st.p0_theta_aligned, e.p0_TL)):
+            c[_k.C_P0_ALIGNED + i] = float(p0)
+        # I-f damping gain over sqrt(i): the linearised swing J s^2 + N psi i (k s + N) = 0
+        c[_k.C_IF_DAMP] = 2.0 * self.startup.if_damping * math.sqrt(self.observer.J / self.motor.psi) \
+            if self.sensorless else 0.0
+        c[_k.C_SLIP_FILTER] = min(dt / st.if_damping_filter, 1.0) if st.if_damping_filter > 0 else 1.0
         self.reset()
 
     def reset(self) -> None:

@@ -78,7 +78,8 @@ S_STARTED = 91  #: stationary-frame EKF5: 1.0 once past its first sample (x0 is 
 # step, the current vector of alignment and I-f (angle in the stationary frame, magnitude,
 # target magnitude), the I-f speed and how long omega_hat has agreed with it
 S_MODE, S_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE = range(92, 99)
-UNIT_STATE = 99
+S_SLIP = 99  #: I-f: omega_hat - omega_if, low-pass filtered (the damping's input) [rad/s]
+UNIT_STATE = 100
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -90,10 +91,13 @@ C_I_D_REF, C_ADVANCE, C_HALF_PERIOD_N, C_ZOH, C_DELAYED, C_ESTIMATED, C_OBSERVER
  C_R0, C_R1) = range(22, 35)  #: EKF model constants (A2-A32) and R
 C_Q = 35  #: EKF Q diagonal, n entries
 C_C_MID = 40  #: stationary-frame EKF5: d(mid-period angle)/d(omega_m) = N dt / 2
-C_P0 = 41  #: EKF P0 diagonal, n entries (the restart after the alignment)
+C_P0 = 41  #: EKF P0 diagonal, n entries
 (C_T_RAMP, C_T_HOLD, C_T_SWEEP, C_T_SETTLE, C_I_ALIGN, C_I_IF, C_IF_ACCEL, C_I_RATE, C_W_UP, C_W_DOWN,
  C_AGREE_TOL, C_AGREE_TIME, C_IF_MARGIN) = range(46, 59)  #: ``pmsm_ev.params.StartupParams``
-UNIT_PARAMS = 59
+C_IF_DAMP = 59  #: I-f damping: 2 zeta sqrt(J / psi) [rad s sqrt(A)], divided by sqrt(i) in use
+C_P0_ALIGNED = 60  #: EKF P0 diagonal at the restart after the alignment, 5 entries
+C_SLIP_FILTER = 65  #: dt / time constant of the low-pass filter of the damping's input [-]
+UNIT_PARAMS = 66
 
 #: modes of the sensorless unit (``S_MODE``)
 MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
@@ -570,7 +574,8 @@ def seat_current_pis(s, c, theta, turn, i_dref, i_qref, i_d, i_q, omega_est):
 
 @kernel()
 def restart_ekf(s, c, theta, i_d, i_q):
-    """The EKF restarted at a known angle from standstill: x = [i_d, i_q, 0, theta, 0], P = P0."""
+    """The EKF restarted at a known angle from standstill: x = [i_d, i_q, 0, theta, 0], P = the
+    restart's P0 (``C_P0_ALIGNED``)."""
     s[S_X] = i_d
     s[S_X + 1] = i_q
     s[S_X + 2] = 0.0
@@ -579,7 +584,7 @@ def restart_ekf(s, c, theta, i_d, i_q):
     for i in range(25):
         s[S_P + i] = 0.0
     for i in range(5):
-        s[S_P + 6 * i] = c[C_P0 + i]
+        s[S_P + 6 * i] = c[C_P0_ALIGNED + i]
     s[S_THETA_PRIOR] = theta
 
 
@@ -673,6 +678,12 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     else:
         theta_ctrl = s[S_PHI]
         omega_ctrl = s[S_OMEGA_IF]
+        if mode == MODE_IF:  # damp the rotor's swing on the vector: pull the vector back by
+            # k (omega_hat - omega_if), filtered, k = 2 zeta sqrt(J / (psi i)) (docs/sensorless.md)
+            s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - omega_ctrl - s[S_SLIP])
+            theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP]
+        else:
+            s[S_SLIP] = 0.0
         i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
         i_qref = 0.0
         v_d, v_q = current_step(s, c, s[S_I_MAG], 0.0, i_d, i_q, 0.0)  # (15)-(16), no decoupling

@@ -366,6 +366,22 @@ class StartupParams:
     #: I-f current after the handover down, times the present current [-] [chosen]: a lag
     #: of acos(1/1.3) = 40 deg in reserve for load changes while the car stands
     if_margin: float = 1.3
+    #: damping ratio of the rotor's swing on the I-f vector [-] [chosen]: the magnet on the
+    #: vector is a spring (N^2 psi i per rad at the shaft) on J_eq with almost no damping;
+    #: the vector is pulled back by k (omega_hat - omega_if), k = 2 zeta sqrt(J / (psi i)),
+    #: which damps it (docs/sensorless.md); 0.7: a well-damped second-order response.
+    #: 0 = the plain I-f (the swing then rings, +-35 N m at a stop on 22 deg)
+    if_damping: float = 0.7
+    #: time constant of the low-pass filter on omega_hat - omega_if before the damping [s]
+    #: [chosen]: 10 ms, a tenth of the swing's period at 60-300 A (0.2-0.5 s), so it keeps the
+    #: sensor noise that omega_hat carries at low speed out of the vector's angle
+    if_damping_filter: float = 0.01
+    #: EKF covariances at its restart after the alignment [chosen]: the rotor is at rest on the
+    #: vector, to within the swing left (~0.05 rad): (1 rad/s)^2 and (0.1 rad)^2, not the
+    #: (10 rad/s)^2, pi^2 of an unknown start (EkfParams.p0_omega, p0_theta), whose first
+    #: corrections on noisy currents would jolt omega_hat and with it the I-f damping
+    p0_omega_aligned: float = 1.0
+    p0_theta_aligned: float = 0.01
 
     @property
     def align_time(self) -> float:
