@@ -22,5 +22,6 @@ class FocSensorless(FocSlave):
             "turns, so a route should hold omega_ref = 0 that long",
             parameter_notes={"q_omega_ekf4": "not used by this observer",
                              "x0_omega": "not used (the EKF restarts at rest after the alignment)",
-                             "x0_theta": "not used (the EKF restarts at the aligned angle)"},
+                             "x0_theta": "not used (the EKF restarts at the aligned angle)",
+                             "angle_source": "not used: the sensorless unit always uses its estimate"},
             **kwargs)

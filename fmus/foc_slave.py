@@ -87,7 +87,7 @@ class FocSlave(DriveSlave):
             self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams)
         else:
             self.add_parameters(ControllerParams, EkfParams, MotorParams)
-            self.add_parameter("angle_source", "measured")
+        self.add_parameter("angle_source", "measured")  # the same interface for every controller
         self._unit = None
         self._dt = None  # sample period, fixed by the first do_step
 
@@ -97,8 +97,8 @@ class FocSlave(DriveSlave):
         self._dt = None
 
     def _build_unit(self, dt: float) -> None:
-        if self._sensorless:
-            self._unit = ControlUnit(self._observer, "estimated", self.parameters(MotorParams),
+        if self._sensorless:  # angle_source checked, not used: always the estimate
+            self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
                                      self.parameters(ControllerParams), self.parameters(EkfParams), dt,
                                      self.parameters(StartupParams))
         else:

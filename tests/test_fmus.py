@@ -117,11 +117,6 @@ def unit_outputs(u: ControlUnit):
     return [u.v_alpha, u.v_beta, u.v_d, u.v_q, *u.estimates, u.i_d, u.i_q, u.i_qref, u.mode]
 
 
-def ctrl_start(name: str, angle_source: str) -> dict:
-    """Start values choosing the angle source (the sensorless unit has no such parameter)."""
-    return {} if name == "FocSensorless" else {"angle_source": angle_source}
-
-
 def omega_ramp(t):
     return 200.0 * min(t / 10.0, 1.0)
 
@@ -237,7 +232,7 @@ def test_model_description_is_complete(fmus, name):
         (ControllerParams, EkfParams, MotorParams, StartupParams) if name == "FocSensorless" else \
         (ControllerParams, EkfParams, MotorParams)
     expected = {f.name for cls in groups for f in dataclasses.fields(cls)}
-    if name not in ("PmsmEvPlant", "FocSensorless"):
+    if name != "PmsmEvPlant":
         expected.add("angle_source")
     assert {v.name for v in md.modelVariables if v.causality == "parameter"} == expected
     inputs = PLANT_INPUTS if name == "PmsmEvPlant" else CTRL_INPUTS
@@ -326,7 +321,7 @@ def test_controller_with_constant_inputs_gives_bounded_voltages(fmus, name, angl
     signals = np.array([(0.0, 20.0, -5.0, 100.0, 0.4, 10.0), (1.0, 20.0, -5.0, 100.0, 0.4, 10.0)],
                        dtype=[("time", float)] + [(n, float) for n in CTRL_INPUTS])
     r = fmpy.simulate_fmu(str(fmus[name]), stop_time=0.2, step_size=DT, output_interval=DT, input=signals,
-                          start_values=ctrl_start(name, angle_source))
+                          start_values={"angle_source": angle_source})
     for n in CTRL_OUTPUTS:
         assert np.all(np.isfinite(r[n])), n
     assert np.max(np.hypot(r["v_alpha"], r["v_beta"])) <= u_max * (1 + 1e-12)
@@ -359,7 +354,7 @@ def test_cosimulation_is_bit_identical_to_the_classes(unzipped, name, angle_sour
     """Gauss-Seidel, controller first: the FMUs give exactly the numbers of Plant and
     ControlUnit called in the same order (the monolithic reference's loop)."""
     p = Instance(unzipped, "PmsmEvPlant", instance_name="plant")
-    c = Instance(unzipped, name, instance_name="ctrl", start=ctrl_start(name, angle_source))
+    c = Instance(unzipped, name, instance_name="ctrl", start={"angle_source": angle_source})
     plant, unit = Plant(), ControlUnit(OBSERVER[name], angle_source, dt=DT)
     p_out, c_out = p.refs(PLANT_OUTPUTS), c.refs(CTRL_OUTPUTS)
     c_in, p_in = c.refs(CTRL_INPUTS), p.refs(PLANT_INPUTS)
