@@ -311,8 +311,9 @@ def _targets(data) -> tuple[list[str], list[str]]:
             if not f:
                 continue
             e, rb = f["startup_speed_error_max"], f["roll_back_start"]
-            worst_speed = e if worst_speed is None else max(worst_speed, e)
-            worst_roll = rb if worst_roll is None else max(worst_roll, rb)
+            if e is not None:  # None: the run ended before STARTUP_FROM
+                worst_speed = e if worst_speed is None else max(worst_speed, e)
+                worst_roll = rb if worst_roll is None else max(worst_roll, rb)
     if worst_speed is not None:
         add(f"Start-up, every initial angle: abs(ω_m − ω_ref) ≤ {STARTUP_BAND:g} rad/s from {STARTUP_FROM:g} s on",
             f"largest {worst_speed:.2f} rad/s (8 angles × exact / σ = 1 A)", worst_speed <= STARTUP_BAND)
