@@ -123,8 +123,7 @@ class FocSlave(DriveSlave):
 
     def _copy_outputs(self) -> None:
         u = self._unit
-        self.v_alpha = u.v_alpha
-        self.v_beta = u.v_beta
+        self.v_alpha, self.v_beta = u.v_out
         self.v_d = u.v_d
         self.v_q = u.v_q
         self.i_d = u.i_d

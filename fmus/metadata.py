@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 
 #: unit name -> exponents of the SI base units (FMI 2.0 BaseUnit attributes)
-UNITS: dict[str, dict[str, int]] = {
+UNITS: dict[str, dict[str, float]] = {
     "V": {"kg": 1, "m": 2, "s": -3, "A": -1},
     "A": {"A": 1},
     "A2": {"A": 2},
@@ -43,6 +43,8 @@ UNITS: dict[str, dict[str, int]] = {
     "A/s": {"A": 1, "s": -1},
     "rad/s2": {"rad": 1, "s": -2},
     "A/rad": {"A": 1, "rad": -1},
+    "degC": {"K": 1, "offset": 273.15},  # FMI 2.0 BaseUnit: value in K = value in degC + offset
+    "1/K": {"K": -1},
 }
 
 #: unit name -> [(display unit, factor)], display value = factor * value
@@ -123,6 +125,18 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "adc_range": ("A", "ADC full scale: the converter spans -adc_range..+adc_range"),
     "v_dc": ("V", "DC-link voltage; the voltage vector is limited to v_dc/sqrt(3) (0 = ideal inverter)"),
     "inverter_delay": (None, "actuation delay in communication steps, 0 or 1"),
+    "dead_time": ("s", "inverter dead time per leg (0 = off); per-phase voltage error v_dc dead_time / step "
+                       "in the sign of the phase current; needs v_dc > 0"),
+    "dead_time_i0": ("A", "current scale of the dead-time error's soft sign tanh(i / dead_time_i0)"),
+    "sat_i_q": ("A", "q-axis saturation current: psi_q = L_q i_q / (1 + |i_q| / sat_i_q) (0 = off, linear)"),
+    "sat_i_d": ("A", "d-axis saturation current: psi_d = psi + L_d i_d / (1 + |i_d| / sat_i_d) (0 = off)"),
+    "T_winding": ("degC", "winding temperature: R_s(T) = R_s (1 + alpha_R (T - 20 degC))"),
+    "T_magnet": ("degC", "magnet temperature: psi(T) = psi (1 + alpha_psi (T - 20 degC))"),
+    "alpha_R": ("1/K", "temperature coefficient of the winding resistance (copper 0.00393)"),
+    "alpha_psi": ("1/K", "temperature coefficient of the magnet flux (NdFeB about -0.0012)"),
+    "dead_time_comp": ("V", "dead-time compensation: per-phase voltage added in the sign of the measured "
+                            "current (0 = off; v_dc t_d / T_s cancels the plant's dead time)"),
+    "dead_time_comp_i0": ("A", "current scale of the dead-time compensation's soft sign"),
     "delay_compensation": (None, "actuation delay the controller accounts for, 0 or 1 periods (observer input)"),
     "x0_omega": ("rad/s", "EKF initial speed estimate (flying start: set to the plant's initial speed)"),
     "x0_theta": ("rad", "EKF initial electrical-angle estimate, the observer's guess of theta(0)"),

@@ -13,7 +13,12 @@ Per control period, at t_k, with the plant's measured currents at t_k:
 5. inverse Park at the control angle (measured, or the updated estimate), advanced by
    ``angle_advance`` periods of omega_hat, to v_alpha, v_beta held until t_{k+1}; with
    ``zoh_compensation`` the held vector is lengthened by a/sin(a), a = omega_e dt/2, so
-   that its mean over the period, seen from the turning rotor, equals the command.
+   that its mean over the period, seen from the turning rotor, equals the command;
+   with ``dead_time_comp`` the vector sent to the inverter gets the dead time's expected
+   loss for the measured phase currents added (the observer keeps the command).
+
+The controller's motor model is its own ``MotorParams`` (nominal): a plant with another
+R_s, psi, L_q, saturation, temperature or dead time is a model mismatch for the observer.
 
 The step is ``pmsm_ev.kernels.control_step`` (compiled with numba when available, see
 ``pmsm_ev.accel``) on one state vector that the observer and the controllers share.
@@ -46,6 +51,8 @@ _STARTUP_SLOTS = (
 #: state slots of the sensorless start-up, saved and restored with the unit
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP)
+#: the vector sent to the inverter with dead-time compensation, saved and restored with the unit
+_DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 
 
 def _slot(index: int, doc: str) -> property:
@@ -102,6 +109,8 @@ class ControlUnit:
         c[_k.C_ZOH] = 1.0 if self.params.zoh_compensation else 0.0
         c[_k.C_DELAYED] = 1.0 if self.params.delay_compensation else 0.0
         c[_k.C_ESTIMATED] = 1.0 if self.angle_source == "estimated" else 0.0
+        c[_k.C_DTC_V] = float(self.params.dead_time_comp)
+        c[_k.C_DTC_I0] = float(self.params.dead_time_comp_i0)
         for name, slot in _STARTUP_SLOTS:
             c[slot] = float(getattr(self.startup, name))
         # the EKF's restart after the alignment: its P0, with the speed and angle known
@@ -125,8 +134,16 @@ class ControlUnit:
         self.v_alpha = self.v_beta = 0.0
         self.i_d = self.i_q = 0.0
         self.i_qref = 0.0
-        for slot in _STARTUP_STATE:
+        for slot in _STARTUP_STATE + _DTC_STATE:
             self._s[slot] = 0.0
+
+    @property
+    def v_out(self) -> tuple[float, float]:
+        """The vector sent to the inverter: (v_alpha, v_beta), plus the dead-time compensation
+        of the last step when ``dead_time_comp`` is on."""
+        if self.params.dead_time_comp:
+            return float(self._s[_k.S_V_OUT_ALPHA]), float(self._s[_k.S_V_OUT_BETA])
+        return self.v_alpha, self.v_beta
 
     @property
     def mode(self) -> float:
@@ -153,6 +170,7 @@ class ControlUnit:
 
     def get_state(self) -> tuple:
         startup = tuple(float(self._s[slot]) for slot in _STARTUP_STATE) if self.sensorless else ()
+        startup += tuple(float(self._s[slot]) for slot in _DTC_STATE) if self.params.dead_time_comp else ()
         return ((self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
                  self.speed.integral, self.u_prev0, self.u_prev1)
                 + self.current.get_state() + startup + self.observer.get_state())
@@ -162,7 +180,8 @@ class ControlUnit:
         (self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
          self.speed.integral, self.u_prev0, self.u_prev1) = state[:10]
         self.current.set_state(state[10:15])
-        n = len(_STARTUP_STATE) if self.sensorless else 0
-        for slot, value in zip(_STARTUP_STATE, state[15:15 + n]):
+        slots = (_STARTUP_STATE if self.sensorless else ()) + (_DTC_STATE if self.params.dead_time_comp else ())
+        n = len(slots)
+        for slot, value in zip(slots, state[15:15 + n]):
             self._s[slot] = value
         self.observer.set_state(state[15 + n:])

@@ -58,7 +58,12 @@ def _sig(result: str, *args: str) -> str:
 (P_R_S, P_L_D, P_L_Q, P_PSI, P_N, P_B_M, P_T_M0, P_OMEGA_EPS, P_J_EQ,
  P_M_V, P_G, P_C_R, P_RHO_A, P_C_D, P_A_F, P_R_W, P_ETA, P_N_G, P_V_A, P_V_EPS, P_PAPER,
  P_SUBSTEPS) = range(22)
-PLANT_PARAMS = 22
+#: inverter dead time: per-phase voltage error amplitude v_dc t_d / T_s [V] (0 = off) and the
+#: current scale of its soft sign [A] (``PlantParams.dead_time``, ``dead_time_i0``)
+P_DT_V, P_DT_I0 = 22, 23
+#: magnetic saturation: 1.0 = on, and 1/I_sat of the d and q axes [1/A] (``saturated_flux``)
+P_SAT, P_SAT_AD, P_SAT_AQ = 24, 25, 26
+PLANT_PARAMS = 27
 
 # -- state vector of the control unit (controller + observer) ----------------------------------------
 # unit: last command, the observer's voltage input of one period earlier (dq, or alpha-beta
@@ -79,7 +84,8 @@ S_STARTED = 91  #: stationary-frame EKF5: 1.0 once past its first sample (x0 is 
 # target magnitude), the I-f speed and how long omega_hat has agreed with it
 S_MODE, S_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE = range(92, 99)
 S_SLIP = 99  #: I-f: omega_hat - omega_if, low-pass filtered (the damping's input) [rad/s]
-UNIT_STATE = 100
+S_V_OUT_ALPHA, S_V_OUT_BETA = 100, 101  #: with dead-time compensation: the vector sent to the inverter
+UNIT_STATE = 102
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -97,7 +103,10 @@ C_P0 = 41  #: EKF P0 diagonal, n entries
 C_IF_DAMP = 59  #: I-f damping: 2 zeta sqrt(J / psi) [rad s sqrt(A)], divided by sqrt(i) in use
 C_P0_ALIGNED = 60  #: EKF P0 diagonal at the restart after the alignment, 5 entries
 C_SLIP_FILTER = 65  #: dt / time constant of the low-pass filter of the damping's input [-]
-UNIT_PARAMS = 66
+#: dead-time compensation: per-phase voltage amplitude [V] (0 = off) and its soft sign's
+#: current scale [A] (``ControllerParams.dead_time_comp``, ``dead_time_comp_i0``)
+C_DTC_V, C_DTC_I0 = 66, 67
+UNIT_PARAMS = 68
 
 #: modes of the sensorless unit (``S_MODE``)
 MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
@@ -154,6 +163,62 @@ def friction_torque(omega_m, B_m, T_m0, omega_eps, paper):
     return B_m * omega_m + T_m0 * math.tanh(omega_m / omega_eps)
 
 
+# -- departures of a real motor and inverter from eqs 10-12 (plant only, each off by default) ----
+_SQRT3_2 = 0.5 * math.sqrt(3.0)
+_INV_SQRT3 = 1.0 / math.sqrt(3.0)
+
+
+@kernel()
+def dead_time_error(i_alpha, i_beta, v_err, i0):
+    """Voltage error (alpha, beta) [V] of an inverter with dead time for the current vector
+    (i_alpha, i_beta): each phase x = a, b, c loses v_err * tanh(i_x / i0) of its pole voltage
+    (v_err = v_dc t_d / T_s, the volt-seconds the dead time takes per switching period, of the
+    sign of the phase current: the free-wheeling diode conducts during the dead time; tanh is
+    the soft sign of the switches' output capacitance, which makes the error fall to zero with
+    the current). The common mode of the three errors does not reach the star-connected
+    winding; the amplitude-invariant Clarke transform drops it."""
+    i_b = -0.5 * i_alpha + _SQRT3_2 * i_beta
+    i_c = -0.5 * i_alpha - _SQRT3_2 * i_beta
+    e_a = -v_err * math.tanh(i_alpha / i0)
+    e_b = -v_err * math.tanh(i_b / i0)
+    e_c = -v_err * math.tanh(i_c / i0)
+    return (2.0 * e_a - e_b - e_c) / 3.0, (e_b - e_c) * _INV_SQRT3
+
+
+@kernel()
+def saturated_flux(i, L0, a):
+    """Flux linkage and incremental inductance of one axis with self-saturation, the
+    Froehlich-Kennelly magnetisation curve psi(i) = L0 i / (1 + a |i|), a = 1/I_sat [1/A]:
+    apparent inductance psi/i = L0 / (1 + a|i|), incremental dpsi/di = L0 / (1 + a|i|)^2.
+    Returns (psi [Wb], L_inc [H]); a = 0 gives (L0 i, L0)."""
+    k = 1.0 + a * abs(i)
+    return L0 * i / k, L0 / (k * k)
+
+
+@kernel()
+def saturated_current_derivatives(i_d, i_q, omega_m, v_d, v_q, R_s, L_d, L_q, psi, N, a_d, a_q):
+    """Eqs 10-11 in flux form with saturated inductances: d psi_d/dt = v_d - R i_d + w_e psi_q,
+    d psi_q/dt = v_q - R i_q - w_e psi_d, psi_d = psi + psi_dd(i_d), psi_q = psi_qq(i_q)
+    (``saturated_flux``, no cross-saturation), so di/dt = (d psi/dt) / L_inc. With a_d = a_q =
+    0 these are eqs 10-11."""
+    w_e = N * omega_m
+    f_d, l_d = saturated_flux(i_d, L_d, a_d)
+    f_q, l_q = saturated_flux(i_q, L_q, a_q)
+    did = (-R_s * i_d + w_e * f_q + v_d) / l_d  # (10) with psi_q = L_q,app i_q
+    diq = (-R_s * i_q - w_e * (psi + f_d) + v_q) / l_q  # (11) with psi_d = psi + L_d,app i_d
+    return did, diq
+
+
+@kernel()
+def saturated_torque(i_d, i_q, psi, L_d, L_q, N, a_d, a_q):
+    """T_e = N (psi_d i_q - psi_q i_d) [N m]: eq 12 in its flux form with the saturated fluxes
+    (``saturated_flux``); it equals the co-energy derivative (no cross-saturation, no slot
+    harmonics) and eq 12 for a_d = a_q = 0."""
+    f_d, _ = saturated_flux(i_d, L_d, a_d)
+    f_q, _ = saturated_flux(i_q, L_q, a_q)
+    return N * ((psi + f_d) * i_q - f_q * i_d)
+
+
 # -- road load, eqs 2-4 and 29 ---------------------------------------------------------------
 @kernel()
 def gradient_force(delta, m_v, g):
@@ -202,12 +267,21 @@ def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage."""
     c = math.cos(theta_e)
     s = math.sin(theta_e)
+    if pp[P_DT_V] != 0.0:  # the inverter's dead time: the applied voltage loses its error
+        e_alpha, e_beta = dead_time_error(c * i_d - s * i_q, s * i_d + c * i_q, pp[P_DT_V], pp[P_DT_I0])
+        v_alpha = v_alpha + e_alpha
+        v_beta = v_beta + e_beta
     v_d = c * v_alpha + s * v_beta  # Park at the true angle
     v_q = -s * v_alpha + c * v_beta
     N = pp[P_N]
-    did, diq = current_derivatives(i_d, i_q, omega_m, v_d, v_q,
-                                   pp[P_R_S], pp[P_L_D], pp[P_L_Q], pp[P_PSI], N)  # (10), (11)
-    t_e = electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12)
+    if pp[P_SAT] != 0.0:  # saturated inductances
+        did, diq = saturated_current_derivatives(i_d, i_q, omega_m, v_d, v_q, pp[P_R_S], pp[P_L_D], pp[P_L_Q],
+                                                 pp[P_PSI], N, pp[P_SAT_AD], pp[P_SAT_AQ])
+        t_e = saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N, pp[P_SAT_AD], pp[P_SAT_AQ])
+    else:
+        did, diq = current_derivatives(i_d, i_q, omega_m, v_d, v_q,
+                                       pp[P_R_S], pp[P_L_D], pp[P_L_Q], pp[P_PSI], N)  # (10), (11)
+        t_e = electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12)
     t_l = plant_load_torque(omega_m, delta, pp)  # (29)
     t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], pp[P_PAPER] != 0.0)  # (8)
     dw = (t_e - t_f - t_l) / pp[P_J_EQ]  # (9) = (28)
@@ -219,7 +293,10 @@ def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
 def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
     """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state."""
     i_alpha, i_beta = inverse_park(i_d, i_q, theta_e)
-    t_e = electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N])  # (12)
+    if pp[P_SAT] != 0.0:
+        t_e = saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N], pp[P_SAT_AD], pp[P_SAT_AQ])
+    else:
+        t_e = electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N])  # (12)
     t_l = plant_load_torque(omega_m, delta, pp)  # (29)
     v_v = pp[P_R_W] * omega_m / pp[P_N_G]  # (1), (6)
     return i_alpha, i_beta, t_e, t_l, v_v
@@ -503,6 +580,25 @@ def observer_correct(s, c, i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas):
         s[S_THETA_PRIOR] = theta_meas
 
 
+@kernel()
+def dead_time_compensated(c, v_alpha, v_beta, i_alpha, i_beta):
+    """The voltage sent to the inverter with dead-time compensation: the command minus the
+    error ``dead_time_error`` expects for the measured currents, so that the applied voltage
+    is the command again. The observers keep the command (``S_V_ALPHA``, ``S_V_BETA``) as
+    their voltage input: the compensation's aim is that the motor sees it."""
+    e_alpha, e_beta = dead_time_error(i_alpha, i_beta, c[C_DTC_V], c[C_DTC_I0])
+    return v_alpha - e_alpha, v_beta - e_beta
+
+
+@kernel()
+def compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta):
+    """``dead_time_compensated``, the result also kept in ``S_V_OUT_ALPHA``, ``S_V_OUT_BETA``."""
+    v_alpha, v_beta = dead_time_compensated(c, v_alpha, v_beta, i_alpha, i_beta)
+    s[S_V_OUT_ALPHA] = v_alpha
+    s[S_V_OUT_BETA] = v_beta
+    return v_alpha, v_beta
+
+
 # -- the control unit ----------------------------------------------------------------------------
 @kernel(_sig(f"UniTuple({_F}, 12)", _V, _V, _F, _F, _F, _F, _F))
 def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
@@ -545,6 +641,8 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     s[S_V_Q] = v_q
     s[S_V_ALPHA] = v_alpha
     s[S_V_BETA] = v_beta
+    if c[C_DTC_V] != 0.0:  # to the inverter: the command plus the dead time's expected loss
+        v_alpha, v_beta = compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4])
 
@@ -695,5 +793,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_V_Q] = v_q
     s[S_V_ALPHA] = v_alpha
     s[S_V_BETA] = v_beta
+    if c[C_DTC_V] != 0.0:  # to the inverter: the command plus the dead time's expected loss
+        v_alpha, v_beta = compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode)

@@ -110,6 +110,21 @@ def equivalent_inertia(motor: MotorParams, vehicle: VehicleParams) -> float:
     return motor.J_m + vehicle.reflected_inertia
 
 
+#: reference temperature of Table I's R_s and psi [degC] [chosen]: data-sheet values are
+#: usually given at 20-25 degC; 20 degC, the reference of copper's alpha = 0.00393 1/K
+TEMPERATURE_REF = 20.0
+
+
+def winding_resistance(R_s20: float, T: float, alpha_R: float) -> float:
+    """R_s(T) = R_s20 (1 + alpha_R (T - 20 degC)) [Ohm]: copper's linear law."""
+    return R_s20 * (1.0 + alpha_R * (T - TEMPERATURE_REF))
+
+
+def magnet_flux(psi20: float, T: float, alpha_psi: float) -> float:
+    """psi(T) = psi20 (1 + alpha_psi (T - 20 degC)) [V s/rad]: the remanence's linear law."""
+    return psi20 * (1.0 + alpha_psi * (T - TEMPERATURE_REF))
+
+
 @dataclass(frozen=True)
 class PlantParams:
     """Numerical and initial-state settings of the plant (vehicle + PMSM)."""
@@ -144,6 +159,42 @@ class PlantParams:
     #: actuation delay [communication steps], 0 or 1: with 1 the voltage received at t_k is
     #: applied over [t_{k+1}, t_{k+2}] (the computation delay of a real drive).
     inverter_delay: int = 0
+    #: dead time of each inverter leg [s]; 0 = off. Each phase's pole voltage loses
+    #: v_dc t_d / T_s tanh(i_x / dead_time_i0) (the switching period T_s is the communication
+    #: step; ``pmsm_ev.kernels.dead_time_error``), so it needs v_dc > 0. Typical size: 1-3 us for
+    #: IGBT inverters of this power class (2 us at 10 kHz and 360 V is 7.2 V per phase, 2 % of
+    #: v_dc: the back-EMF at 20 rad/s).
+    dead_time: float = 0.0
+    #: current scale of the dead time's soft sign [A] [chosen]: the error builds up as the phase
+    #: current charges the switches' output capacitance within the dead time, i0 ~ C_oss v_dc / t_d
+    #: = 10 nF x 360 V / 2 us = 1.8 A for a module of this size: 2 A.
+    dead_time_i0: float = 2.0
+
+    # -- magnetic saturation (off by default: Table I's constant inductances) ------------
+    #: saturation current of the q axis [A]; 0 = off (linear). Flux psi_q = L_q i_q / (1 +
+    #: |i_q| / sat_i_q) (Froehlich-Kennelly curve, ``pmsm_ev.kernels.saturated_flux``): the
+    #: apparent inductance falls to 1/(1 + i/I_sat). Typical size: the q inductance of EV
+    #: interior-PM motors falls by 30-50 % from no load to rated current; 900 A gives -31 % (apparent),
+    #: -51 % (incremental) at the 400 A limit, -21 % at the 234 A of the 22 deg plateau.
+    sat_i_q: float = 0.0
+    #: saturation current of the d axis [A]; 0 = off. Same form around the magnet's flux, psi_d =
+    #: psi + L_d i_d / (1 + |i_d| / sat_i_d); the magnet already biases the d path, so its
+    #: self-saturation with i_d is the smaller (typical: 2-3x sat_i_q). No cross-saturation.
+    sat_i_d: float = 0.0
+
+    # -- temperature (start values, constant over a run) --------------------------------
+    #: winding temperature [degC]; Table I's R_s is taken at ``TEMPERATURE_REF`` (20 degC).
+    #: R_s(T) = R_s (1 + alpha_R (T - 20)). Typical: 20 (cold) .. 120 degC (hot, +39 % R_s).
+    T_winding: float = TEMPERATURE_REF
+    #: magnet temperature [degC]; Table I's psi at 20 degC. psi(T) = psi (1 + alpha_psi (T - 20)).
+    #: Typical: 20 .. 100 degC (-10 % psi for NdFeB).
+    T_magnet: float = TEMPERATURE_REF
+    #: temperature coefficient of the copper's resistance [1/K]: 0.00393 (annealed copper at
+    #: 20 degC, IEC 60028)
+    alpha_R: float = 0.00393
+    #: temperature coefficient of the magnet's remanence, hence of psi [1/K]: -0.0012 (sintered
+    #: NdFeB, -0.09 .. -0.12 %/K in makers' data sheets; the upper end for high-coercivity grades)
+    alpha_psi: float = -0.0012
 
     def validate(self) -> None:
         _require(self.rk4_substeps >= 1 and float(self.rk4_substeps).is_integer(),
@@ -162,6 +213,22 @@ class PlantParams:
         _require(math.isfinite(self.adc_range) and self.adc_range > 0, f"adc_range must be > 0 A (got {self.adc_range})")
         _require(math.isfinite(self.v_dc) and self.v_dc >= 0, f"v_dc must be >= 0 V (got {self.v_dc})")
         _require(self.inverter_delay in (0, 1), f"inverter_delay must be 0 or 1 (got {self.inverter_delay})")
+        _require(math.isfinite(self.dead_time) and self.dead_time >= 0, f"dead_time must be >= 0 s (got {self.dead_time})")
+        _require(self.dead_time == 0 or self.v_dc > 0,
+                 f"dead_time = {self.dead_time} s needs the DC-link voltage: set v_dc > 0 V")
+        _require(math.isfinite(self.dead_time_i0) and self.dead_time_i0 > 0,
+                 f"dead_time_i0 must be > 0 A (got {self.dead_time_i0})")
+        for name in ("sat_i_q", "sat_i_d"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be >= 0 A, 0 = off (got {value})")
+        for name in ("T_winding", "T_magnet", "alpha_R", "alpha_psi"):
+            _require(math.isfinite(getattr(self, name)), f"{name} must be finite (got {getattr(self, name)})")
+        for name in ("T_winding", "T_magnet"):
+            _require(getattr(self, name) > -273.15, f"{name} must be above -273.15 degC (got {getattr(self, name)})")
+        _require(1.0 + self.alpha_R * (self.T_winding - TEMPERATURE_REF) > 0,
+                 f"R_s at T_winding = {self.T_winding} degC with alpha_R = {self.alpha_R} 1/K is not > 0")
+        _require(1.0 + self.alpha_psi * (self.T_magnet - TEMPERATURE_REF) > 0,
+                 f"psi at T_magnet = {self.T_magnet} degC with alpha_psi = {self.alpha_psi} 1/K is not > 0")
 
 
 # --- Controller design ------------------------------------------------------------
@@ -239,6 +306,12 @@ class ControllerParams:
     #: EKF the other way, and with the compensation on the EKF5's speed bias doubles
     #: (0.05 -> 0.10 rad/s at 10 kHz). Off by default; both vanish as dt^2.
     zoh_compensation: bool = False
+    #: dead-time compensation: per-phase voltage added in the sign of the measured phase current
+    #: [V]; 0 = off. To cancel the plant's ``dead_time``: v_dc t_d / T_s (7.2 V for 2 us at 10 kHz
+    #: and 360 V). The observers keep the uncompensated command as their voltage input.
+    dead_time_comp: float = 0.0
+    #: current scale of the compensation's soft sign [A] [chosen]: the plant's ``dead_time_i0``
+    dead_time_comp_i0: float = 2.0
 
     def validate(self) -> None:
         for name in ("kp_w", "ki_w", "kp_id", "ki_id", "kp_iq", "ki_iq", "T_d", "i_q_max", "u_max"):
@@ -250,6 +323,10 @@ class ControllerParams:
         _require(self.delay_compensation in (0, 1), f"delay_compensation must be 0 or 1 (got {self.delay_compensation})")
         _require(self.i_q_max > 0, f"i_q_max must be > 0 A (got {self.i_q_max})")
         _require(self.u_max > 0, f"u_max must be > 0 V (got {self.u_max})")
+        _require(math.isfinite(self.dead_time_comp) and self.dead_time_comp >= 0,
+                 f"dead_time_comp must be >= 0 V (got {self.dead_time_comp})")
+        _require(math.isfinite(self.dead_time_comp_i0) and self.dead_time_comp_i0 > 0,
+                 f"dead_time_comp_i0 must be > 0 A (got {self.dead_time_comp_i0})")
         _require(self.decoupling in DECOUPLING_MODES,
                  f"decoupling must be one of {DECOUPLING_MODES} (got {self.decoupling!r})")
 

@@ -8,7 +8,11 @@ true rotor angle with RK4 sub-steps. Truth signals are exposed for recording.
 Optional realism, all off by default (``PlantParams``): current sensors with white
 noise, offset, gain error and ADC quantisation per phase (two phase sensors, a and b;
 the truth outputs stay clean), and an inverter with a DC-link voltage limit and a
-one-step actuation delay.
+one-step actuation delay. A motor that is not its data sheet: inverter dead time (a
+per-phase voltage error in the sign of the current), magnetic saturation of L_d, L_q
+(flux-form eqs 10-12) and the winding and magnet temperatures (R_s(T), psi(T), constant
+over a run). The controllers keep their own nominal parameters, so each is a model
+mismatch for the observers.
 
 The RK4 step, the model (eqs 8-13, 29) and the outputs are ``pmsm_ev.kernels.plant_step``
 (compiled with numba when available, see ``pmsm_ev.accel``); this class holds the state
@@ -21,7 +25,8 @@ import math
 
 from . import accel
 from . import kernels as _k
-from .params import MotorParams, PlantParams, VehicleParams, equivalent_inertia
+from .params import (TEMPERATURE_REF, MotorParams, PlantParams, VehicleParams, equivalent_inertia, magnet_flux,
+                     winding_resistance)
 from .transforms import clarke, wrap_angle
 
 
@@ -43,12 +48,19 @@ class Plant:
         self._u_lim = p.v_dc / math.sqrt(3.0)
         self._kernels = accel.kernels()
         m, v = self.motor, self.vehicle
-        values = {_k.P_R_S: m.R_s, _k.P_L_D: m.L_d, _k.P_L_Q: m.L_q, _k.P_PSI: m.psi, _k.P_N: m.N,
+        # the winding's and the magnet's temperature (Table I's values hold at 20 degC)
+        self.R_s = winding_resistance(m.R_s, p.T_winding, p.alpha_R) if p.T_winding != TEMPERATURE_REF else m.R_s
+        self.psi = magnet_flux(m.psi, p.T_magnet, p.alpha_psi) if p.T_magnet != TEMPERATURE_REF else m.psi
+        values = {_k.P_R_S: self.R_s, _k.P_L_D: m.L_d, _k.P_L_Q: m.L_q, _k.P_PSI: self.psi, _k.P_N: m.N,
                   _k.P_B_M: m.B_m, _k.P_T_M0: m.T_m0, _k.P_OMEGA_EPS: m.omega_eps, _k.P_J_EQ: self.J_eq,
                   _k.P_M_V: v.m_v, _k.P_G: v.g, _k.P_C_R: v.c_r, _k.P_RHO_A: v.rho_a, _k.P_C_D: v.c_d,
                   _k.P_A_F: v.A_f, _k.P_R_W: v.r_w, _k.P_ETA: v.eta, _k.P_N_G: v.n_g, _k.P_V_A: v.v_a,
                   _k.P_V_EPS: v.v_eps, _k.P_PAPER: 1.0 if v.load_model == "paper" else 0.0,
-                  _k.P_SUBSTEPS: p.rk4_substeps}
+                  _k.P_SUBSTEPS: p.rk4_substeps, _k.P_DT_I0: p.dead_time_i0,
+                  _k.P_SAT: 1.0 if (p.sat_i_d > 0 or p.sat_i_q > 0) else 0.0,
+                  _k.P_SAT_AD: 1.0 / p.sat_i_d if p.sat_i_d > 0 else 0.0,
+                  _k.P_SAT_AQ: 1.0 / p.sat_i_q if p.sat_i_q > 0 else 0.0}
+        self._dead_time_dt = None  # the step the dead time's voltage error was computed for
         self._pp = accel.vector(_k.PLANT_PARAMS)
         for slot, value in values.items():
             self._pp[slot] = float(value)
@@ -98,6 +110,9 @@ class Plant:
                 v_alpha *= self._u_lim / mag
                 v_beta *= self._u_lim / mag
         self.v_alpha_applied, self.v_beta_applied = v_alpha, v_beta
+        if p.dead_time and dt != self._dead_time_dt:  # error per phase: v_dc t_d / T_s, T_s = the step
+            self._pp[_k.P_DT_V] = p.v_dc * p.dead_time / dt
+            self._dead_time_dt = dt
         out = self._kernels.plant_step(self.i_d, self.i_q, self.omega_m, self.theta_e,
                                        v_alpha, v_beta, delta, dt, self._pp)
         (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta,
