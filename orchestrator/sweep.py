@@ -39,7 +39,7 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -53,7 +53,10 @@ from .system import (PACKAGED_SCENARIOS, SystemSpec, load_system, project_fmu_di
                      split_reference)
 
 #: the sweeps shipped with the package (``orchestrator/sweeps/<name>.toml``)
-PACKAGED_SWEEPS = ("ekf5_load_noise",)
+PACKAGED_SWEEPS = ("ekf5_load_noise",
+                   "robust_rs_psi_sensorless", "robust_rs_psi_ekf5ab", "robust_rs_psi_ekf5paper",
+                   "robust_lq_load_sensorless", "robust_lq_load_ekf5ab", "robust_lq_load_ekf5paper",
+                   "robust_montecarlo_sensorless", "robust_deadtime_hill")
 TOP_KEYS = ("name", "description", "system", "stop_time", "output_interval", "metric", "figures", "set",
             "grid", "random")
 GRID_KEYS = ("values", "from", "to", "num", "scale")
@@ -72,7 +75,8 @@ MAX_ID_LENGTH = 80
 
 @dataclass(frozen=True)
 class Param:
-    """A swept or fixed parameter: ``kind`` "start" (INSTANCE.VAR), "fmu" (fmu.INSTANCE) or "system"."""
+    """A swept or fixed parameter: ``kind`` "start" (INSTANCE.VAR), "fmu" (fmu.INSTANCE), "scale"
+    (scale.SIGNAL: a factor on the values of one of the system's signal tables) or "system"."""
 
     name: str
     kind: str
@@ -121,12 +125,14 @@ def packaged_sweep(name: str) -> Path:
 
 
 def parse_param(name: str, where: str) -> Param:
-    """``system``, ``fmu.INSTANCE`` or ``INSTANCE.VAR``."""
+    """``system``, ``fmu.INSTANCE``, ``scale.SIGNAL`` or ``INSTANCE.VAR``."""
     if name == "system":
         return Param(name, "system")
     inst, var = split_reference(name, f"{where}: {name!r}")
     if inst == "fmu":
         return Param(name, "fmu", instance=var)
+    if inst == "scale":
+        return Param(name, "scale", variable=var)
     return Param(name, "start", inst, var)
 
 
@@ -182,7 +188,7 @@ def _grid_values(param: Param, spec, where: str) -> tuple[list, bool]:
             missing = [k for k in ("from", "to", "num") if k not in spec]
             if missing:
                 raise CosimError(f"{where}: a range needs from, to and num (missing {', '.join(missing)})")
-            if param.kind != "start":
+            if param.kind not in ("start", "scale"):
                 raise CosimError(f"{where}: {param.name} takes a list of values, not a range")
             lo, hi = _finite(spec["from"], f"{where}.from"), _finite(spec["to"], f"{where}.to")
             num = spec["num"]
@@ -217,6 +223,8 @@ def _check_value(param: Param, value, where: str) -> None:
     if param.kind in ("system", "fmu"):
         if not isinstance(value, str) or not value.strip():
             raise CosimError(f"{where}: {param.name} values must be non-empty strings (got {value!r})")
+    elif param.kind == "scale":
+        _finite(value, f"{where}: {param.name} (a factor on the signal's values)")
     elif not _scalar(value):
         raise CosimError(f"{where}: values must be numbers, booleans or strings (got {value!r})")
     elif isinstance(value, float) and not math.isfinite(value):
@@ -237,7 +245,7 @@ def _random_law(param: Param, spec, where: str) -> tuple[str, tuple]:
         for v in args:
             _check_value(param, v, f"{where}.choice")
         return law, tuple(args)
-    if param.kind != "start":
+    if param.kind not in ("start", "scale"):
         raise CosimError(f"{where}: {param.name} takes a choice of values, not a range")
     if not isinstance(args, list) or len(args) != 2:
         raise CosimError(f"{where}.{law} must be [low, high]")
@@ -450,6 +458,14 @@ def run_signature(spec: SystemSpec, fmu_hashes: dict[str, str]) -> str:
 
 
 def _apply(spec: SystemSpec, param: Param, value, base_dir: Path) -> None:
+    if param.kind == "scale":  # every value of the signal's table times the factor
+        sig = spec.signals.get(param.variable)
+        if sig is None:
+            raise CosimError(f"the system has no signal {param.variable!r}{close_matches(param.variable, spec.signals)}"
+                             f"; its signals: {', '.join(spec.signals) or 'none'}")
+        prof = sig.profile
+        sig.profile = replace(prof, values=tuple(float(value) * v for v in prof.values))
+        return
     comp = spec.component(param.instance)  # an unknown instance: close matches
     if param.kind == "fmu":
         comp.fmu, comp.fmu_text = _resolve_fmu(value, base_dir), value
