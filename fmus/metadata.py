@@ -45,6 +45,7 @@ UNITS: dict[str, dict[str, float]] = {
     "A/rad": {"A": 1, "rad": -1},
     "degC": {"K": 1, "offset": 273.15},  # FMI 2.0 BaseUnit: value in K = value in degC + offset
     "1/K": {"K": -1},
+    "1/s": {"s": -1},
 }
 
 #: unit name -> [(display unit, factor)], display value = factor * value
@@ -142,6 +143,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "x0_theta": ("rad", "EKF initial electrical-angle estimate, the observer's guess of theta(0)"),
     "J_model": ("kg.m2", "inertia of the EKF's mechanical model (0 = the motor's J_m, the paper's eq 22; "
                          "the drive's J_eq of eq 9 is 0.526 kg m^2)"),
+    "psi_adapt": ("1/s", "magnet-flux adaptation gain of the stationary-frame EKF5 (ekf5ab, sensorless); 0 = off"),
+    "psi_adapt_speed": ("rad/s", "the magnet-flux adaptation runs while |omega_hat| exceeds this"),
     # StartupParams: the sensorless unit's low-speed range
     "i_align": ("A", "alignment current at standstill"),
     "t_ramp": ("s", "alignment: ramp of the current to i_align on the +90 deg axis"),

@@ -317,8 +317,19 @@ def cmd_report(a) -> int:
         return 0
     if a.jobs < 1:
         raise CosimError(f"--jobs must be >= 1 (got {a.jobs})")
+    if a.robustness:
+        from . import report_robustness  # noqa: PLC0415
+
+        command = "pmsm-cosim report --robustness" + (" --small" if a.small else "") + (
+            f" --stop-time {a.stop_time:g}" if a.stop_time else "")
+        report_robustness.generate(out=a.out, runs_dir=a.runs or "runs/robustness", workers=a.jobs,
+                                   small=a.small, stop_time=a.stop_time, run=not a.no_run, command=command,
+                                   log=lambda msg: print(msg, file=sys.stderr, flush=True))
+        return 0
+    if a.small or a.no_run:
+        raise CosimError("--small and --no-run go with --robustness")
     command = "pmsm-cosim report" + (f" --stop-time {a.stop_time:g}" if a.stop_time else "")
-    report.generate(out=a.out, runs_dir=a.runs, jobs=a.jobs, stop_time=a.stop_time, only=a.only,
+    report.generate(out=a.out, runs_dir=a.runs or "runs/report", jobs=a.jobs, stop_time=a.stop_time, only=a.only,
                     force=a.force, log=lambda msg: print(msg, file=sys.stderr, flush=True), command=command)
     return 0
 
@@ -450,8 +461,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "its figures in OUT/results/. A run in RUNS whose metrics.json is "
                                     "'completed' with the same settings and FMU builds is reused.")
     rp.add_argument("--out", metavar="DIR", default="docs", help="where results.md goes (default: docs)")
-    rp.add_argument("--runs", "--reuse", dest="runs", metavar="DIR", default="runs/report",
-                    help="run directories, reused when up to date (default: runs/report)")
+    rp.add_argument("--runs", "--reuse", dest="runs", metavar="DIR", default=None,
+                    help="run directories, reused when up to date (default: runs/report; with --robustness: "
+                         "runs/robustness)")
     rp.add_argument("--jobs", "-j", type=int, default=2, metavar="N", help="runs at a time (default: 2)")
     rp.add_argument("--stop-time", type=_positive, metavar="S",
                     help="stop time of every run [s] (default: the scenarios' 350 s); short for a quick look")
@@ -460,6 +472,13 @@ def build_parser() -> argparse.ArgumentParser:
                          "glob), e.g. ekf5ab; the others are taken from RUNS as they are")
     rp.add_argument("--force", action="store_true", help="rerun the (selected) configurations even when up to date")
     rp.add_argument("--list", action="store_true", help="list the configuration ids and exit")
+    rp.add_argument("--robustness", action="store_true",
+                    help="instead: run the robustness sweeps (orchestrator/sweeps/robust_*.toml) on a local Dask "
+                         "cluster of --jobs workers and write OUT/robustness.md and OUT/robustness/*.png")
+    rp.add_argument("--small", action="store_true",
+                    help="with --robustness: 3 x 3 grids and a few Monte-Carlo samples (a quick check)")
+    rp.add_argument("--no-run", action="store_true",
+                    help="with --robustness: write the page from the runs in RUNS as they are")
     rp.set_defaults(func=cmd_report)
     return ap
 

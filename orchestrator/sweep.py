@@ -56,7 +56,8 @@ from .system import (PACKAGED_SCENARIOS, SystemSpec, load_system, project_fmu_di
 PACKAGED_SWEEPS = ("ekf5_load_noise",
                    "robust_rs_psi_sensorless", "robust_rs_psi_ekf5ab", "robust_rs_psi_ekf5paper",
                    "robust_lq_load_sensorless", "robust_lq_load_ekf5ab", "robust_lq_load_ekf5paper",
-                   "robust_montecarlo_sensorless", "robust_deadtime_hill")
+                   "robust_rs_psi_sensorless_adapt", "robust_lq_load_sensorless_adapt",
+                   "robust_montecarlo_sensorless", "robust_montecarlo_sensorless_adapt", "robust_deadtime_hill")
 TOP_KEYS = ("name", "description", "system", "stop_time", "output_interval", "metric", "figures", "set",
             "grid", "random")
 GRID_KEYS = ("values", "from", "to", "num", "scale")

@@ -23,17 +23,24 @@ from pmsm_ev.reference import run_reference
 sys.path.insert(0, sys.argv[3])
 from regression_runs import PARAMS, ELEVATION
 observer, angle_source, out = sys.argv[1], sys.argv[2], sys.argv[4]
+if len(sys.argv) > 5:  # the plant's effects on: dead time and its compensation, saturation, temperature
+    from dataclasses import replace
+    from pmsm_ev.params import ControllerParams, PlantParams
+    PARAMS = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, sat_i_q=900.0, sat_i_d=2000.0,
+                                               T_winding=90.0, T_magnet=70.0),
+                     controller=ControllerParams(dead_time_comp=7.2))
 run_reference(out, stop_time=2.0, observer=observer, angle_source=angle_source, params=PARAMS,
               output_interval=0.001, elevation=ELEVATION)
 print(json.dumps({"mode": accel.describe(), "compiled": accel.compiled()}))
 """
 
 
-def _run(tmp_path: Path, observer: str, angle_source: str, name: str, **env) -> tuple[dict, dict]:
+def _run(tmp_path: Path, observer: str, angle_source: str, name: str, *extra, **env) -> tuple[dict, dict]:
     script = tmp_path / "run.py"
     script.write_text(RUN_SCRIPT)
     out = tmp_path / name
-    r = subprocess.run([sys.executable, str(script), observer, angle_source, str(Path(__file__).parent), str(out)],
+    r = subprocess.run([sys.executable, str(script), observer, angle_source, str(Path(__file__).parent), str(out),
+                        *extra],
                        capture_output=True, text=True, timeout=300, env={**os.environ, **env})
     assert r.returncode == 0, r.stderr[-3000:]
     return json.loads(r.stdout.strip().splitlines()[-1]), read_results(out)
@@ -49,6 +56,19 @@ def test_plain_python_and_numba_give_the_same_bits(tmp_path, observer, angle_sou
     for col in ALL_COLUMNS:
         assert np.array_equal(plain[col], jit[col]), col
     assert np.max(np.abs(jit["omega_m"])) > 50.0  # the drive moved
+
+
+@pytest.mark.parametrize("observer", ["sensored", "ekf5ab"])
+def test_plant_effects_give_the_same_bits_compiled_or_not(tmp_path, observer):
+    """Dead time (and its compensation), saturation and temperature on: the same bits."""
+    pytest.importorskip("numba")
+    _, plain = _run(tmp_path, observer, "measured", "plain", "effects", PMSM_EV_JIT="0")
+    info_jit, jit = _run(tmp_path, observer, "measured", "jit", "effects")
+    assert info_jit["compiled"], info_jit["mode"]
+    for col in ALL_COLUMNS:
+        assert np.array_equal(plain[col], jit[col]), col
+    _, off = _run(tmp_path, observer, "measured", "off")
+    assert not np.array_equal(off["i_q"], jit["i_q"])  # the effects changed the run
 
 
 def test_kernels_are_cached_by_content(tmp_path):

@@ -119,6 +119,8 @@ def test_random_samples_are_seeded_and_in_range(tmp_path):
      "ctrl.q_TL is both in [grid] and in [random]"),
     ('metric = "speed_rms"\n[grid]\n"ctrl.q_TL" = [1]\n', "unknown metric 'speed_rms' (did you mean: speed_rms_error"),
     ('[set]\n"ctrl.q_TL" = 1e-3\n', "nothing to sweep"),
+    ('[grid]\n"scale.deltaa" = [1.0]\n', "grid.scale.deltaa: the system has no signal 'deltaa' (did you mean: delta"),
+    ('[grid]\n"scale.delta" = ["big"]\n', "scale.delta (a factor on the signal's values) must be a finite number"),
     ('[set]\n"ctrl.q_TLL" = 1e-3\n[grid]\n"ctrl.q_i" = [1]\n', "set.ctrl.q_TLL: ctrl (FocEkf5.fmu) has no variable 'q_TLL' (did you mean: q_TL"),
 ])
 def test_sweep_file_errors_are_one_line(tmp_path, capsys, body, message):

@@ -111,6 +111,12 @@ class ControlUnit:
         c[_k.C_ESTIMATED] = 1.0 if self.angle_source == "estimated" else 0.0
         c[_k.C_DTC_V] = float(self.params.dead_time_comp)
         c[_k.C_DTC_I0] = float(self.params.dead_time_comp_i0)
+        self.psi_adapt = self.ekf_params.psi_adapt > 0
+        if self.psi_adapt and observer not in ("ekf5ab", "sensorless"):
+            raise ParameterError(f"psi_adapt needs the stationary-frame EKF5 (observer ekf5ab or sensorless; "
+                                 f"got {observer})")
+        c[_k.C_PSI_ADAPT] = float(self.ekf_params.psi_adapt)
+        c[_k.C_PSI_ADAPT_W] = float(self.ekf_params.psi_adapt_speed)
         for name, slot in _STARTUP_SLOTS:
             c[slot] = float(getattr(self.startup, name))
         # the EKF's restart after the alignment: its P0, with the speed and angle known
@@ -136,6 +142,7 @@ class ControlUnit:
         self.i_qref = 0.0
         for slot in _STARTUP_STATE + _DTC_STATE:
             self._s[slot] = 0.0
+        self._s[_k.S_PSI_RATIO] = 1.0
 
     @property
     def v_out(self) -> tuple[float, float]:
@@ -144,6 +151,11 @@ class ControlUnit:
         if self.params.dead_time_comp:
             return float(self._s[_k.S_V_OUT_ALPHA]), float(self._s[_k.S_V_OUT_BETA])
         return self.v_alpha, self.v_beta
+
+    @property
+    def psi_ratio(self) -> float:
+        """The EKF's magnet flux over the nominal psi (1 without ``EkfParams.psi_adapt``)."""
+        return float(self._s[_k.S_PSI_RATIO])
 
     @property
     def mode(self) -> float:
@@ -171,6 +183,7 @@ class ControlUnit:
     def get_state(self) -> tuple:
         startup = tuple(float(self._s[slot]) for slot in _STARTUP_STATE) if self.sensorless else ()
         startup += tuple(float(self._s[slot]) for slot in _DTC_STATE) if self.params.dead_time_comp else ()
+        startup += (float(self._s[_k.S_PSI_RATIO]),) if self.psi_adapt else ()
         return ((self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
                  self.speed.integral, self.u_prev0, self.u_prev1)
                 + self.current.get_state() + startup + self.observer.get_state())
@@ -180,7 +193,8 @@ class ControlUnit:
         (self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
          self.speed.integral, self.u_prev0, self.u_prev1) = state[:10]
         self.current.set_state(state[10:15])
-        slots = (_STARTUP_STATE if self.sensorless else ()) + (_DTC_STATE if self.params.dead_time_comp else ())
+        slots = ((_STARTUP_STATE if self.sensorless else ()) + (_DTC_STATE if self.params.dead_time_comp else ())
+                 + ((_k.S_PSI_RATIO,) if self.psi_adapt else ()))
         n = len(slots)
         for slot, value in zip(slots, state[15:15 + n]):
             self._s[slot] = value

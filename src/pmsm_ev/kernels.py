@@ -85,7 +85,8 @@ S_STARTED = 91  #: stationary-frame EKF5: 1.0 once past its first sample (x0 is 
 S_MODE, S_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE = range(92, 99)
 S_SLIP = 99  #: I-f: omega_hat - omega_if, low-pass filtered (the damping's input) [rad/s]
 S_V_OUT_ALPHA, S_V_OUT_BETA = 100, 101  #: with dead-time compensation: the vector sent to the inverter
-UNIT_STATE = 102
+S_PSI_RATIO = 102  #: with psi adaptation: the EKF's magnet flux over the nominal psi [-]
+UNIT_STATE = 103
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -106,7 +107,10 @@ C_SLIP_FILTER = 65  #: dt / time constant of the low-pass filter of the damping'
 #: dead-time compensation: per-phase voltage amplitude [V] (0 = off) and its soft sign's
 #: current scale [A] (``ControllerParams.dead_time_comp``, ``dead_time_comp_i0``)
 C_DTC_V, C_DTC_I0 = 66, 67
-UNIT_PARAMS = 68
+#: psi adaptation of the stationary-frame EKF5 (``EkfParams.psi_adapt``): gain [1/s] (0 = off) and
+#: the least |omega_hat| it adapts at [rad/s]
+C_PSI_ADAPT, C_PSI_ADAPT_W = 68, 69
+UNIT_PARAMS = 70
 
 #: modes of the sensorless unit (``S_MODE``)
 MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
@@ -395,6 +399,9 @@ def ekf5_time_update(s, c, v_d, v_q, f03, f13, c_mid):
     t_l = s[S_X + 4]
     c_wq, c_wd, c_wpsi = c[C_C_WQ], c[C_C_WD], c[C_C_WPSI]
     c_tpsi, c_tdq, c_th = c[C_C_TPSI], c[C_C_TDQ], c[C_C_TH]
+    if c[C_PSI_ADAPT] != 0.0:  # the adapted magnet flux (``adapt_psi``) in A3, A4 and their Jacobian
+        c_wpsi = c_wpsi * s[S_PSI_RATIO]
+        c_tpsi = c_tpsi * s[S_PSI_RATIO]
     f00, f01, f02 = c[C_A_RD], c_wq * w, c_wq * i_q + f03 * c_mid  # (A8-A10)
     f10, f11, f12 = -c_wd * w, c[C_A_RQ], -c_wd * i_d - c_wpsi + f13 * c_mid  # (A13-A15)
     f20, f21, f24 = c_tdq * i_q, c_tpsi + c_tdq * i_d, c[C_C_TL]  # (A18, A19, A22)
@@ -428,6 +435,24 @@ def ekf5_time_update(s, c, v_d, v_q, f03, f13, c_mid):
         s[r + 4] = a4
         s[r + i] += c[C_Q + i]
     s[S_THETA_PRIOR] = s[S_X + 3]
+
+
+@kernel()
+def adapt_psi(s, c):
+    """Adapt the stationary-frame EKF5's magnet flux (after its measurement update; on while
+    |omega_hat| > ``C_PSI_ADAPT_W``). The estimated angle tracks the rotor, so over time it turns
+    at the true electrical speed; with a wrong psi the model's back-EMF omega_hat psi_hat can match
+    the currents only with a wrong omega_hat, and the Kalman gain then corrects the angle by the
+    difference at every step: corr = theta_post - theta_prior has the mean N (omega - omega_hat) dt.
+    The law d(psi_hat/psi)/dt = -gain corr / (N dt |omega_hat|) sign(omega_hat) raises psi_hat while
+    omega_hat runs ahead of the angle's rate (psi_hat too small) and settles where the two agree;
+    psi_hat/psi is kept within 0.5 .. 1.5."""
+    w = s[S_X + 2]
+    if abs(w) <= c[C_PSI_ADAPT_W]:
+        return
+    corr = wrap_angle(s[S_X + 3] - s[S_THETA_PRIOR])
+    rate = -c[C_PSI_ADAPT] * corr / (c[C_N] * c[C_DT] * w)  # the sign of omega_hat via the division
+    s[S_PSI_RATIO] = min(max(s[S_PSI_RATIO] + rate * c[C_DT], 0.5), 1.5)
 
 
 @kernel()
@@ -623,6 +648,8 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     theta_frame = s[S_THETA_PRIOR] if estimated else theta_meas
     i_d, i_q = park(i_alpha, i_beta, theta_frame)
     observer_correct(s, c, i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas)  # (25)-(27)
+    if c[C_PSI_ADAPT] != 0.0:
+        adapt_psi(s, c)
     if estimated:
         theta_ctrl = s[S_X + 3]
         i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
@@ -709,6 +736,8 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     else:
         ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
     ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
+    if c[C_PSI_ADAPT] != 0.0 and s[S_MODE] == MODE_EKF:
+        adapt_psi(s, c)
     t = s[S_CLOCK] * dt
     s[S_CLOCK] += 1.0
     mode = s[S_MODE]

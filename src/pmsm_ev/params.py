@@ -376,6 +376,15 @@ class EkfParams:
     #: swings at start-up makes the model see 52x the acceleration per N m of torque error,
     #: and the estimate loses the angle.
     J_model: float = 0.0
+    #: magnet-flux adaptation of the stationary-frame EKF5 (observers "ekf5ab", "sensorless")
+    #: [1/s]; 0 = off (the nominal psi). The EKF's psi is moved until omega_hat agrees with the
+    #: rate of its own angle estimate (``pmsm_ev.kernels.adapt_psi``): a hot magnet (-10 % psi)
+    #: otherwise biases omega_hat, and the speed, by several %. [chosen] 1/s when on: the
+    #: mismatch is corrected in a few seconds, far slower than the EKF's own dynamics.
+    psi_adapt: float = 0.0
+    #: the adaptation runs while |omega_hat| exceeds this [rad/s] [chosen]: 30 rad/s, the
+    #: sensorless unit's handover speed (back-EMF 10.8 V): below it psi is poorly observable
+    psi_adapt_speed: float = 30.0
 
     def validate(self) -> None:
         for f in fields(self):

@@ -69,7 +69,7 @@ def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_
                     row = (t, math.degrees(delta), w_ref, plant.omega_m, o.omega_hat, plant.theta_e,
                            o.theta_hat, plant.i_d, plant.i_q, o.i_d_hat, o.i_q_hat, plant.T_e,
                            plant.T_L_mech, o.T_L_hat, ctrl.v_d, ctrl.v_q, plant.i_alpha, plant.i_beta,
-                           ctrl.v_alpha, ctrl.v_beta, ctrl.i_qref, plant.v_vehicle)
+                           *ctrl.v_out, ctrl.i_qref, plant.v_vehicle)
                     w.write(row + (plant.x_vehicle, ctrl.mode) if sensorless else row)
                 if k == n_steps:
                     break
