@@ -460,10 +460,27 @@ def render(grids: dict, mc: list[dict], dead: list[tuple[dict, dict]], figs: dic
                      f"{roll_back(r['x_vehicle'][t > 20.0]):.3g} | "
                      f"{float(np.sqrt(np.mean(err[w] ** 2))) if w.any() else math.nan:.3g} | {met['slips']} |")
         L.append("")
+        by = {(float(row["plant.dead_time"]) > 0, float(row["ctrl.dead_time_comp"]) > 0): r for row, r in dead}
+        raw = by.get((True, False))
+        if raw is not None:
+            t = raw["time"]
+            climb = (t >= 25.0) & (t <= 30.0)
+            bias = float(np.mean(raw["omega_m"][climb] - raw["omega_ref"][climb])) if climb.any() else math.nan
+            k = int(np.searchsorted(t, 38.0))
+            lead = float(raw["omega_hat"][k] - raw["omega_m"][k]) if k < len(t) else math.nan
+            L += [f"Without compensation the observer is fed the commanded voltage, while the motor gets "
+                  f"about 4/π × 7.2 = {4 / math.pi * 7.2:.1f} V less, against the current: at 200 rad/s on the "
+                  f"slope (25-30 s) that is a few % of the voltage, and the speed runs {bias:+.1f} rad/s off. On "
+                  "the way down to the stop the back-EMF falls towards the error (7.2 V at 20 rad/s): at 38 s "
+                  f"the speed estimate runs {lead:+.1f} rad/s ahead of the rotor, the rotor falls out of step "
+                  "before the handover to I-f, the I-f vector placed from the estimate does not hold the load, and "
+                  f"the car rolls back {roll_back(raw['x_vehicle'][t > 20.0]):.0f} m. With the compensation the run "
+                  "equals the ideal inverter's; over-compensating an ideal inverter (7.2 V added where no dead "
+                  "time took it) breaks the start-up just as surely: the compensation must match the inverter.", ""]
     if timing:
         L += ["## Cost", "",
-              f"{timing['runs']} runs made by this generation in {timing['elapsed']:.0f} s on "
-              f"{timing['workers']} Dask worker(s) ({os.cpu_count()} cores, load average at the end "
+              f"{timing['runs']} runs made by the last generation that ran any in {timing['elapsed']:.0f} s on "
+              f"{timing['workers']} Dask worker(s) ({timing.get('cores', os.cpu_count())} cores, load average at the end "
               f"{timing['load']}); the runs' own wall times add up to {timing['run_walls']:.0f} s: a "
               f"speed-up of {timing['run_walls'] / max(timing['elapsed'], 1e-9):.2f} over running them one "
               "after the other (`benchmarks/sweep_speedup.py` measures it on equal runs).", ""]
@@ -487,11 +504,11 @@ def _why(grids: dict) -> list[str]:
         j0, i0 = _near(g["x"], 0.0), _near(g["y"], 0.0)
         if j0 is None or i0 is None:
             continue
-        psi = ", ".join(f"ψ {g['y'][i]:+.0f} %: {g['bias'][i, j0]:+.1f}" for i in range(len(g["y"])) if i != i0)
+        psi = ", ".join(f"ψ {g['y'][i]:+.0f} %: {g['bias'][i, j0]:+.2f}" for i in range(len(g["y"])) if i != i0)
         rs = np.nanmax(np.abs(g["bias"][i0, :]))
+        angle = f" (angle RMS error ≤ {np.nanmax(g['angle'][i0, :]):.3f} rad)" if key != "ekf5paper" else ""
         lines.append(f"- {label}: steady speed error ω_m − ω_ref after {T_FROM:g} s at the nominal R_s: {psi} rad/s; "
-                     f"over the whole R_s range at the nominal ψ at most {rs:.2f} rad/s "
-                     f"(angle RMS error ≤ {np.nanmax(g['angle'][i0, :]):.3f} rad); "
+                     f"over the whole R_s range at the nominal ψ at most {rs:.2f} rad/s{angle}; "
                      f"{int(g['diverged'].sum())} of {g['diverged'].size} cells diverged.")
     if lines:
         L += ["## Where and why the drive breaks", "",
@@ -503,6 +520,17 @@ def _why(grids: dict) -> list[str]:
               "and the speed loop, which holds ω̂ at the reference, drives the rotor off by the rest: a steady "
               "speed error of roughly the sign of −Δψ, not a divergence. A hot magnet (−10 %) alone takes "
               "the drive out of the 2.5 % speed tolerance:", ""] + lines + [""]
+        if "sensorless" in gs and "sensorless_adapt" in gs:
+            a, b = gs["sensorless"], gs["sensorless_adapt"]
+            L += [f"**The magnet-flux adaptation widens the stable region from {int(a['stable'].sum())} to "
+                  f"{int(b['stable'].sum())} of {b['stable'].size} cells** (`ctrl.psi_adapt` = 1/s, "
+                  "`EkfParams.psi_adapt`, `pmsm_ev.kernels.adapt_psi`): the estimated angle must turn at the "
+                  "rotor's speed on average, so the mean of the EKF's angle corrections, N (ω − ω̂) dt per step, "
+                  "measures the speed error a wrong ψ causes; the EKF's ψ is moved until it vanishes (largest "
+                  f"|ω_m − ω_ref| left: {np.nanmax(np.abs(b['bias'])):.2f} rad/s against "
+                  f"{np.nanmax(np.abs(a['bias'])):.1f} without). It needs speed (it runs above 30 rad/s) and "
+                  "identifies ψ, not R_s: at 200 rad/s R_s hardly matters, at low speed it is the dead time and "
+                  "R_s that count (below).", ""]
     gl = grids.get("lq_load", {})
     lines = []
     for key, label in CONTROLLERS:
@@ -513,11 +541,19 @@ def _why(grids: dict) -> list[str]:
                      f"{_cells(g, MAPS[1], g['diverged'])}; biased "
                      f"{_cells(g, MAPS[1], ~g['stable'] & ~g['diverged'] & (g['status'] == 'completed'))}.")
     if lines:
+        g = gl.get("sensorless")
+        measured = ""
+        if g is not None:
+            i, j = _near(g["y"], 22.0), _near(g["x"], -40.0)
+            if i is not None and j is not None:
+                measured = f"; the sensorless unit's angle RMS error there: {g['angle'][i, j]:.2f} rad"
+        dtheta = 0.4 * _M.L_q * 234.0 / _M.psi
         L += ["**L_q mismatch (saturation) grows with the load.** L_q enters the model through the "
               "cross-coupling ω L_q i_q of eq 10 and the q-current dynamics (eq 11): a wrong L_q is a d-axis "
-              "voltage error proportional to the load current, which the EKF takes as an angle error "
-              "(Δθ ≈ ω ΔL_q i_q / (ω ψ) = ΔL_q i_q / ψ, 0.08 rad for −40 % at 234 A) and, through the "
-              "torque it then mis-attributes, as a speed error. Unloaded it is harmless:", ""] + lines + [""]
+              "voltage error proportional to the load current, ω ΔL_q i_q, which the EKF takes as a rotated "
+              f"back-EMF, an angle error Δθ ≈ ΔL_q i_q / ψ ({dtheta:.2f} rad for −40 % at the 234 A of 22°"
+              f"{measured}) and, through the torque it then mis-attributes, a small speed error. Unloaded it is "
+              "harmless; the angle error costs torque per ampere (cos Δθ) rather than stability:", ""] + lines + [""]
     return L
 
 
@@ -553,10 +589,17 @@ def generate(out: Path | str = "docs", runs_dir: Path | str = "runs/robustness",
     """Run the sweeps (unless ``run`` is False: then the runs in ``runs_dir`` as they are) and write
     ``out/robustness.md`` with its figures in ``out/robustness/``. Returns the page's path."""
     out, runs_dir = Path(out), Path(runs_dir)
+    import json  # noqa: PLC0415
+
     timing = None
+    record = runs_dir / "generation.json"  # the cost of the last generation that made runs
     if run:
         timing = run_sweeps(runs_dir, workers, small, stop_time, log=log)
-        timing.update(workers=workers, load=" ".join(f"{x:.2f}" for x in os.getloadavg()))
+        timing.update(workers=workers, load=" ".join(f"{x:.2f}" for x in os.getloadavg()), cores=os.cpu_count())
+        if timing["runs"]:
+            record.write_text(json.dumps(timing, indent=1) + "\n", encoding="utf-8")
+    if (timing is None or not timing["runs"]) and record.is_file():
+        timing = json.loads(record.read_text(encoding="utf-8"))
     t_from = T_FROM if stop_time is None or stop_time > 1.5 * T_FROM else stop_time / 2.0
     grids, mc, dead = collect(runs_dir, t_from)
     fig_dir = out / "robustness"
@@ -570,7 +613,7 @@ def generate(out: Path | str = "docs", runs_dir: Path | str = "runs/robustness",
     if dead:
         figs["dead"] = dead_time_figure(dead, fig_dir / "dead_time_hill.png")
     page = out / "robustness.md"
-    page.write_text(render(grids, mc, dead, figs, timing if timing and timing["runs"] else None, command, small),
+    page.write_text(render(grids, mc, dead, figs, timing, command, small),
                     encoding="utf-8")
     log(f"wrote {page} and {len(figs)} figures in {fig_dir}")
     return page

@@ -196,6 +196,20 @@ def test_sensorless_start_up_values_are_refused_before_the_run(fmus, tmp_path, c
     assert message in line
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--set", "plant.dead_time=2e-6"], "plant (PmsmEvPlant.fmu): fmi2ExitInitializationMode (start values) refused: "
+                                        "dead_time = 2e-06 s needs the DC-link voltage: set v_dc > 0 V"),
+    (["--set", "plant.sat_i_q=-1"], "sat_i_q must be >= 0 A, 0 = off (got -1.0)"),
+    (["--set", "plant.T_magnet=-300"], "T_magnet must be above -273.15 degC (got -300.0)"),
+    (["--set", "ctrl.dead_time_comp=-7.2"], "dead_time_comp must be >= 0 V (got -7.2)"),
+    (["--set", "ctrl.psi_adapt=1"], "ctrl (FocEkf5.fmu): fmi2ExitInitializationMode (start values) refused: "
+                                    "psi_adapt needs the stationary-frame EKF5 (observer ekf5ab or sensorless; got ekf5)"),
+])
+def test_plant_effect_values_are_refused_before_the_run(fmus, tmp_path, capsys, args, message):
+    line = refused(["run", "scenario2", "--stop-time", 0.01, *args], capsys, tmp_path / "out")
+    assert message in line
+
+
 @pytest.mark.parametrize("change, message", [
     ({"step": 0}, "experiment.step_size must be a finite number > 0 (got 0.0)"),
     ({"step": -1e-3}, "experiment.step_size must be a finite number > 0 (got -0.001)"),
