@@ -123,7 +123,7 @@ def test_report_cli_errors(tmp_path, capsys):
     assert main(["report", "--jobs", "0", "--runs", str(tmp_path / "r")]) == 2
     assert main(["report", "--list"]) == 0
     ids = capsys.readouterr().out.split()
-    assert "s1-ekf5-paper:" in ids and "s2-angle-ekf5ab:" in ids and len(report.CONFIGS) == 28
+    assert "s1-ekf5-paper:" in ids and "s2-angle-ekf5ab:" in ids and len(report.CONFIGS) == 62  # 28 + the sensorless section's 34
 
 
 def synthetic_run(t, theta_err, delta_deg, omega_m):
