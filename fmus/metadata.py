@@ -46,6 +46,8 @@ UNITS: dict[str, dict[str, float]] = {
     "degC": {"K": 1, "offset": 273.15},  # FMI 2.0 BaseUnit: value in K = value in degC + offset
     "1/K": {"K": -1},
     "1/s": {"s": -1},
+    "K/W": {"K": 1, "kg": -1, "m": -2, "s": 3},
+    "J/K": {"kg": 1, "m": 2, "s": -2, "K": -1},
 }
 
 #: unit name -> [(display unit, factor)], display value = factor * value
@@ -133,6 +135,10 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "sat_i_d": ("A", "d-axis saturation current: psi_d = psi + L_d i_d / (1 + |i_d| / sat_i_d) (0 = off)"),
     "T_winding": ("degC", "winding temperature: R_s(T) = R_s (1 + alpha_R (T - 20 degC))"),
     "T_magnet": ("degC", "magnet temperature: psi(T) = psi (1 + alpha_psi (T - 20 degC))"),
+    "thermal_R": ("K/W", "thermal resistance winding -> coolant of the first-order thermal model (0 = off: "
+                         "T_winding constant)"),
+    "thermal_C": ("J/K", "heat capacity of the winding in the thermal model"),
+    "T_ambient": ("degC", "coolant temperature of the thermal model"),
     "alpha_R": ("1/K", "temperature coefficient of the winding resistance (copper 0.00393)"),
     "alpha_psi": ("1/K", "temperature coefficient of the magnet flux (NdFeB about -0.0012)"),
     "dead_time_comp": ("V", "dead-time compensation: per-phase voltage added in the sign of the measured "

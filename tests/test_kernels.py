@@ -23,11 +23,12 @@ from pmsm_ev.reference import run_reference
 sys.path.insert(0, sys.argv[3])
 from regression_runs import PARAMS, ELEVATION
 observer, angle_source, out = sys.argv[1], sys.argv[2], sys.argv[4]
-if len(sys.argv) > 5:  # the plant's effects on: dead time and its compensation, saturation, temperature
+if len(sys.argv) > 5:  # the plant's effects on: dead time and its compensation, saturation, temperature (heating)
     from dataclasses import replace
     from pmsm_ev.params import ControllerParams, PlantParams
     PARAMS = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, sat_i_q=900.0, sat_i_d=2000.0,
-                                               T_winding=90.0, T_magnet=70.0),
+                                               T_winding=90.0, T_magnet=70.0, thermal_R=0.05,
+                                               thermal_C=2.0),
                      controller=ControllerParams(dead_time_comp=7.2))
 run_reference(out, stop_time=2.0, observer=observer, angle_source=angle_source, params=PARAMS,
               output_interval=0.001, elevation=ELEVATION)

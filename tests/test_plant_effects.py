@@ -265,3 +265,45 @@ def test_psi_adaptation_removes_the_speed_bias_of_a_hot_magnet():
     with pytest.raises(ParameterError, match="psi_adapt needs the stationary-frame EKF5"):
         from pmsm_ev.params import EkfParams
         ControlUnit("ekf5", ekf=EkfParams(psi_adapt=1.0))
+
+
+# -- the winding's first-order thermal model ----------------------------------------------------------
+def test_thermal_model_settles_at_losses_times_thermal_resistance():
+    """C_th dT/dt = P - (T - T_amb) / R_th: the step response reaches 1 - 1/e of P R_th after one time
+    constant and T_amb + P R_th in steady state."""
+    P, R_th, C_th, T_amb = 1500.0, 0.05, 2000.0, 40.0
+    T, t = T_amb, 0.0
+    while t < R_th * C_th - 1e-9:  # one time constant in 1 s steps
+        T = k.thermal_step(T, P, T_amb, R_th, C_th, 1.0)
+        t += 1.0
+    assert T - T_amb == pytest.approx(P * R_th * (1 - math.exp(-1)), rel=1e-9)
+    for _ in range(3000):
+        T = k.thermal_step(T, P, T_amb, R_th, C_th, 1.0)
+    assert T - T_amb == pytest.approx(P * R_th, rel=1e-9)
+
+
+def test_plant_winding_heats_to_copper_losses_times_thermal_resistance():
+    """The plant at standstill with a constant d-axis voltage (no torque): the copper losses heat the
+    winding, R_s rises (+0.393 %/K) and the current falls, until T - T_amb = P_cu(T) R_th."""
+    R_th, C_th, T_amb = 0.5, 2.0, 25.0  # a 1 s time constant, for a short test
+    p = PlantParams(thermal_R=R_th, thermal_C=C_th, T_ambient=T_amb, T_winding=T_amb)
+    plant = Plant(plant=p)
+    m = plant.motor
+    v_d = 0.5  # [V]: ~55 A in the cold winding
+    for _ in range(int(12.0 / DT)):
+        plant.step(v_d, 0.0, 0.0, DT)
+    assert abs(plant.omega_m) < 1e-6  # standstill (the magnet on the d axis, friction holds it)
+    r_hot = winding_resistance(m.R_s, plant.T_winding, p.alpha_R)
+    i_sq = plant.i_d ** 2 + plant.i_q ** 2
+    assert math.sqrt(i_sq) == pytest.approx(v_d / r_hot, rel=1e-6)  # the current of the hot winding
+    losses = r_hot * i_sq
+    assert plant.T_winding - T_amb == pytest.approx(losses * R_th, rel=1e-4)
+    assert plant.T_winding - T_amb > 10.0  # it did heat
+    # the state (temperature included) saves and restores
+    state = plant.get_state()
+    assert len(state) == 10 and state[-1] == plant.T_winding
+    other = Plant(plant=p)
+    other.set_state(state)
+    a = plant.step(v_d, 0.0, 0.0, DT)
+    b = other.step(v_d, 0.0, 0.0, DT)
+    assert a == b and other.T_winding == plant.T_winding

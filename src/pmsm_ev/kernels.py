@@ -223,6 +223,30 @@ def saturated_torque(i_d, i_q, psi, L_d, L_q, N, a_d, a_q):
     return N * ((psi + f_d) * i_q - f_q * i_d)
 
 
+@kernel()
+def winding_resistance(R_s20, T, alpha_R, T_ref):
+    """R_s(T) = R_s20 (1 + alpha_R (T - T_ref)) [Ohm]: copper's linear law."""
+    return R_s20 * (1.0 + alpha_R * (T - T_ref))
+
+
+@kernel()
+def winding_thermal_step(T, i_d, i_q, R_s20, alpha_R, T_ref, T_amb, R_th, C_th, dt):
+    """The winding heated over dt by its copper losses R_s(T) (i_d^2 + i_q^2) (``thermal_step``; the
+    model's power scaling, p = v_d i_d + v_q i_q); returns the new temperature [degC] and R_s there."""
+    r_s = winding_resistance(R_s20, T, alpha_R, T_ref)
+    T_new = thermal_step(T, r_s * (i_d * i_d + i_q * i_q), T_amb, R_th, C_th, dt)
+    return T_new, winding_resistance(R_s20, T_new, alpha_R, T_ref)
+
+
+@kernel()
+def thermal_step(T, P, T_amb, R_th, C_th, dt):
+    """Winding temperature after dt [degC] of the first-order model C_th dT/dt = P - (T - T_amb) / R_th
+    with the losses P [W] held over the step (exact solution: T relaxes to T_amb + P R_th with the
+    time constant R_th C_th)."""
+    T_inf = T_amb + P * R_th
+    return T_inf + (T - T_inf) * math.exp(-dt / (R_th * C_th))
+
+
 # -- road load, eqs 2-4 and 29 ---------------------------------------------------------------
 @kernel()
 def gradient_force(delta, m_v, g):

@@ -116,8 +116,11 @@ TEMPERATURE_REF = 20.0
 
 
 def winding_resistance(R_s20: float, T: float, alpha_R: float) -> float:
-    """R_s(T) = R_s20 (1 + alpha_R (T - 20 degC)) [Ohm]: copper's linear law."""
-    return R_s20 * (1.0 + alpha_R * (T - TEMPERATURE_REF))
+    """R_s(T) = R_s20 (1 + alpha_R (T - 20 degC)) [Ohm]: copper's linear law
+    (``pmsm_ev.kernels.winding_resistance``, which the thermal model uses at every step)."""
+    from .kernels import winding_resistance as law  # noqa: PLC0415
+
+    return law(R_s20, T, alpha_R, TEMPERATURE_REF)
 
 
 def magnet_flux(psi20: float, T: float, alpha_psi: float) -> float:
@@ -183,12 +186,23 @@ class PlantParams:
     sat_i_d: float = 0.0
 
     # -- temperature (start values, constant over a run) --------------------------------
-    #: winding temperature [degC]; Table I's R_s is taken at ``TEMPERATURE_REF`` (20 degC).
-    #: R_s(T) = R_s (1 + alpha_R (T - 20)). Typical: 20 (cold) .. 120 degC (hot, +39 % R_s).
+    #: winding temperature [degC] (at the start, with the thermal model); Table I's R_s is taken at
+    #: ``TEMPERATURE_REF`` (20 degC). R_s(T) = R_s (1 + alpha_R (T - 20)). Typical: 20 (cold) .. 120
+    #: degC (hot, +39 % R_s).
     T_winding: float = TEMPERATURE_REF
     #: magnet temperature [degC]; Table I's psi at 20 degC. psi(T) = psi (1 + alpha_psi (T - 20)).
     #: Typical: 20 .. 100 degC (-10 % psi for NdFeB).
     T_magnet: float = TEMPERATURE_REF
+    #: thermal resistance winding -> coolant [K/W]; 0 = off (T_winding stays at its start value).
+    #: On: C_th dT/dt = P_cu - (T - T_ambient) / R_th, P_cu = R_s(T) (i_d^2 + i_q^2) in the model's
+    #: power scaling (p = v_d i_d + v_q i_q, as eq 12 without 3/2), R_s following T each step.
+    #: Typical: 0.02-0.1 K/W for a liquid-cooled EV motor's winding (100 K at 1-5 kW of copper loss).
+    thermal_R: float = 0.0
+    #: heat capacity of the winding [J/K] [chosen]: ~5 kg of copper and insulation, 2000 J/K;
+    #: with thermal_R = 0.05 K/W a time constant of 100 s
+    thermal_C: float = 2000.0
+    #: coolant (ambient) temperature of the thermal model [degC]
+    T_ambient: float = TEMPERATURE_REF
     #: temperature coefficient of the copper's resistance [1/K]: 0.00393 (annealed copper at
     #: 20 degC, IEC 60028)
     alpha_R: float = 0.00393
@@ -221,9 +235,11 @@ class PlantParams:
         for name in ("sat_i_q", "sat_i_d"):
             value = getattr(self, name)
             _require(math.isfinite(value) and value >= 0, f"{name} must be >= 0 A, 0 = off (got {value})")
-        for name in ("T_winding", "T_magnet", "alpha_R", "alpha_psi"):
+        _require(math.isfinite(self.thermal_R) and self.thermal_R >= 0, f"thermal_R must be >= 0 K/W, 0 = off (got {self.thermal_R})")
+        _require(math.isfinite(self.thermal_C) and self.thermal_C > 0, f"thermal_C must be > 0 J/K (got {self.thermal_C})")
+        for name in ("T_winding", "T_magnet", "alpha_R", "alpha_psi", "T_ambient"):
             _require(math.isfinite(getattr(self, name)), f"{name} must be finite (got {getattr(self, name)})")
-        for name in ("T_winding", "T_magnet"):
+        for name in ("T_winding", "T_magnet", "T_ambient"):
             _require(getattr(self, name) > -273.15, f"{name} must be above -273.15 degC (got {getattr(self, name)})")
         _require(1.0 + self.alpha_R * (self.T_winding - TEMPERATURE_REF) > 0,
                  f"R_s at T_winding = {self.T_winding} degC with alpha_R = {self.alpha_R} 1/K is not > 0")

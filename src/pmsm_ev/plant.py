@@ -61,6 +61,7 @@ class Plant:
                   _k.P_SAT_AD: 1.0 / p.sat_i_d if p.sat_i_d > 0 else 0.0,
                   _k.P_SAT_AQ: 1.0 / p.sat_i_q if p.sat_i_q > 0 else 0.0}
         self._dead_time_dt = None  # the step the dead time's voltage error was computed for
+        self._thermal = p.thermal_R > 0
         self._pp = accel.vector(_k.PLANT_PARAMS)
         for slot, value in values.items():
             self._pp[slot] = float(value)
@@ -75,18 +76,26 @@ class Plant:
         self.delta = 0.0
         self.x_vehicle = 0.0  # distance travelled since the start [m] (eqs 1, 6 integrated)
         self.samples = 0  # measurements taken so far (the noise counter)
+        self.T_winding = p.T_winding  # [degC]; changes only with the thermal model
+        if self._thermal:
+            self._pp[_k.P_R_S] = self.R_s
         self._v_pending = (0.0, 0.0)  # voltage received, applied next step (inverter_delay)
         self.v_alpha_applied = self.v_beta_applied = 0.0
         self._update_outputs()
 
     # -- state as a tuple, for save/restore by wrappers --------------------------
     def get_state(self) -> tuple:
-        return (self.i_d, self.i_q, self.omega_m, self.theta_e, self.delta,
-                float(self.samples - 1), self._v_pending[0], self._v_pending[1], self.x_vehicle)
+        state = (self.i_d, self.i_q, self.omega_m, self.theta_e, self.delta,
+                 float(self.samples - 1), self._v_pending[0], self._v_pending[1], self.x_vehicle)
+        return state + (self.T_winding,) if self._thermal else state
 
     def set_state(self, state) -> None:
+        state = [float(x) for x in state]
+        if self._thermal:
+            self.T_winding = state.pop()
+            self._pp[_k.P_R_S] = winding_resistance(self.motor.R_s, self.T_winding, self.params.alpha_R)
         (self.i_d, self.i_q, self.omega_m, self.theta_e, self.delta, samples,
-         v_a, v_b, self.x_vehicle) = (float(x) for x in state)
+         v_a, v_b, self.x_vehicle) = state
         self.samples = int(samples)  # _update_outputs takes the same sample again
         self._v_pending = (v_a, v_b)
         self._update_outputs()
@@ -119,6 +128,10 @@ class Plant:
          self.T_e, self.T_L_mech, self.v_vehicle, dx) = out
         out = out[:9]
         self.x_vehicle += dx
+        if self._thermal:  # the copper losses heat the winding; R_s follows for the next step
+            self.T_winding, self._pp[_k.P_R_S] = self._kernels.winding_thermal_step(
+                self.T_winding, self.i_d, self.i_q, self.motor.R_s, p.alpha_R, TEMPERATURE_REF, p.T_ambient,
+                p.thermal_R, p.thermal_C, dt)
         self.i_alpha_true, self.i_beta_true = self.i_alpha, self.i_beta
         self.samples += 1
         if self._sensors:
