@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from pmsm_ev import __version__
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import SENSORLESS_EKF, DT_DEFAULT, ControllerParams, EkfParams, MotorParams, StartupParams
+from pmsm_ev.params import DT_DEFAULT, SENSORLESS_EKF, ControllerParams, EkfParams, MotorParams, StartupParams
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
 
 #: relative tolerance on the communication step size after the first step
@@ -97,13 +97,9 @@ class FocSlave(DriveSlave):
         self._dt = None
 
     def _build_unit(self, dt: float) -> None:
-        if self._sensorless:  # angle_source checked, not used: always the estimate
-            self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
-                                     self.parameters(ControllerParams), self.parameters(EkfParams), dt,
-                                     self.parameters(StartupParams))
-        else:
-            self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
-                                     self.parameters(ControllerParams), self.parameters(EkfParams), dt)
+        self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
+                                 self.parameters(ControllerParams), self.parameters(EkfParams), dt,
+                                 self.parameters(StartupParams) if self._sensorless else None)
         self.mark_built()
         self._copy_outputs()
 
