@@ -51,6 +51,7 @@ FMUS: dict[str, tuple[str, bool]] = {
     "FocEkf4": ("foc_ekf4.py", True),
     "FocEkf5AB": ("foc_ekf5ab.py", True),
     "FocSensored": ("foc_sensored.py", True),
+    "FocSensorless": ("foc_sensorless.py", True),
     "RouteProfile": ("route_profile.py", True),
 }
 #: FMUs for the step-cost benchmark (``orchestrator.bench``), not built by default: the
@@ -60,7 +61,8 @@ BENCH_FMUS: dict[str, tuple[str, bool]] = {
     "PassThroughFoc": ("passthrough_foc.py", True),
 }
 #: observer of each controller FMU (pmsm_ev.params.OBSERVERS)
-OBSERVER_FMUS = {"ekf5": "FocEkf5", "ekf4": "FocEkf4", "ekf5ab": "FocEkf5AB", "sensored": "FocSensored"}
+OBSERVER_FMUS = {"ekf5": "FocEkf5", "ekf4": "FocEkf4", "ekf5ab": "FocEkf5AB", "sensored": "FocSensored",
+                 "sensorless": "FocSensorless"}
 #: the FMU of the scenario signals, and the route file it reads by default (resources/)
 ROUTE_FMU = "RouteProfile"
 ROUTE_FILE = "route.json"

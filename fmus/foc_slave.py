@@ -21,7 +21,8 @@ import math
 
 from pmsm_ev import __version__
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import DT_DEFAULT, ControllerParams, EkfParams, MotorParams, ParameterError
+from pmsm_ev.params import (DT_DEFAULT, SENSORLESS_EKF, ControllerParams, EkfParams, MotorParams, ParameterError,
+                            StartupParams)
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
 
 #: an instant within this fraction of dt of a communication point counts as that point:
@@ -89,8 +90,16 @@ class FocSlave(DriveSlave):
         self.add_output("i_qref", "A", "q-current reference from the speed PI (eq 14), limited to i_q_max"
                         + hold, discrete=True)
 
-        self.add_parameters(ControllerParams, EkfParams, MotorParams)
-        self.add_parameter("angle_source", "measured")
+        self.add_output("mode", None, "operating mode: 0 alignment at standstill, 1 I-f (current-frequency) "
+                                      "drive, 2 FOC on the observer's angle and speed (only the sensorless "
+                                      "unit has modes 0 and 1; the others are always 2)" + hold,
+                        discrete=True, start=0.0 if observer == "sensorless" else 2.0)
+        self._sensorless = observer == "sensorless"
+        if self._sensorless:
+            self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams)
+        else:
+            self.add_parameters(ControllerParams, EkfParams, MotorParams)
+        self.add_parameter("angle_source", "measured")  # the same interface for every controller
         self.add_parameter("dt", 0.0)
         self._unit = None
         self._dt = None  # sample period, fixed by the parameter or the first do_step
@@ -108,7 +117,8 @@ class FocSlave(DriveSlave):
 
     def _build_unit(self, dt: float) -> None:
         self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
-                                 self.parameters(ControllerParams), self.parameters(EkfParams), dt)
+                                 self.parameters(ControllerParams), self.parameters(EkfParams), dt,
+                                 self.parameters(StartupParams) if self._sensorless else None)
         self.mark_built()
         self._copy_outputs()
 
@@ -137,6 +147,7 @@ class FocSlave(DriveSlave):
         self.i_q = u.i_q
         self.i_qref = u.i_qref
         self.i_d_hat, self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat = u.estimates
+        self.mode = u.mode
 
     def _start_clock(self, current_time: float, step_size: float) -> None:
         """First step: the sample period (the parameter, else ``step_size``) and the first
@@ -162,9 +173,14 @@ class FocSlave(DriveSlave):
                 self._start_clock(current_time, step_size)
             k_end = math.ceil((current_time + step_size - self._t0) / self._dt - SAMPLE_TOLERANCE)
             for _ in range(k_end - self._k_next):  # the instants in [t, t + h), on the inputs at t
-                (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
-                 self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
-                    self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
+                if self._sensorless:  # never reads theta_meas, omega_meas
+                    (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
+                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode) = self._unit.step(
+                        self.i_alpha, self.i_beta, self.omega_ref)
+                else:
+                    (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
+                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
+                        self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
             self._k_next = max(self._k_next, k_end)
         except Exception as exc:
             self._fail("fmi2DoStep", exc)

@@ -40,6 +40,8 @@ UNITS: dict[str, dict[str, int]] = {
     "V/A": {"kg": 1, "m": 2, "s": -3, "A": -2},
     "V/(A.s)": {"kg": 1, "m": 2, "s": -4, "A": -2},
     "A.s/rad": {"A": 1, "s": 1, "rad": -1},
+    "A/s": {"A": 1, "s": -1},
+    "rad/s2": {"rad": 1, "s": -2},
     "A/rad": {"A": 1, "rad": -1},
 }
 
@@ -124,6 +126,27 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "delay_compensation": (None, "actuation delay the controller accounts for, 0 or 1 periods (observer input)"),
     "x0_omega": ("rad/s", "EKF initial speed estimate (flying start: set to the plant's initial speed)"),
     "x0_theta": ("rad", "EKF initial electrical-angle estimate, the observer's guess of theta(0)"),
+    "J_model": ("kg.m2", "inertia of the EKF's mechanical model (0 = the motor's J_m, the paper's eq 22; "
+                         "the drive's J_eq of eq 9 is 0.526 kg m^2)"),
+    # StartupParams: the sensorless unit's low-speed range
+    "i_align": ("A", "alignment current at standstill"),
+    "t_ramp": ("s", "alignment: ramp of the current to i_align on the +90 deg axis"),
+    "t_hold": ("s", "alignment: hold on +90 deg"),
+    "t_sweep": ("s", "alignment: sweep of the current vector from +90 deg to 0 deg"),
+    "t_settle": ("s", "alignment: hold on 0 deg before the I-f start"),
+    "i_if": ("A", "I-f current (start-up; least current after a handover down)"),
+    "if_accel": ("rad/s2", "largest acceleration of the I-f speed, which follows omega_ref"),
+    "i_rate": ("A/s", "rate of change of the I-f current magnitude"),
+    "omega_up": ("rad/s", "handover from I-f to the EKF above this I-f speed"),
+    "omega_down": ("rad/s", "handover from the EKF back to I-f below this |omega_hat|"),
+    "agree_tol": (None, "handover up: relative agreement of omega_hat with the I-f speed"),
+    "agree_time": ("s", "handover up: how long omega_hat must agree with the I-f speed"),
+    "if_margin": (None, "I-f current after a handover down, times the present current"),
+    "if_damping": (None, "damping ratio of the rotor's swing on the I-f vector (0 = plain I-f)"),
+    "if_damping_filter": ("s", "time constant of the low-pass filter on omega_hat - omega_if before the I-f "
+                                "damping (0 = none)"),
+    "p0_omega_aligned": ("rad2/s2", "EKF covariance of the speed at its restart after the alignment"),
+    "p0_theta_aligned": ("rad2", "EKF covariance of the angle at its restart after the alignment"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),

@@ -23,7 +23,7 @@ DESCRIPTION = (
     "inputs v_alpha, v_beta (inverter voltage, stationary frame) and delta (road elevation) held; "
     "the outputs are the state at t+h, so no output depends directly on the inputs at the same "
     "communication point. Any step size, fixed or variable. Truth signals (i_d, i_q, omega_m, "
-    "theta_e, T_e, T_L_mech, v_vehicle) are outputs for recording and for a sensored controller. "
+    "theta_e, T_e, T_L_mech, v_vehicle, x_vehicle) are outputs for recording and for a sensored controller. "
     "A Python FMU (pythonfmu): it needs a Python 3 interpreter with numpy; the project code it "
     "runs is bundled in resources/. A state whose speed or currents are not finite fails the step."
 )
@@ -63,6 +63,9 @@ class PmsmEvPlant(DriveSlave):
                         start=None, start_dependencies=("omega_m0",) + _VEHICLE_LOAD)
         self.add_output("v_vehicle", "m/s", "vehicle speed" + at_start,
                         start=None, start_dependencies=("omega_m0", "r_w", "n_g"), display_unit="km/h")
+        self.add_output("x_vehicle", "m", "distance travelled since the start, forward positive "
+                                          "(vehicle position; 0 before the first step)",
+                        start=None, start_dependencies=())
 
         self.add_parameters(MotorParams, VehicleParams, PlantParams)
         self._plant = None
@@ -97,6 +100,7 @@ class PmsmEvPlant(DriveSlave):
         self.T_e = p.T_e
         self.T_L_mech = p.T_L_mech
         self.v_vehicle = p.v_vehicle
+        self.x_vehicle = p.x_vehicle
 
     # -- FMI -------------------------------------------------------------------------
     def do_step(self, current_time, step_size):
@@ -107,6 +111,7 @@ class PmsmEvPlant(DriveSlave):
                 raise FmuUsageError(f"communication step size must be > 0 s (got {step_size!r})")
             (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta, self.T_e,
              self.T_L_mech, self.v_vehicle) = self._plant.step(self.v_alpha, self.v_beta, self.delta, step_size)
+            self.x_vehicle = self._plant.x_vehicle
             if not math.isfinite(self.omega_m + self.i_d + self.i_q):
                 raise SimulationError(f"plant state is not finite at t = {current_time + step_size!r} s "
                                       f"(omega_m={self.omega_m!r}, i_d={self.i_d!r}, i_q={self.i_q!r})")

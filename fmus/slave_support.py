@@ -192,9 +192,10 @@ class DriveSlave(Fmi2Slave):
         self._parameter_names.append(name)
 
     def add_parameters(self, *groups) -> None:
-        """One parameter per field of each dataclass in ``groups``, default = field default."""
-        for cls in groups:
-            defaults = cls()
+        """One parameter per field of each dataclass in ``groups`` (a class: default = field
+        default; an instance: default = its value)."""
+        for group in groups:
+            cls, defaults = (group, group()) if isinstance(group, type) else (type(group), group)
             for f in dataclasses.fields(cls):
                 type_name = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
                 self.add_parameter(f.name, getattr(defaults, f.name), _KINDS.get(type_name))

@@ -30,6 +30,7 @@ import numpy as np
 
 from pmsm_ev.results import angle_error_unwrapped
 
+from . import report_sensorless
 from .compare import COLUMNS, Run, format_value, load_run, markdown_table, plot_overlay, summarize
 from .errors import CosimError, one_line
 from .system import project_fmu_dir
@@ -42,7 +43,8 @@ FLYING_SPEED = 200.0
 KEY_FILE = "report-run.json"
 
 PLANT_FMU = "PmsmEvPlant"
-OBSERVER_FMUS = {"ekf5": "FocEkf5", "ekf4": "FocEkf4", "ekf5ab": "FocEkf5AB", "sensored": "FocSensored"}
+OBSERVER_FMUS = {"ekf5": "FocEkf5", "ekf4": "FocEkf4", "ekf5ab": "FocEkf5AB", "sensored": "FocSensored",
+                 "sensorless": "FocSensorless"}
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,8 @@ SETUPS = {s.key: s for s in (
     Setup("ekf4-sensorless", "ekf4", "estimated", False, "EKF4 sensorless"),
     Setup("sensored", "sensored", "measured", False, "sensored"),
 )}
+#: the sensorless unit from standstill (section "Sensorless from standstill")
+SENSORLESS_SETUP = Setup("sensorless", "sensorless", "estimated", False, "sensorless from standstill")
 
 #: the paper's scenarios: (short name, shipped scenario)
 PAPER_SCENARIOS = (("s1", "scenario1"), ("s2", "scenario2"))
@@ -86,8 +90,11 @@ class Config:
     id: str
     scenario: str  #: shipped scenario name
     setup: Setup
-    section: str  #: "paper" or "realism"
+    section: str  #: "paper", "realism" or "sensorless"
     variant: str = ""  #: short name of the realism variant
+    sets: tuple[str, ...] = ()  #: more start values (``--set``)
+    stop_time: float | None = None  #: its own stop time [s]; a shorter one of the report's wins
+    description: str = ""  #: the variant as the tables show it
 
     @property
     def label(self) -> str:
@@ -101,13 +108,16 @@ class Config:
         s = self.setup
         args = [self.scenario, "--controller", str(project_fmu_dir() / f"{OBSERVER_FMUS[s.observer]}.fmu")]
         sets = []
-        if s.observer != "sensored":
+        if s.observer not in ("sensored", "sensorless"):  # these have no angle_source
             sets.append(f"ctrl.angle_source={s.angle_source}")
+        sets += self.sets
         if s.flying:
             sets += [f"plant.omega_m0={FLYING_SPEED!r}", f"ctrl.x0_omega={FLYING_SPEED!r}"]
             args += ["--profile", f"omega_ref={flying_csv}"]
         if sets:
             args += ["--set", *sets]
+        if self.stop_time is not None:
+            stop_time = self.stop_time if stop_time is None else min(stop_time, self.stop_time)
         if stop_time is not None:
             args += ["--stop-time", repr(float(stop_time))]
         return args
@@ -118,6 +128,9 @@ def all_configs() -> list[Config]:
                for short, scen in PAPER_SCENARIOS for key, setup in SETUPS.items()]
     configs += [Config(f"s2-{short}-{key}", scen, SETUPS[key], "realism", short)
                 for short, scen, _ in REALISM_SCENARIOS for key in REALISM_SETUPS]
+    setups = {"sensorless": SENSORLESS_SETUP, "sensored": SETUPS["sensored"]}
+    configs += [Config(cid, scen, setups[key], "sensorless", sets=sets, stop_time=stop, description=desc)
+                for cid, scen, key, sets, stop, desc in report_sensorless.config_specs()]
     return configs
 
 
@@ -260,8 +273,8 @@ class Data:
             run = load_run(d, c.label)
             self.runs[c.id] = run
             row = summarize(run, t_from)
-            if c.variant:
-                row["variant"] = dict((s, d) for s, _, d in REALISM_SCENARIOS)[c.variant]
+            if c.description or c.variant:
+                row["variant"] = c.description or dict((s, d) for s, _, d in REALISM_SCENARIOS)[c.variant]
             self.rows[c.id] = row
 
     def row(self, cid: str) -> dict:
@@ -399,6 +412,7 @@ def _figures(data: Data, fig_dir: Path) -> list[Path]:
             made.append(plot_overlay(rs, "angle_error", fig_dir / f"s2_{FIG_NAMES[short]}_angle_error_start.png",
                                      window=(0.0, 3.0),
                                      title=f"Scenario 2, {desc}: angle error over the first 3 s"))
+    made += report_sensorless.figures(data, fig_dir)
     return made
 
 
@@ -695,6 +709,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
                 L.append(f"![{name}](results/{name}.png)\n")
 
     # --- errata and what would change ------------------------------------------------------
+    L += report_sensorless.render(d, fig_names)
     L.append("## The paper's errata and how the project handles them\n")
     L.append(
         "- **Eq 20** prints v_q = u_q − N ω L_d i_dl − N ω ψ: its terms add to, rather than cancel, the "
@@ -724,8 +739,8 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
         "- The angle drift in paper mode comes from a small speed bias of the discretised model "
         "(Euler step of eqs 23-24 at 10 kHz, O(dt)); a higher control rate or an exact discretisation "
         "shrinks it but cannot make θ observable from dq currents.\n"
-        "- The stationary-frame EKF5 runs start at speed; from standstill it would need an initial angle "
-        "detection or an open-loop start. Ideal inverter and exact sensors unless stated: a dead time, "
+        "- The stationary-frame EKF5 runs above start at speed; from standstill the sensorless unit adds an "
+        "alignment and an I-f start (section \"Sensorless from standstill\"). Ideal inverter and exact sensors unless stated: a dead time, "
         "an actuation delay or a DC-link limit (all available as plant parameters) are not in these runs.\n")
     return "\n".join(L)
 

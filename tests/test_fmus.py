@@ -28,7 +28,7 @@ from fmpy.validation import validate_fmu
 import pmsm_ev_fmus
 from pmsm_ev import __version__
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import (ControllerParams, DriveParams, EkfParams, MotorParams, ParameterError,
+from pmsm_ev.params import (ControllerParams, DriveParams, EkfParams, MotorParams, ParameterError, StartupParams,
                             PlantParams, ScenarioParams, VehicleParams)
 from pmsm_ev.plant import Plant
 from pmsm_ev.reference import run_reference
@@ -36,13 +36,14 @@ from pmsm_ev.results import read_results
 from pmsm_ev_fmus import build as fmu_build
 from pmsm_ev_fmus.metadata import PARAMETERS, UNITS
 
-CONTROLLERS = ("FocEkf5", "FocEkf4", "FocEkf5AB", "FocSensored")
+CONTROLLERS = ("FocEkf5", "FocEkf4", "FocEkf5AB", "FocSensored", "FocSensorless")
 OBSERVER = {fmu: observer for observer, fmu in pmsm_ev_fmus.OBSERVER_FMUS.items()}
 PLANT_INPUTS = ("v_alpha", "v_beta", "delta")
-PLANT_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle")
+PLANT_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle",
+                 "x_vehicle")
 CTRL_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
 CTRL_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d_hat", "i_q_hat", "omega_hat", "theta_hat", "T_L_hat",
-                "i_d", "i_q", "i_qref")
+                "i_d", "i_q", "i_qref", "mode")
 DT = 1e-4
 DELTA_22 = math.radians(22.0)
 
@@ -109,11 +110,11 @@ class Instance:
 
 
 def plant_outputs(p: Plant):
-    return [p.i_alpha, p.i_beta, p.i_d, p.i_q, p.omega_m, p.theta_e, p.T_e, p.T_L_mech, p.v_vehicle]
+    return [p.i_alpha, p.i_beta, p.i_d, p.i_q, p.omega_m, p.theta_e, p.T_e, p.T_L_mech, p.v_vehicle, p.x_vehicle]
 
 
 def unit_outputs(u: ControlUnit):
-    return [u.v_alpha, u.v_beta, u.v_d, u.v_q, *u.estimates, u.i_d, u.i_q, u.i_qref]
+    return [u.v_alpha, u.v_beta, u.v_d, u.v_q, *u.estimates, u.i_d, u.i_q, u.i_qref, u.mode]
 
 
 def omega_ramp(t):
@@ -201,7 +202,7 @@ def test_fmpy_validation_finds_no_problem(fmus, name):
 
 
 def test_metadata_covers_every_parameter_field():
-    for cls in (MotorParams, VehicleParams, PlantParams, ControllerParams, EkfParams):
+    for cls in (MotorParams, VehicleParams, PlantParams, ControllerParams, EkfParams, StartupParams):
         for f in dataclasses.fields(cls):
             assert f.name in PARAMETERS, f"{cls.__name__}.{f.name} has no unit/description in fmus/metadata.py"
             unit, text = PARAMETERS[f.name]
@@ -228,6 +229,7 @@ def test_model_description_is_complete(fmus, name):
         if v.unit is not None:
             assert v.unit in units
     groups = (MotorParams, VehicleParams, PlantParams) if name == "PmsmEvPlant" else \
+        (ControllerParams, EkfParams, MotorParams, StartupParams) if name == "FocSensorless" else \
         (ControllerParams, EkfParams, MotorParams)
     expected = {f.name for cls in groups for f in dataclasses.fields(cls)}
     if name != "PmsmEvPlant":
@@ -238,8 +240,8 @@ def test_model_description_is_complete(fmus, name):
     outputs = PLANT_OUTPUTS if name == "PmsmEvPlant" else CTRL_OUTPUTS
     assert [v.name for v in md.modelVariables if v.causality == "input"] == list(inputs)
     assert [v.name for v in md.modelVariables if v.causality == "output"] == list(outputs)
-    for n in inputs + outputs:
-        assert by_name[n].type == "Real" and by_name[n].unit in units
+    for n in inputs + outputs:  # all with units, but the mode (a number, 0 / 1 / 2)
+        assert by_name[n].type == "Real" and (by_name[n].unit in units if n != "mode" else by_name[n].unit is None)
     assert by_name["omega_m" if name == "PmsmEvPlant" else "omega_hat"].unit == "rad/s"
     # no direct feedthrough: every output's dependency list is empty
     assert len(md.outputs) == len(outputs)
@@ -251,7 +253,10 @@ def test_model_description_is_complete(fmus, name):
         assert deps["omega_m"] == {"omega_m0"}
         assert set(deps) == set(outputs)
     else:  # zero until the first step, whatever the parameters
-        assert all(by_name[n].initial == "exact" and by_name[n].start == "0.0" for n in outputs)
+        # zero, but the mode: 0 (alignment) for the sensorless unit, 2 (closed loop) for the others
+        mode = "0.0" if name == "FocSensorless" else "2.0"
+        assert all(by_name[n].initial == "exact" and by_name[n].start == (mode if n == "mode" else "0.0")
+                   for n in outputs)
         assert all(by_name[n].variability == "discrete" for n in outputs)
         assert md.initialUnknowns == []
 
@@ -340,7 +345,7 @@ def test_outputs_before_the_first_step(unzipped):
     p.fmu.exitInitializationMode()
     assert p.get(["omega_m", "i_alpha"]) == [60.0, Plant(plant=PlantParams(**{**start, "omega_m0": 60.0})).i_alpha]
     c = Instance(unzipped, "FocEkf5", start={"u_max": 100.0})
-    assert c.get(CTRL_OUTPUTS) == [0.0] * len(CTRL_OUTPUTS)
+    assert c.get(CTRL_OUTPUTS) == [0.0] * (len(CTRL_OUTPUTS) - 1) + [2.0]  # mode 2: closed loop
 
 
 # -- the FMUs in co-simulation -------------------------------------------------------------

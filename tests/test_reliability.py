@@ -186,6 +186,17 @@ def test_non_physical_values_are_refused_before_the_run(fmus, tmp_path, capsys, 
     assert message in line
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--set", "ctrl.omega_down=40"], "ctrl (FocSensorless.fmu): fmi2ExitInitializationMode (start values) refused: "
+                                      "omega_down must be < omega_up (got 40.0 >= 30.0 rad/s)"),
+    (["--set", "ctrl.if_margin=0.5"], "if_margin must be >= 1 (got 0.5)"),
+    (["--set", "ctrl.J_model=-1"], "J_model must be finite and >= 0 (got -1.0)"),
+])
+def test_sensorless_start_up_values_are_refused_before_the_run(fmus, tmp_path, capsys, args, message):
+    line = refused(["run", "hill-start", "--stop-time", 0.01, *args], capsys, tmp_path / "out")
+    assert message in line
+
+
 @pytest.mark.parametrize("change, message", [
     ({"step": 0}, "experiment.step_size must be a finite number > 0 (got 0.0)"),
     ({"step": -1e-3}, "experiment.step_size must be a finite number > 0 (got -0.001)"),

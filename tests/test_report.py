@@ -157,3 +157,34 @@ def test_load_split_sums_drift_per_plateau_kind():
     assert sp["level_drift"] == pytest.approx(-0.1 * (10 + 30), abs=0.01)  # 20-30 s and 60-90 s
     assert sp["inclined_drift"] == pytest.approx(0.0, abs=1e-12)
     assert sp["level_ptp"] == pytest.approx(10.0, abs=0.01) and sp["inclined_ptp"] == 0.0
+
+
+# -- the section "Sensorless from standstill" ---------------------------------------------------------
+SENSORLESS_TINY = [c for c in report.CONFIGS
+                   if c.id in ("sl-s1-exact-sensorless", "sl-s1-exact-sensored", "sl-start0-exact-sensorless")]
+
+
+def test_sensorless_section_quotes_its_runs(tmp_path):
+    """6 s runs (alignment, I-f, handover): the table's handover time and roll-back are the
+    runs' own, read back from results.csv; targets without rows to judge show '-'."""
+    from pmsm_ev.results import roll_back
+
+    project_fmus()
+    assert len(SENSORLESS_TINY) == 3
+    start0 = next(c for c in SENSORLESS_TINY if c.id == "sl-start0-exact-sensorless")
+    assert "plant.theta_e0=-3.141592653589793" in start0.run_args(None, tmp_path / "x.csv")
+    path = report.generate(out=tmp_path / "docs", runs_dir=tmp_path / "runs", jobs=2, stop_time=6.0,
+                           configs=SENSORLESS_TINY, log=lambda *_: None)
+    text = path.read_text(encoding="utf-8")
+    assert "## Sensorless from standstill" in text
+    r = read_results(tmp_path / "runs" / "sl-s1-exact-sensorless")
+    cells = table_row(text, "## Sensorless from standstill", "Scenario 1")  # the first row: sensorless
+    t_up = r["time"][np.nonzero(np.diff(r["mode"]))[0][-1] + 1]
+    assert cells[2] == "sensorless" and cells[4] == f"{t_up:.2f}"
+    assert cells[-2] == f"{100 * roll_back(r['x_vehicle']):.2f}"
+    assert set(read_results(tmp_path / "runs" / "sl-s1-exact-sensored")["mode"]) == {2.0}  # no other modes
+    r0 = read_results(tmp_path / "runs" / "sl-start0-exact-sensorless")
+    assert r0["theta_e"][0] == pytest.approx(-math.pi)
+    row = table_row(text, "Start-up from eight initial rotor angles", "-3.142")
+    assert row[4] == f"{100 * roll_back(r0['x_vehicle']):.2f}"
+    assert (tmp_path / "docs" / "results" / "sensorless_startup.png").is_file()

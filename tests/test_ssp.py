@@ -159,7 +159,7 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     """What OMSimulator needs (its annotation first in the system, no String in an .ssv, no
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
     now in the system), and still valid SSP 1.0."""
-    assert len(SCENARIOS) == 6
+    assert len(SCENARIOS) == 9  # the paper's 2, their 4 variants, the 3 sensorless runs
     args = ["export-ssp", scenario, "-o", str(tmp_path / "p.ssp"), "--plant", str(fmus["PmsmEvPlant"]),
             "--controller", str(fmus["FocEkf5"])]
     if angle_source:

@@ -17,15 +17,35 @@ Per control period, at t_k, with the plant's measured currents at t_k:
 
 The step is ``pmsm_ev.kernels.control_step`` (compiled with numba when available, see
 ``pmsm_ev.accel``) on one state vector that the observer and the controllers share.
+
+Observer "sensorless" is the truly sensorless unit from standstill: the stationary-frame
+EKF5 with a low-speed range (alignment, I-f drive, handover to and from the EKF,
+``pmsm_ev.params.StartupParams``); its step is ``pmsm_ev.kernels.sensorless_step``, it
+never reads theta_meas or omega_meas, and it returns the mode as a 13th output.
 """
 
 from __future__ import annotations
+
+import math
 
 from . import accel
 from . import kernels as _k
 from .controller import CurrentController, SpeedController
 from .observers import make_observer
-from .params import ANGLE_SOURCES, ControllerParams, EkfParams, MotorParams, ParameterError
+from .params import (ANGLE_SOURCES, SENSORLESS_EKF, ControllerParams, EkfParams, MotorParams, ParameterError,
+                     StartupParams)
+
+#: mode names of the sensorless unit, by ``pmsm_ev.kernels`` MODE_* value
+MODES = ("align", "I-f", "EKF")
+
+_STARTUP_SLOTS = (
+    ("t_ramp", _k.C_T_RAMP), ("t_hold", _k.C_T_HOLD), ("t_sweep", _k.C_T_SWEEP), ("t_settle", _k.C_T_SETTLE),
+    ("i_align", _k.C_I_ALIGN), ("i_if", _k.C_I_IF), ("if_accel", _k.C_IF_ACCEL), ("i_rate", _k.C_I_RATE),
+    ("omega_up", _k.C_W_UP), ("omega_down", _k.C_W_DOWN), ("agree_tol", _k.C_AGREE_TOL),
+    ("agree_time", _k.C_AGREE_TIME), ("if_margin", _k.C_IF_MARGIN))
+#: state slots of the sensorless start-up, saved and restored with the unit
+_STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
+                  _k.S_SLIP)
 
 
 def _slot(index: int, doc: str) -> property:
@@ -51,11 +71,13 @@ class ControlUnit:
 
     def __init__(self, observer: str = "ekf5", angle_source: str = "measured",
                  motor: MotorParams | None = None, controller: ControllerParams | None = None,
-                 ekf: EkfParams | None = None, dt: float = 1e-4):
+                 ekf: EkfParams | None = None, dt: float = 1e-4, startup: StartupParams | None = None):
         self.motor = motor or MotorParams()
         self.params = controller or ControllerParams()
-        self.ekf_params = ekf or EkfParams()
-        for group in (self.motor, self.params, self.ekf_params):
+        self.sensorless = observer == "sensorless"
+        self.ekf_params = ekf or (SENSORLESS_EKF if self.sensorless else EkfParams())
+        self.startup = startup or StartupParams()
+        for group in (self.motor, self.params, self.ekf_params, self.startup):
             group.validate()
         if angle_source not in ANGLE_SOURCES:
             raise ParameterError(f"angle_source must be one of {ANGLE_SOURCES} (got {angle_source!r})")
@@ -67,8 +89,10 @@ class ControlUnit:
         self._s = accel.vector(_k.UNIT_STATE)
         self._c = accel.vector(_k.UNIT_PARAMS)
         self.observer = make_observer(observer, self.motor, dt, self.ekf_params, state=self._s, params=self._c)
-        # the sensored baseline has no angle estimate of its own: always the measured angle
-        self.angle_source = "measured" if observer == "sensored" else angle_source
+        # the sensored baseline has no angle estimate of its own: always the measured angle;
+        # the sensorless unit has no other
+        self.angle_source = ("measured" if observer == "sensored" else
+                             "estimated" if self.sensorless else angle_source)
         self.speed = SpeedController(self.params, dt, state=self._s, params=self._c)
         self.current = CurrentController(self.params, self.motor, dt, state=self._s, params=self._c)
         c = self._c
@@ -78,6 +102,17 @@ class ControlUnit:
         c[_k.C_ZOH] = 1.0 if self.params.zoh_compensation else 0.0
         c[_k.C_DELAYED] = 1.0 if self.params.delay_compensation else 0.0
         c[_k.C_ESTIMATED] = 1.0 if self.angle_source == "estimated" else 0.0
+        for name, slot in _STARTUP_SLOTS:
+            c[slot] = float(getattr(self.startup, name))
+        # the EKF's restart after the alignment: its P0, with the speed and angle known
+        st = self.startup
+        e = self.ekf_params
+        for i, p0 in enumerate((e.p0_i, e.p0_i, st.p0_omega_aligned, st.p0_theta_aligned, e.p0_TL)):
+            c[_k.C_P0_ALIGNED + i] = float(p0)
+        # I-f damping gain over sqrt(i): the linearised swing J s^2 + N psi i (k s + N) = 0
+        c[_k.C_IF_DAMP] = 2.0 * self.startup.if_damping * math.sqrt(self.observer.J / self.motor.psi) \
+            if self.sensorless else 0.0
+        c[_k.C_SLIP_FILTER] = min(dt / st.if_damping_filter, 1.0) if st.if_damping_filter > 0 else 1.0
         self.reset()
 
     def reset(self) -> None:
@@ -90,6 +125,13 @@ class ControlUnit:
         self.v_alpha = self.v_beta = 0.0
         self.i_d = self.i_q = 0.0
         self.i_qref = 0.0
+        for slot in _STARTUP_STATE:
+            self._s[slot] = 0.0
+
+    @property
+    def mode(self) -> float:
+        """The sensorless unit's mode: 0 alignment, 1 I-f, 2 EKF (``MODES``); 2 for the others."""
+        return float(self._s[_k.S_MODE]) if self.sensorless else _k.MODE_EKF
 
     def step(self, i_alpha: float, i_beta: float, omega_ref: float,
              theta_meas: float = 0.0, omega_meas: float = 0.0) -> tuple:
@@ -97,7 +139,10 @@ class ControlUnit:
 
         Returns (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref, i_d_hat, i_q_hat, omega_hat,
         theta_hat, T_L_hat), which are also the attributes of the same names (the estimates
-        via ``estimates``)."""
+        via ``estimates``); the sensorless unit adds its mode and ignores theta_meas and
+        omega_meas."""
+        if self.sensorless:
+            return self._kernels.sensorless_step(self._s, self._c, i_alpha, i_beta, omega_ref)
         return self._kernels.control_step(self._s, self._c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas)
 
     # outputs of the observer, for recording
@@ -107,13 +152,17 @@ class ControlUnit:
         return o.i_d_hat, o.i_q_hat, o.omega_hat, o.theta_hat, o.T_L_hat
 
     def get_state(self) -> tuple:
+        startup = tuple(float(self._s[slot]) for slot in _STARTUP_STATE) if self.sensorless else ()
         return ((self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
                  self.speed.integral, self.u_prev0, self.u_prev1)
-                + self.current.get_state() + self.observer.get_state())
+                + self.current.get_state() + startup + self.observer.get_state())
 
     def set_state(self, state) -> None:
         state = tuple(float(v) for v in state)
         (self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
          self.speed.integral, self.u_prev0, self.u_prev1) = state[:10]
         self.current.set_state(state[10:15])
-        self.observer.set_state(state[15:])
+        n = len(_STARTUP_STATE) if self.sensorless else 0
+        for slot, value in zip(_STARTUP_STATE, state[15:15 + n]):
+            self._s[slot] = value
+        self.observer.set_state(state[15 + n:])

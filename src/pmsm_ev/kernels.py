@@ -74,7 +74,12 @@ S_PHT = 46  #: scratch: P H^T, n x 2
 S_K = 56  #: scratch: Kalman gain, n x 2
 S_A = 66  #: scratch: J_f P, n x n (J_f itself when P = I)
 S_STARTED = 91  #: stationary-frame EKF5: 1.0 once past its first sample (x0 is the estimate there)
-UNIT_STATE = 92
+# sensorless start-up (``sensorless_step``): the mode (MODE_*), the periods since the first
+# step, the current vector of alignment and I-f (angle in the stationary frame, magnitude,
+# target magnitude), the I-f speed and how long omega_hat has agreed with it
+S_MODE, S_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE = range(92, 99)
+S_SLIP = 99  #: I-f: omega_hat - omega_if, low-pass filtered (the damping's input) [rad/s]
+UNIT_STATE = 100
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -86,7 +91,16 @@ C_I_D_REF, C_ADVANCE, C_HALF_PERIOD_N, C_ZOH, C_DELAYED, C_ESTIMATED, C_OBSERVER
  C_R0, C_R1) = range(22, 35)  #: EKF model constants (A2-A32) and R
 C_Q = 35  #: EKF Q diagonal, n entries
 C_C_MID = 40  #: stationary-frame EKF5: d(mid-period angle)/d(omega_m) = N dt / 2
-UNIT_PARAMS = 41
+C_P0 = 41  #: EKF P0 diagonal, n entries
+(C_T_RAMP, C_T_HOLD, C_T_SWEEP, C_T_SETTLE, C_I_ALIGN, C_I_IF, C_IF_ACCEL, C_I_RATE, C_W_UP, C_W_DOWN,
+ C_AGREE_TOL, C_AGREE_TIME, C_IF_MARGIN) = range(46, 59)  #: ``pmsm_ev.params.StartupParams``
+C_IF_DAMP = 59  #: I-f damping: 2 zeta sqrt(J / psi) [rad s sqrt(A)], divided by sqrt(i) in use
+C_P0_ALIGNED = 60  #: EKF P0 diagonal at the restart after the alignment, 5 entries
+C_SLIP_FILTER = 65  #: dt / time constant of the low-pass filter of the damping's input [-]
+UNIT_PARAMS = 66
+
+#: modes of the sensorless unit (``S_MODE``)
+MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
 
 #: observers (``C_OBSERVER``)
 OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
@@ -211,11 +225,13 @@ def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
     return i_alpha, i_beta, t_e, t_l, v_v
 
 
-@kernel(_sig(f"UniTuple({_F}, 9)", _F, _F, _F, _F, _F, _F, _F, _F, _V))
+@kernel(_sig(f"UniTuple({_F}, 10)", _F, _F, _F, _F, _F, _F, _F, _F, _V))
 def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp):
     """Advance the state by dt with the voltage and elevation held (RK4, ``P_SUBSTEPS``
     sub-steps); return the new (i_d, i_q, omega_m, theta_e) and the outputs at the new
-    state: (i_alpha, i_beta) (clean), T_e, T_L_mech at ``delta``, v_vehicle."""
+    state: (i_alpha, i_beta) (clean), T_e, T_L_mech at ``delta``, v_vehicle; and the
+    distance the vehicle moved [m]: r_w / (n_g N) times the (unwrapped) RK4 angle step of
+    eq 13, i.e. eqs 1, 6 integrated by the same RK4."""
     n = int(pp[P_SUBSTEPS])
     h = dt / n
     x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
@@ -231,9 +247,10 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp):
         x1 += h / 6.0 * (a1 + 2.0 * b1 + 2.0 * c1 + d1)
         x2 += h / 6.0 * (a2 + 2.0 * b2 + 2.0 * c2 + d2)
         x3 += h / 6.0 * (a3 + 2.0 * b3 + 2.0 * c3 + d3)
+    dx = pp[P_R_W] / (pp[P_N_G] * pp[P_N]) * (x3 - theta_e)
     x3 = wrap_angle(x3)
     i_alpha, i_beta, t_e, t_l, v_v = plant_outputs(x0, x1, x2, x3, delta, pp)
-    return x0, x1, x2, x3, i_alpha, i_beta, t_e, t_l, v_v
+    return x0, x1, x2, x3, i_alpha, i_beta, t_e, t_l, v_v, dx
 
 
 # -- controller, eqs 14-20 -----------------------------------------------------------------------
@@ -530,3 +547,153 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     s[S_V_BETA] = v_beta
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4])
+
+
+# -- the sensorless unit: alignment, I-f, handover to and from the stationary-frame EKF5 --------
+_HALF_PI = 0.5 * math.pi
+
+
+@kernel()
+def seat_current_pis(s, c, theta, turn, i_dref, i_qref, i_d, i_q, omega_est):
+    """Set the current PIs' integrators and decoupling filters so that ``current_step`` in the
+    frame at ``theta`` (with these references, currents and speed) first returns the voltage
+    held now, turned on by ``turn`` [rad] (the angle a rotor-synchronous vector turns in a
+    period): a change of frame without a voltage jump. The filters start at the references,
+    so that only the integrators carry the change (bumpless transfer)."""
+    v_d, v_q = park(s[S_V_ALPHA], s[S_V_BETA], theta - turn)
+    s[S_I_DL] = i_dref
+    s[S_I_QL] = i_qref
+    w_e = c[C_N] * omega_est
+    s[S_INT_D] = v_d + w_e * c[C_L_Q] * i_qref - c[C_KP_ID] * (i_dref - i_d)  # (15), (19)
+    back_emf = w_e * c[C_L_D] * i_dref + w_e * c[C_PSI]
+    if c[C_PAPER_SIGNS] != 0.0:
+        s[S_INT_Q] = v_q + back_emf - c[C_KP_IQ] * (i_qref - i_q)  # (16), (20) as printed
+    else:
+        s[S_INT_Q] = v_q - back_emf - c[C_KP_IQ] * (i_qref - i_q)  # (16), (20)
+
+
+@kernel()
+def restart_ekf(s, c, theta, i_d, i_q):
+    """The EKF restarted at a known angle from standstill: x = [i_d, i_q, 0, theta, 0], P = the
+    restart's P0 (``C_P0_ALIGNED``)."""
+    s[S_X] = i_d
+    s[S_X + 1] = i_q
+    s[S_X + 2] = 0.0
+    s[S_X + 3] = theta
+    s[S_X + 4] = 0.0
+    for i in range(25):
+        s[S_P + i] = 0.0
+    for i in range(5):
+        s[S_P + 6 * i] = c[C_P0_ALIGNED + i]
+    s[S_THETA_PRIOR] = theta
+
+
+@kernel(_sig(f"UniTuple({_F}, 13)", _V, _V, _F, _F, _F))
+def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
+    """One control period of the sensorless unit (``pmsm_ev.control_unit``, observer
+    "sensorless"): never reads the rotor angle or speed. Returns ``control_step``'s outputs
+    and the mode (``MODE_ALIGN``, ``MODE_IF``, ``MODE_EKF``).
+
+    1. The stationary-frame EKF5 (eqs 23-27 with h = inverse Park) runs in every mode.
+    2. Alignment (``C_T_RAMP`` .. ``C_T_SETTLE``): the current vector ramped up on +90 deg,
+       held, swept to 0 deg, held; then the EKF restarts at the aligned angle, at rest.
+    3. I-f: the vector turns at the I-f speed (the reference, slew-limited); its magnitude
+       ramps to its target; handover up once omega_hat agrees with the I-f speed.
+    4. EKF: FOC (eqs 14-20) on the EKF's angle and speed; back to I-f at low speed.
+    In alignment and I-f the current PIs work in the vector's frame (reference on its d
+    axis, no decoupling: the back-EMF is small there and the integrators carry it).
+    """
+    dt = c[C_DT]
+    if c[C_DELAYED] != 0.0:
+        ekf5ab_predict(s, c, s[S_U_PREV_0], s[S_U_PREV_1])
+        s[S_U_PREV_0] = s[S_V_ALPHA]
+        s[S_U_PREV_1] = s[S_V_BETA]
+    else:
+        ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
+    ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
+    t = s[S_CLOCK] * dt
+    s[S_CLOCK] += 1.0
+    mode = s[S_MODE]
+    omega_hat = s[S_X + 2]
+    if mode == MODE_ALIGN:
+        t_hold = c[C_T_RAMP] + c[C_T_HOLD]
+        t_sweep = t_hold + c[C_T_SWEEP]
+        if t < t_sweep + c[C_T_SETTLE]:
+            s[S_I_MAG] = c[C_I_ALIGN] * min(t / c[C_T_RAMP], 1.0) if c[C_T_RAMP] > 0.0 else c[C_I_ALIGN]
+            if t < t_hold:
+                s[S_PHI] = _HALF_PI
+            elif t < t_sweep:
+                s[S_PHI] = _HALF_PI * (1.0 - (t - t_hold) / c[C_T_SWEEP])
+            else:
+                s[S_PHI] = 0.0
+        else:  # aligned: the magnet is on the vector; the EKF restarts there, at rest
+            i_d, i_q = park(i_alpha, i_beta, s[S_PHI])
+            restart_ekf(s, c, s[S_PHI], i_d, i_q)
+            omega_hat = 0.0
+            s[S_OMEGA_IF] = 0.0
+            s[S_I_TGT] = max(c[C_I_IF], s[S_I_MAG])
+            mode = MODE_IF
+    elif mode == MODE_EKF and abs(omega_hat) < c[C_W_DOWN]:
+        # handover down: the vector stays where the current is, its magnitude ramps up
+        i_mag = math.sqrt(i_alpha * i_alpha + i_beta * i_beta)
+        s[S_PHI] = math.atan2(i_beta, i_alpha)
+        s[S_I_MAG] = i_mag
+        s[S_I_TGT] = max(c[C_IF_MARGIN] * i_mag, c[C_I_IF])
+        s[S_OMEGA_IF] = omega_hat
+        s[S_AGREE] = 0.0
+        seat_current_pis(s, c, s[S_PHI] + c[C_ADVANCE] * omega_hat, c[C_N] * omega_hat * dt,
+                         i_mag, 0.0, i_mag, 0.0, 0.0)
+        mode = MODE_IF
+    if mode == MODE_IF:
+        if t > 0.0 and s[S_MODE] == MODE_IF:  # turn the vector (not in the period it was placed)
+            step = c[C_IF_ACCEL] * dt
+            w_if = s[S_OMEGA_IF]
+            s[S_OMEGA_IF] = w_if + min(max(omega_ref - w_if, -step), step)
+            s[S_PHI] = wrap_angle(s[S_PHI] + c[C_N] * s[S_OMEGA_IF] * dt)  # (13)
+            # the target never falls in I-f: at least margin x the load the EKF sees (eq 12 with i_d = 0)
+            load_current = c[C_IF_MARGIN] * abs(s[S_X + 4]) / (c[C_N] * c[C_PSI])
+            s[S_I_TGT] = min(max(s[S_I_TGT], load_current), c[C_I_Q_MAX])
+            rate = c[C_I_RATE] * dt
+            s[S_I_MAG] += min(max(s[S_I_TGT] - s[S_I_MAG], -rate), rate)
+        w_if = s[S_OMEGA_IF]
+        if abs(w_if) > c[C_W_UP] and abs(omega_hat - w_if) < c[C_AGREE_TOL] * abs(w_if):
+            s[S_AGREE] += dt
+        else:
+            s[S_AGREE] = 0.0
+        if s[S_AGREE] >= c[C_AGREE_TIME]:  # handover up: FOC on the EKF, seated on the present state
+            theta = s[S_X + 3]
+            i_d, i_q = park(i_alpha, i_beta, theta)
+            s[S_W_INT] = i_q - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_q now
+            seat_current_pis(s, c, theta + c[C_ADVANCE] * omega_hat, c[C_N] * s[S_OMEGA_IF] * dt,
+                             c[C_I_D_REF], i_q, i_d, i_q, omega_hat)
+            s[S_AGREE] = 0.0
+            mode = MODE_EKF
+    s[S_MODE] = mode
+    if mode == MODE_EKF:
+        theta_ctrl = s[S_X + 3]
+        omega_ctrl = omega_hat
+        i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
+        i_qref = speed_step(s, c, omega_ref, omega_hat)  # (14)
+        v_d, v_q = current_step(s, c, c[C_I_D_REF], i_qref, i_d, i_q, omega_hat)  # (15)-(20)
+    else:
+        theta_ctrl = s[S_PHI]
+        omega_ctrl = s[S_OMEGA_IF]
+        if mode == MODE_IF:  # damp the rotor's swing on the vector: pull the vector back by
+            # k (omega_hat - omega_if), filtered, k = 2 zeta sqrt(J / (psi i)) (docs/sensorless.md)
+            s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - omega_ctrl - s[S_SLIP])
+            theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP]
+        else:
+            s[S_SLIP] = 0.0
+        i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
+        i_qref = 0.0
+        v_d, v_q = current_step(s, c, s[S_I_MAG], 0.0, i_d, i_q, 0.0)  # (15)-(16), no decoupling
+    v_alpha, v_beta = inverse_park(v_d, v_q, theta_ctrl + c[C_ADVANCE] * omega_ctrl)
+    s[S_I_D] = i_d
+    s[S_I_Q] = i_q
+    s[S_I_QREF] = i_qref
+    s[S_V_D] = v_d
+    s[S_V_Q] = v_q
+    s[S_V_ALPHA] = v_alpha
+    s[S_V_BETA] = v_beta
+    return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
+            s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode)

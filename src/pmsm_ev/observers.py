@@ -101,7 +101,7 @@ class ExtendedKalmanFilter(_Observer):
     """
 
     def __init__(self, motor: MotorParams, dt: float, q_diag, r_diag, p0_diag, x0=None,
-                 state=None, params=None):
+                 state=None, params=None, J: float | None = None):
         super().__init__(state, params)
         self.motor = motor
         self.dt = dt
@@ -109,6 +109,8 @@ class ExtendedKalmanFilter(_Observer):
         self.p0 = [float(v) for v in p0_diag]
         self.x0 = [0.0] * n if x0 is None else [float(v) for v in x0]
         m = motor
+        #: inertia of the model's mechanical equation (A4): J_m (eq 22) unless given
+        self.J = J_m = J if J else m.J_m
         c = self._c
         # constants of A2-A6 and A8-A32
         for slot, value in (
@@ -119,14 +121,16 @@ class ExtendedKalmanFilter(_Observer):
                 (_k.C_C_WPSI, m.N * m.psi * dt / m.L_q),  # (A15), psi part
                 (_k.C_C_VD, dt / m.L_d),
                 (_k.C_C_VQ, dt / m.L_q),
-                (_k.C_C_TPSI, m.N * m.psi * dt / m.J_m),  # (A19), psi part
-                (_k.C_C_TDQ, m.N * (m.L_d - m.L_q) * dt / m.J_m),  # (A18)/i_q, (A19)/i_d
-                (_k.C_C_TL, -dt / m.J_m),  # (A22)
+                (_k.C_C_TPSI, m.N * m.psi * dt / J_m),  # (A19), psi part
+                (_k.C_C_TDQ, m.N * (m.L_d - m.L_q) * dt / J_m),  # (A18)/i_q, (A19)/i_d
+                (_k.C_C_TL, -dt / J_m),  # (A22)
                 (_k.C_C_TH, m.N * dt)):  # (A25)
             c[slot] = float(value)
         c[_k.C_R0], c[_k.C_R1] = (float(v) for v in r_diag)
         for i, q in enumerate(q_diag):
             c[_k.C_Q + i] = float(q)
+        for i, p0 in enumerate(self.p0):  # for a restart inside the kernels (sensorless start-up)
+            c[_k.C_P0 + i] = p0
         self.reset()
 
     def reset(self) -> None:
@@ -214,7 +218,8 @@ class Ekf5(ExtendedKalmanFilter):
         super().__init__(motor, dt,
                          (e.q_i, e.q_i, e.q_omega, e.q_theta, e.q_TL), (e.r_i, e.r_i),
                          (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta, e.p0_TL),
-                         x0 if x0 is not None else (0.0, 0.0, e.x0_omega, e.x0_theta, 0.0), state, params)
+                         x0 if x0 is not None else (0.0, 0.0, e.x0_omega, e.x0_theta, 0.0), state, params,
+                         e.inertia(motor))
 
     def h(self, x) -> np.ndarray:
         """Measurement model: z = [i_d, i_q]."""
@@ -313,7 +318,8 @@ class Ekf4(ExtendedKalmanFilter):
         super().__init__(motor, dt,
                          (e.q_i, e.q_i, e.q_omega_ekf4, e.q_theta), (e.r_i, e.r_i),
                          (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta),
-                         x0 if x0 is not None else (0.0, 0.0, e.x0_omega, e.x0_theta), state, params)
+                         x0 if x0 is not None else (0.0, 0.0, e.x0_omega, e.x0_theta), state, params,
+                         e.inertia(motor))
 
     h = Ekf5.h
     jacobian_h = Ekf5.jacobian_h
@@ -343,7 +349,9 @@ class Sensored(_Observer):
             self._s[slot] = float(state[i])
 
 
-OBSERVER_CLASSES = {"ekf5": Ekf5, "ekf4": Ekf4, "ekf5ab": Ekf5AlphaBeta, "sensored": Sensored}
+#: "sensorless" is the stationary-frame EKF5 with the start-up of ``pmsm_ev.control_unit``
+OBSERVER_CLASSES = {"ekf5": Ekf5, "ekf4": Ekf4, "ekf5ab": Ekf5AlphaBeta, "sensored": Sensored,
+                    "sensorless": Ekf5AlphaBeta}
 
 
 def make_observer(name: str, motor: MotorParams, dt: float, ekf: EkfParams | None = None,

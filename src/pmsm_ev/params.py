@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, fields, replace
 LOAD_MODELS = ("physical", "paper")
 DECOUPLING_MODES = ("physical", "paper")
 ANGLE_SOURCES = ("measured", "estimated")
-OBSERVERS = ("ekf5", "ekf4", "ekf5ab", "sensored")
+OBSERVERS = ("ekf5", "ekf4", "ekf5ab", "sensored", "sensorless")
 
 
 class ParameterError(ValueError):
@@ -292,6 +292,13 @@ class EkfParams:
     x0_omega: float = 0.0
     #: initial electrical-angle estimate [rad]: the observer's own guess of theta(0).
     x0_theta: float = 0.0
+    #: inertia of the EKF's mechanical model (A4, A18-A22) [kg m^2]; 0 = the motor's J_m,
+    #: the paper's choice (eq 22), which makes T_L_hat absorb the reflected vehicle inertia
+    #: (eqs 30-31). [chosen] The sensorless unit defaults to the drive's whole inertia
+    #: J_eq (eq 9, 0.526 kg m^2, ``SENSORLESS_EKF``): with J_m, 52x too small, a rotor that
+    #: swings at start-up makes the model see 52x the acceleration per N m of torque error,
+    #: and the estimate loses the angle.
+    J_model: float = 0.0
 
     def validate(self) -> None:
         for f in fields(self):
@@ -301,6 +308,102 @@ class EkfParams:
                 continue
             _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")
         _require(self.r_i > 0, f"r_i must be > 0 A^2 (got {self.r_i})")
+
+    def inertia(self, motor: "MotorParams") -> float:
+        """The inertia of the EKF's mechanical model [kg m^2]: ``J_model``, or J_m if 0."""
+        return self.J_model if self.J_model > 0 else motor.J_m
+
+
+@dataclass(frozen=True)
+class StartupParams:
+    """The sensorless unit's low-speed range (observer "sensorless", FocSensorless.fmu):
+    alignment at standstill, I-f (current-frequency) drive, and the handover to and from
+    the stationary-frame EKF5 (``pmsm_ev.kernels.sensorless_step``; reasoning in
+    ``docs/sensorless.md``).
+
+    Alignment [chosen]: a current vector of ``i_align`` is ramped up on the +90 deg axis
+    (``t_ramp``), held (``t_hold``), swept slowly to 0 deg (``t_sweep``) and held again
+    (``t_settle``): the magnet then sits on 0 deg, whatever theta(0) was. Two steps
+    because a single vector on 0 deg gives no torque at theta(0) = +-pi (the unstable
+    equilibrium); slow because the drivetrain (J_eq = 0.526 kg m^2) on the magnet's
+    "spring" (N^2 psi i_align = 86 N m/rad at 60 A) swings at 2 Hz with little damping: a
+    ramped current and a swept vector move it quasi-statically. Position moved by the
+    alignment: at most pi/N = 45 deg at the shaft, 1.8 cm at the wheel.
+
+    I-f [chosen]: the vector (magnitude i_if) turns at the I-f speed, which follows the
+    speed reference with at most ``if_accel`` [rad/s^2]; the rotor lags it by the load
+    angle, sin(lag) = torque / (N psi i), a self-stabilising open-loop drive as long as
+    the torque needed stays below N psi i_if (21.5 N m at 60 A; the level-road start needs
+    ~14 N m). The EKF5 runs on throughout; it was restarted at the aligned angle.
+
+    Handover up [chosen]: once |omega_if| > ``omega_up`` and |omega_hat - omega_if| <
+    ``agree_tol`` |omega_if| for ``agree_time``, the speed PI takes over on the EKF's
+    angle and speed, its integral and the current PIs' integrators seated on the present
+    currents and voltage (no jump). Handover down: below |omega_hat| < ``omega_down``
+    (hysteresis: 20 < 30 rad/s) the vector stays where the current is and its magnitude
+    ramps to ``if_margin`` times the present current (at least ``i_if``), so it holds the
+    load (a car stopping on a slope) with a lag of acos(1/margin) to spare.
+    """
+
+    i_align: float = 60.0  #: alignment current [A] [chosen]: the I-f current
+    t_ramp: float = 0.5  #: alignment current ramp 0 -> i_align on +90 deg [s] [chosen]
+    t_hold: float = 0.5  #: hold on +90 deg [s] [chosen]: the swing decays (rolling friction)
+    t_sweep: float = 1.0  #: sweep of the vector +90 -> 0 deg [s] [chosen]: ~2 swing periods
+    t_settle: float = 0.3  #: hold on 0 deg before the I-f start [s] [chosen]
+    #: I-f current [A] [chosen]: 60 A gives N psi i = 21.5 N m, 1.5x the ~14 N m of the
+    #: level-road start (10.5 N m to accelerate J_eq at 20 rad/s^2 plus the rolling load)
+    i_if: float = 60.0
+    #: largest I-f acceleration [rad/s^2] [chosen]: 2x the routes' 20 rad/s^2 ramp, so the
+    #: I-f speed follows them; a jump of the reference becomes a ramp the rotor can follow
+    if_accel: float = 40.0
+    #: rate of change of the I-f current magnitude [A/s] [chosen]: 300 A/s, 0.03 A per period.
+    #: After a handover down the vector sits on the q axis, where the magnet's spring is
+    #: softest; a faster rise kicks the rotor into a swing (measured at the stop on 22 deg:
+    #: T_e transient 24 N m peak-to-peak at 1000 A/s, 8 N m at 300 A/s); 0.23 s to 1.3 x 234 A
+    i_rate: float = 300.0
+    omega_up: float = 30.0  #: handover up above this I-f speed [rad/s] [chosen]: back-EMF 10.8 V
+    omega_down: float = 20.0  #: back to I-f below this |omega_hat| [rad/s] [chosen]
+    agree_tol: float = 0.1  #: relative agreement of omega_hat with the I-f speed [-] [chosen]
+    agree_time: float = 0.3  #: how long it must hold before the handover up [s] [chosen]
+    #: I-f current after the handover down, times the present current [-] [chosen]: a lag
+    #: of acos(1/1.3) = 40 deg in reserve for load changes while the car stands
+    if_margin: float = 1.3
+    #: damping ratio of the rotor's swing on the I-f vector [-] [chosen]: the magnet on the
+    #: vector is a spring (N^2 psi i per rad at the shaft) on J_eq with almost no damping;
+    #: the vector is pulled back by k (omega_hat - omega_if), k = 2 zeta sqrt(J / (psi i)),
+    #: which damps it (docs/sensorless.md); 0.7: a well-damped second-order response.
+    #: 0 = the plain I-f (the swing then rings, +-35 N m at a stop on 22 deg)
+    if_damping: float = 0.7
+    #: time constant of the low-pass filter on omega_hat - omega_if before the damping [s]
+    #: [chosen]: 10 ms, a tenth of the swing's period at 60-300 A (0.2-0.5 s), so it keeps the
+    #: sensor noise that omega_hat carries at low speed out of the vector's angle
+    if_damping_filter: float = 0.01
+    #: EKF covariances at its restart after the alignment [chosen]: the rotor is at rest on the
+    #: vector, to within the swing left (~0.05 rad): (1 rad/s)^2 and (0.1 rad)^2, not the
+    #: (10 rad/s)^2, pi^2 of an unknown start (EkfParams.p0_omega, p0_theta), whose first
+    #: corrections on noisy currents would jolt omega_hat and with it the I-f damping
+    p0_omega_aligned: float = 1.0
+    p0_theta_aligned: float = 0.01
+
+    @property
+    def align_time(self) -> float:
+        """Duration of the alignment [s]; the I-f start follows."""
+        return self.t_ramp + self.t_hold + self.t_sweep + self.t_settle
+
+    def validate(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")
+        for name in ("i_align", "i_if", "if_accel", "i_rate", "omega_up", "agree_tol", "if_margin"):
+            _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
+        _require(self.omega_down < self.omega_up,
+                 f"omega_down must be < omega_up (got {self.omega_down} >= {self.omega_up} rad/s)")
+        _require(self.if_margin >= 1.0, f"if_margin must be >= 1 (got {self.if_margin})")
+
+
+#: the EKF of the sensorless unit: the paper's covariances, the drive's whole inertia J_eq
+#: in the mechanical model (see ``EkfParams.J_model``)
+SENSORLESS_EKF = EkfParams(J_model=equivalent_inertia(MotorParams(), VehicleParams()))
 
 
 @dataclass(frozen=True)
@@ -328,10 +431,11 @@ class DriveParams:
     controller: ControllerParams = field(default_factory=ControllerParams)
     ekf: EkfParams = field(default_factory=EkfParams)
     scenario: ScenarioParams = field(default_factory=ScenarioParams)
+    startup: StartupParams = field(default_factory=StartupParams)  #: the sensorless unit only
     dt: float = DT_DEFAULT  #: control period = communication step [s]
 
     def validate(self) -> "DriveParams":
-        for group in (self.motor, self.vehicle, self.plant, self.controller, self.ekf, self.scenario):
+        for group in (self.motor, self.vehicle, self.plant, self.controller, self.ekf, self.scenario, self.startup):
             group.validate()
         _require(math.isfinite(self.dt) and self.dt > 0, f"dt must be > 0 s (got {self.dt})")
         return self

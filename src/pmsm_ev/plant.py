@@ -61,6 +61,7 @@ class Plant:
         self.omega_m = p.omega_m0
         self.theta_e = wrap_angle(p.theta_e0)
         self.delta = 0.0
+        self.x_vehicle = 0.0  # distance travelled since the start [m] (eqs 1, 6 integrated)
         self.samples = 0  # measurements taken so far (the noise counter)
         self._v_pending = (0.0, 0.0)  # voltage received, applied next step (inverter_delay)
         self.v_alpha_applied = self.v_beta_applied = 0.0
@@ -69,11 +70,11 @@ class Plant:
     # -- state as a tuple, for save/restore by wrappers --------------------------
     def get_state(self) -> tuple:
         return (self.i_d, self.i_q, self.omega_m, self.theta_e, self.delta,
-                float(self.samples - 1), self._v_pending[0], self._v_pending[1])
+                float(self.samples - 1), self._v_pending[0], self._v_pending[1], self.x_vehicle)
 
     def set_state(self, state) -> None:
         (self.i_d, self.i_q, self.omega_m, self.theta_e, self.delta, samples,
-         v_a, v_b) = (float(x) for x in state)
+         v_a, v_b, self.x_vehicle) = (float(x) for x in state)
         self.samples = int(samples)  # _update_outputs takes the same sample again
         self._v_pending = (v_a, v_b)
         self._update_outputs()
@@ -100,7 +101,9 @@ class Plant:
         out = self._kernels.plant_step(self.i_d, self.i_q, self.omega_m, self.theta_e,
                                        v_alpha, v_beta, delta, dt, self._pp)
         (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta,
-         self.T_e, self.T_L_mech, self.v_vehicle) = out
+         self.T_e, self.T_L_mech, self.v_vehicle, dx) = out
+        out = out[:9]
+        self.x_vehicle += dx
         self.i_alpha_true, self.i_beta_true = self.i_alpha, self.i_beta
         self.samples += 1
         if self._sensors:

@@ -16,9 +16,9 @@ import time
 from pathlib import Path
 
 from .control_unit import ControlUnit
-from .params import OBSERVERS, ANGLE_SOURCES, DriveParams, ParameterError
+from .params import OBSERVERS, ANGLE_SOURCES, SENSORLESS_EKF, DriveParams, ParameterError
 from .plant import Plant
-from .results import ALL_COLUMNS, ResultWriter, compute_metrics, read_results, write_metrics
+from .results import ALL_COLUMNS, SENSORLESS_COLUMNS, ResultWriter, compute_metrics, read_results, write_metrics
 from .scenarios import SCENARIO_STOP_TIME, Profile, elevation_profile, speed_reference
 
 
@@ -40,34 +40,40 @@ def grid(stop_time: float, dt: float, output_interval: float) -> tuple[int, int]
 def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_STOP_TIME,
                   observer: str = "ekf5", angle_source: str = "measured",
                   params: DriveParams | None = None, output_interval: float = 0.01,
-                  elevation: Profile | None = None) -> dict:
-    """Run, write results.csv and metrics.json into ``out_dir``, return the metrics."""
-    p = (params or DriveParams()).validate()
+                  elevation: Profile | None = None, omega_ref: Profile | None = None) -> dict:
+    """Run, write results.csv and metrics.json into ``out_dir``, return the metrics.
+
+    ``elevation`` [rad] and ``omega_ref`` [rad/s] replace the scenario's profiles. Without
+    ``params``, the sensorless unit's EKF is ``SENSORLESS_EKF`` (its model on J_eq)."""
+    sensorless = observer == "sensorless"
+    p = (params or (DriveParams(ekf=SENSORLESS_EKF) if sensorless else DriveParams())).validate()
     dt = p.dt
     n_steps, every = grid(stop_time, dt, output_interval)
     delta_of = elevation or elevation_profile(scenario)
-    omega_ref_of = speed_reference(p.scenario)
+    omega_ref_of = omega_ref or speed_reference(p.scenario)
     plant = Plant(p.motor, p.vehicle, p.plant)
-    ctrl = ControlUnit(observer, angle_source, p.motor, p.controller, p.ekf, dt)
+    ctrl = ControlUnit(observer, angle_source, p.motor, p.controller, p.ekf, dt, p.startup)
+    columns = ALL_COLUMNS + SENSORLESS_COLUMNS if sensorless else ALL_COLUMNS
     out = Path(out_dir)
     status = "completed"
     t0, cpu0 = time.perf_counter(), time.process_time()
     k = 0
-    with ResultWriter(out, ALL_COLUMNS) as w:
+    with ResultWriter(out, columns) as w:
         try:
             for k in range(n_steps + 1):
                 t = k * dt
                 delta = delta_of(t)
-                omega_ref = omega_ref_of(t)
+                w_ref = omega_ref_of(t)
                 if k % every == 0 or k == n_steps:
                     o = ctrl.observer
-                    w.write((t, math.degrees(delta), omega_ref, plant.omega_m, o.omega_hat, plant.theta_e,
-                             o.theta_hat, plant.i_d, plant.i_q, o.i_d_hat, o.i_q_hat, plant.T_e,
-                             plant.T_L_mech, o.T_L_hat, ctrl.v_d, ctrl.v_q, plant.i_alpha, plant.i_beta,
-                             ctrl.v_alpha, ctrl.v_beta, ctrl.i_qref, plant.v_vehicle))
+                    row = (t, math.degrees(delta), w_ref, plant.omega_m, o.omega_hat, plant.theta_e,
+                           o.theta_hat, plant.i_d, plant.i_q, o.i_d_hat, o.i_q_hat, plant.T_e,
+                           plant.T_L_mech, o.T_L_hat, ctrl.v_d, ctrl.v_q, plant.i_alpha, plant.i_beta,
+                           ctrl.v_alpha, ctrl.v_beta, ctrl.i_qref, plant.v_vehicle)
+                    w.write(row + (plant.x_vehicle, ctrl.mode) if sensorless else row)
                 if k == n_steps:
                     break
-                v_alpha, v_beta = ctrl.step(plant.i_alpha, plant.i_beta, omega_ref, plant.theta_e,
+                v_alpha, v_beta = ctrl.step(plant.i_alpha, plant.i_beta, w_ref, plant.theta_e,
                                             plant.omega_m)[:2]
                 plant.step(v_alpha, v_beta, delta, dt)
                 if not math.isfinite(plant.omega_m + plant.i_d + plant.i_q):
@@ -96,7 +102,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, help="output directory")
     a = ap.parse_args(argv)
     try:
-        params = DriveParams(dt=a.step)
+        params = DriveParams(dt=a.step, ekf=SENSORLESS_EKF) if a.observer == "sensorless" else DriveParams(dt=a.step)
         m = run_reference(a.out, a.scenario, a.stop_time, a.observer, a.angle_source, params, a.output_interval)
     except (ParameterError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

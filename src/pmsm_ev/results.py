@@ -26,6 +26,9 @@ CONTRACT_COLUMNS = (
 #: extra columns the project's runs add
 EXTRA_COLUMNS = ("i_alpha", "i_beta", "v_alpha", "v_beta", "i_qref", "v_vehicle")
 ALL_COLUMNS = CONTRACT_COLUMNS + EXTRA_COLUMNS
+#: what runs of the sensorless unit add: the vehicle position [m] (roll-back) and the mode
+#: (0 alignment, 1 I-f, 2 closed loop on the observer; ``pmsm_ev.control_unit.MODES``)
+SENSORLESS_COLUMNS = ("x_vehicle", "mode")
 
 #: speed band for settling times [rad/s]
 SETTLING_BAND = 1.0
@@ -157,7 +160,50 @@ def compute_metrics(r: dict[str, np.ndarray]) -> dict:
         })
     m["plateaus"] = plateaus
     m["steps"] = steps
+    if all(c in r for c in SENSORLESS_COLUMNS):
+        m["sensorless"] = sensorless_metrics(r)
     return m
+
+
+#: a start-up target: |omega_m - omega_ref| within this band [rad/s] ...
+STARTUP_BAND = 10.0
+#: ... from this time on [s] (the delayed routes reach 200 rad/s at 12.5 s)
+STARTUP_FROM = 12.0
+
+
+def row_timing_corrected_angle_error(r: dict[str, np.ndarray], dt: float, pole_pairs: int) -> np.ndarray:
+    """theta_hat - theta_e [rad] with the row-timing term removed: a row at t_k holds the
+    estimate computed at t_{k-1}, which trails the rotor by omega_e dt (0.08 rad at 200
+    rad/s for every observer, sensored too); wrapped to (-pi, pi]."""
+    return _wrap(r["theta_hat"] - r["theta_e"] + pole_pairs * r["omega_m"] * dt)
+
+
+def roll_back(x: np.ndarray) -> float:
+    """Largest backward travel [m] of a position trace: its drop below its running maximum."""
+    return float(np.max(np.maximum.accumulate(x) - x)) if len(x) else 0.0
+
+
+def sensorless_metrics(r: dict[str, np.ndarray], t_from: float = 20.0) -> dict:
+    """Figures of a run with the sensorless columns (``SENSORLESS_COLUMNS``): the mode changes
+    (time, from, to; 0 alignment, 1 I-f, 2 closed loop), the first handover to the closed
+    loop, the largest |omega_m - omega_ref| from ``STARTUP_FROM`` on, the roll-back [m] before
+    ``t_from`` (start-up) and after it (stops and restarts), and the time spent in I-f after
+    ``t_from`` [s]."""
+    t, mode = r["time"], r["mode"]
+    changes = [(float(t[i + 1]), float(mode[i]), float(mode[i + 1])) for i in np.nonzero(np.diff(mode))[0]]
+    closed = [c[0] for c in changes if c[2] == 2.0]
+    late = t >= STARTUP_FROM
+    early = t <= t_from
+    dt_row = float(t[1] - t[0]) if len(t) > 1 else 0.0
+    return {
+        "mode_changes": changes,
+        "t_closed_loop": closed[0] if closed else (0.0 if len(mode) and mode[0] == 2.0 else None),
+        "startup_speed_error_max": float(np.max(np.abs(r["omega_m"][late] - r["omega_ref"][late])))
+        if np.any(late) else None,
+        "roll_back_start": roll_back(r["x_vehicle"][early]),
+        "roll_back_after": roll_back(r["x_vehicle"][~early]) if np.any(~early) else None,
+        "t_if_after": float(np.count_nonzero(mode[~early] == 1.0) * dt_row),
+    }
 
 
 #: the scalar figures of merit of a run (:func:`summary_metrics`), in this order

@@ -103,9 +103,26 @@ def elevation_profile(scenario: int | str) -> Profile:
     raise ProfileError(f"unknown scenario {scenario!r}; choose 1 or 2, or give a CSV profile")
 
 
-def speed_reference(p: ScenarioParams | None = None) -> Profile:
-    """omega_ref [rad/s]: ramp from 0 to ``omega_ref`` in ``startup_time``, then constant."""
+#: start-up delay of the sensorless scenario variants [s] [chosen]: omega_ref stays 0 while the
+#: sensorless unit aligns the rotor (``StartupParams().align_time`` = 2.3 s), plus 0.2 s of
+#: standstill on the aligned vector; then the paper's 10 s ramp to 200 rad/s
+SENSORLESS_START_DELAY = 2.5
+#: the ``hill-start`` route [chosen]: level road to 20 s, then 22 deg (scenario 2's slope);
+#: 0 -> 200 rad/s after the alignment, 200 -> 0 over 30-40 s on the slope, standstill for
+#: 10 s, 0 -> 200 rad/s over 50-60 s; 20 s more at 200 rad/s
+HILL_START_DEG = ((0, 0), (20, 22))
+HILL_START_OMEGA_REF = ((0.0, 0.0), (SENSORLESS_START_DELAY, 0.0), (SENSORLESS_START_DELAY + 10.0, 200.0),
+                        (30.0, 200.0), (40.0, 0.0), (50.0, 0.0), (60.0, 200.0))
+HILL_START_STOP_TIME = 80.0
+
+
+def speed_reference(p: ScenarioParams | None = None, delay: float = 0.0) -> Profile:
+    """omega_ref [rad/s]: ramp from 0 to ``omega_ref`` in ``startup_time``, then constant;
+    with ``delay`` [s] the ramp starts that late (0 until then)."""
     p = p or ScenarioParams()
+    if delay > 0:
+        return Profile((0.0, delay, delay + p.startup_time), (0.0, 0.0, p.omega_ref), "linear", "omega_ref",
+                       "rad/s")
     if p.startup_time > 0:
         return Profile((0.0, p.startup_time), (0.0, p.omega_ref), "linear", "omega_ref", "rad/s")
     return Profile((0.0,), (p.omega_ref,), "previous", "omega_ref", "rad/s")
@@ -198,6 +215,13 @@ ROUTE_SIGNALS: dict[str, str] = {"delta": "rad", "omega_ref": "rad/s"}
 ROUTE_FORMAT = "pmsm-ev-cosim route 1"
 #: the routes known by name (``scenario_route``)
 PACKAGED_ROUTES = ("scenario1", "scenario2")
+
+
+def hill_start_route() -> dict[str, Profile]:
+    """The ``hill-start`` route: stop, stand and restart on a 22 deg slope."""
+    w = HILL_START_OMEGA_REF
+    return {"delta": _steps_deg(HILL_START_DEG),
+            "omega_ref": Profile(tuple(t for t, _ in w), tuple(v for _, v in w), "linear", "omega_ref", "rad/s")}
 
 
 def scenario_route(scenario: int | str, p: ScenarioParams | None = None) -> dict[str, Profile]:
