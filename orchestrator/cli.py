@@ -313,7 +313,7 @@ def cmd_report(a) -> int:
 
     if a.list:
         for c in report.CONFIGS:
-            print(f"{c.id}: {c.scenario}, {c.label}")
+            print(f"{c.id}: {c.scenario}, {c.label}" + (f", {c.description}" if c.description else ""))
         return 0
     if a.jobs < 1:
         raise CosimError(f"--jobs must be >= 1 (got {a.jobs})")
