@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import atexit
 import math
+import re
 import shutil
 import tempfile
 import zipfile
@@ -238,12 +239,16 @@ def export_ssp(spec: SystemSpec, dest, route_fmu=None) -> ExportSummary:
         resources = _resource_names(paths)
 
         # -- the .ssd ---------------------------------------------------------------
+        # OMSimulator takes these names for its model and system: identifiers only (a hyphen,
+        # as in "hill-start", leaves it with no model); the run record keeps the system's name
+        ident = re.sub(r"\W", "_", spec.name, flags=re.ASCII)
+        ident = ident if ident[:1].isalpha() else f"s_{ident}"
         root = ET.Element(_q("ssd:SystemStructureDescription"), {
-            "version": "1.0", "name": spec.name,
+            "version": "1.0", "name": ident,
             "generationTool": f"pmsm-ev-cosim {__version__}",
             "generationDateAndTime": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
         })
-        system = ET.SubElement(root, _q("ssd:System"), name=spec.name)
+        system = ET.SubElement(root, _q("ssd:System"), name=ident)
         if spec.description:
             system.set("description", spec.description)
         elements = ET.SubElement(system, _q("ssd:Elements"))

@@ -255,10 +255,10 @@ def run_fmpy_ssp(package: Path, stop_time: float, **kwargs):
     return simulate_ssp(str(package), stop_time=stop_time, step_size=STEP, **kwargs)
 
 
-def compare_with_jacobi(rows, package: Path, jacobi: dict, n: int, offset: int) -> float:
+def compare_with_jacobi(rows, package: Path, jacobi: dict, n: int, offset: int, tol: float = RTOL) -> float:
     """Max |difference| of the recorded columns of a tool's rows (``rows[name][k]`` for
     ``k < n``, by ``INSTANCE.VARIABLE``) and the Jacobi run's rows ``k + offset``;
-    asserts them equal to RTOL/ATOL."""
+    asserts them equal to ``tol`` (relative and absolute)."""
     worst = 0.0
     for col in ALL_COLUMNS[1:]:
         spec_col = next(c for c in load_ssp(package).columns if c.name == col)
@@ -266,7 +266,7 @@ def compare_with_jacobi(rows, package: Path, jacobi: dict, n: int, offset: int) 
         if spec_col.unit == "deg":
             values = np.degrees(values)
         expected = jacobi[col][offset:n + offset]
-        np.testing.assert_allclose(values, expected, rtol=RTOL, atol=ATOL, err_msg=col)
+        np.testing.assert_allclose(values, expected, rtol=tol, atol=tol, err_msg=col)
         worst = max(worst, float(np.max(np.abs(values - expected))))
     return worst
 
@@ -338,8 +338,9 @@ def run_omsimulator(package: Path, stop_time: float, work: Path) -> tuple[dict, 
     steps = np.round(data["time"] / STEP).astype(int)
     last = np.unique(steps[::-1], return_index=True)[1]
     last = len(steps) - 1 - last  # the last row of each step
-    prefix = f"{load_ssp(package).name}.{load_ssp(package).name}."
-    rows = {name.removeprefix(prefix): data[name][last] for name in data.dtype.names}
+    # columns MODEL.SYSTEM.INSTANCE.VARIABLE (model and system named by the SSD) and time
+    rows = {(name.split(".", 2)[2] if name.count(".") >= 3 else name): data[name][last]
+            for name in data.dtype.names}
     return rows, out
 
 
@@ -361,6 +362,27 @@ def test_omsimulator_runs_the_package(fmus, tmp_path, angle_source):
     worst = compare_with_jacobi({k: v[1:] for k, v in rows.items()}, package, a, n, offset=1)
     print(f"OMSimulator vs orchestrator Jacobi, {stop} s, angle_source={angle_source}: max |diff| = {worst:.3g}")
     assert a["omega_ref"][-1] == 40.0 and a["omega_m"][-1] > 30.0
+
+
+@pytest.mark.skipif(shutil.which("OMSimulator") is None,
+                    reason="OMSimulator is not on PATH (not on the package index; README: building it)")
+def test_omsimulator_runs_the_sensorless_hill_start(fmus, tmp_path):
+    """A scenario whose name is no identifier (hill-start: OMSimulator needs identifiers for
+    its model and system) and the sensorless unit: alignment, I-f and handover in 5 s."""
+    stop = 5.0
+    spec = load_system("hill-start")
+    spec.set_fmu("ctrl", fmus["FocSensorless"])
+    spec.set_fmu("plant", fmus["PmsmEvPlant"])
+    package = tmp_path / "hill.ssp"
+    export_ssp(spec, package, route_fmu=fmus["RouteProfile"])
+    rows, _ = run_omsimulator(package, stop, tmp_path / "oms")
+    n = round(stop / STEP)
+    assert set(np.unique(rows["ctrl.mode"])) == {0.0, 1.0, 2.0}
+    a = run(spec, tmp_path / "jacobi", stop, "jacobi", output_interval=STEP)
+    # measured: up to 1.3e-8 from the Jacobi run over the start-up (round-off differences grow
+    # through the alignment and I-f, ~1e-11 in the paper's scenarios), so 1e-8 relative here
+    worst = compare_with_jacobi({k: v[1:] for k, v in rows.items()}, package, a, n, offset=1, tol=1e-8)
+    print(f"OMSimulator vs orchestrator Jacobi, hill-start, {stop} s: max |diff| = {worst:.3g}")
 
 
 # -- round trip ----------------------------------------------------------------------------------------
