@@ -8,7 +8,7 @@ reference) from a route table in its resources.
 """
 
 from .build import (FMUS, OBSERVER_FMUS, ROUTE_FMU, BuildError, build_all, build_fmu, default_out_dir, main,
-                    write_route_fmu)
+                    takes_packaged_starts, write_fmu_with_starts, write_route_fmu)
 
 __all__ = ["FMUS", "OBSERVER_FMUS", "ROUTE_FMU", "BuildError", "build_all", "build_fmu", "default_out_dir", "main",
-           "write_route_fmu"]
+           "takes_packaged_starts", "write_fmu_with_starts", "write_route_fmu"]

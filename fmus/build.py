@@ -37,6 +37,8 @@ import time
 import zipfile
 from pathlib import Path
 
+from .slave_support import START_VALUES_FILE  # the packaged defaults a slave reads
+
 HERE = Path(__file__).resolve().parent
 BUILD_INFO = "build_info.json"
 PROJECT_MODULE_PREFIX = "pmsm_ev_fmus"
@@ -45,18 +47,18 @@ PHYSICS_PACKAGE = "pmsm_ev"
 #: FMU name -> (slave script in this package, can handle a variable communication step size)
 FMUS: dict[str, tuple[str, bool]] = {
     "PmsmEvPlant": ("pmsm_ev_plant.py", True),
-    "FocEkf5": ("foc_ekf5.py", False),
-    "FocEkf4": ("foc_ekf4.py", False),
-    "FocEkf5AB": ("foc_ekf5ab.py", False),
-    "FocSensored": ("foc_sensored.py", False),
-    "FocSensorless": ("foc_sensorless.py", False),
+    "FocEkf5": ("foc_ekf5.py", True),
+    "FocEkf4": ("foc_ekf4.py", True),
+    "FocEkf5AB": ("foc_ekf5ab.py", True),
+    "FocSensored": ("foc_sensored.py", True),
+    "FocSensorless": ("foc_sensorless.py", True),
     "RouteProfile": ("route_profile.py", True),
 }
 #: FMUs for the step-cost benchmark (``orchestrator.bench``), not built by default: the
 #: interface of PmsmEvPlant and FocEkf5 with a ``do_step`` that computes nothing
 BENCH_FMUS: dict[str, tuple[str, bool]] = {
     "PassThroughPlant": ("passthrough_plant.py", True),
-    "PassThroughFoc": ("passthrough_foc.py", False),
+    "PassThroughFoc": ("passthrough_foc.py", True),
 }
 #: observer of each controller FMU (pmsm_ev.params.OBSERVERS)
 OBSERVER_FMUS = {"ekf5": "FocEkf5", "ekf4": "FocEkf4", "ekf5ab": "FocEkf5AB", "sensored": "FocSensored",
@@ -261,6 +263,7 @@ def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]
         "project_version": importlib.import_module(PHYSICS_PACKAGE).__version__,
         "pythonfmu": _pythonfmu_version(),
         "python_built_with": sys.version.split()[0],
+        "start_values": START_VALUES_FILE,
         "files_sha256": files,
     }
     if name == ROUTE_FMU:
@@ -348,6 +351,20 @@ def _check(fmu: Path, name: str) -> None:
         raise BuildError(f"{name}.fmu does not validate: " + "; ".join(problems))
 
 
+def _copy_fmu(source: Path, dest: Path, change) -> Path:
+    """Write a copy of the FMU ``source`` to ``dest``; ``change(names)`` gives {member:
+    new bytes} (members not in ``names`` are added)."""
+    tmp = dest.with_name(dest.name + ".tmp")
+    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
+        changed = change(zin.namelist())
+        for item in zin.infolist():
+            zout.writestr(item, changed.pop(item.filename) if item.filename in changed else zin.read(item))
+        for name, data in changed.items():
+            zout.writestr(name, data)
+    os.replace(tmp, dest)
+    return dest
+
+
 def write_route_fmu(route_json: str, dest, source=None) -> Path:
     """A copy of RouteProfile.fmu (``source``, default: the one in ``default_out_dir()``,
     built if needed) whose default route, ``resources/route.json``, is ``route_json`` (the
@@ -357,17 +374,47 @@ def write_route_fmu(route_json: str, dest, source=None) -> Path:
 
     route_from_json(route_json, "route")  # refuse a malformed route here, not in the FMU
     source = Path(source) if source is not None else build_fmu(ROUTE_FMU)[0]
-    dest = Path(dest)
     target = f"resources/{ROUTE_FILE}"
-    tmp = dest.with_name(dest.name + ".tmp")
-    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
-        if target not in zin.namelist():
+
+    def change(names):
+        if target not in names:
             raise BuildError(f"{source}: not a RouteProfile FMU (no {target})")
-        for item in zin.infolist():
-            data = route_json.encode("utf-8") if item.filename == target else zin.read(item)
-            zout.writestr(item, data)
-    os.replace(tmp, dest)
-    return dest
+        return {target: route_json.encode("utf-8")}
+
+    return _copy_fmu(source, Path(dest), change)
+
+
+def takes_packaged_starts(fmu) -> bool:
+    """Whether ``fmu`` is one of this project's FMUs that reads its parameter defaults
+    from ``resources/start_values.json`` (``write_fmu_with_starts``)."""
+    return (read_build_info(Path(fmu)) or {}).get("start_values") == START_VALUES_FILE
+
+
+def write_fmu_with_starts(source, dest, values: dict) -> Path:
+    """A copy of the project FMU ``source`` whose parameters ``values`` (name -> value)
+    have other defaults: ``resources/start_values.json`` holds them (the slave reads it
+    when it is instantiated) and the ``start`` attributes of the model description say
+    so. For hosts that cannot set a parameter (fmpy and OMSimulator cannot set Strings)."""
+    source, dest = Path(source), Path(dest)
+    if not takes_packaged_starts(source):
+        raise BuildError(f"{source}: not an FMU of this project that reads {START_VALUES_FILE} (rebuild it)")
+
+    def change(names):
+        with zipfile.ZipFile(source) as z:
+            text = z.read("modelDescription.xml").decode("utf-8")
+        for name, value in values.items():
+            pattern = re.compile(r'(<ScalarVariable name="' + re.escape(name) +
+                                 r'"[^>]*causality="parameter"[^>]*>\s*<(?:Real|Integer|Boolean|String) start=")'
+                                 r'([^"]*)(")')
+            if len(pattern.findall(text)) != 1:
+                raise BuildError(f"{source}: no parameter {name!r} with a start value")
+            shown = ("true" if value else "false") if isinstance(value, bool) else \
+                repr(float(value)) if isinstance(value, float) else str(value)
+            text = pattern.sub(lambda m: m.group(1) + html.escape(shown, quote=True) + m.group(3), text)
+        return {"modelDescription.xml": text.encode("utf-8"),
+                f"resources/{START_VALUES_FILE}": (json.dumps(values, indent=2) + "\n").encode("utf-8")}
+
+    return _copy_fmu(source, dest, change)
 
 
 def build_all(out_dir=None, force: bool = False, names=None) -> dict[str, Path]:

@@ -1,41 +1,53 @@
 """The controller-plus-observer slave shared by FocEkf5, FocEkf4, FocEkf5AB and
 FocSensored: ``pmsm_ev.control_unit.ControlUnit`` as an FMI 2.0 co-simulation unit.
 
-No equations here: ``do_step(t, h)`` is ``ControlUnit.step(i_alpha, i_beta, omega_ref,
+No equations here: a control period is ``ControlUnit.step(i_alpha, i_beta, omega_ref,
 theta_meas, omega_meas)``, then the unit's outputs are copied into the output variables.
 
-The control period is the communication step size: the unit is built at
-``exit_initialization_mode`` (which validates the parameters) and rebuilt, still
-untouched, with ``dt`` = the size of the first ``do_step``; a later step of another size
-(beyond a relative 1e-6, the round-off of masters that compute h = t_next - t) is an
-error.
+The unit keeps its own sample clock: the sample period ``dt`` is a parameter (0, the
+default: the size of the first communication step), the sample instants are
+``t0 + k dt`` (``t0`` the start time of fmi2SetupExperiment), and ``do_step(t, h)`` runs
+one control period for each instant in ``[t, t + h)`` not yet run, all on the inputs
+held at ``t``. An instant within ``SAMPLE_TOLERANCE dt`` of ``t`` counts as ``t`` (and
+one within it of ``t + h`` as ``t + h``, i.e. the next step's), so that a master's time
+arithmetic (an accumulated sum ``t += h``, integer nanoseconds) neither moves a period
+to another step nor runs it twice, and a sliver step at the end of a run runs none. With
+``h = dt`` every step runs exactly one period, as the unit did before it had a clock.
 """
 
 from __future__ import annotations
 
+import math
+
 from pmsm_ev import __version__
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import SENSORLESS_EKF, DT_DEFAULT, ControllerParams, EkfParams, MotorParams, StartupParams
+from pmsm_ev.params import (DT_DEFAULT, SENSORLESS_EKF, ControllerParams, EkfParams, MotorParams, ParameterError,
+                            StartupParams)
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
 
-#: relative tolerance on the communication step size after the first step
-STEP_SIZE_RTOL = 1.0e-6
+#: an instant within this fraction of dt of a communication point counts as that point:
+#: far above the drift of time accumulated as t += h (1.6e-4 dt after 350 s at h = dt,
+#: 7e-4 dt at h = dt/3), far below any step size that makes sense
+SAMPLE_TOLERANCE = 1.0e-2
 
 DESCRIPTION = (
     "Speed and current control of a sensorless EV drive (Wicaksono, Harini, Yusivar, "
     "'Sensorless PMSM Control using Fifth Order EKF in Electric Vehicle Application'): "
     "field-oriented control (speed PI, current PIs, decoupling, eqs 14-20) with {observer}. "
-    "One control period per communication step: fmi2DoStep(t, h) reads the inputs at t "
-    "(measured currents i_alpha, i_beta; omega_ref; theta_meas, omega_meas, used only with "
-    "angle_source = 'measured' or by the sensored observer), runs the observer and the "
-    "controller, and sets the voltage v_alpha, v_beta that the plant must hold over [t, t+h]. "
+    "A control period reads the inputs (measured currents i_alpha, i_beta; omega_ref; theta_meas, "
+    "omega_meas, used only with angle_source = 'measured' or by the sensored observer), runs the "
+    "observer and the controller, and sets the voltage v_alpha, v_beta that the plant must hold "
+    "until the next period. "
     "The outputs change only inside fmi2DoStep, so no output depends directly on an input at the "
     "same communication point (a one-step delay, as in a sampled drive); before the first step "
-    "all outputs are 0. The sample period dt of the controller and observer is the size of the "
-    "first communication step; every later step must have the same size (relative tolerance 1e-6), "
-    "otherwise fmi2DoStep fails. The parameters of the motor are the controller's model of the "
-    "motor and need not equal the plant's. A Python FMU (pythonfmu): it needs a Python 3 "
-    "interpreter with numpy; the project code it runs is bundled in resources/."
+    "all outputs are 0. Its own sample clock: the sample period is the parameter dt (0, the "
+    "default: the size of the first communication step) and fmi2DoStep(t, h) runs one control "
+    "period at each sample instant start + k dt in [t, t+h) (an instant within 1e-2 dt of t counts "
+    "as t), on the inputs at t: a step shorter than dt runs one period or none, a longer one "
+    "several (the later ones on the inputs held from t), so the outputs change only at the sample "
+    "instants whatever the communication step size. The parameters of the motor are the "
+    "controller's model of the motor and need not equal the plant's. A Python FMU (pythonfmu): it "
+    "needs a Python 3 interpreter with numpy; the project code it runs is bundled in resources/."
 )
 
 
@@ -88,38 +100,42 @@ class FocSlave(DriveSlave):
         else:
             self.add_parameters(ControllerParams, EkfParams, MotorParams)
         self.add_parameter("angle_source", "measured")  # the same interface for every controller
+        self.add_parameter("dt", 0.0)
         self._unit = None
-        self._dt = None  # sample period, fixed by the first do_step
+        self._dt = None  # sample period, fixed by the parameter or the first do_step
+        self._t0 = 0.0  # start time (fmi2SetupExperiment): the instants are t0 + k dt
+        self._k_next = None  # index of the next sample instant to run, set by the first do_step
 
     # -- physics hooks ---------------------------------------------------------------
     def build(self) -> None:
-        self._build_unit(DT_DEFAULT)
-        self._dt = None
+        if not (math.isfinite(self.dt) and self.dt >= 0.0):
+            raise ParameterError(f"dt must be > 0 s, or 0 for the size of the first communication step "
+                                 f"(got {self.dt!r})")
+        self._build_unit(self.dt or DT_DEFAULT)
+        self._dt = self.dt or None
+        self._k_next = None
 
     def _build_unit(self, dt: float) -> None:
-        if self._sensorless:  # angle_source checked, not used: always the estimate
-            self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
-                                     self.parameters(ControllerParams), self.parameters(EkfParams), dt,
-                                     self.parameters(StartupParams))
-        else:
-            self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
-                                     self.parameters(ControllerParams), self.parameters(EkfParams), dt)
+        self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
+                                 self.parameters(ControllerParams), self.parameters(EkfParams), dt,
+                                 self.parameters(StartupParams) if self._sensorless else None)
         self.mark_built()
         self._copy_outputs()
 
     def physics_state(self):
-        return {"dt": self._dt, "unit_dt": self._unit.dt, "unit": list(self._unit.get_state())}
+        return {"dt": self._dt, "unit_dt": self._unit.dt, "unit": list(self._unit.get_state()),
+                "t0": self._t0, "k_next": self._k_next}
 
     def restore_physics(self, snapshot) -> None:
         if self._unit is None or self.needs_rebuild() or self._unit.dt != snapshot["unit_dt"]:
             self._build_unit(snapshot["unit_dt"])
         self._unit.set_state(snapshot["unit"])
-        self._dt = snapshot["dt"]
+        self._dt, self._t0, self._k_next = snapshot["dt"], snapshot["t0"], snapshot["k_next"]
         self._copy_outputs()
 
     def forget_physics(self) -> None:
         self._unit = None
-        self._dt = None
+        self._dt = self._k_next = None
 
     def _copy_outputs(self) -> None:
         u = self._unit
@@ -132,30 +148,39 @@ class FocSlave(DriveSlave):
         self.i_d_hat, self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat = u.estimates
         self.mode = u.mode
 
-    def _fix_sample_period(self, step_size: float) -> None:
+    def _start_clock(self, current_time: float, step_size: float) -> None:
+        """First step: the sample period (the parameter, else ``step_size``) and the first
+        sample instant at or after ``current_time``."""
         if not self._initialized:
             raise FmuUsageError("fmi2DoStep before fmi2ExitInitializationMode")
-        if self._dt is None:  # first step: the unit is untouched, rebuild it with dt = h
+        if self._dt is None:  # the unit is untouched: rebuild it with dt = h
             if step_size != self._unit.dt:
-                self._build_unit(step_size)  # raises ParameterError unless h > 0
+                self._build_unit(step_size)
             self._dt = step_size
-        elif not abs(step_size - self._dt) <= STEP_SIZE_RTOL * self._dt:
-            raise FmuUsageError(f"communication step size {step_size!r} s differs from the first one, "
-                                f"{self._dt!r} s, the sample period of the controller")
+        self._k_next = math.ceil((current_time - self._t0) / self._dt - SAMPLE_TOLERANCE)
 
     # -- FMI -------------------------------------------------------------------------
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        super().setup_experiment(start_time, stop_time, tolerance)
+        self._t0 = float(start_time)
+
     def do_step(self, current_time, step_size):
         try:
-            if step_size != self._dt:
-                self._fix_sample_period(step_size)
-            if self._sensorless:  # never reads theta_meas, omega_meas
-                (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
-                 self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode) = self._unit.step(
-                    self.i_alpha, self.i_beta, self.omega_ref)
-                return True
-            (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
-             self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
-                self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
+            if not step_size > 0.0:
+                raise FmuUsageError(f"communication step size must be > 0 s (got {step_size!r})")
+            if self._k_next is None:
+                self._start_clock(current_time, step_size)
+            k_end = math.ceil((current_time + step_size - self._t0) / self._dt - SAMPLE_TOLERANCE)
+            for _ in range(k_end - self._k_next):  # the instants in [t, t + h), on the inputs at t
+                if self._sensorless:  # never reads theta_meas, omega_meas
+                    (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
+                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode) = self._unit.step(
+                        self.i_alpha, self.i_beta, self.omega_ref)
+                else:
+                    (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
+                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
+                        self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
+            self._k_next = max(self._k_next, k_end)
         except Exception as exc:
             self._fail("fmi2DoStep", exc)
             raise

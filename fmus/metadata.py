@@ -173,4 +173,7 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),
+    # the controller FMUs' sample clock (fmus/foc_slave.py)
+    "dt": ("s", "sample period of the controller and observer: one control period at each instant "
+                "start + k dt; 0 (default): the size of the first communication step"),
 }

@@ -15,18 +15,24 @@ top of pythonfmu 0.7.0:
   wrong references go through checked setters), instead of pythonfmu's dict look-up and
   type test per variable;
 * the physics is built from the parameters (and validated by the dataclasses) at
-  ``exit_initialization_mode``; a ``ParameterError`` is logged and raised;
+  ``exit_initialization_mode``; a ``ParameterError`` is raised with the reason;
+* parameter defaults of a packaged copy: ``resources/start_values.json`` (name -> value,
+  written by ``pmsm_ev_fmus.write_fmu_with_starts``) replaces the coded default of those
+  parameters, so that a host that cannot set String parameters runs a chosen value;
 * ``fmi2SetupExperiment`` with a stop time before the start time is refused;
 * the FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``, JSON-serialisable) holds every
   variable plus the full state of the wrapped physics (subclass hooks).
 
 Errors: pythonfmu 0.7.0's C wrapper turns every Python exception into ``fmi2Fatal``
-(there is no way to return ``fmi2Error`` from Python) and drops the exception text, so
-the reason is logged first with status ``fmi2Error`` (category ``logStatusError``; the
-wrapper forwards log messages only when the master enables logging). The same wrapper
-releases the Python instance, its class and its log queue when the exception occurs
-and once more in ``fmi2FreeInstance``; ``_fail`` takes one extra reference to each, so
-a master that frees a failed instance does not crash the process.
+(there is no way to return ``fmi2Error`` from Python) and logs it, with status
+``fmi2Fatal``, as ``Fatal py exception encountered: [<call>] ...`` followed by the repr of
+the exception: the exception's text is the reason (the wrapper forwards log messages
+only when the master enables logging). A failing call logs nothing of its own: the
+wrapper flushes the log queue while the exception is still set, and Python 3.13 refuses
+a host's Python logger callback (fmpy's) in that state (``SystemError``, the reason
+lost). The same wrapper releases the Python instance, its class and its log queue when
+the exception occurs and once more in ``fmi2FreeInstance``; ``_fail`` takes one extra
+reference to each, so a master that frees a failed instance does not crash the process.
 """
 
 from __future__ import annotations
@@ -34,11 +40,12 @@ from __future__ import annotations
 import ctypes
 import dataclasses
 import functools
+import json
+from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave,
                        Fmi2Variability, Integer, Real, String)
-from pythonfmu.enums import Fmi2Status
 
 from pmsm_ev_fmus.metadata import DISPLAY_UNITS, PARAMETERS, UNITS
 
@@ -48,6 +55,8 @@ LICENSE = "MIT"
 START_TIME, STOP_TIME, STEP_SIZE = 0.0, 350.0, 1.0e-4
 
 _KINDS = {"float": Real, "int": Integer, "bool": Boolean, "str": String}
+#: parameter defaults of a packaged copy of an FMU (resources/), see ``packaged_starts``
+START_VALUES_FILE = "start_values.json"
 
 
 class FmuUsageError(RuntimeError):
@@ -56,6 +65,28 @@ class FmuUsageError(RuntimeError):
 
 class SimulationError(RuntimeError):
     """The physics cannot continue (e.g. its state is no longer finite)."""
+
+
+def packaged_starts(resources) -> dict:
+    """The parameter defaults of a packaged copy (``resources/start_values.json``: a JSON
+    object, name -> value), {} when the FMU has none."""
+    path = Path(resources) / START_VALUES_FILE if resources else None
+    if path is None or not path.is_file():
+        return {}
+    values = json.loads(path.read_text(encoding="utf-8"))
+    if not isinstance(values, dict):
+        raise FmuUsageError(f"{START_VALUES_FILE}: not a JSON object")
+    return values
+
+
+def _packaged_value(name: str, value, kind):
+    """``value`` from ``start_values.json`` as a value of the parameter's FMI type."""
+    ok = {Real: isinstance(value, (int, float)) and not isinstance(value, bool),
+          Integer: isinstance(value, int) and not isinstance(value, bool),
+          Boolean: isinstance(value, bool), String: isinstance(value, str)}[kind]
+    if not ok:
+        raise FmuUsageError(f"{START_VALUES_FILE}: {name} = {value!r} is not a {kind.__name__}")
+    return float(value) if kind is Real else value
 
 
 def _wrong_access(name: str, what: str, *_args):
@@ -90,6 +121,7 @@ class DriveSlave(Fmi2Slave):
         self._initialized = False
         self._stale = True  # parameters changed since the physics was built
         self._built_with = None  # parameter values the physics was built with
+        self._packaged_starts = packaged_starts(self.resources)
 
     # -- declaring variables ---------------------------------------------------------
     def _declare(self, var, value, unit=None, display_unit=None):
@@ -151,6 +183,8 @@ class DriveSlave(Fmi2Slave):
                         else Real if isinstance(value, float) else String)
         if kind is Real:
             value = float(value)
+        if name in self._packaged_starts:  # the default of this packaged copy
+            value = _packaged_value(name, self._packaged_starts[name], kind)
         var = kind(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
                    initial=Fmi2Initial.exact, description=description,
                    setter=functools.partial(self._set_parameter, name))
@@ -208,9 +242,9 @@ class DriveSlave(Fmi2Slave):
 
     # -- FMI calls -------------------------------------------------------------------
     def _fail(self, where: str, exc: Exception) -> None:
-        """Log why an FMI call fails; keep the objects the C wrapper releases twice alive."""
-        self.log(f"{type(self).__name__} {self.instance_name!r}: {where}: {type(exc).__name__}: {exc}",
-                 Fmi2Status.error)
+        """An FMI call fails with ``exc`` (re-raised by the caller; the wrapper logs its repr):
+        keep the objects the C wrapper releases twice alive. Nothing is logged here (see the
+        module doc: the wrapper would pass it to the host with the exception still set)."""
         for obj in (self, self.log_queue, type(self)):
             ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
 

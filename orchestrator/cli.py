@@ -193,7 +193,7 @@ def cmd_export_ssp(a) -> int:
     ensure_fmus(spec, a.quiet)
     summary = export_ssp(spec, Path(a.output), route_fmu(a.quiet) if spec.signals else None)
     print(f"wrote {summary.path}: components {', '.join(summary.components)}; {summary.connections} connections; "
-          f"{summary.parameters} parameter values; step {spec.step_size:g} s, stop {spec.stop_time:g} s, "
+          f"{summary.parameters} parameter value{'' if summary.parameters == 1 else 's'}; step {spec.step_size:g} s, stop {spec.stop_time:g} s, "
           f"{spec.algorithm}")
     return 0
 
@@ -313,7 +313,7 @@ def cmd_report(a) -> int:
 
     if a.list:
         for c in report.CONFIGS:
-            print(f"{c.id}: {c.scenario}, {c.label}")
+            print(f"{c.id}: {c.scenario}, {c.label}" + (f", {c.description}" if c.description else ""))
         return 0
     if a.jobs < 1:
         raise CosimError(f"--jobs must be >= 1 (got {a.jobs})")

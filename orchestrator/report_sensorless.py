@@ -63,6 +63,20 @@ def _corrected_error(r) -> np.ndarray:
     return row_timing_corrected_angle_error(r, DT_DEFAULT, MotorParams().N)
 
 
+def _finish(plt, fig, axes, path: Path, mode_axis=None) -> Path:
+    """Grid, mode ticks, layout; save and close."""
+    if mode_axis is not None:
+        mode_axis.set_ylabel("mode")
+        mode_axis.set_yticks([0, 1, 2], ["align", "I-f", "EKF"])
+    for ax in axes:
+        ax.grid(True, lw=0.3)
+    axes[-1].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
 def figures(data, fig_dir: Path) -> list[Path]:
     """The first 15 s of the start-up from the 8 angles, and the hill stop and restart."""
     import matplotlib  # noqa: PLC0415 (lazy: matplotlib costs ~0.5 s to import)
@@ -89,17 +103,8 @@ def figures(data, fig_dir: Path) -> list[Path]:
         axes[0].set_ylabel("ω_m [rad/s]")
         axes[0].legend(fontsize=6, ncol=3)
         axes[1].set_ylabel("θ̂ − θ [rad]\n(row timing removed)")
-        axes[2].set_ylabel("mode")
-        axes[2].set_yticks([0, 1, 2], ["align", "I-f", "EKF"])
-        axes[2].set_xlabel("time [s]")
         axes[0].set_title("Sensorless start-up from standstill, scenario 1, exact sensors: the first 15 s")
-        for ax in axes:
-            ax.grid(True, lw=0.3)
-        fig.tight_layout()
-        path = fig_dir / "sensorless_startup.png"
-        fig.savefig(path, dpi=90)
-        plt.close(fig)
-        made.append(path)
+        made.append(_finish(plt, fig, axes, fig_dir / "sensorless_startup.png", axes[2]))
     # sensored (dashed) first, the sensorless unit on top
     hill = [(data.runs.get(f"sl-hill-{c}-{k}"), f"{k}, {d}", "--" if k == "sensored" else "-")
             for k in ("sensored", "sensorless") for c, _, d in CONDITIONS[:2]]
@@ -125,35 +130,20 @@ def figures(data, fig_dir: Path) -> list[Path]:
         axes[1].set_ylabel(f"x − x({window[0]:g} s) [m]")
         axes[2].set_ylabel("T_e [N m]")
         axes[2].legend(fontsize=7)
-        axes[3].set_ylabel("mode")
-        axes[3].set_yticks([0, 1, 2], ["align", "I-f", "EKF"])
-        axes[3].set_xlabel("time [s]")
         axes[0].set_title("hill-start on 22°: stop (30-40 s), stand (40-50 s), restart (50-60 s)")
-        for ax in axes:
-            ax.grid(True, lw=0.3)
-        fig.tight_layout()
-        path = fig_dir / "sensorless_hill.png"
-        fig.savefig(path, dpi=90)
-        plt.close(fig)
-        made.append(path)
+        made.append(_finish(plt, fig, axes, fig_dir / "sensorless_hill.png", axes[3]))
         # the position over the stand, zoomed: the roll-back in millimetres
         fig, ax = plt.subplots(figsize=(7.5, 3.0))
         for i, (run, label, ls) in enumerate(hill):
             r = run.r
-            sel = (r["time"] >= 38.0) & (r["time"] <= 53.0)
-            ax.plot(r["time"][sel], 1000.0 * (r["x_vehicle"][sel] - r["x_vehicle"][sel][-1]), lw=0.9,
-                    label=label, color=f"C{i}", ls=ls)
-        ax.set_ylabel("x − x(53 s) [mm]")
-        ax.set_ylim(-150.0, 50.0)
-        ax.set_xlabel("time [s]")
-        ax.set_title("hill-start: vehicle position around the stop and the restart")
+            sel = (r["time"] >= 38.5) & (r["time"] <= 51.5)
+            x45 = float(np.interp(45.0, r["time"], r["x_vehicle"]))
+            ax.plot(r["time"][sel], 1000.0 * (r["x_vehicle"][sel] - x45), lw=0.9, label=label, color=f"C{i}", ls=ls)
+        ax.set_ylabel("x − x(45 s) [mm]")
+        ax.set_ylim(-100.0, 40.0)
+        ax.set_title("hill-start: vehicle position around the stand (below 0: rolled back)")
         ax.legend(fontsize=7)
-        ax.grid(True, lw=0.3)
-        fig.tight_layout()
-        path = fig_dir / "sensorless_hill_position.png"
-        fig.savefig(path, dpi=90)
-        plt.close(fig)
-        made.append(path)
+        made.append(_finish(plt, fig, [ax], fig_dir / "sensorless_hill_position.png"))
     return made
 
 

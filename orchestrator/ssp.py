@@ -8,16 +8,26 @@ system as one ``.ssp`` zip that other co-simulation masters run unchanged.
   the units (``ssd:Units``), the default experiment (start 0, the stop time) with the
   base step as libcosim reads it (annotation ``com.opensimulationplatform``,
   ``osp:FixedStepAlgorithm baseStepSize``; a component's step as ``osp:StepSizeHint``),
-  and an annotation ``org.pmsm-ev-cosim`` with what only this master uses (coupling
+  and, in the system's annotations, the step as OMSimulator reads it (first,
+  ``org.openmodelica``: ``oms:FixedStepMaster description="oms-ma" stepSize``; OMSimulator
+  reads only the first annotation there and refuses annotations at the root of the SSD)
+  and the annotation ``org.pmsm-ev-cosim`` with what only this master uses (coupling
   algorithm, output interval, the recorded columns);
 * the scenario signals as a component: the RouteProfile FMU whose default route
   (``resources/route.json`` inside it) is the system's signals, connected to the inputs
   the signals drove. It comes last in the stepping order, so that Gauss-Seidel reads
   the profile at t_n as the master's signals do;
-* the start values as parameter values, one ``resources/<instance>.ssv`` per instance.
+* the start values as parameter values, one ``resources/<instance>.ssv`` per instance,
+  except String values: fmpy and OMSimulator cannot set a String, so a String that is not
+  the FMU's default travels in a copy of the FMU whose default it is
+  (``resources/<FMU>_<instance>.fmu``, ``pmsm_ev_fmus.write_fmu_with_starts``), as the
+  route travels in the RouteProfile copy; one equal to the default is left out. (An FMU
+  not built by this project cannot be copied so: its String values stay in the ``.ssv``.)
 
 :func:`load_ssp` reads a package into the same ``SystemSpec`` the TOML loader gives (no
-signals: profiles come from FMUs). It checks the ``.ssd`` and ``.ssv`` files against the
+signals: profiles come from FMUs; the run record of packages written before it moved
+into the system's annotations is read at the root too). It checks the ``.ssd`` and
+``.ssv`` files against the
 SSP 1.0 schemas shipped with fmpy and refuses, in one line naming them, the SSP features
 this master does not implement (sub-systems, signal dictionaries, connection
 transformations, parameter mappings, components that are not FMUs, ...). Without the
@@ -30,6 +40,7 @@ from __future__ import annotations
 
 import atexit
 import math
+import re
 import shutil
 import tempfile
 import zipfile
@@ -53,6 +64,7 @@ NS = {
     "ssm": "http://ssp-standard.org/SSP1/SystemStructureParameterMapping",
     "ssb": "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
     "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+    "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
     "pec": "urn:pmsm-ev-cosim:ssp",
 }
 for _prefix, _uri in NS.items():
@@ -62,6 +74,10 @@ SSD_NAME = "SystemStructure.ssd"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
 OSP_ANNOTATION = "com.opensimulationplatform"
+#: OMSimulator's annotation: it takes the kind of a system (a fixed-step master of
+#: co-simulation FMUs, "oms-ma") from it and from nothing else
+OMS_ANNOTATION = "org.openmodelica"
+OMS_MASTER = "oms-ma"
 OWN_ANNOTATION = "org.pmsm-ev-cosim"
 #: the instance name of the RouteProfile component (a suffix is added if it is taken)
 ROUTE_INSTANCE = "route"
@@ -156,7 +172,7 @@ def _value_text(kind: str, value) -> str:
 def export_ssp(spec: SystemSpec, dest, route_fmu=None) -> ExportSummary:
     """Write ``spec`` as an SSP 1.0 package ``dest``; ``route_fmu`` is the RouteProfile FMU
     that carries the signals (needed when the system has signals)."""
-    from pmsm_ev_fmus.build import write_route_fmu  # noqa: PLC0415
+    from pmsm_ev_fmus.build import takes_packaged_starts, write_fmu_with_starts, write_route_fmu  # noqa: PLC0415
 
     from .master import Master  # noqa: PLC0415 - the full check of the system against its FMUs
 
@@ -196,23 +212,49 @@ def export_ssp(spec: SystemSpec, dest, route_fmu=None) -> ExportSummary:
             columns = [ColumnSpec(c.name, "variable", route, c.variable, c.unit) if c.kind == "signal" else c
                        for c in columns]
         descriptions = {c.name: read_description(paths[c.name], c.name) for c in components}
+        starts: dict[str, list[tuple[str, str, str]]] = {}  # instance -> [(name, type, text)] for its .ssv
+        n_parameters = 0
+        for comp in components:
+            values, packaged = [], {}
+            by_name = {sv.name: sv for sv in descriptions[comp.name].modelVariables}
+            for var, value in comp.start.items():
+                sv = by_name[var]
+                if sv.type not in TYPES:
+                    raise CosimError(f"{where}export-ssp: start value {comp.name}.{var}: {sv.type} "
+                                     f"parameters cannot be written to an .ssv (Real, Integer, Boolean, "
+                                     f"String only)")
+                converted = convert_start(sv, value, f"{where}start value {comp.name}.{var}")
+                if sv.type == "String" and takes_packaged_starts(paths[comp.name]):
+                    if converted != (sv.start or ""):
+                        packaged[var] = converted  # travels in a copy of the FMU
+                else:
+                    values.append((var, sv.type, _value_text(sv.type, converted)))
+            if packaged:
+                source = paths[comp.name]
+                paths[comp.name] = write_fmu_with_starts(source, work / f"{source.stem}_{comp.name}.fmu", packaged)
+                descriptions[comp.name] = read_description(paths[comp.name], comp.name)
+            if values:
+                starts[comp.name] = values
+            n_parameters += len(values) + len(packaged)
         resources = _resource_names(paths)
-        variables = {name: {sv.name: sv for sv in md.modelVariables} for name, md in descriptions.items()}
 
         # -- the .ssd ---------------------------------------------------------------
+        # OMSimulator takes these names for its model and system: identifiers only (a hyphen,
+        # as in "hill-start", leaves it with no model); the run record keeps the system's name
+        ident = re.sub(r"\W", "_", spec.name, flags=re.ASCII)
+        ident = ident if ident[:1].isalpha() else f"s_{ident}"
         root = ET.Element(_q("ssd:SystemStructureDescription"), {
-            "version": "1.0", "name": spec.name,
+            "version": "1.0", "name": ident,
             "generationTool": f"pmsm-ev-cosim {__version__}",
             "generationDateAndTime": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
         })
-        system = ET.SubElement(root, _q("ssd:System"), name=spec.name)
+        system = ET.SubElement(root, _q("ssd:System"), name=ident)
         if spec.description:
             system.set("description", spec.description)
         elements = ET.SubElement(system, _q("ssd:Elements"))
         connected_inputs = {(c.dst, c.dst_var) for c in connections}
         units_used: dict[str, object] = {}
         ssv_files: dict[str, bytes] = {}
-        n_parameters = 0
         for comp in components:
             md = descriptions[comp.name]
             element = ET.SubElement(elements, _q("ssd:Component"), {
@@ -238,19 +280,9 @@ def export_ssp(spec: SystemSpec, dest, route_fmu=None) -> ExportSummary:
                         units_used[unit] = definition
                     else:
                         units_used.setdefault(unit, None)
-            if comp.start:
-                values = []
-                for var, value in comp.start.items():
-                    sv = variables[comp.name][var]
-                    if sv.type not in TYPES:
-                        raise CosimError(f"{where}export-ssp: start value {comp.name}.{var}: {sv.type} "
-                                         f"parameters cannot be written to an .ssv (Real, Integer, Boolean, "
-                                         f"String only)")
-                    converted = convert_start(sv, value, f"{where}start value {comp.name}.{var}")
-                    values.append((var, sv.type, _value_text(sv.type, converted)))
+            if comp.name in starts:
                 ssv_name = f"resources/{comp.name}.ssv"
-                ssv_files[ssv_name] = _ssv_text(comp.name, values)
-                n_parameters += len(values)
+                ssv_files[ssv_name] = _ssv_text(comp.name, starts[comp.name])
                 bindings = ET.SubElement(element, _q("ssd:ParameterBindings"))
                 ET.SubElement(bindings, _q("ssd:ParameterBinding"), type=PARAMETER_SET_TYPE, source=ssv_name)
             if comp.step_multiple != 1:
@@ -263,6 +295,11 @@ def export_ssp(spec: SystemSpec, dest, route_fmu=None) -> ExportSummary:
             for c in connections:
                 ET.SubElement(conns, _q("ssd:Connection"), startElement=c.src, startConnector=c.src_var,
                               endElement=c.dst, endConnector=c.dst_var)
+        system_annotations = ET.SubElement(system, _q("ssd:Annotations"))
+        oms = ET.SubElement(ET.SubElement(system_annotations, _q("ssc:Annotation"), type=OMS_ANNOTATION),
+                            _q("oms:Annotations"))
+        ET.SubElement(ET.SubElement(oms, _q("oms:SimulationInformation")), _q("oms:FixedStepMaster"),
+                      description=OMS_MASTER, stepSize=_number_text(spec.step_size))
         if units_used:
             units = ET.SubElement(root, _q("ssd:Units"))
             for name, definition in sorted(units_used.items()):
@@ -276,8 +313,7 @@ def export_ssp(spec: SystemSpec, dest, route_fmu=None) -> ExportSummary:
                                    type=OSP_ANNOTATION)
         ET.SubElement(ET.SubElement(annotation, _q("osp:Algorithm")), _q("osp:FixedStepAlgorithm"),
                       baseStepSize=_number_text(spec.step_size))
-        annotation = ET.SubElement(ET.SubElement(root, _q("ssd:Annotations")), _q("ssc:Annotation"),
-                                   type=OWN_ANNOTATION)
+        annotation = ET.SubElement(system_annotations, _q("ssc:Annotation"), type=OWN_ANNOTATION)
         run = ET.SubElement(annotation, _q("pec:Run"), {
             "name": spec.name, "algorithm": spec.algorithm, "stepSize": _number_text(spec.step_size),
             "outputInterval": _number_text(spec.output_interval)})
@@ -513,7 +549,10 @@ def load_ssp(path) -> SystemSpec:
                 if _local(algorithm) != "osp:FixedStepAlgorithm":
                     raise _unsupported(where, f"algorithm {_local(algorithm)}")
                 step = _float(algorithm.get("baseStepSize"), f"{where}: FixedStepAlgorithm baseStepSize")
-    own = root.find(f"ssd:Annotations/ssc:Annotation[@type='{OWN_ANNOTATION}']/pec:Run", NS)
+    own_path = f"ssd:Annotations/ssc:Annotation[@type='{OWN_ANNOTATION}']/pec:Run"
+    own = system.find(own_path, NS)
+    if own is None:  # a package written before the run record moved into the system
+        own = root.find(own_path, NS)
     algorithm, interval, name, description = "jacobi", None, root.get("name") or path.stem, \
         system.get("description", "")
     if own is not None:

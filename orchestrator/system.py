@@ -1,6 +1,6 @@
 """System files: which FMUs, how they are wired, what drives them, what is recorded.
 
-A system file is TOML (read with :mod:`tomllib`); ``docs/system-file.md`` is the
+A system file is TOML (read with :mod:`tomllib`, ``tomli`` before Python 3.11); ``docs/system-file.md`` is the
 reference of its schema. :func:`load_system` turns one into a :class:`SystemSpec`,
 checking everything that can be checked without opening an FMU (the FMU-side checks,
 variable names, causality, types and units, are done by :mod:`orchestrator.master`).
@@ -13,11 +13,16 @@ from __future__ import annotations
 import math
 import os
 import re
-import tomllib
+import sys
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10: the same parser, as the package tomli (a dependency there)
+    import tomli as tomllib
 
 from pmsm_ev.scenarios import INTERPOLATIONS, Profile, ProfileError, load_profile_csv
 

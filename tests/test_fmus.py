@@ -218,7 +218,7 @@ def test_model_description_is_complete(fmus, name):
     assert (float(experiment.startTime), float(experiment.stopTime), float(experiment.stepSize)) == (0.0, 350.0, 1e-4)
     cs = md.coSimulation
     assert cs.canGetAndSetFMUstate and cs.canSerializeFMUstate
-    assert cs.canHandleVariableCommunicationStepSize == (name == "PmsmEvPlant")
+    assert cs.canHandleVariableCommunicationStepSize  # the controllers keep their own sample clock
     units = {u.name for u in md.unitDefinitions}
     by_name = {v.name: v for v in md.modelVariables}
     for v in md.modelVariables:
@@ -233,7 +233,8 @@ def test_model_description_is_complete(fmus, name):
         (ControllerParams, EkfParams, MotorParams)
     expected = {f.name for cls in groups for f in dataclasses.fields(cls)}
     if name != "PmsmEvPlant":
-        expected.add("angle_source")
+        expected |= {"angle_source", "dt"}
+        assert by_name["dt"].start == "0.0" and by_name["dt"].unit == "s"  # 0: the first step size
     assert {v.name for v in md.modelVariables if v.causality == "parameter"} == expected
     inputs = PLANT_INPUTS if name == "PmsmEvPlant" else CTRL_INPUTS
     outputs = PLANT_OUTPUTS if name == "PmsmEvPlant" else CTRL_OUTPUTS
@@ -510,15 +511,17 @@ def test_fmu_state_restores_the_trajectory_exactly(unzipped, angle_source):
         fmu.free()
 
 
-def test_a_restored_state_keeps_the_sample_period(unzipped):
+def test_a_restored_state_keeps_the_sample_clock(unzipped):
     """A state saved at a 2e-4 s sample period, restored into a fresh instance, goes on at
-    2e-4 s, exactly as the original; another step size is still refused."""
+    2e-4 s, exactly as the original, also when the master then steps at 1e-4 s: a period
+    at every other step, on the inputs of that step."""
     inputs = dict(i_alpha=15.0, i_beta=-4.0, omega_ref=30.0, theta_meas=0.2, omega_meas=1.0)
     c = Instance(unzipped, "FocEkf5", start={"angle_source": "estimated"})
     c.set(**inputs)
     for _ in range(10):
         c.step(2e-4)
     blob = c.fmu.serializeFMUstate(c.fmu.getFMUstate())
+    assert json.loads(blob)["physics"]["k_next"] == 10
     expected = []
     for _ in range(10):
         c.step(2e-4)
@@ -531,9 +534,15 @@ def test_a_restored_state_keeps_the_sample_period(unzipped):
         fresh.step(2e-4)
         got.append(fresh.get(CTRL_OUTPUTS))
     assert got == expected
-    with pytest.raises(Exception, match="fmi2DoStep failed"):
+    fresh.fmu.setFMUstate(fresh.fmu.deSerializeFMUstate(blob))
+    fresh.t = 10 * 2e-4
+    halves = []
+    for _ in range(20):
         fresh.step(1e-4)
+        halves.append(fresh.get(CTRL_OUTPUTS))
+    assert halves[0::2] == expected and halves[1::2] == expected
     c.free()
+    fresh.free()
 
 
 def test_the_state_holds_the_whole_control_unit(unzipped):
@@ -557,23 +566,95 @@ def _fails_to_initialise(fmus, name, start, expected):
 
 
 def test_invalid_parameters_fail_initialisation_with_the_reason_logged(fmus):
-    _fails_to_initialise(fmus, "PmsmEvPlant", {"m_v": -1.0}, "ParameterError: m_v must be > 0 kg (got -1.0)")
+    _fails_to_initialise(fmus, "PmsmEvPlant", {"m_v": -1.0}, "ParameterError('m_v must be > 0 kg (got -1.0)')")
     _fails_to_initialise(fmus, "PmsmEvPlant", {"load_model": "magic"}, "load_model must be one of")
     _fails_to_initialise(fmus, "PmsmEvPlant", {"rk4_substeps": 0}, "rk4_substeps must be")
     _fails_to_initialise(fmus, "FocEkf5", {"u_max": -1.0}, "u_max must be > 0 V")
     _fails_to_initialise(fmus, "FocEkf5", {"r_i": 0.0}, "r_i must be > 0")
     _fails_to_initialise(fmus, "FocEkf4", {"angle_source": "sideways"}, "angle_source must be one of")
     _fails_to_initialise(fmus, "FocSensored", {"L_d": 0.0}, "L_d must be > 0 H")
+    _fails_to_initialise(fmus, "FocEkf5", {"dt": -1e-4}, "dt must be > 0 s, or 0 for the size of the first")
 
 
-def test_a_step_size_change_is_an_error_for_a_controller(unzipped):
+def _clocked(unzipped, steps, start=None, inputs=None):
+    """FocEkf5 stepped by ``steps`` [(t, h)] (fmpy's FMU2Slave), inputs ``inputs(t)``; the
+    outputs after each step."""
+    c = Instance(unzipped, "FocEkf5", instance_name="clocked", start=start)
+    rows = []
+    for t, h in steps:
+        c.set(**inputs(t))
+        c.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        rows.append(c.get(CTRL_OUTPUTS))
+    state = json.loads(c.fmu.serializeFMUstate(c.fmu.getFMUstate()))["physics"]
+    c.free()
+    return rows, state
+
+
+def _ctrl_inputs(t):
+    return dict(i_alpha=20.0 * math.cos(300.0 * t), i_beta=20.0 * math.sin(300.0 * t), omega_ref=omega_ramp(t),
+                theta_meas=(300.0 * t) % (2 * math.pi) - math.pi, omega_meas=75.0)
+
+
+def _unit_at(instants, h_inputs=None):
+    """The ControlUnit run at the sample instants k dt, each on the inputs at ``h_inputs(k)``
+    (default: at k dt); its outputs after each period."""
+    unit, out = ControlUnit("ekf5", "measured", dt=DT), []
+    for k in instants:
+        i = _ctrl_inputs(h_inputs(k) if h_inputs else k * DT)
+        unit.step(i["i_alpha"], i["i_beta"], i["omega_ref"], i["theta_meas"], i["omega_meas"])
+        out.append(unit_outputs(unit))
+    return out
+
+
+def test_the_controller_keeps_its_sample_clock_at_shorter_steps(unzipped):
+    """h = dt/3 with dt = 1e-4 s set: a control period at the steps from k dt (on the inputs
+    there), none at the two others, so the outputs change only at the sample instants and
+    equal the unit's run at dt, number for number. Time as fmpy's SSP loop makes it (t += h)."""
+    h, steps, t = DT / 3, [], 0.0
+    for _ in range(300):
+        steps.append((t, h))
+        t += h
+    rows, state = _clocked(unzipped, steps, start={"dt": DT}, inputs=_ctrl_inputs)
+    assert state["dt"] == DT and state["k_next"] == 100
+    expected = _unit_at(range(100), h_inputs=lambda k: steps[3 * k][0])  # the inputs at the step's t
+    assert rows[0::3] == expected and rows[1::3] == expected and rows[2::3] == expected
+    # without dt set, the first step size is the sample period: a period at every step
+    rows, state = _clocked(unzipped, steps[:30], inputs=_ctrl_inputs)
+    assert state["dt"] == h and state["k_next"] == 30 and len({r[3] for r in rows}) == 30
+
+
+def test_the_controller_runs_several_periods_in_a_longer_step(unzipped):
+    """h = 2.5 dt: the instants k dt in [t, t + h) are 3, then 2 per step, all on the inputs
+    held from t; the outputs are those of the last period."""
+    steps = [(n * 2.5 * DT, 2.5 * DT) for n in range(8)]
+    rows, state = _clocked(unzipped, steps, start={"dt": DT}, inputs=_ctrl_inputs)
+    assert state["k_next"] == 20
+    step_of = {k: math.floor(k / 2.5 + 1e-9) for k in range(20)}  # the step whose [t, t+h) holds k dt
+    expected = _unit_at(range(20), h_inputs=lambda k: step_of[k] * 2.5 * DT)
+    last_period = [max(k for k in range(20) if step_of[k] == n) for n in range(8)]
+    assert rows == [expected[k] for k in last_period] and last_period[:3] == [2, 4, 7]
+
+
+def test_a_sliver_step_runs_no_period_and_the_run_goes_on(unzipped):
+    """A master that ends its run with a sliver (OMSimulator: 2e-13 s) or goes on after one:
+    the sliver runs no period; the instant k dt just after it (within 1e-2 dt of the next
+    step's start) runs at the next step, so the trajectory is the one at h = dt."""
+    steps = [(n * DT, DT) for n in range(10)] + [(10 * DT, 1e-13), (10 * DT + 1e-13, DT - 1e-13),
+                                                   (11 * DT, DT)]
+    rows, state = _clocked(unzipped, steps, inputs=_ctrl_inputs)
+    expected = _unit_at(range(12), h_inputs=lambda k: 10 * DT + 1e-13 if k == 10 else k * DT)
+    assert rows[:10] == expected[:10]
+    assert rows[10] == rows[9]  # the sliver: no period
+    assert rows[11:] == expected[10:12] and state["k_next"] == 12
+
+
+def test_a_step_size_of_zero_is_an_error_for_a_controller(unzipped):
     messages = []
     c = Instance(unzipped, "FocEkf5", messages=messages)
     c.step(DT)
-    c.step(DT * (1 + 1e-9))  # round-off of t_next - t is accepted
     with pytest.raises(Exception, match="fmi2DoStep failed"):
-        c.step(2 * DT)
-    assert any("differs from the first one" in m for _, m in messages), messages
+        c.step(0.0)
+    assert any("communication step size must be > 0 s (got 0.0)" in m for _, m in messages), messages
 
 
 def test_a_fixed_parameter_cannot_change_after_initialisation(unzipped):
@@ -594,7 +675,7 @@ def test_slave_classes_validate_in_plain_python():
     slave.set_real([next(vr for vr, v in slave.vars.items() if v.name == "m_v")], [0.0])
     with pytest.raises(ParameterError, match="m_v must be > 0"):
         slave.exit_initialization_mode()
-    assert "m_v must be > 0" in slave.log_queue[-1].msg and slave.log_queue[-1].status == 3
+    assert slave.log_queue == []  # nothing queued: the wrapper would pass it on with the exception set
     ctrl = FocEkf5(instance_name="direct")
     ctrl.exit_initialization_mode()
     ctrl.do_step(0.0, 2e-4)

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main
+from orchestrator.fmu import fmu_reason
 from orchestrator_support import project_fmus, toy_fmus, toy_system
 from pmsm_ev.results import ALL_COLUMNS, read_results
 
@@ -264,13 +265,16 @@ class RawInstance:
     ("FocEkf5", {}, (1.0, 0.5), 1e-4, "fmi2SetupExperiment", "stop time 0.5 s is before the start time 1.0 s"),
     ("PmsmEvPlant", {}, (0.0, 1.0), 0.0, "fmi2DoStep", "communication step size must be > 0 s (got 0.0)"),
     ("PmsmEvPlant", {}, (0.0, 1.0), -1e-4, "fmi2DoStep", "communication step size must be > 0 s (got -0.0001)"),
-    ("FocEkf5", {}, (0.0, 1.0), 0.0, "fmi2DoStep", "dt must be > 0 s (got 0.0)"),
+    ("FocEkf5", {}, (0.0, 1.0), 0.0, "fmi2DoStep", "communication step size must be > 0 s (got 0.0)"),
+    ("FocEkf5", {"dt": -1e-4}, (0.0, 1.0), 1e-4, "fmi2ExitInitializationMode",
+     "dt must be > 0 s, or 0 for the size of the first communication step (got -0.0001)"),
 ])
 def test_the_fmus_refuse_non_physical_values_from_another_master(fmus, tmp_path, name, start, experiment, step,
                                                                  call, reason):
     """Set from another master (fmpy's low-level FMU2Slave), a non-physical value fails
-    the FMI call with the reason in the FMU's log (status fmi2Error, category
-    logStatusError); the call returns **fmi2Fatal**, not fmi2Error.
+    the FMI call with the reason in the FMU's log (status fmi2Fatal, the wrapper's
+    ``Fatal py exception encountered: [call] ...`` with the exception's repr); the call
+    returns **fmi2Fatal**, not fmi2Error.
 
     Why fmi2Fatal: pythonfmu 0.7.0 gives a slave no way to return fmi2Error. Its C++
     wrapper (pythonfmu-export, ``PySlaveInstance.cpp``) discards what
@@ -279,9 +283,10 @@ def test_the_fmus_refuse_non_physical_values_from_another_master(fmus, tmp_path,
     gets fmi2OK), and turns a Python exception, in these as in every other call, into
     ``handle_py_exception``, which always throws ``pythonfmu::fatal_error``; the FMI
     functions map that to fmi2Fatal. Only other C++ exceptions become fmi2Error, and Python
-    code cannot raise those. The wrapper also loses the exception's text (it logs
-    ``unknown error``), hence the slaves log the reason themselves first. A failed
-    instance is not called again (FMI 2.0 allows no call after fmi2Fatal).
+    code cannot raise those. The wrapper logs the exception's repr; the slaves log nothing
+    of their own in a failing call (the wrapper would pass it to the host's logger with the
+    exception still set, which Python 3.13 refuses). A failed instance is not called again
+    (FMI 2.0 allows no call after fmi2Fatal).
     """
     from fmpy.fmi1 import FMICallException
 
@@ -306,8 +311,10 @@ def test_the_fmus_refuse_non_physical_values_from_another_master(fmus, tmp_path,
             fmu.terminate()
             fmu.freeInstance()
     assert failed, f"{name} accepted {start} / {experiment} / step {step}"
-    errors = [text for status, text in inst.messages if status == 3]
-    assert any(text.endswith(reason) for text in errors), inst.messages
+    fatal = [text for status, text in inst.messages if status == 4]
+    assert any(text.startswith("Fatal py exception encountered: [") and fmu_reason(text).endswith(reason)
+               for text in fatal), inst.messages
+    assert not any("SystemError" in text for _, text in inst.messages), inst.messages
 
 
 # --- the time grid ----------------------------------------------------------------------------------

@@ -266,3 +266,26 @@ def test_cosimulation_equals_the_reference(tmp_path):
     for col in a:
         np.testing.assert_allclose(a[col], b[col], rtol=1e-9, atol=1e-9, err_msg=col)
     assert set(a["mode"]) == {ALIGN, IF, EKF}
+
+
+def test_saved_state_restores_the_trajectory_exactly():
+    """get_state/set_state (the FMU's fmi2Get/SetFMUstate) carry the start-up's state: mode,
+    clock, the I-f vector and its damping filter, mid-I-f."""
+    plant = Plant(plant=PlantParams(theta_e0=0.4))
+    unit = ControlUnit("sensorless", dt=DT)
+    w_ref = speed_reference(delay=SENSORLESS_START_DELAY)
+    for k in range(30000):  # 3 s: in I-f
+        out = unit.step(plant.i_alpha, plant.i_beta, w_ref(k * DT))
+        plant.step(out[0], out[1], 0.0, DT)
+    assert unit.mode == IF
+    snap, plant_snap = unit.get_state(), plant.get_state()
+    fresh, fresh_plant = ControlUnit("sensorless", dt=DT), Plant(plant=PlantParams(theta_e0=0.4))
+    fresh.set_state(snap)
+    fresh_plant.set_state(plant_snap)
+    for k in range(30000, 45000):  # on past the handover
+        a = unit.step(plant.i_alpha, plant.i_beta, w_ref(k * DT))
+        b = fresh.step(fresh_plant.i_alpha, fresh_plant.i_beta, w_ref(k * DT))
+        assert a == b, k
+        plant.step(a[0], a[1], 0.0, DT)
+        fresh_plant.step(b[0], b[1], 0.0, DT)
+    assert unit.mode == EKF

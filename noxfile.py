@@ -1,0 +1,73 @@
+"""The test suite on every Python the package claims (``requires-python = ">=3.10"``).
+
+    pip install nox
+    nox                       # pytest -q on each of Python 3.10, 3.11, 3.12, 3.13 found
+    nox -s tests-3.13         # one of them
+    nox -- tests/test_ssp.py  # arguments after -- go to pytest
+
+Each session installs the package as a new user would (``pip install -e .`` and the test
+extras, in a fresh virtual environment under ``.nox/``) and runs the tests. An
+interpreter is looked for on PATH (``python3.X``), then among pyenv's versions; one not
+found is skipped, saying so. An extra that has no wheel for an interpreter (libcosimpy) is
+left out, saying so; the tests that need it are then skipped by name. The sessions share
+the FMUs in ``fmus/`` (built by the first that needs them), so an FMU built under one
+Python runs in the hosts of the others.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import tomllib
+from pathlib import Path
+
+import nox
+
+ROOT = Path(__file__).resolve().parent
+PYTHONS = ["3.10", "3.11", "3.12", "3.13"]
+#: test extras an interpreter may lack a wheel for: installed if possible, else left out
+OPTIONAL = ("libcosimpy",)
+
+nox.options.sessions = ["tests"]
+nox.options.error_on_missing_interpreters = False
+
+
+def _pyenv_bins() -> list[str]:
+    """bin/ of pyenv's versions for the PYTHONS not on PATH (newest patch release first)."""
+    if shutil.which("pyenv") is None:
+        return []
+    root = Path(subprocess.run(["pyenv", "root"], capture_output=True, text=True, check=False).stdout.strip())
+    found = []
+    for version in PYTHONS:
+        if shutil.which(f"python{version}") and "shims" not in shutil.which(f"python{version}"):
+            continue
+        candidates = sorted((root / "versions").glob(f"{version}.*/bin/python{version}"),
+                            key=lambda p: [int(x) for x in re.findall(r"\d+", p.parent.parent.name)], reverse=True)
+        if candidates:
+            found.append(str(candidates[0].parent))
+    return found
+
+
+os.environ["PATH"] = os.pathsep.join(_pyenv_bins() + [os.environ.get("PATH", "")])
+
+
+def _test_extras() -> list[str]:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    return project["optional-dependencies"]["test"]
+
+
+@nox.session(python=PYTHONS)
+def tests(session: nox.Session) -> None:
+    extras = _test_extras()
+    required = [r for r in extras if not r.startswith(OPTIONAL)]
+    session.install("-e", ".", *required)
+    for requirement in (r for r in extras if r.startswith(OPTIONAL)):
+        try:
+            session.install(requirement, silent=True)
+        except nox.command.CommandFailed:
+            session.warn(f"{requirement}: not installable on Python {session.python} here; "
+                         f"the tests that need it are skipped")
+    session.run("python", "-c", "import sys; print('Python', sys.version)")
+    session.run("pytest", *(session.posargs or ["-q", "-rs"]))
