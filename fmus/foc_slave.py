@@ -171,7 +171,8 @@ class FocSlave(DriveSlave):
             if self._k_next is None:
                 self._start_clock(current_time, step_size)
             k_end = math.ceil((current_time + step_size - self._t0) / self._dt - SAMPLE_TOLERANCE)
-            for _ in range(k_end - self._k_next):  # the instants in [t, t + h), on the inputs at t
+            n = k_end - self._k_next  # the instants in [t, t + h), run on the inputs at t
+            while n > 0:  # (one per step when h = dt: no range object on the per-step path)
                 if self._sensorless:  # never reads theta_meas, omega_meas
                     (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
                      self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode) = self._unit.step(
@@ -180,7 +181,8 @@ class FocSlave(DriveSlave):
                     (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
                      self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
                         self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
-            self._k_next = max(self._k_next, k_end)
+                n -= 1
+                self._k_next = k_end
         except Exception as exc:
             self._fail("fmi2DoStep", exc)
             raise
