@@ -649,6 +649,23 @@ def compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta):
 
 
 # -- the control unit ----------------------------------------------------------------------------
+@kernel()
+def store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta):
+    """End of a control period, every unit alike: keep the period's currents, references and
+    command in the state; return the vector sent to the inverter (the command, plus the dead
+    time's expected loss with dead-time compensation on)."""
+    s[S_I_D] = i_d
+    s[S_I_Q] = i_q
+    s[S_I_QREF] = i_qref
+    s[S_V_D] = v_d
+    s[S_V_Q] = v_q
+    s[S_V_ALPHA] = v_alpha
+    s[S_V_BETA] = v_beta
+    if c[C_DTC_V] != 0.0:
+        return compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta)
+    return v_alpha, v_beta
+
+
 @kernel(_sig(f"UniTuple({_F}, 12)", _V, _V, _F, _F, _F, _F, _F))
 def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     """One control period (see ``pmsm_ev.control_unit``); returns (v_alpha, v_beta, v_d,
@@ -685,15 +702,7 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     half_arc = c[C_HALF_PERIOD_N] * omega_hat  # a = omega_e dt / 2
     gain = half_arc / math.sin(half_arc) if c[C_ZOH] != 0.0 and abs(half_arc) > 1e-6 else 1.0
     v_alpha, v_beta = inverse_park(gain * v_d, gain * v_q, theta_ctrl + c[C_ADVANCE] * omega_hat)
-    s[S_I_D] = i_d
-    s[S_I_Q] = i_q
-    s[S_I_QREF] = i_qref
-    s[S_V_D] = v_d
-    s[S_V_Q] = v_q
-    s[S_V_ALPHA] = v_alpha
-    s[S_V_BETA] = v_beta
-    if c[C_DTC_V] != 0.0:  # to the inverter: the command plus the dead time's expected loss
-        v_alpha, v_beta = compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta)
+    v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4])
 
@@ -839,14 +848,6 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         i_qref = 0.0
         v_d, v_q = current_step(s, c, s[S_I_MAG], 0.0, i_d, i_q, 0.0)  # (15)-(16), no decoupling
     v_alpha, v_beta = inverse_park(v_d, v_q, theta_ctrl + c[C_ADVANCE] * omega_ctrl)
-    s[S_I_D] = i_d
-    s[S_I_Q] = i_q
-    s[S_I_QREF] = i_qref
-    s[S_V_D] = v_d
-    s[S_V_Q] = v_q
-    s[S_V_ALPHA] = v_alpha
-    s[S_V_BETA] = v_beta
-    if c[C_DTC_V] != 0.0:  # to the inverter: the command plus the dead time's expected loss
-        v_alpha, v_beta = compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta)
+    v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode)
