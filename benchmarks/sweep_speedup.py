@@ -6,7 +6,7 @@ Each sweep is ``--runs`` equal runs of scenario 2 (stop time ``--stop-time``, by
 whole scenario, 350 s: what a sweep runs; with short runs the fixed cost of a run, loading
 its FMUs and kernels, weighs more and the speed-up is lower); only the
 parameter that names the run differs, set to its default value, so every run does the
-same work. The time measured is that of :func:`orchestrator.sweep.run_sweep` on an
+same work. The time measured is that of :func:`pmsm_cosim.sweeps.run_sweep` on an
 already started cluster (submission, runs, files written, summary); the cluster's
 start-up (about a second) is printed apart. The figure depends on how busy the machine
 is: the load average is printed with it, and so is how the runs were spread (runs per
@@ -26,7 +26,7 @@ from pathlib import Path
 
 from distributed import Client
 
-from orchestrator.sweep import load_sweep, local_cluster, run_sweep
+from pmsm_cosim.sweeps import load_sweep, local_cluster, run_sweep
 
 
 def sweep_file(directory: Path, runs: int, stop_time: float) -> Path:

@@ -54,7 +54,7 @@ FMUS: dict[str, tuple[str, bool]] = {
     "FocSensorless": ("foc_sensorless.py", True),
     "RouteProfile": ("route_profile.py", True),
 }
-#: FMUs for the step-cost benchmark (``orchestrator.bench``), not built by default: the
+#: FMUs for the step-cost benchmark (``pmsm_cosim.app.bench``), not built by default: the
 #: interface of PmsmEvPlant and FocEkf5 with a ``do_step`` that computes nothing
 BENCH_FMUS: dict[str, tuple[str, bool]] = {
     "PassThroughPlant": ("passthrough_plant.py", True),

@@ -8,7 +8,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 # -- leaving the test process ---------------------------------------------------------------
 # The tests load many FMUs in this process (pythonfmu binaries embedding this interpreter)
 # and, with numba, compiled kernels. The native teardown after the interpreter's
-# finalization can abort in free() (see orchestrator.cli.entry_point, which the command
+# finalization can abort in free() (see pmsm_cosim.app.cli.entry_point, which the command
 # uses for the same reason) after every test has passed and been reported; leave with the
 # session's exit status before that teardown.
 import os  # noqa: E402

@@ -73,7 +73,7 @@ def plateau_system(tmp_path: Path, delta_deg: float = 0.0, omega_ref: float = 20
     """Scenario 2's system with a constant elevation and a constant speed reference."""
     from importlib import resources
 
-    text = (resources.files("orchestrator") / "scenarios" / "scenario2.toml").read_text(encoding="utf-8")
+    text = (resources.files("pmsm_cosim.app") / "scenarios" / "scenario2.toml").read_text(encoding="utf-8")
     start, end = text.index("[signals.delta]"), text.index("[record]")
     signals = (f'[signals.delta]\nunit = "deg"\ntable = [[0.0, {delta_deg!r}]]\ndrives = "plant.delta"\n\n'
                f'[signals.omega_ref]\nunit = "rad/s"\ntable = [[0.0, {omega_ref!r}]]\ndrives = "ctrl.omega_ref"\n\n')

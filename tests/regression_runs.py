@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 
 from pmsm_ev.params import DriveParams, ScenarioParams
-from pmsm_ev.reference import run_reference
+from pmsm_cosim.app.reference import run_reference
 from pmsm_ev.scenarios import Profile
 
 FIXTURES = Path(__file__).parent / "fixtures"

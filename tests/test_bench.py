@@ -5,11 +5,11 @@ from __future__ import annotations
 import fmpy
 import pytest
 
-from orchestrator import bench
-from orchestrator.cli import main
-from orchestrator.master import Master
+from pmsm_cosim.app import bench
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.engine.master import Master
 from orchestrator_support import project_fmus
-from pmsm_ev.results import read_results
+from pmsm_cosim.engine.recording import read_results
 
 
 def test_bench_refuses_a_short_slice(capsys):

@@ -1,7 +1,7 @@
 """Equality checks (issue 6): the FMU boundary and the master change no number.
 
 * Gauss-Seidel co-simulation of the FMUs (orchestrator, ctrl then plant) equals the
-  monolithic reference run ``pmsm_ev.reference`` (same parameters, same dt) on every
+  monolithic reference run ``pmsm_cosim.app.reference`` (same parameters, same dt) on every
   recorded column over the first 10 s of scenario 2, to 1e-9 relative (1e-9 absolute
   near zero). Also with the angle source estimated (truly sensorless), whose loop is
   locally unstable at light load and so amplifies any difference, and over a compressed
@@ -19,12 +19,13 @@ import math
 import numpy as np
 import pytest
 
-from orchestrator.master import Master
-from orchestrator.system import load_system
+from pmsm_cosim.engine.master import Master
+from pmsm_cosim.app.drive import load_system
 from orchestrator_support import project_fmus
 from pmsm_ev.params import DriveParams
-from pmsm_ev.reference import run_reference
-from pmsm_ev.results import ALL_COLUMNS, CONTRACT_COLUMNS, read_results
+from pmsm_cosim.app.reference import run_reference
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import ALL_COLUMNS, CONTRACT_COLUMNS
 from pmsm_ev.scenarios import Profile
 
 RTOL = ATOL = 1e-9

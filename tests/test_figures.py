@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from pmsm_ev import figures
-from pmsm_ev.figures import FiguresError, figure_plan, make_figures, unwrap_with_speed
+from pmsm_cosim.app import figures
+from pmsm_cosim.app.figures import FiguresError, figure_plan, make_figures, unwrap_with_speed
 from pmsm_ev.results import ALL_COLUMNS
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

@@ -31,8 +31,8 @@ from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import (ControllerParams, DriveParams, EkfParams, MotorParams, ParameterError, StartupParams,
                             PlantParams, ScenarioParams, VehicleParams)
 from pmsm_ev.plant import Plant
-from pmsm_ev.reference import run_reference
-from pmsm_ev.results import read_results
+from pmsm_cosim.app.reference import run_reference
+from pmsm_cosim.engine.recording import read_results
 from pmsm_ev_fmus import build as fmu_build
 from pmsm_ev_fmus.metadata import PARAMETERS, UNITS
 
@@ -705,7 +705,7 @@ for i in range(40):
     fmu.freeInstance()
 print("survived", flush=True)
 # leave before the native teardown (pythonfmu binaries + numba's LLVM), which can abort in
-# free() after the interpreter is gone: see orchestrator.cli.entry_point
+# free() after the interpreter is gone: see pmsm_cosim.app.cli.entry_point
 import os; os._exit(0)
 """
 
@@ -740,7 +740,7 @@ physics = sorted(m for m in sys.modules if m.startswith("pmsm_ev"))
 files = sorted({sys.modules[m].__file__ for m in physics})
 print(json.dumps({"i_d": float(r["i_d"][-1]), "v_q": float(q["v_q"][-1]), "modules": physics, "files": files}),
       flush=True)
-import os; os._exit(0)  # before the native teardown, see orchestrator.cli.entry_point
+import os; os._exit(0)  # before the native teardown, see pmsm_cosim.app.cli.entry_point
 """
 
 

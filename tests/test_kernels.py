@@ -13,13 +13,14 @@ import numpy as np
 import pytest
 
 from pmsm_ev import accel, kernels
-from pmsm_ev.results import ALL_COLUMNS, read_results
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import ALL_COLUMNS
 from regression_runs import CASES
 
 RUN_SCRIPT = """
 import json, sys
 from pmsm_ev import accel
-from pmsm_ev.reference import run_reference
+from pmsm_cosim.app.reference import run_reference
 sys.path.insert(0, sys.argv[3])
 from regression_runs import PARAMS, ELEVATION
 observer, angle_source, out = sys.argv[1], sys.argv[2], sys.argv[4]

@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.progress import ProgressBar
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.engine.progress import ProgressBar
 from orchestrator_support import toy_fmus, toy_system
 
 
@@ -26,7 +26,7 @@ def test_help_on_every_command(argv, capsys):
 
 
 def test_console_script_help():
-    proc = subprocess.run([sys.executable, "-m", "orchestrator.cli", "run", "--help"],
+    proc = subprocess.run([sys.executable, "-m", "pmsm_cosim.app.cli", "run", "--help"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and "--algorithm" in proc.stdout
 
@@ -110,7 +110,7 @@ def test_plot_needs_the_contract_columns(tmp_path, capsys):
     out = tmp_path / "toy"
     assert main(["run", str(toy_system(tmp_path)), "--out", str(out), "--quiet"]) == 0
     capsys.readouterr()
-    pytest.importorskip("pmsm_ev.figures")
+    pytest.importorskip("pmsm_cosim.app.figures")
     assert main(["plot", str(out)]) == 2
     assert "missing columns" in one_line_error(capsys)
 

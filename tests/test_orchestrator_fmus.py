@@ -10,14 +10,15 @@ import math
 import numpy as np
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.errors import CosimError
-from orchestrator.master import Master
-from orchestrator.system import load_system
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.engine.errors import CosimError
+from pmsm_cosim.engine.master import Master
+from pmsm_cosim.app.drive import load_system
 from orchestrator_support import plateau_system, project_fmus, toy_fmus
 from pmsm_ev.params import VehicleParams
-from pmsm_ev.reference import run_reference
-from pmsm_ev.results import ALL_COLUMNS, read_results
+from pmsm_cosim.app.reference import run_reference
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import ALL_COLUMNS
 from pmsm_ev.vehicle import load_torque
 
 METRICS_KEYS = ("status", "wall_time_s", "macro_steps", "us_per_step", "speed_rms_error", "omega_hat_rms_error",
@@ -63,7 +64,7 @@ def test_end_to_end_scenario2_slice(fmus, tmp_path, capsys):
     assert np.allclose(r["T_L_mech"], expected, rtol=1e-12, atol=1e-12)
     # figures (when the figures module is there)
     try:
-        import pmsm_ev.figures  # noqa: F401
+        import pmsm_cosim.app.figures  # noqa: F401
     except ImportError:
         return
     assert sorted(p.suffix for p in (out / "figures").iterdir()) and all(

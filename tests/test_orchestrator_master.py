@@ -8,11 +8,11 @@ import math
 
 import pytest
 
-from orchestrator.errors import CosimError
-from orchestrator.master import Master
-from orchestrator.system import load_system
+from pmsm_cosim.engine.errors import CosimError
+from pmsm_cosim.engine.master import Master
+from pmsm_cosim.app.drive import load_system
 from orchestrator_support import toy_system
-from pmsm_ev.results import read_results
+from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.scenarios import Profile
 
 STEP = 1e-3

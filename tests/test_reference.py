@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from pmsm_ev.params import DriveParams, MotorParams, PlantParams, ScenarioParams, ParameterError, VehicleParams
-from pmsm_ev.reference import main as reference_main
-from pmsm_ev.reference import run_reference
-from pmsm_ev.results import CONTRACT_COLUMNS, read_results
+from pmsm_cosim.app.reference import main as reference_main
+from pmsm_cosim.app.reference import run_reference
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import CONTRACT_COLUMNS
 from pmsm_ev.scenarios import Profile
 
 METRIC_KEYS = {"speed_rms_error", "omega_hat_rms_error", "theta_error_rms", "theta_error_max", "plateaus",

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from pmsm_ev.results import CONTRACT_COLUMNS, read_results
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import CONTRACT_COLUMNS
 from regression_runs import CASES, fixture_path, run_case
 
 

@@ -18,10 +18,11 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.fmu import fmu_reason
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.engine.fmu import fmu_reason
 from orchestrator_support import project_fmus, toy_fmus, toy_system
-from pmsm_ev.results import ALL_COLUMNS, read_results
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import ALL_COLUMNS
 
 STEP = 1e-3  # the toy systems' step
 
@@ -70,7 +71,7 @@ def scenario2_with(tmp_path: Path, old: str, new: str, name: str = "edited") -> 
     """The shipped scenario 2 with one piece of text replaced."""
     from importlib import resources
 
-    text = (resources.files("orchestrator") / "scenarios" / "scenario2.toml").read_text(encoding="utf-8")
+    text = (resources.files("pmsm_cosim.app") / "scenarios" / "scenario2.toml").read_text(encoding="utf-8")
     assert old in text
     path = tmp_path / f"{name}.toml"
     path.write_text(text.replace(old, new), encoding="utf-8")
@@ -454,7 +455,7 @@ def test_sigint_or_sigterm_keeps_every_completed_row(fmus, tmp_path, signum):
     it stops at its next check, results.csv holds every completed row and ends on a
     complete line, metrics.json says interrupted (and by which signal), exit code 130."""
     out = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "run", "scenario1", "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "pmsm_cosim.app.cli", "run", "scenario1", "--out", str(out),
                              "--no-figures", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 300
@@ -548,9 +549,10 @@ def test_a_run_refused_at_load_leaves_the_previous_results(fmus, tmp_path, capsy
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from orchestrator.errors import CosimError  # noqa: E402
-from orchestrator.system import SystemSpec, load_system  # noqa: E402
-from pmsm_ev.scenarios import Profile, ProfileError, load_profile_csv  # noqa: E402
+from pmsm_cosim.engine.errors import CosimError  # noqa: E402
+from pmsm_cosim.app.drive import load_system  # noqa: E402
+from pmsm_cosim.engine.system import SystemSpec  # noqa: E402
+from pmsm_cosim.engine.signals import Table, TableError, load_table_csv  # noqa: E402
 
 PROPERTY = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -560,11 +562,11 @@ def scratch(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("properties")
 
 
-def load_csv_cleanly(path: Path) -> Profile | None:
-    """The reader's contract: a valid Profile, or a one-line ProfileError naming the file."""
+def load_csv_cleanly(path: Path) -> Table | None:
+    """The reader's contract: a valid Table, or a one-line TableError naming the file."""
     try:
-        prof = load_profile_csv(path)
-    except ProfileError as exc:
+        prof = load_table_csv(path)
+    except TableError as exc:
         assert "\n" not in str(exc) and str(exc).startswith(str(path)), str(exc)
         return None
     assert len(prof.times) == len(prof.values) >= 1

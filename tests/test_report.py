@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator import report
-from orchestrator.cli import main
-from orchestrator.compare import format_value
+from pmsm_cosim.app import report
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.compare import format_value
 from orchestrator_support import project_fmus
-from pmsm_ev.results import read_results
+from pmsm_cosim.engine.recording import read_results
 
 STOP = 1.5
 T_FROM = 0.5
@@ -129,7 +129,7 @@ def test_report_cli_errors(tmp_path, capsys):
 
 def synthetic_run(t, theta_err, delta_deg, omega_m):
     """A Run whose angle error, elevation and speed are given (other columns zero)."""
-    from orchestrator.compare import Run
+    from pmsm_cosim.app.compare import Run
 
     z = np.zeros_like(t)
     theta_e = (7.0 * t + math.pi) % (2 * math.pi) - math.pi

@@ -20,10 +20,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orchestrator.master import Master
-from orchestrator.system import load_system
+from pmsm_cosim.engine.master import Master
+from pmsm_cosim.app.drive import load_system
 from orchestrator_support import project_fmus
-from pmsm_ev.results import ALL_COLUMNS, read_results
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import ALL_COLUMNS
 
 DT = 1e-4
 STOP = 0.5

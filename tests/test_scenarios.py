@@ -5,7 +5,9 @@ import math
 import pytest
 
 from pmsm_ev.params import ScenarioParams
-from pmsm_ev.scenarios import ProfileError, elevation_profile, load_profile_csv, speed_reference
+from pmsm_cosim.engine.signals import TableError, load_table_csv
+from pmsm_ev.scenarios import ProfileError
+from pmsm_ev.scenarios import elevation_profile, speed_reference
 
 
 def deg(p, t):
@@ -38,7 +40,7 @@ def test_unknown_scenario():
 def test_csv_profile(tmp_path):
     f = tmp_path / "route.csv"
     f.write_text("time,delta_deg\n0,0\n10,4\n20,0\n")
-    p = load_profile_csv(f, "linear", scale=math.pi / 180)
+    p = load_table_csv(f, "linear", scale=math.pi / 180)
     assert deg(p, 5.0) == pytest.approx(2.0)
     assert deg(p, 25.0) == pytest.approx(0.0)
 
@@ -55,6 +57,6 @@ def test_csv_profile(tmp_path):
 def test_csv_profile_errors_name_file_and_line(tmp_path, text, where):
     f = tmp_path / "bad.csv"
     f.write_text(text)
-    with pytest.raises(ProfileError) as e:
-        load_profile_csv(f)
+    with pytest.raises(TableError) as e:
+        load_table_csv(f)
     assert "bad.csv" in str(e.value) and where in str(e.value)

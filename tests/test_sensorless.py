@@ -16,16 +16,18 @@ import fmpy
 import numpy as np
 import pytest
 
-from orchestrator.master import Master
-from orchestrator.system import load_system, read_toml
+from pmsm_cosim.engine.master import Master
+from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.engine.system import read_toml
 from orchestrator_support import project_fmus
 from pmsm_ev import kernels as _k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import (SENSORLESS_EKF, EkfParams, MotorParams, ParameterError, PlantParams, StartupParams,
                             VehicleParams, equivalent_inertia)
 from pmsm_ev.plant import Plant
-from pmsm_ev.reference import run_reference
-from pmsm_ev.results import ALL_COLUMNS, SENSORLESS_COLUMNS, read_results
+from pmsm_cosim.app.reference import run_reference
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import ALL_COLUMNS, SENSORLESS_COLUMNS
 from pmsm_ev.scenarios import (HILL_START_DEG, HILL_START_OMEGA_REF, HILL_START_STOP_TIME, SENSORLESS_START_DELAY,
                                Profile, hill_start_route, speed_reference)
 
@@ -227,7 +229,7 @@ def test_x_vehicle_integrates_the_vehicle_speed():
 
 # -- the shipped scenarios ---------------------------------------------------------------------------
 def _system(name: str) -> dict:
-    return read_toml(Path(str(resources.files("orchestrator") / "scenarios" / f"{name}.toml")), "system file")
+    return read_toml(Path(str(resources.files("pmsm_cosim.app") / "scenarios" / f"{name}.toml")), "system file")
 
 
 def test_shipped_sensorless_scenarios_have_the_routes_of_pmsm_ev_scenarios():

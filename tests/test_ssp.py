@@ -36,14 +36,15 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-import orchestrator
-from orchestrator.cli import main
-from orchestrator.errors import CosimError
-from orchestrator.master import Master
-from orchestrator.ssp import NS, export_ssp, load_ssp, schema_errors
-from orchestrator.system import load_system
+import pmsm_cosim.app
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.engine.errors import CosimError
+from pmsm_cosim.engine.master import Master
+from pmsm_cosim.app.drive import export_ssp, load_system
+from pmsm_cosim.engine.ssp import NS, load_ssp, schema_errors
 from orchestrator_support import project_fmus
-from pmsm_ev.results import ALL_COLUMNS, read_results
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.results import ALL_COLUMNS
 
 RTOL = ATOL = 1e-9
 STEP = 1e-4
@@ -150,7 +151,7 @@ def system_annotations(ssd: ET.Element) -> list[str]:
     return [a.get("type") for a in ssd.findall("ssd:System/ssd:Annotations/ssc:Annotation", NS)]
 
 
-SCENARIOS = sorted(p.stem for p in (Path(orchestrator.__file__).parent / "scenarios").glob("*.toml"))
+SCENARIOS = sorted(p.stem for p in (Path(pmsm_cosim.app.__file__).parent / "scenarios").glob("*.toml"))
 
 
 @pytest.mark.parametrize("angle_source", [None, "estimated"])

@@ -10,9 +10,10 @@ import textwrap
 
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.errors import CosimError
-from orchestrator.sweep import load_sweep, parse_sweep, read_summary, run_sweep
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.engine.errors import CosimError
+from pmsm_cosim.app.studies import load_sweep, parse_sweep
+from pmsm_cosim.sweeps import read_summary, run_sweep
 from orchestrator_support import project_fmus
 
 STOP = 0.5  # [s] short runs: the start-up ramp, 5000 steps
@@ -29,7 +30,7 @@ def write_sweep(tmp_path, body: str, name: str = "sw", header: str | None = None
 def client():
     """One LocalCluster of two single-threaded worker processes for the module."""
     distributed = pytest.importorskip("distributed")
-    from orchestrator.sweep import local_cluster
+    from pmsm_cosim.sweeps import local_cluster
 
     project_fmus()  # build the FMUs once, before any sweep
     with local_cluster(2) as cluster, distributed.Client(cluster) as cl:
@@ -277,7 +278,7 @@ def test_summary_metrics_of_steps_and_plateaus():
 def test_count_bar():
     import io
 
-    from orchestrator.progress import CountBar
+    from pmsm_cosim.engine.progress import CountBar
 
     class Tty(io.StringIO):
         def isatty(self):
@@ -308,7 +309,7 @@ def test_sigterm_stops_the_sweep_keeping_finished_runs(tmp_path):
                        header='system = "scenario2"\nstop_time = 5.0\n')
     log = tmp_path / "log.txt"
     with open(log, "w") as fh:
-        proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "sweep", str(path), "--workers", "1",
+        proc = subprocess.Popen([sys.executable, "-m", "pmsm_cosim.app.cli", "sweep", str(path), "--workers", "1",
                                  "--out", str(tmp_path / "out")], stdout=fh, stderr=subprocess.STDOUT)
     try:
         deadline = time.monotonic() + 120
@@ -326,7 +327,7 @@ def test_sigterm_stops_the_sweep_keeping_finished_runs(tmp_path):
 
 
 def test_run_signature_follows_values_not_spelling(tmp_path):
-    from orchestrator.sweep import prepare_runs
+    from pmsm_cosim.sweeps import prepare_runs
 
     project_fmus()
     a = prepare_runs(load_sweep(write_sweep(tmp_path, '[grid]\n"ctrl.q_i" = [1, 2]\n', name="a")))

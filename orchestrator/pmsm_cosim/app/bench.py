@@ -1,0 +1,259 @@
+"""Step-cost benchmark of the co-simulation: ``pmsm-cosim bench`` (``benchmarks/step_cost.py``).
+
+On the same slice of scenario 1 (t = 0 .. ``slice`` s at its 1e-4 s step) it measures the
+wall time per macro step of
+
+(a) the orchestrator's master with the project's FMUs (``PmsmEvPlant`` + ``FocEkf5``);
+(b) the same master and system with pass-through FMUs of the same interface whose
+    ``fmi2DoStep`` computes nothing (``PassThroughPlant`` + ``PassThroughFoc``): the floor
+    of FMI calls, pythonfmu and the master;
+(c) the monolithic reference run ``pmsm_cosim.app.reference`` (same physics, no FMUs);
+(d) libcosim (``libcosimpy``, if installed) stepping the same FMUs with the same
+    connections; the scenario signals are set through its override manipulator when their
+    value changes, as the master does (its loop is a Python ``for`` over ``execution.step()``;
+    nothing is recorded);
+
+and prints one table with the ratios a/b and d/a, in wall time (what a user waits) and in
+CPU time of the process (less sensitive to other load on the machine; for libcosim it
+includes its worker threads). (a)-(c) include the recording of a row
+every 10 ms, as in a normal run. With ``memory`` it also runs ``pmsm-cosim run scenario1``
+(figures included) for 100 s and for the full 350 s, each in a fresh process, and prints
+their wall time and peak resident memory (``wait4`` of that process): memory must not grow
+with the duration.
+
+Timings on a shared machine vary with its load: the 1, 5 and 15 min load averages are
+printed with the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from pmsm_ev import accel
+from pmsm_ev_fmus.build import BENCH_FMUS, build_all, build_fmu
+
+from ..engine.errors import CosimError
+from ..engine.master import Master
+from .drive import load_system, project_fmu_dir
+from .reference import run_reference
+
+SCENARIO = "scenario1"
+DEFAULT_SLICE = 20.0  #: [s] of simulated time per case
+MEMORY_STOP_TIMES = (100.0, 350.0)
+
+
+def load_average() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "n/a"
+
+
+def jit_mode() -> str:
+    """How the physics kernels run in this process (``pmsm_ev.accel``)."""
+    return accel.describe()
+
+
+# -- the cases -----------------------------------------------------------------------------
+def _spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None):
+    spec = load_system(SCENARIO)
+    spec.stop_time = stop_time
+    if plant is not None:
+        spec.set_fmu("plant", plant)
+    if ctrl is not None:
+        spec.set_fmu("ctrl", ctrl)
+    return spec
+
+
+def cosim_us_per_step(stop_time: float, work: Path, plant: Path | None = None,
+                      ctrl: Path | None = None) -> tuple[float, float]:
+    """(a) or (b): the master's loop (wall, CPU) time per macro step [us]."""
+    out = Path(tempfile.mkdtemp(prefix="cosim-", dir=work))
+    master = Master(_spec(stop_time, plant, ctrl))
+    m = master.run(out, catch_sigint=False)
+    if m["status"] != "completed":
+        raise CosimError(f"benchmark run did not complete: {m['status']}")
+    return m["us_per_step"], 1e6 * master.loop_cpu_time / m["macro_steps"]
+
+
+def reference_us_per_step(stop_time: float, work: Path) -> tuple[float, float]:
+    """(c): the monolithic reference's loop (wall, CPU) time per step [us]."""
+    out = Path(tempfile.mkdtemp(prefix="ref-", dir=work))
+    m = run_reference(out, 1, stop_time=stop_time)
+    if m["status"] != "completed":
+        raise CosimError(f"reference run did not complete: {m['status']}")
+    return m["us_per_step"], 1e6 * m["cpu_time_s"] / m["macro_steps"]
+
+
+def libcosim_us_per_step(stop_time: float, plant: Path, ctrl: Path) -> tuple[float, float] | None:
+    """(d): libcosim's fixed-step execution of the same system, (wall, CPU of all the
+    process's threads) per step [us]; None without libcosimpy."""
+    try:
+        from libcosimpy.CosimExecution import CosimExecution  # noqa: PLC0415
+        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level  # noqa: PLC0415
+        from libcosimpy.CosimManipulator import CosimManipulator  # noqa: PLC0415
+        from libcosimpy.CosimSlave import CosimLocalSlave  # noqa: PLC0415
+    except ImportError:
+        return None
+    spec = _spec(stop_time, plant, ctrl)
+    log_output_level(CosimLogLevel.WARNING)
+    h = spec.step_size
+    ex = CosimExecution.from_step_size(step_size=round(h * 1e9))
+    index, refs = {}, {}
+    for comp in spec.components:
+        index[comp.name] = ex.add_local_slave(CosimLocalSlave(fmu_path=str(comp.fmu), instance_name=comp.name))
+        refs[comp.name] = {v.name.decode(): v.reference for v in ex.slave_variables(index[comp.name])}
+    for comp in spec.components:
+        for var, value in comp.start.items():
+            if isinstance(value, str):
+                ex.string_initial_value(index[comp.name], refs[comp.name][var], value)
+            else:
+                ex.real_initial_value(index[comp.name], refs[comp.name][var], float(value))
+    for c in spec.connections:
+        if ex.connect_real_variables(index[c.src], refs[c.src][c.src_var], index[c.dst], refs[c.dst][c.dst_var]):
+            raise CosimError(f"libcosim refused the connection {c}")
+    manipulator = CosimManipulator.create_override()
+    ex.add_manipulator(manipulator)
+    targets = [(sig.profile, index[inst], refs[inst][var]) for sig in spec.signals.values()
+               for inst, var in sig.drives]
+    last = [profile(0.0) for profile, _, _ in targets]
+    for (_profile, slave, ref), value in zip(targets, last):
+        ex.real_initial_value(slave, ref, value)
+    n_steps = round(stop_time / h)
+    step, override = ex.step, manipulator.slave_real_values
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    for n in range(n_steps):
+        t = n * h
+        for k, (profile, slave, ref) in enumerate(targets):
+            v = profile(t)
+            if v != last[k]:
+                last[k] = v
+                override(slave, [ref], [v])
+        if not step():
+            raise CosimError(f"libcosim step {n} failed")
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+    return 1e6 * wall / n_steps, 1e6 * cpu / n_steps
+
+
+def passthrough_fmus(out_dir: Path) -> dict[str, Path]:
+    return {name: build_fmu(name, out_dir)[0] for name in BENCH_FMUS}
+
+
+def project_fmus() -> dict[str, Path]:
+    return build_all(out_dir=project_fmu_dir(), names=["PmsmEvPlant", "FocEkf5"])
+
+
+# -- memory: a fresh process per run ---------------------------------------------------------
+def run_child(stop_time: float, out_dir: Path) -> tuple[float, float, str]:
+    """``pmsm-cosim run scenario1 --stop-time T`` in a new process: (wall s, peak RSS MB, last line)."""
+    cmd = [sys.executable, "-m", "pmsm_cosim.app.cli", "run", SCENARIO, "--stop-time", repr(stop_time),
+           "--out", str(out_dir), "--quiet"]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    output = proc.stdout.read()
+    _pid, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    proc.stdout.close()
+    last = output.strip().splitlines()[-1] if output.strip() else ""
+    if proc.returncode != 0:
+        raise CosimError(f"{' '.join(cmd[2:])} exited with {proc.returncode}: {last}")
+    return wall, usage.ru_maxrss / 1024.0, last  # ru_maxrss is in KiB on Linux
+
+
+# -- the report ------------------------------------------------------------------------------
+def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: bool = True,
+              out=sys.stdout) -> dict:
+    def say(text: str = "") -> None:
+        print(text, file=out, flush=True)
+
+    work = Path(tempfile.mkdtemp(prefix="pmsm-bench-"))
+    results: dict = {}
+    try:
+        real = project_fmus()
+        dummy = passthrough_fmus(work / "fmus")
+        plant, ctrl = real["PmsmEvPlant"], real["FocEkf5"]
+        n = round(slice_s / 1e-4)
+        say(f"step cost: {SCENARIO}, t = 0 .. {slice_s:g} s, dt = 1e-4 s ({n} macro steps per case); "
+            f"physics kernels: {jit_mode()}")
+        say(f"load average at start: {load_average()}")
+        results["a"] = cosim_us_per_step(slice_s, work, plant, ctrl)
+        results["b"] = cosim_us_per_step(slice_s, work, dummy["PassThroughPlant"], dummy["PassThroughFoc"])
+        results["c"] = reference_us_per_step(slice_s, work)
+        results["d"] = libcosim_us_per_step(slice_s, plant, ctrl) if libcosim else None
+        rows = [
+            ("(a) orchestrator + PmsmEvPlant/FocEkf5 FMUs", results["a"]),
+            ("(b) orchestrator + pass-through FMUs", results["b"]),
+            ("(c) monolithic reference (no FMUs)", results["c"]),
+            ("(d) libcosim + PmsmEvPlant/FocEkf5 FMUs", results["d"]),
+        ]
+        say(f"{'case':<46}{'us/step wall':>14}{'us/step CPU':>13}")
+        for label, value in rows:
+            if value is None:
+                say(f"{label:<46}{'n/a':>14}  (" + ("libcosimpy not installed)" if libcosim else "skipped)"))
+            else:
+                say(f"{label:<46}{value[0]:>14.2f}{value[1]:>13.2f}")
+
+        def ratio(label, x, y):
+            say(f"{label:<46}{x[0] / y[0]:>14.2f}{x[1] / y[1]:>13.2f}")
+
+        ratio("a/b", results["a"], results["b"])
+        if results["d"] is not None:
+            ratio("d/a", results["d"], results["a"])
+        say(f"load average at end: {load_average()}")
+        if memory:
+            say()
+            say(f"memory: 'pmsm-cosim run {SCENARIO} --stop-time T' (figures included), a fresh process each")
+            mem = {}
+            for stop in MEMORY_STOP_TIMES:
+                wall, rss, last = run_child(stop, work / f"run{stop:g}")
+                mem[stop] = (wall, rss)
+                extra = ""
+                if stop != MEMORY_STOP_TIMES[0]:
+                    base = mem[MEMORY_STOP_TIMES[0]][1]
+                    extra = f" ({100.0 * (rss - base) / base:+.1f} % vs T = {MEMORY_STOP_TIMES[0]:g} s)"
+                say(f"  T = {stop:>5g} s: {wall:7.1f} s wall, peak RSS {rss:7.1f} MB{extra}; "
+                    f"load average {load_average()}")
+                say(f"      {last}")
+            results["memory"] = mem
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return results
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--slice", type=float, default=DEFAULT_SLICE, metavar="S",
+                    help=f"simulated seconds per case, from t = 0 (default {DEFAULT_SLICE:g}; at least 10)")
+    ap.add_argument("--no-memory", action="store_true",
+                    help="skip the 100 s and 350 s runs that measure peak memory (about 2 min)")
+    ap.add_argument("--no-libcosim", action="store_true", help="skip case (d)")
+
+
+def run_from_args(a) -> int:
+    if not (a.slice >= 10.0 and math.isfinite(a.slice)) or abs(round(a.slice / 1e-4) * 1e-4 - a.slice) > 1e-9:
+        raise CosimError(f"--slice must be a whole number of 1e-4 s steps and at least 10 s (got {a.slice:g})")
+    run_bench(a.slice, memory=not a.no_memory, libcosim=not a.no_libcosim)
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="benchmarks/step_cost.py", description=__doc__.split("\n\n")[0])
+    add_arguments(ap)
+    a = ap.parse_args(argv)
+    try:
+        return run_from_args(a)
+    except CosimError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,437 @@
+"""``pmsm-cosim``: run, sweep, build, inspect, plot and compare co-simulations; report; export a system as an SSP package.
+
+Every user error (missing file, bad system file, unknown variable, a value an FMU
+refuses, ...) ends in one line ``error: ...`` on stderr and exit code 2.
+Exit codes of ``run``: 0 completed, 1 failed during the steps, 130 interrupted (Ctrl-C);
+of ``sweep``: 0 every run completed, 1 some run did not, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from pmsm_ev.params import ParameterError
+from pmsm_ev.scenarios import ProfileError
+from pmsm_ev_fmus import build as fmu_build
+
+from ..engine.errors import CosimError, one_line
+from ..engine.fmu import read_description, variable_unit
+from ..engine.master import Master
+from ..engine.progress import ProgressBar
+from ..engine.system import ALGORITHMS
+from ..sweeps import prepare_runs, run_sweep
+from . import bench, compare, report
+from .drive import (PACKAGED_SCENARIOS, draw_figures, drive_metrics, ensure_fmus, export_ssp, load_system,
+                    project_fmu_dir)
+from .studies import load_sweep
+
+#: the instances --plant and --controller replace the FMU of
+PLANT_INSTANCE = "plant"
+CONTROLLER_INSTANCE = "ctrl"
+EXIT_USER_ERROR = 2
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+
+def _err(message: str) -> int:
+    print(f"error: {one_line(message)}", file=sys.stderr)
+    return EXIT_USER_ERROR
+
+
+def _note(message: str, quiet: bool = False) -> None:
+    if not quiet:
+        print(f"note: {message}", file=sys.stderr)
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0 (got {text})")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (got {text})")
+    return value
+
+
+# --- commands --------------------------------------------------------------------------
+
+def _load_with_overrides(a):
+    """The system of ``a.system`` with the command line's FMU, time-grid and value overrides."""
+    spec = load_system(a.system)
+    if a.plant:
+        spec.set_fmu(PLANT_INSTANCE, a.plant, "--plant")
+    if a.controller:
+        spec.set_fmu(CONTROLLER_INSTANCE, a.controller, "--controller")
+    for assignment in a.fmu or ():
+        inst, sep, path = assignment.partition("=")
+        if not sep or not path:
+            raise CosimError(f"--fmu {assignment!r}: expected INSTANCE=FMU")
+        spec.set_fmu(inst.strip(), path.strip())
+    if a.stop_time is not None:
+        spec.stop_time = a.stop_time
+    if a.step is not None:
+        spec.step_size = a.step
+    if a.output_interval is not None:
+        spec.output_interval = a.output_interval
+    if a.algorithm is not None:
+        spec.algorithm = a.algorithm
+    for assignment in a.set or ():
+        spec.set_start(assignment)
+    for assignment in a.profile or ():
+        spec.set_signal_csv(assignment)
+    return spec
+
+
+def cmd_run(a) -> int:
+    spec = _load_with_overrides(a)
+    out = Path(a.out) if a.out else Path("runs") / spec.name
+    ensure_fmus(spec, a.quiet)
+    master = Master(spec)
+    if not a.quiet:
+        for w in master.warnings:
+            _note(w)
+    progress = ProgressBar(spec.stop_time) if ProgressBar.wanted(a.quiet) else None
+    m = master.run(out, progress=progress, metrics_of=drive_metrics,
+                   extra_settings={"command_line": {"set": list(a.set or ()), "profile": list(a.profile or ())}})
+    if "metrics_note" in m:
+        _note(m["metrics_note"], a.quiet)
+    figures = None
+    if not a.no_figures and m["rows"] >= 2:
+        figures = draw_figures(out, spec.name, a.quiet)
+    fig_note = f", {len(figures)} figures" if figures else ""
+    print(f"{m['status']}: {m['macro_steps']} steps in {m['wall_time_s']:.2f} s "
+          f"({m['us_per_step']:.1f} us/step), {m['rows']} rows{fig_note}; results in {out}")
+    if m["status"] == "completed":
+        return 0
+    return EXIT_INTERRUPTED if m["status"] == "interrupted" else EXIT_FAILED
+
+
+def cmd_export_ssp(a) -> int:
+    spec = _load_with_overrides(a)
+    if not a.output.lower().endswith(".ssp"):
+        raise CosimError(f"-o {a.output}: an SSP package file name ends in .ssp")
+    ensure_fmus(spec, a.quiet)
+    summary = export_ssp(spec, Path(a.output), a.quiet)
+    print(f"wrote {summary.path}: components {', '.join(summary.components)}; {summary.connections} connections; "
+          f"{summary.parameters} parameter value{'' if summary.parameters == 1 else 's'}; step {spec.step_size:g} s, stop {spec.stop_time:g} s, "
+          f"{spec.algorithm}")
+    return 0
+
+
+def cmd_sweep(a) -> int:
+    if a.workers is not None and a.scheduler:
+        raise CosimError("--workers sizes the local cluster; with --scheduler the cluster's own workers are used")
+    sweep = load_sweep(a.sweep)
+    if a.stop_time is not None:
+        sweep.stop_time = a.stop_time
+    out = Path(a.out) if a.out else Path("runs") / sweep.name
+    if a.dry_run:
+        prepare_runs(sweep, a.quiet)  # every check, nothing launched
+        names = sweep.swept
+        print(f"{sweep.name}: {len(sweep.runs)} runs into {out / 'runs'}")
+        for plan in sweep.runs:
+            print(f"  {plan.id}: " + ", ".join(f"{n} = {plan.params[n]!r}" for n in names))
+        return 0
+    outcome = run_sweep(sweep, out, scheduler=a.scheduler, workers=a.workers, quiet=a.quiet)
+    where = f"{outcome.summary}" + (f", {outcome.figure}" if outcome.figure else "")
+    completed = sum(r["status"] == "completed" for r in outcome.rows)
+    print(f"{'interrupted' if outcome.interrupted else 'done'}: {completed} of {len(outcome.rows)} runs completed "
+          f"({outcome.ran} run now, {outcome.skipped} already done), {outcome.failed} not completed; {where}")
+    if outcome.interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED if outcome.failed else 0
+
+
+def cmd_build(a) -> int:
+    kwargs = {"force": a.force, "out_dir": project_fmu_dir()}
+    if a.names:
+        kwargs["names"] = a.names
+    try:
+        paths = fmu_build.build_all(**kwargs)
+    except (CosimError, ParameterError, ProfileError):
+        raise
+    except Exception as exc:
+        raise CosimError(f"building the FMUs failed: {type(exc).__name__}: {exc}") from None
+    for name, path in paths.items():
+        print(f"{name}: {path}")
+    return 0
+
+
+def cmd_bench(a) -> int:
+    return bench.run_from_args(a)
+
+
+def cmd_info(a) -> int:
+    md = read_description(Path(a.fmu))
+    cs = md.coSimulation
+    print(f"{md.modelName} (FMI {md.fmiVersion}, co-simulation, model identifier {cs.modelIdentifier})")
+    if md.description:
+        print(f"  {md.description}")
+    print(f"  generated by {md.generationTool or '?'}; guid {md.guid}")
+    if md.defaultExperiment is not None:
+        de = md.defaultExperiment
+        print(f"  default experiment: start {de.startTime}, stop {de.stopTime}, step {de.stepSize}")
+    rows = [("name", "causality", "variability", "type", "unit", "start", "description")]
+    order = {"input": 0, "output": 1, "parameter": 2, "calculatedParameter": 3, "local": 4, "independent": 5}
+    variables = sorted(md.modelVariables, key=lambda v: (order.get(v.causality, 9), v.valueReference))
+    if a.causality:
+        variables = [v for v in variables if v.causality == a.causality]
+    for v in variables:
+        rows.append((v.name, v.causality, v.variability, v.type, variable_unit(v) or "-",
+                     "-" if v.start is None else str(v.start), v.description or ""))
+    widths = [max(len(r[i]) for r in rows) for i in range(6)]
+    for r in rows:
+        print("  " + "  ".join(r[i].ljust(widths[i]) for i in range(6)) + "  " + r[6])
+    return 0
+
+
+def cmd_plot(a) -> int:
+    run_dir = Path(a.dir)
+    if not run_dir.exists():
+        raise CosimError(f"{run_dir}: no such run directory")
+    label = a.scenario
+    if label is None:
+        try:
+            label = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8")).get("scenario")
+        except (OSError, ValueError):
+            label = None
+    from .figures import make_figures  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+
+    try:
+        paths = make_figures(run_dir, scenario_label=label)
+    except ValueError as exc:  # FiguresError
+        raise CosimError(str(exc)) from None
+    for p in paths:
+        print(p)
+    return 0
+
+
+def cmd_compare(a) -> int:
+    out = Path(a.out)
+    result = compare.compare(a.dirs, out, labels=a.labels, t_from=a.t_from, figures=not a.no_figures)
+    print(result["markdown"].read_text(encoding="utf-8"), end="")
+    print(f"table: {result['markdown']}, {result['csv']}"
+          + (f"; figures: {', '.join(str(p) for p in result['figures'])}" if result["figures"] else ""))
+    return 0
+
+
+def cmd_report(a) -> int:
+    if a.list:
+        for c in report.CONFIGS:
+            print(f"{c.id}: {c.scenario}, {c.label}" + (f", {c.description}" if c.description else ""))
+        return 0
+    if a.jobs < 1:
+        raise CosimError(f"--jobs must be >= 1 (got {a.jobs})")
+    if a.robustness:
+        command = "pmsm-cosim report --robustness" + (" --small" if a.small else "") + (
+            f" --stop-time {a.stop_time:g}" if a.stop_time else "")
+        report.robustness.generate(out=a.out, runs_dir=a.runs or "runs/robustness", workers=a.jobs,
+                                   small=a.small, stop_time=a.stop_time, run=not a.no_run, command=command,
+                                   log=lambda msg: print(msg, file=sys.stderr, flush=True))
+        return 0
+    if a.small or a.no_run:
+        raise CosimError("--small and --no-run go with --robustness")
+    command = "pmsm-cosim report" + (f" --stop-time {a.stop_time:g}" if a.stop_time else "")
+    report.generate(out=a.out, runs_dir=a.runs or "runs/report", jobs=a.jobs, stop_time=a.stop_time, only=a.only,
+                    force=a.force, log=lambda msg: print(msg, file=sys.stderr, flush=True), command=command)
+    return 0
+
+
+# --- parser ------------------------------------------------------------------------------
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's error format: one line ``error: ...``, exit code 2."""
+
+    def error(self, message):
+        self.exit(EXIT_USER_ERROR, f"error: {one_line(message)} (see {self.prog} --help)\n")
+
+
+def _system_options(p: argparse.ArgumentParser) -> None:
+    """The options that change a system before it is run or exported."""
+    p.add_argument("--plant", metavar="FMU", help=f"FMU of the instance '{PLANT_INSTANCE}'")
+    p.add_argument("--controller", metavar="FMU",
+                   help=f"FMU of the instance '{CONTROLLER_INSTANCE}' (e.g. fmus/FocEkf4.fmu swaps the observer)")
+    p.add_argument("--fmu", action="append", metavar="INSTANCE=FMU", help="FMU of any instance (repeatable)")
+    p.add_argument("--stop-time", type=_positive, metavar="S", help="stop time [s] (default: the system file's)")
+    p.add_argument("--step", type=_positive, metavar="S", help="base communication step [s]")
+    p.add_argument("--algorithm", choices=ALGORITHMS, help="coupling (default: the system file's, gauss-seidel)")
+    p.add_argument("--output-interval", type=_positive, metavar="S", help="recording interval [s]")
+    p.add_argument("--set", action="extend", nargs="+", metavar="INSTANCE.VAR=VALUE",
+                   help="start value of an FMU variable, e.g. ctrl.angle_source=estimated plant.omega_m0=200")
+    p.add_argument("--profile", action="append", metavar="SIGNAL=CSV",
+                   help="take a scenario signal from a (time, value) CSV file in the signal's unit, "
+                        "e.g. delta=route.csv (repeatable)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = _Parser(
+        prog="pmsm-cosim",
+        description="Co-simulate the PMSM EV drive FMUs (FMI 2.0) with a fixed-step master.",
+        epilog="Run 'pmsm-cosim COMMAND --help' for the options of a command.")
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("run", help="co-simulate a scenario, a system file or an SSP package",
+                       description="Co-simulate a shipped scenario (scenario1, scenario2), a system file "
+                                   "(TOML, see docs/system-file.md) or an SSP 1.0 package (.ssp); write "
+                                   "OUT/results.csv, OUT/metrics.json and OUT/figures/*.png. Missing project "
+                                   "FMUs are built first.")
+    r.add_argument("system", metavar="SCENARIO_OR_SYSTEM",
+                   help=f"{' or '.join(PACKAGED_SCENARIOS)}, or the path of a system file or .ssp package")
+    _system_options(r)
+    r.add_argument("--out", metavar="DIR", help="output directory (default: runs/<scenario name>)")
+    r.add_argument("--no-figures", action="store_true", help="do not draw figures")
+    r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes")
+    r.set_defaults(func=cmd_run)
+
+    e = sub.add_parser("export-ssp", help="write a system as an SSP 1.0 package for other tools",
+                       description="Write a scenario or system file as an SSP 1.0 package: SystemStructure.ssd, "
+                                   "the FMUs (the signals as a RouteProfile FMU carrying the system's route) and "
+                                   "the start values as .ssv parameter sets. libcosim, fmpy and other SSP "
+                                   "tools run it; so does 'pmsm-cosim run FILE.ssp'.")
+    e.add_argument("system", metavar="SCENARIO_OR_SYSTEM",
+                   help=f"{' or '.join(PACKAGED_SCENARIOS)}, or the path of a system file or .ssp package")
+    e.add_argument("-o", "--output", required=True, metavar="FILE.ssp", help="the package to write")
+    _system_options(e)
+    e.add_argument("--quiet", "-q", action="store_true", help="no notes")
+    e.set_defaults(func=cmd_export_ssp)
+
+    w = sub.add_parser("sweep", help="run a parameter sweep or Monte-Carlo study on Dask",
+                       description="Run the runs of a sweep file (TOML, see docs/sweeps.md; or a shipped sweep: "
+                                   "ekf5_load_noise) on a Dask cluster: OUT/runs/<run>/ (results.csv, "
+                                   "metrics.json), OUT/summary.csv, OUT/summary.png. Completed runs of the same "
+                                   "parameters already in OUT are skipped. Exit code 1 if a run did not complete.")
+    w.add_argument("sweep", metavar="SWEEP_FILE", help="a sweep file, or the name of a shipped sweep")
+    w.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="use this Dask scheduler (its workers need pmsm-ev-cosim installed) instead of a local "
+                        "cluster")
+    w.add_argument("--workers", type=_count, metavar="N",
+                   help="worker processes of the local cluster (default: one per core, at most one per run)")
+    w.add_argument("--out", metavar="DIR", help="output directory (default: runs/<sweep name>)")
+    w.add_argument("--stop-time", type=_positive, metavar="S", help="stop time of every run [s] (overrides the file)")
+    w.add_argument("--dry-run", action="store_true", help="check the sweep against the FMUs and list its runs")
+    w.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no per-run lines")
+    w.set_defaults(func=cmd_sweep)
+
+    b = sub.add_parser("build", help="build the project's FMUs into fmus/",
+                       description="Build the project's FMUs (pmsm_ev_fmus.build.build_all); "
+                                   "only those whose sources changed unless --force.")
+    b.add_argument("--force", action="store_true", help="rebuild even when up to date")
+    b.add_argument("names", nargs="*", metavar="NAME", help="build only these FMUs (default: all)")
+    b.set_defaults(func=cmd_build)
+
+
+    bn = sub.add_parser("bench", help="measure the co-simulation's cost per step",
+                        description="Measure the wall time per macro step on a slice of scenario 1: "
+                                    "(a) the master with the project's FMUs, (b) with pass-through FMUs "
+                                    "that compute nothing, (c) the monolithic reference, (d) libcosim "
+                                    "with the same FMUs; then the peak memory of 100 s and 350 s runs.")
+    bench.add_arguments(bn)
+    bn.set_defaults(func=cmd_bench)
+
+    i = sub.add_parser("info", help="list an FMU's variables",
+                       description="Print an FMU's model information and its variables with causality, "
+                                   "variability, type, unit, start value and description.")
+    i.add_argument("fmu", metavar="FMU", help="the .fmu file")
+    i.add_argument("--causality", choices=("input", "output", "parameter", "calculatedParameter", "local"),
+                   help="only variables of this causality")
+    i.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("plot", help="draw the figures of an existing run",
+                       description="Draw the figures of a run directory (DIR/results.csv) into DIR/figures.")
+    p.add_argument("dir", metavar="DIR", help="run directory")
+    p.add_argument("--scenario", metavar="LABEL",
+                   help="scenario1/scenario2 names the figures after the paper's (default: from metrics.json)")
+    p.set_defaults(func=cmd_plot)
+
+    c = sub.add_parser("compare", help="overlay runs and tabulate their metrics",
+                       description="Overlay finished runs (speed, angle error, torque estimate vs T_L_mech) "
+                                   "as OUT/compare_*.png and write one metrics table across them as "
+                                   "OUT/metrics.md and OUT/metrics.csv.")
+    c.add_argument("dirs", nargs="+", metavar="RUN_DIR", help="run directories (results.csv, metrics.json)")
+    c.add_argument("--out", metavar="DIR", default="runs/compare", help="output directory (default: runs/compare)")
+    c.add_argument("--labels", nargs="+", metavar="LABEL", help="one label per run (default: directory names)")
+    c.add_argument("--from", dest="t_from", type=float, default=20.0, metavar="S",
+                   help="start of the window of the 'after' figures [s] (default: 20, past the start-up ramp)")
+    c.add_argument("--no-figures", action="store_true", help="only the table")
+    c.set_defaults(func=cmd_compare)
+
+    rp = sub.add_parser("report", help="run the observer comparison and write docs/results.md",
+                        description="Co-simulate every configuration of the observer comparison (both paper "
+                                    "scenarios x EKF5 paper mode / sensorless, stationary-frame EKF5, EKF4 paper "
+                                    "mode / sensorless, sensored; scenario 2 under sensor noise, offsets and an "
+                                    "initial angle error), JOBS runs at a time, and write OUT/results.md with "
+                                    "its figures in OUT/results/. A run in RUNS whose metrics.json is "
+                                    "'completed' with the same settings and FMU builds is reused.")
+    rp.add_argument("--out", metavar="DIR", default="docs", help="where results.md goes (default: docs)")
+    rp.add_argument("--runs", "--reuse", dest="runs", metavar="DIR", default=None,
+                    help="run directories, reused when up to date (default: runs/report; with --robustness: "
+                         "runs/robustness)")
+    rp.add_argument("--jobs", "-j", type=int, default=2, metavar="N", help="runs at a time (default: 2)")
+    rp.add_argument("--stop-time", type=_positive, metavar="S",
+                    help="stop time of every run [s] (default: the scenarios' 350 s); short for a quick look")
+    rp.add_argument("--only", nargs="+", metavar="PATTERN",
+                    help="(re)run only the configurations whose id contains PATTERN (or matches it as a "
+                         "glob), e.g. ekf5ab; the others are taken from RUNS as they are")
+    rp.add_argument("--force", action="store_true", help="rerun the (selected) configurations even when up to date")
+    rp.add_argument("--list", action="store_true", help="list the configuration ids and exit")
+    rp.add_argument("--robustness", action="store_true",
+                    help="instead: run the robustness sweeps (orchestrator/pmsm_cosim/app/sweeps/robust_*.toml) on a local Dask "
+                         "cluster of --jobs workers and write OUT/robustness.md and OUT/robustness/*.png")
+    rp.add_argument("--small", action="store_true",
+                    help="with --robustness: 3 x 3 grids and a few Monte-Carlo samples (a quick check)")
+    rp.add_argument("--no-run", action="store_true",
+                    help="with --robustness: write the page from the runs in RUNS as they are")
+    rp.set_defaults(func=cmd_report)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (CosimError, ParameterError, ProfileError) as exc:
+        return _err(str(exc))
+    except OSError as exc:
+        return _err(f"{exc.filename + ': ' if getattr(exc, 'filename', None) else ''}{exc.strerror or exc}")
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def entry_point() -> None:
+    """The ``pmsm-cosim`` command: ``main``, then leave the process without the native
+    teardown.
+
+    Everything a command writes is closed by the time ``main`` returns. What would follow
+    is the interpreter's finalization and the C/C++ static destructors of the libraries in
+    the process: pythonfmu's FMU binaries (which embed this same interpreter) and, when the
+    kernels are compiled, numba's LLVM. Measured here, that teardown aborts the process in
+    free() ("corrupted double-linked list", after the interpreter is gone, so no Python
+    frame is involved) in about 1 of 10 completed and half of the interrupted runs with
+    compiled kernels, and never with PMSM_EV_JIT=0. Leaving with os._exit after flushing
+    the standard streams keeps the exit code the command chose.
+    """
+    code = main()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    finally:
+        os._exit(code if isinstance(code, int) else 1)
+
+
+if __name__ == "__main__":
+    entry_point()

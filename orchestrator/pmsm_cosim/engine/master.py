@@ -1,0 +1,632 @@
+"""The co-simulation master: a fixed-step loop over FMI 2.0 co-simulation FMUs.
+
+Time grid: base step ``h``; communication points ``t_n = n * h`` (an integer step
+counter times the step, never an accumulated sum). A component with
+``step_multiple = m`` is stepped at the base steps n with ``n % m == 0``, from t_n with
+step size ``m * h``; its inputs are set only then.
+
+Coupling, at each base step n (after the row of t_n is recorded):
+
+* ``gauss-seidel`` (default): the due components are stepped in the order of the
+  system file; each one first reads the outputs its inputs are connected to as they are
+  at that moment, i.e. the freshest: a component earlier in the order has already
+  advanced to t_{n+1}. With the order (controller, plant) this is the ordering of the
+  monolithic reference: the controller reads the plant at t_n, steps, and the plant
+  then advances with the new voltage.
+* ``jacobi``: every due component reads the outputs as they are at t_n (all reads
+  before any write), then all are stepped.
+
+Scenario signals are evaluated as ``profile(n * h)`` (re-evaluated only when the
+profile can have changed: every step on a linear ramp, at the breakpoints of a
+piecewise-constant table) and an input they drive is set only when its value changed.
+
+Recording: the row of t_n is written before step n is taken, every output interval
+and at the stop time: FMU variables as they are (a component's outputs as of its last
+step), signals at t_n. Rows are streamed through :class:`~pmsm_cosim.engine.recording.ResultWriter`;
+figures of merit, if any, are the caller's (``run(..., metrics=...)``): the master knows no
+model.
+"""
+
+from __future__ import annotations
+
+import array
+import bisect
+import ctypes
+import functools
+import math
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .errors import CosimError, one_line
+from .fmu import FmuInstance, STATUS, real_array, variable_unit, vr_array
+from .recording import ResultWriter, write_metrics
+from .system import COLUMN_CONVERSIONS, SystemSpec
+
+#: the longest run of steps between two checks for Ctrl-C / progress updates
+MAX_CHUNK = 2000
+#: signals that stop a run at its next check (a second one stops it at once)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_NEVER = sys.maxsize
+#: connections per transfer up to which the finiteness check is an unrolled sum
+_UNROLL = 8
+
+
+def _a(word: str) -> str:
+    """``word`` with its indefinite article."""
+    return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"
+
+
+class _StepFailed(Exception):
+    """An FMU returned an error status in the stepping loop."""
+
+    n: int | None = None  #: the base step that failed (= macro steps completed)
+
+
+class _Interrupted(Exception):
+    """A second Ctrl-C inside the loop, with the base step it reached."""
+
+    def __init__(self, n: int):
+        super().__init__(n)
+        self.n = n
+
+
+@dataclass
+class _SignalTarget:
+    """An input driven by a scenario signal."""
+
+    stepper: "_Stepper"
+    set: object  #: zero-argument fmi2SetReal of this input from ``buf``
+    buf: object  #: one-value buffer
+    label: str
+    immediate: bool  #: set at once when the value changes (single-rate), else queued
+    queued: bool = False
+
+
+@dataclass
+class _Signal:
+    name: str
+    profile: object
+    targets: list = field(default_factory=list)
+    value: float = math.nan
+    next_n: int = 0  #: the first base step at which the profile must be evaluated again
+    ramp_end: int = 0  #: on a linear segment: the first step at or after its end
+
+
+@dataclass
+class _Stepper:
+    """Everything the loop needs to step one component, prebuilt."""
+
+    inst: FmuInstance
+    multiple: int
+    step_size: float
+    handle: object = None
+    do_step: object = None
+    #: [(get, set, source name, buffer, connections, values)]: zero-argument fmi2GetReal of
+    #: the connected outputs of one source instance into the buffer (a ctypes array on the
+    #: memory of ``values``, an array.array) and fmi2SetReal of the inputs from it
+    transfers: list = field(default_factory=list)
+    pending: list = field(default_factory=list)  #: queued signal targets (multi-rate)
+
+
+class Master:
+    """Check a :class:`SystemSpec` against its FMUs and run it."""
+
+    def __init__(self, spec: SystemSpec):
+        self.spec = spec
+        self.h = spec.step_size
+        self.n_steps, self.every = self._grid()
+        self.instances: dict[str, FmuInstance] = {}
+        try:
+            for comp in spec.components:
+                self.instances[comp.name] = FmuInstance(comp.name, comp.fmu)
+            self._check()
+        except BaseException:
+            self.close()
+            raise
+        self.warnings: list[str] = self._unconnected_inputs()
+        self._stop_requested = False
+        self._stop_signal = ""  #: the name of the signal that asked for the stop
+        self._finishing = False
+        self.loop_cpu_time = 0.0
+
+    # -- checks at load ----------------------------------------------------------
+    def _grid(self) -> tuple[int, int]:
+        s, h = self.spec, self.spec.step_size
+        where = f"{s.path}: " if s.path else ""
+        if h is None:  # an SSP package need not declare one
+            raise CosimError(f"{where}no communication step size is given (give one with --step)")
+        if s.stop_time is None:
+            raise CosimError(f"{where}no stop time is given (give one with --stop-time)")
+        if s.output_interval is None:
+            s.output_interval = h
+        n = round(s.stop_time / h)
+        if n < 1:
+            raise CosimError(f"{where}stop time {s.stop_time:g} s is shorter than one {h:g} s step")
+        if abs(n * h - s.stop_time) > 1e-9 * max(1.0, s.stop_time):
+            below, above = math.floor(s.stop_time / h), math.ceil(s.stop_time / h)
+            hint = " or ".join(f"{k * h:.12g}" for k in sorted({below, above}) if k >= 1)
+            raise CosimError(f"{where}stop time {s.stop_time:g} s is not a whole number of {h:g} s steps "
+                             f"(the nearest that are: {hint} s)")
+        every = round(s.output_interval / h)
+        if every < 1 or abs(every * h - s.output_interval) > 1e-9 * max(1.0, s.output_interval):
+            below, above = max(1, math.floor(s.output_interval / h)), max(1, math.ceil(s.output_interval / h))
+            hint = " or ".join(f"{k * h:.12g}" for k in sorted({below, above}))
+            raise CosimError(f"{where}output interval {s.output_interval:g} s is not a multiple of the {h:g} s "
+                             f"step (the nearest that are: {hint} s)")
+        for c in s.components:
+            if n % c.step_multiple:
+                raise CosimError(f"{where}stop time {s.stop_time} s is not a multiple of {c.name}'s step "
+                                 f"({c.step_multiple} x {h} s)")
+        return n, every
+
+    def _check(self) -> None:
+        s = self.spec
+        where = f"{s.path}: " if s.path else ""
+        for conn in s.connections:
+            ctx = f"{where}connection {conn}"
+            src = self.instances[conn.src].variable(conn.src_var, ctx)
+            dst = self.instances[conn.dst].variable(conn.dst_var, ctx)
+            if src.causality != "output":
+                raise CosimError(f"{ctx}: {conn.src}.{conn.src_var} is {_a(src.causality)}, not an output "
+                                 f"(a connection goes from an output to an input)")
+            if dst.causality != "input":
+                raise CosimError(f"{ctx}: {conn.dst}.{conn.dst_var} is {_a(dst.causality)}, not an input "
+                                 f"(a connection goes from an output to an input)")
+            for ref, sv in ((f"{conn.src}.{conn.src_var}", src), (f"{conn.dst}.{conn.dst_var}", dst)):
+                if sv.type != "Real":
+                    raise CosimError(f"{ctx}: {ref} is {_a(sv.type)}; only Real variables can be connected")
+            u_src, u_dst = variable_unit(src), variable_unit(dst)
+            if u_src and u_dst and u_src != u_dst:
+                raise CosimError(f"{ctx}: units differ ({u_src!r} -> {u_dst!r})")
+        for sig in s.signals.values():
+            for inst, var in sig.drives:
+                ctx = f"{where}signal {sig.name}"
+                sv = self.instances[inst].variable(var, ctx)
+                if sv.causality != "input" or sv.type != "Real":
+                    raise CosimError(f"{ctx}: {inst}.{var} is {_a(sv.type)} {sv.causality}; "
+                                     f"a signal drives Real inputs")
+                u = variable_unit(sv)
+                if u and sig.unit and u != sig.unit:
+                    raise CosimError(f"{ctx}: the signal is in {sig.unit!r} but {inst}.{var} is in {u!r}")
+        for col in s.columns:
+            if col.kind != "variable":
+                continue
+            ctx = f"{where}record.{col.name}"
+            sv = self.instances[col.instance].variable(col.variable, ctx)
+            if sv.type not in ("Real", "Integer", "Enumeration", "Boolean"):
+                raise CosimError(f"{ctx}: {col.instance}.{col.variable} is {_a(sv.type)}; "
+                                 f"only numbers can be recorded")
+            if col.unit:
+                need = COLUMN_CONVERSIONS[col.unit][0]
+                u = variable_unit(sv)
+                if sv.type != "Real" or (u and u != need):
+                    raise CosimError(f"{ctx}: cannot convert {col.instance}.{col.variable} "
+                                     f"({u or sv.type}) to {col.unit!r}")
+        for comp in s.components:
+            inst = self.instances[comp.name]
+            for var in comp.start:
+                inst.check_settable(var, f"start value {comp.name}.{var}")
+
+    def _unconnected_inputs(self) -> list[str]:
+        driven = {(c.dst, c.dst_var) for c in self.spec.connections}
+        driven |= {d for sig in self.spec.signals.values() for d in sig.drives}
+        out = []
+        for name, inst in self.instances.items():
+            for sv in inst.md.modelVariables:
+                if sv.causality == "input" and (name, sv.name) not in driven \
+                        and sv.name not in self.spec.component(name).start:
+                    out.append(f"input {name}.{sv.name} is not connected; it keeps its start value "
+                               f"({sv.start if sv.start is not None else 'none declared'})")
+        return out
+
+    # -- set-up --------------------------------------------------------------------
+    def _build(self) -> None:
+        """Instantiate every FMU and prebuild the loop's arrays."""
+        s = self.spec
+        stop = self.n_steps * self.h
+        for comp in s.components:
+            self.instances[comp.name].instantiate(0.0, stop, comp.start)
+        self.steppers = []
+        by_name = {}
+        for comp in s.components:
+            inst = self.instances[comp.name]
+            st = _Stepper(inst, comp.step_multiple, comp.step_multiple * self.h,
+                          handle=inst.lean.handle, do_step=inst.lean.do_step)
+            self.steppers.append(st)
+            by_name[comp.name] = st
+        # connections grouped by (destination, source): one get and one set per group
+        groups: dict[tuple[str, str], list] = {}
+        for conn in s.connections:
+            groups.setdefault((conn.dst, conn.src), []).append(conn)
+        for (dst, src), conns in groups.items():
+            si, di = self.instances[src], self.instances[dst]
+            svr = vr_array([si.variables[c.src_var].valueReference for c in conns])
+            dvr = vr_array([di.variables[c.dst_var].valueReference for c in conns])
+            # the values in an array.array, seen by the FMI calls through a ctypes array on
+            # its memory: the loop reads them from the array.array, several times faster
+            # than indexing (or iterating) the ctypes array
+            values = array.array("d", [0.0] * len(conns))
+            buf = (ctypes.c_double * len(conns)).from_buffer(values)
+            count = si.lean.count(len(conns))
+            by_name[dst].transfers.append((functools.partial(si.lean.get_real, si.lean.handle, svr, count, buf),
+                                           functools.partial(di.lean.set_real, di.lean.handle, dvr, count, buf),
+                                           src, buf, conns, values))
+        # scenario signals; their inputs get the value at t = 0 in initialization mode
+        self.signals = []
+        for spec in s.signals.values():
+            sig = _Signal(spec.name, spec.profile)
+            for inst_name, var in spec.drives:
+                inst, st = self.instances[inst_name], by_name[inst_name]
+                buf = real_array([0.0])
+                setter = functools.partial(inst.lean.set_real, inst.lean.handle,
+                                           vr_array([inst.variables[var].valueReference]), inst.lean.count(1), buf)
+                sig.targets.append(_SignalTarget(st, setter, buf, f"{inst_name}.{var}", st.multiple == 1))
+            self.signals.append(sig)
+        try:
+            self._update_signals(0)
+            for st in self.steppers:
+                self._flush_pending(st, 0.0)
+        except _StepFailed as exc:
+            raise CosimError(str(exc)) from None
+        for comp in s.components:
+            self.instances[comp.name].exit_initialization()
+        self._build_recorder()
+        self._steps = self._compile_steps()
+
+    def _build_recorder(self) -> None:
+        """Per instance, one get call per type for the recorded variables; a row plan."""
+        reads: dict[tuple[str, str], list] = {}
+        for col in self.spec.columns:
+            if col.kind == "variable":
+                sv = self.instances[col.instance].variables[col.variable]
+                kind = "Real" if sv.type == "Real" else ("Boolean" if sv.type == "Boolean" else "Integer")
+                refs = reads.setdefault((col.instance, kind), [])
+                if sv.valueReference not in refs:
+                    refs.append(sv.valueReference)
+        self.record_reads = []
+        buffers = {}
+        for (name, kind), refs in reads.items():
+            inst = self.instances[name]
+            if kind == "Real":
+                fn, buf = inst.get_real, real_array([0.0] * len(refs))
+            else:
+                fn = inst.get_boolean if kind == "Boolean" else inst.get_integer
+                buf = (ctypes.c_int * len(refs))()
+            self.record_reads.append((fn, inst.handle, vr_array(refs), len(refs), buf, name))
+            buffers[(name, kind)] = (buf, refs)
+        sig_by_name = {sig.name: sig for sig in self.signals}
+        plan = []
+        for col in self.spec.columns:
+            conv = COLUMN_CONVERSIONS[col.unit][1] if col.unit else None
+            if col.kind == "time":
+                plan.append(("time", None, None, None, col.name))
+            elif col.kind == "signal":
+                plan.append(("signal", sig_by_name[col.variable], None, conv, col.name))
+            else:
+                sv = self.instances[col.instance].variables[col.variable]
+                kind = "Real" if sv.type == "Real" else ("Boolean" if sv.type == "Boolean" else "Integer")
+                buf, refs = buffers[(col.instance, kind)]
+                plan.append(("var", buf, refs.index(sv.valueReference), conv, f"{col.instance}.{col.variable}"))
+        self.row_plan = plan
+
+    # -- scenario signals --------------------------------------------------------------
+    def _first_step_at(self, t_event: float, n: int) -> int:
+        """The first base step m > n with m * h >= t_event."""
+        h = self.h
+        m = max(n + 1, math.ceil(t_event / h))
+        while m - 1 > n and (m - 1) * h >= t_event:
+            m -= 1
+        while m * h < t_event:
+            m += 1
+        return m
+
+    def _next_eval(self, profile, n: int) -> tuple[int, int]:
+        """(next step at which ``profile`` can differ from ``profile(n h)``, end of the ramp)."""
+        ts = profile.times
+        i = bisect.bisect_right(ts, n * self.h) - 1
+        if i + 1 >= len(ts):
+            return _NEVER, 0  # after the last breakpoint: constant
+        if profile.interpolation == "linear" and i >= 0:
+            return n + 1, self._first_step_at(ts[i + 1], n)  # on a ramp: every step
+        return self._first_step_at(ts[i + 1], n), 0  # constant until the next breakpoint
+
+    def _update_signals(self, n: int) -> int:
+        """Evaluate the signals due at step n, set (or queue) the inputs whose value changed;
+        return the next step at which a signal must be evaluated."""
+        t = n * self.h
+        nxt = _NEVER
+        for sig in self.signals:
+            if n >= sig.next_n:
+                v = sig.profile(t)
+                if v != sig.value:
+                    sig.value = v
+                    for tg in sig.targets:
+                        tg.buf[0] = v
+                        if tg.immediate:
+                            status = tg.set()
+                            if status > 1:
+                                raise self._set_failed(tg, t, status)
+                        elif not tg.queued:
+                            tg.queued = True
+                            tg.stepper.pending.append(tg)
+                if n + 1 < sig.ramp_end:
+                    sig.next_n = n + 1
+                else:
+                    sig.next_n, sig.ramp_end = self._next_eval(sig.profile, n)
+            if sig.next_n < nxt:
+                nxt = sig.next_n
+        return nxt
+
+    def _flush_pending(self, st: _Stepper, t: float) -> None:
+        """Set the queued signal inputs of a multi-rate component (when it is stepped)."""
+        for tg in st.pending:
+            tg.queued = False
+            status = tg.set()
+            if status > 1:
+                raise self._set_failed(tg, t, status)
+        st.pending.clear()
+
+    # -- stepping ---------------------------------------------------------------------
+    def _describe(self, inst: FmuInstance, action: str, t: float) -> str:
+        reason = inst.last_problem()
+        return f"{inst.name}: {action} failed at t = {t:.9g} s" + (f": {reason}" if reason else "")
+
+    def _set_failed(self, tg: _SignalTarget, t: float, status: int = 3) -> _StepFailed:
+        tg.stepper.inst.note_status(status)
+        return _StepFailed(self._describe(tg.stepper.inst, f"setting {tg.label} = {tg.buf[0]!r}", t))
+
+    def _get_failed(self, st: _Stepper, j: int, t: float, status: int) -> _StepFailed:
+        src = self.instances[st.transfers[j][2]]
+        src.note_status(status)
+        return _StepFailed(self._describe(src, "fmi2GetReal", t))
+
+    def _put_failed(self, st: _Stepper, j: int, t: float, status: int) -> _StepFailed:
+        st.inst.note_status(status)
+        return _StepFailed(self._describe(st.inst, f"fmi2SetReal of the inputs from {st.transfers[j][2]}", t))
+
+    def _check_finite(self, st: _Stepper, j: int, t: float) -> None:
+        """Raise if a value just read for a connection is NaN or infinite (the loop calls this
+        when the sum of the values is not finite, which a finite overflow can also cause)."""
+        _get, _set, _src, buf, conns, _values = st.transfers[j]
+        for k, conn in enumerate(conns):
+            if not math.isfinite(buf[k]):
+                raise _StepFailed(f"{conn.src}.{conn.src_var} is not finite ({buf[k]!r}) at t = {t:.9g} s, "
+                                  f"before it reached {conn.dst}.{conn.dst_var}")
+
+    def _step_failed(self, st: _Stepper, t: float, status: int = 3) -> _StepFailed:
+        st.inst.note_status(status)
+        return _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
+
+    def _compile_steps(self):
+        """The stepping loop of this system, generated once, unrolled over its components.
+
+        ``steps(n0, n1, sig_next)`` takes the base steps n0 .. n1-1 and returns the next
+        step at which a signal must be evaluated. Every FMI call in it is a prebuilt
+        ``functools.partial`` of the raw ctypes entry point with its value-reference and
+        value arrays: no look-ups, no allocation, no loop over components per step.
+        A failing call raises ``_StepFailed`` carrying the step it failed at.
+        """
+        ns = {"_StepFailed": _StepFailed, "_Interrupted": _Interrupted, "update": self._update_signals,
+              "h": self.h, "fail_get": self._get_failed, "fail_set": self._put_failed,
+              "fail_step": self._step_failed, "check_finite": self._check_finite, "flush": self._flush_pending,
+              "vsum": sum}
+        jacobi = self.spec.algorithm == "jacobi"
+        reads, writes, steps = [], [], []
+        for i, st in enumerate(self.steppers):
+            ns[f"st{i}"], ns[f"pend{i}"] = st, st.pending
+            ns[f"do{i}"], ns[f"h{i}"] = functools.partial(st.do_step, st.handle), st.step_size
+            guard = f"if n % {st.multiple} == 0:" if st.multiple > 1 else None
+            ind = "    " if guard else ""
+
+            def block(lines, guard=guard):
+                return ([guard] if guard and lines else []) + lines
+
+            read, write = [], []
+            for j, (get, set_, _src, buf, _conns, values) in enumerate(st.transfers):
+                ns[f"get{i}_{j}"], ns[f"set{i}_{j}"], ns[f"buf{i}_{j}"] = get, set_, values
+                if len(buf) <= _UNROLL:
+                    total = " + ".join(f"buf{i}_{j}[{k}]" for k in range(len(buf)))
+                else:
+                    total = f"vsum(buf{i}_{j})"
+                # the status of each call; then NaN or inf in the values read: x - x is 0.0
+                # for a finite sum, NaN otherwise
+                read += [f"{ind}if (s := get{i}_{j}()) > 1: raise fail_get(st{i}, {j}, t, s)",
+                         f"{ind}x = {total}",
+                         f"{ind}if x - x: check_finite(st{i}, {j}, t)"]
+                write += [f"{ind}if (s := set{i}_{j}()) > 1: raise fail_set(st{i}, {j}, t, s)"]
+            flush = []
+            if st.multiple > 1 and any(tg.stepper is st for sig in self.signals for tg in sig.targets):
+                flush = [f"{ind}if pend{i}: flush(st{i}, t)"]  # queued signal inputs
+            step = [f"{ind}if (s := do{i}(t, h{i}, 1)) > 1: raise fail_step(st{i}, t, s)"]
+            if jacobi:  # all reads at t_n, then all writes, then all steps
+                reads += block(read)
+                writes += block(write + flush)
+                steps += block(step)
+            else:  # Gauss-Seidel: read the freshest values, write, step; component by component
+                steps += block(read + write + flush + step)
+        body = reads + writes + steps
+        src = "\n".join([
+            "def steps(n0, n1, sig_next):",
+            "    n = n0",
+            "    try:",
+            "        for n in range(n0, n1):",
+            "            if n >= sig_next:",
+            "                sig_next = update(n)",
+            "            t = n * h",
+            *("            " + line for line in body),
+            "    except _StepFailed as exc:",
+            "        exc.n = n",
+            "        raise",
+            "    except KeyboardInterrupt:",
+            "        raise _Interrupted(n) from None",
+            "    return sig_next",
+        ])
+        self.step_source = src
+        exec(compile(src, f"<orchestrator steps: {self.spec.name}>", "exec"), ns)
+        return ns["steps"]
+
+    # -- recording -------------------------------------------------------------------
+    def _row(self, n: int) -> list:
+        t = n * self.h
+        for fn, handle, vrs, cnt, buf, name in self.record_reads:
+            status = fn(handle, vrs, cnt, buf)
+            if status > 1:
+                self.instances[name].note_status(status)
+                raise _StepFailed(self._describe(self.instances[name], "reading the recorded variables", t))
+        row = []
+        for kind, a, b, conv, label in self.row_plan:
+            if kind == "time":
+                v = t
+            elif kind == "signal":
+                v = a.value
+            else:
+                v = a[b]
+            if conv is not None:
+                v = conv(v)
+            v = float(v)
+            if not math.isfinite(v):
+                raise _StepFailed(f"{label} is not finite ({v}) at t = {t:.9g} s")
+            row.append(v)
+        return row
+
+    # -- the run -----------------------------------------------------------------------
+    def request_stop(self, signum=None, _frame=None) -> None:
+        """Ask the loop to stop at its next check (the SIGINT and SIGTERM handler)."""
+        if self._finishing:
+            return  # the loop is over: metrics.json is being written
+        if self._stop_requested:
+            raise KeyboardInterrupt  # a second Ctrl-C (or SIGTERM) stops at once
+        self._stop_requested = True
+        if signum is not None:
+            self._stop_signal = signal.Signals(signum).name
+
+    def run(self, out_dir, progress=None, extra_settings: dict | None = None,
+            catch_sigint: bool = True, metrics_of=None) -> dict:
+        """Initialize, step to the stop time, stream ``results.csv``, write ``metrics.json``.
+
+        ``metrics_of(out_dir, columns, rows)`` -> dict: the caller's figures of merit of the
+        run (called after the last row, whatever the status; its keys come first in
+        metrics.json, then the bookkeeping). Returns metrics.json's content.
+
+        A CosimError during initialization (a start value refused by an FMU, ...) is raised
+        before anything is written: ``out_dir`` is left as it was.
+        Once the FMUs are initialized, ``results.csv`` is (re)created and ``metrics.json``
+        says ``"status": "running"``; a failure or an interruption (SIGINT or SIGTERM, with
+        ``catch_sigint``) during the steps ends the run with that status, the rows kept.
+        metrics.json is written before the FMU instances are freed.
+        """
+        out = Path(out_dir)
+        self._finishing = False
+        handlers = {}
+        if catch_sigint and threading.current_thread() is threading.main_thread():
+            for signum in STOP_SIGNALS:
+                handlers[signum] = signal.signal(signum, self.request_stop)
+        writer = None
+        try:
+            t_init = time.perf_counter()
+            self._build()
+            init_time = time.perf_counter() - t_init
+            # from here on, a previous run's files in out_dir are replaced
+            out.mkdir(parents=True, exist_ok=True)
+            writer = ResultWriter(out, [c.name for c in self.spec.columns])
+            write_metrics(out, self._bookkeeping("running", 0, 0.0, init_time, 0, extra_settings))
+            status, n, wall = "interrupted", 0, 0.0
+            try:
+                status, n, wall = self._loop(writer, progress)
+            except Exception as exc:  # e.g. the disk is full: say so in metrics.json too
+                status = f"failed: {type(exc).__name__}: {one_line(exc)}"
+                raise
+            finally:
+                self._finishing = True
+                writer.close()
+                metrics = self._metrics(out, status, n, wall, init_time, writer.rows, extra_settings, metrics_of)
+                write_metrics(out, metrics)
+        finally:
+            if writer is not None:
+                writer.close()
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
+            if progress is not None:
+                progress.close()
+            self.close()
+        return metrics
+
+    def _loop(self, writer: ResultWriter, progress) -> tuple[str, int, float]:
+        N, every, h = self.n_steps, self.every, self.h
+        steps = self._steps
+        status = "completed"
+        n = 0
+        sig_next = self._update_signals(0)
+        t0, cpu0 = time.perf_counter(), time.process_time()
+        try:
+            while True:
+                if n >= sig_next:
+                    sig_next = self._update_signals(n)
+                if n % every == 0 or n == N:
+                    writer.write(self._row(n))
+                if n == N:
+                    break
+                if self._stop_requested:
+                    status = "interrupted"
+                    break
+                if progress is not None:
+                    progress.update(n * h)
+                n1 = min(N, (n // every + 1) * every, n + MAX_CHUNK)
+                sig_next = steps(n, n1, sig_next)
+                n = n1
+        except _StepFailed as exc:
+            n = exc.n if exc.n is not None else n
+            status = f"failed: {exc}"
+        except _Interrupted as exc:
+            n, status = exc.n, "interrupted"
+        except KeyboardInterrupt:
+            status = "interrupted"
+        wall = time.perf_counter() - t0
+        self.loop_cpu_time = time.process_time() - cpu0  #: CPU time of the loop [s] (benchmarks)
+        if status.startswith("failed") and self._stop_requested:
+            status = "interrupted"  # an FMU that saw the Ctrl-C itself
+        return status, n, wall
+
+    def _metrics(self, out: Path, status: str, n: int, wall: float, init_time: float, rows: int,
+                 extra: dict | None, metrics_of) -> dict:
+        metrics: dict = {}
+        if metrics_of is not None:
+            try:
+                metrics = dict(metrics_of(out, [col.name for col in self.spec.columns], rows))
+            except Exception as exc:  # a partial or odd result set: keep the bookkeeping
+                metrics = {"metrics_error": one_line(f"{type(exc).__name__}: {exc}")}
+        metrics.update(self._bookkeeping(status, n, wall, init_time, rows, extra))
+        return metrics
+
+    def _bookkeeping(self, status: str, n: int, wall: float, init_time: float, rows: int,
+                     extra: dict | None) -> dict:
+        s = self.spec
+        out = {"status": status}
+        if status == "interrupted" and self._stop_signal:
+            out["stop_signal"] = self._stop_signal
+        out.update({
+            "wall_time_s": wall,
+            "init_time_s": init_time,
+            "macro_steps": n,
+            "us_per_step": 1e6 * wall / max(n, 1),
+            "rows": rows,
+            "scenario": s.name,
+            "algorithm": s.algorithm,
+            "step_size": s.step_size,
+            "stop_time": s.stop_time,
+            "output_interval": s.output_interval,
+            "settings": {**s.settings(), **(extra or {})},
+        })
+        return out
+
+    def close(self) -> None:
+        for inst in self.instances.values():
+            inst.close()
+
+
+def status_name(code: int) -> str:
+    return STATUS[code] if 0 <= code < len(STATUS) else str(code)

@@ -1,0 +1,76 @@
+"""Recording: ``results.csv`` streamed row by row, and ``metrics.json``.
+
+``DIR/results.csv``: one header row (the recorded column names), then one row per output
+interval, every value written with ``repr`` (the shortest text that reads back as the same
+double), flushed row by row so that an interrupted run keeps what it had written.
+``DIR/metrics.json``: the run's bookkeeping (status, times, settings) and whatever figures
+of merit the application computed, written atomically.
+"""
+
+from __future__ import annotations
+
+import array
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+
+class ResultWriter:
+    """Streams rows to ``results.csv``; every row is flushed when written."""
+
+    def __init__(self, out_dir, columns):
+        self.dir = Path(out_dir)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.columns = tuple(columns)
+        self.path = self.dir / "results.csv"
+        self._fh = open(self.path, "w", encoding="ascii", newline="")
+        self._fh.write(",".join(self.columns) + "\n")
+        self._fh.flush()
+        self.rows = 0
+
+    def write(self, values) -> None:
+        # repr() is the shortest string that round-trips the double exactly
+        self._fh.write(",".join([repr(float(v)) for v in values]) + "\n")
+        self._fh.flush()
+        self.rows += 1
+
+    def close(self) -> None:
+        if not self._fh.closed:
+            self._fh.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def read_results(path) -> dict[str, np.ndarray]:
+    """results.csv (or its directory) -> {column: array}. Tolerates a cut last line.
+
+    Read line by line into one array of doubles: memory is the size of the numbers (8
+    bytes each), not of the text and its Python objects, whatever the length of the run."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "results.csv"
+    with open(path, encoding="ascii") as fh:
+        header = fh.readline().strip().split(",")
+        commas = len(header) - 1
+        values = array.array("d")
+        for line in fh:
+            if line.count(",") == commas:
+                values.extend(map(float, line.split(",")))
+    data = np.frombuffer(values, dtype=float).reshape(-1, len(header))
+    return {name: data[:, i] for i, name in enumerate(header)}
+
+
+def write_metrics(out_dir, metrics: dict) -> Path:
+    """Write metrics.json atomically (a reader never sees half a file)."""
+    path = Path(out_dir) / "metrics.json"
+    tmp = path.with_suffix(".json.tmp")
+    text = json.dumps(metrics, indent=2, allow_nan=True)
+    tmp.write_text(text + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+    return path
