@@ -7,8 +7,19 @@ all with one interface: ``FocEkf5`` (the paper's EKF), ``FocEkf4``, ``FocEkf5AB`
 reference) from a route table in its resources.
 """
 
-from .build import (FMUS, OBSERVER_FMUS, ROUTE_FMU, BuildError, build_all, build_fmu, default_out_dir, main,
-                    takes_packaged_starts, write_fmu_with_starts, write_route_fmu)
+from .build import (
+    FMUS,
+    OBSERVER_FMUS,
+    ROUTE_FMU,
+    BuildError,
+    build_all,
+    build_fmu,
+    default_out_dir,
+    main,
+    takes_packaged_starts,
+    write_fmu_with_starts,
+    write_route_fmu,
+)
 
 __all__ = ["FMUS", "OBSERVER_FMUS", "ROUTE_FMU", "BuildError", "build_all", "build_fmu", "default_out_dir", "main",
            "takes_packaged_starts", "write_fmu_with_starts", "write_route_fmu"]

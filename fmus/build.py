@@ -37,6 +37,12 @@ import time
 import zipfile
 from pathlib import Path
 
+import pythonfmu
+from fmpy.validation import validate_fmu
+from pythonfmu import FmuBuilder
+
+from pmsm_ev.scenarios import route_from_json, route_to_json, scenario_route
+
 from .slave_support import START_VALUES_FILE  # the packaged defaults a slave reads
 
 HERE = Path(__file__).resolve().parent
@@ -85,8 +91,7 @@ def physics_dir() -> Path:
 
 
 def _pythonfmu_version() -> str:
-    from pythonfmu import __version__
-    return __version__
+    return pythonfmu.__version__
 
 
 # -- sources and their hash ------------------------------------------------------------
@@ -267,8 +272,6 @@ def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]
         "files_sha256": files,
     }
     if name == ROUTE_FMU:
-        from pmsm_ev.scenarios import route_to_json, scenario_route  # noqa: PLC0415
-
         route = stage / ROUTE_FILE
         route.write_text(route_to_json(scenario_route(DEFAULT_ROUTE), DEFAULT_ROUTE), encoding="utf-8")
         project_files.append(route)
@@ -297,9 +300,6 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
     digest = source_hash(name)
     if not force and target.is_file() and (read_build_info(target) or {}).get("hash") == digest:
         return target, False
-
-    import pythonfmu  # noqa: PLC0415 - only needed when building
-    from pythonfmu import FmuBuilder  # noqa: PLC0415
 
     # A loaded pythonfmu FMU puts its resources/ (a copy of pythonfmu without the
     # builder's binaries) on sys.path; building with that copy gives FMUs without binaries.
@@ -344,8 +344,6 @@ def _make_stage(out: Path, name: str) -> Path:
 
 
 def _check(fmu: Path, name: str) -> None:
-    from fmpy.validation import validate_fmu  # noqa: PLC0415
-
     problems = validate_fmu(str(fmu))
     if problems:
         raise BuildError(f"{name}.fmu does not validate: " + "; ".join(problems))
@@ -370,8 +368,6 @@ def write_route_fmu(route_json: str, dest, source=None) -> Path:
     built if needed) whose default route, ``resources/route.json``, is ``route_json`` (the
     text of ``pmsm_ev.scenarios.route_to_json``): the route chosen when the FMU is
     packaged. The model description is unchanged."""
-    from pmsm_ev.scenarios import route_from_json  # noqa: PLC0415
-
     route_from_json(route_json, "route")  # refuse a malformed route here, not in the FMU
     source = Path(source) if source is not None else build_fmu(ROUTE_FMU)[0]
     target = f"resources/{ROUTE_FILE}"

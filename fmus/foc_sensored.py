@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pmsm_ev_fmus.foc_slave import FocSlave
 
-_UNUSED = ("q_i", "q_omega", "q_theta", "q_TL", "r_i", "p0_i", "p0_omega", "p0_theta", "p0_TL", "q_omega_ekf4", "x0_omega", "x0_theta")
+_UNUSED = ("q_i", "q_omega", "q_theta", "q_TL", "r_i", "p0_i", "p0_omega", "p0_theta", "p0_TL", "q_omega_ekf4",
+           "x0_omega", "x0_theta")
 
 
 class FocSensored(FocSlave):

@@ -21,8 +21,15 @@ import math
 
 from pmsm_ev import __version__
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import (DT_DEFAULT, SENSORLESS_EKF, ControllerParams, EkfParams, MotorParams, ParameterError,
-                            StartupParams)
+from pmsm_ev.params import (
+    DT_DEFAULT,
+    SENSORLESS_EKF,
+    ControllerParams,
+    EkfParams,
+    MotorParams,
+    ParameterError,
+    StartupParams,
+)
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
 
 #: an instant within this fraction of dt of a communication point counts as that point:

@@ -44,8 +44,17 @@ import json
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement
 
-from pythonfmu import (Boolean, DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Slave,
-                       Fmi2Variability, Integer, Real, String)
+from pythonfmu import (
+    Boolean,
+    DefaultExperiment,
+    Fmi2Causality,
+    Fmi2Initial,
+    Fmi2Slave,
+    Fmi2Variability,
+    Integer,
+    Real,
+    String,
+)
 
 from pmsm_ev_fmus.metadata import DISPLAY_UNITS, PARAMETERS, UNITS
 

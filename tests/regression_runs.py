@@ -13,8 +13,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from pmsm_ev.params import DriveParams, ScenarioParams
 from pmsm_cosim.app.reference import run_reference
+from pmsm_ev.params import DriveParams, ScenarioParams
 from pmsm_ev.scenarios import Profile
 
 FIXTURES = Path(__file__).parent / "fixtures"

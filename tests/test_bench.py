@@ -5,10 +5,10 @@ from __future__ import annotations
 import fmpy
 import pytest
 
+from orchestrator_support import project_fmus
 from pmsm_cosim.app import bench
 from pmsm_cosim.app.cli import main
 from pmsm_cosim.engine.master import Master
-from orchestrator_support import project_fmus
 from pmsm_cosim.engine.recording import read_results
 
 

@@ -19,12 +19,12 @@ import math
 import numpy as np
 import pytest
 
-from pmsm_cosim.engine.master import Master
-from pmsm_cosim.app.drive import load_system
 from orchestrator_support import project_fmus
-from pmsm_ev.params import DriveParams
+from pmsm_cosim.app.drive import load_system
 from pmsm_cosim.app.reference import run_reference
+from pmsm_cosim.engine.master import Master
 from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.params import DriveParams
 from pmsm_ev.results import ALL_COLUMNS, CONTRACT_COLUMNS
 from pmsm_ev.scenarios import Profile
 

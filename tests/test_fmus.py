@@ -21,18 +21,32 @@ from pathlib import Path
 import fmpy
 import numpy as np
 import pytest
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
 from fmpy.validation import validate_fmu
 
 import pmsm_ev_fmus
-from pmsm_ev import __version__
-from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import (ControllerParams, DriveParams, EkfParams, MotorParams, ParameterError, StartupParams,
-                            PlantParams, ScenarioParams, VehicleParams)
-from pmsm_ev.plant import Plant
 from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
+from pmsm_ev import __version__
+from pmsm_ev.control_unit import ControlUnit
+from pmsm_ev.params import (
+    ControllerParams,
+    DriveParams,
+    EkfParams,
+    MotorParams,
+    ParameterError,
+    PlantParams,
+    ScenarioParams,
+    StartupParams,
+    VehicleParams,
+)
+from pmsm_ev.plant import Plant
 from pmsm_ev_fmus import build as fmu_build
 from pmsm_ev_fmus.metadata import PARAMETERS, UNITS
 
@@ -734,7 +748,8 @@ signals = np.array([(0.0, 1.0, 0.5, 0.0), (1.0, 1.0, 0.5, 0.0)],
 r = fmpy.simulate_fmu(plant, stop_time=0.01, step_size=1e-4, output_interval=1e-4, input=signals,
                       start_values={"m_v": 1e12, "theta_e0": 0.3})
 signals = np.array([(0.0, 20.0, -5.0, 100.0, 0.4, 10.0)],
-                   dtype=[("time", float)] + [(n, float) for n in ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")])
+                   dtype=[("time", float)] + [(n, float) for n in ("i_alpha", "i_beta", "omega_ref", "theta_meas",
+                                                                    "omega_meas")])
 q = fmpy.simulate_fmu(ctrl, stop_time=0.01, step_size=1e-4, output_interval=1e-4, input=signals)
 physics = sorted(m for m in sys.modules if m.startswith("pmsm_ev"))
 files = sorted({sys.modules[m].__file__ for m in physics})
@@ -868,7 +883,8 @@ int main(int argc, char **argv) {
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     fmi2Component c = instantiate("plant", fmi2CoSimulation, argv[3], argv[2], &cb, fmi2False, fmi2True);
     if (!c) { printf("instantiate failed\n"); return 3; }
-    fmi2ValueReference v_ref[2] = {atoi(argv[4]), atoi(argv[5])}, m_ref[1] = {atoi(argv[6])}, i_ref[1] = {atoi(argv[7])};
+    fmi2ValueReference v_ref[2] = {atoi(argv[4]), atoi(argv[5])}, m_ref[1] = {atoi(argv[6])},
+                       i_ref[1] = {atoi(argv[7])};
     fmi2Real v[2] = {1.0, 0.5}, m_v[1] = {1e12}, i_d;
     if (setup(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) || enter(c) || set_real(c, m_ref, 1, m_v) || leave(c)
         || set_real(c, v_ref, 2, v)) return 4;

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pmsm_ev import accel, kernels
 from pmsm_cosim.engine.recording import read_results
+from pmsm_ev import accel, kernels
 from pmsm_ev.results import ALL_COLUMNS
 from regression_runs import CASES
 

@@ -10,9 +10,9 @@ import sys
 
 import pytest
 
+from orchestrator_support import toy_fmus, toy_system
 from pmsm_cosim.app.cli import main
 from pmsm_cosim.engine.progress import ProgressBar
-from orchestrator_support import toy_fmus, toy_system
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["export-ssp", "--help"], ["build", "--help"],

@@ -10,14 +10,14 @@ import math
 import numpy as np
 import pytest
 
+from orchestrator_support import plateau_system, project_fmus, toy_fmus
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.engine.master import Master
-from pmsm_cosim.app.drive import load_system
-from orchestrator_support import plateau_system, project_fmus, toy_fmus
-from pmsm_ev.params import VehicleParams
-from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.params import VehicleParams
 from pmsm_ev.results import ALL_COLUMNS
 from pmsm_ev.vehicle import load_torque
 

@@ -8,10 +8,10 @@ import math
 
 import pytest
 
+from orchestrator_support import toy_system
+from pmsm_cosim.app.drive import load_system
 from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.engine.master import Master
-from pmsm_cosim.app.drive import load_system
-from orchestrator_support import toy_system
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.scenarios import Profile
 

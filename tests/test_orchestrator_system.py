@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.app.drive import load_system, packaged_scenario, project_fmu_dir
+from pmsm_cosim.engine.errors import CosimError
 from pmsm_ev.results import ALL_COLUMNS
 from pmsm_ev.scenarios import SCENARIO1_DEG, SCENARIO2_DEG, elevation_profile, speed_reference
 

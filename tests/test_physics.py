@@ -5,7 +5,7 @@ import math
 import pytest
 
 from pmsm_ev import vehicle as veh
-from pmsm_ev.params import MotorParams, PlantParams, VehicleParams, equivalent_inertia, ParameterError
+from pmsm_ev.params import MotorParams, ParameterError, PlantParams, VehicleParams, equivalent_inertia
 from pmsm_ev.plant import Plant
 from pmsm_ev.pmsm import current_derivatives, electromagnetic_torque, friction_torque
 from pmsm_ev.transforms import clarke, inverse_clarke, inverse_park, park, wrap_angle

@@ -12,8 +12,7 @@ import pytest
 
 from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import (ControllerParams, MotorParams, ParameterError, PlantParams, magnet_flux,
-                            winding_resistance)
+from pmsm_ev.params import ControllerParams, MotorParams, ParameterError, PlantParams, magnet_flux, winding_resistance
 from pmsm_ev.plant import Plant
 
 DT = 1e-4

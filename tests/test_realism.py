@@ -5,12 +5,20 @@ import math
 import numpy as np
 import pytest
 
-from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import (ControllerParams, DriveParams, EkfParams, MotorParams, ParameterError, PlantParams,
-                            ScenarioParams, VehicleParams)
-from pmsm_ev.plant import Plant, gaussian_pair
 from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.control_unit import ControlUnit
+from pmsm_ev.params import (
+    ControllerParams,
+    DriveParams,
+    EkfParams,
+    MotorParams,
+    ParameterError,
+    PlantParams,
+    ScenarioParams,
+    VehicleParams,
+)
+from pmsm_ev.plant import Plant, gaussian_pair
 
 LOCKED = VehicleParams(m_v=1e15)  # rotor held: the true currents are known exactly
 

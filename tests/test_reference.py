@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from pmsm_ev.params import DriveParams, MotorParams, PlantParams, ScenarioParams, ParameterError, VehicleParams
 from pmsm_cosim.app.reference import main as reference_main
 from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
+from pmsm_ev.params import DriveParams, MotorParams, ParameterError, PlantParams, ScenarioParams, VehicleParams
 from pmsm_ev.results import CONTRACT_COLUMNS
 from pmsm_ev.scenarios import Profile
 

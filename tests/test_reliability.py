@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pytest
 
+from orchestrator_support import project_fmus, toy_fmus, toy_system
 from pmsm_cosim.app.cli import main
 from pmsm_cosim.engine.fmu import fmu_reason
-from orchestrator_support import project_fmus, toy_fmus, toy_system
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.results import ALL_COLUMNS
 
@@ -205,7 +205,8 @@ def test_sensorless_start_up_values_are_refused_before_the_run(fmus, tmp_path, c
     (["--set", "plant.T_magnet=-300"], "T_magnet must be above -273.15 degC (got -300.0)"),
     (["--set", "ctrl.dead_time_comp=-7.2"], "dead_time_comp must be >= 0 V (got -7.2)"),
     (["--set", "ctrl.psi_adapt=1"], "ctrl (FocEkf5.fmu): fmi2ExitInitializationMode (start values) refused: "
-                                    "psi_adapt needs the stationary-frame EKF5 (observer ekf5ab or sensorless; got ekf5)"),
+                                    "psi_adapt needs the stationary-frame EKF5 "
+                                    "(observer ekf5ab or sensorless; got ekf5)"),
 ])
 def test_plant_effect_values_are_refused_before_the_run(fmus, tmp_path, capsys, args, message):
     line = refused(["run", "scenario2", "--stop-time", 0.01, *args], capsys, tmp_path / "out")
@@ -234,8 +235,15 @@ class RawInstance:
 
     def __init__(self, path: Path, unzip_dir: Path):
         import fmpy
-        from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free)
+        from fmpy.fmi2 import (
+            FMU2Slave,
+            calloc,
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+            free,
+        )
 
         self.md = fmpy.read_model_description(str(path))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
@@ -549,10 +557,10 @@ def test_a_run_refused_at_load_leaves_the_previous_results(fmus, tmp_path, capsy
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from pmsm_cosim.engine.errors import CosimError  # noqa: E402
 from pmsm_cosim.app.drive import load_system  # noqa: E402
-from pmsm_cosim.engine.system import SystemSpec  # noqa: E402
+from pmsm_cosim.engine.errors import CosimError  # noqa: E402
 from pmsm_cosim.engine.signals import Table, TableError, load_table_csv  # noqa: E402
+from pmsm_cosim.engine.system import SystemSpec  # noqa: E402
 
 PROPERTY = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

@@ -11,10 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from orchestrator_support import project_fmus
 from pmsm_cosim.app import report
 from pmsm_cosim.app.cli import main
-from pmsm_cosim.app.compare import format_value
-from orchestrator_support import project_fmus
 from pmsm_cosim.engine.recording import read_results
 
 STOP = 1.5

@@ -1,4 +1,5 @@
-"""Robustness maps (orchestrator/pmsm_cosim/app/report/robustness.py, orchestrator/pmsm_cosim/app/sweeps/robust_*.toml): the
+"""Robustness maps (orchestrator/pmsm_cosim/app/report/robustness.py,
+orchestrator/pmsm_cosim/app/sweeps/robust_*.toml): the
 sweep engine's signal factor, the figures of merit of a run, the failure-rate interval, and a
 small version of every map (3 x 3, short runs) on a 2-worker local cluster, page included."""
 
@@ -9,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
+from orchestrator_support import project_fmus
 from pmsm_cosim.app.report import robustness as rr
 from pmsm_cosim.app.studies import PACKAGED_SWEEPS, load_sweep
 from pmsm_cosim.sweeps import prepare_runs
-from orchestrator_support import project_fmus
 from pmsm_ev.params import MotorParams
 
 

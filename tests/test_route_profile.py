@@ -20,8 +20,15 @@ from fmpy.validation import validate_fmu
 
 from orchestrator_support import project_fmus
 from pmsm_ev import __version__
-from pmsm_ev.scenarios import (ROUTE_FORMAT, Profile, ProfileError, load_route, route_from_json, route_to_json,
-                               scenario_route)
+from pmsm_ev.scenarios import (
+    ROUTE_FORMAT,
+    Profile,
+    ProfileError,
+    load_route,
+    route_from_json,
+    route_to_json,
+    scenario_route,
+)
 from pmsm_ev_fmus import write_route_fmu
 
 H = 1e-4
@@ -192,13 +199,18 @@ def test_a_bad_profile_fails_initialisation_with_the_reason(route_fmu, tmp_path,
         messages.append(text.decode())
 
     from fmpy import calloc, free
-    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                           fmi2CallbackLoggerTYPE)
+    from fmpy.fmi2 import (
+        fmi2CallbackAllocateMemoryTYPE,
+        fmi2CallbackFreeMemoryTYPE,
+        fmi2CallbackFunctions,
+        fmi2CallbackLoggerTYPE,
+    )
     callbacks = fmi2CallbackFunctions()
     callbacks.logger = fmi2CallbackLoggerTYPE(log)
     callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
     callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
     from ctypes import byref
+
     from fmpy.logging import addLoggerProxy
     addLoggerProxy(byref(callbacks))
     md = fmpy.read_model_description(str(route_fmu))

@@ -20,9 +20,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pmsm_cosim.engine.master import Master
-from pmsm_cosim.app.drive import load_system
 from orchestrator_support import project_fmus
+from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.engine.master import Master
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.results import ALL_COLUMNS
 

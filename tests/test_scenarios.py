@@ -4,10 +4,9 @@ import math
 
 import pytest
 
-from pmsm_ev.params import ScenarioParams
 from pmsm_cosim.engine.signals import TableError, load_table_csv
-from pmsm_ev.scenarios import ProfileError
-from pmsm_ev.scenarios import elevation_profile, speed_reference
+from pmsm_ev.params import ScenarioParams
+from pmsm_ev.scenarios import ProfileError, elevation_profile, speed_reference
 
 
 def deg(p, t):

@@ -16,20 +16,35 @@ import fmpy
 import numpy as np
 import pytest
 
-from pmsm_cosim.engine.master import Master
-from pmsm_cosim.app.drive import load_system
-from pmsm_cosim.engine.system import read_toml
 from orchestrator_support import project_fmus
+from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.reference import run_reference
+from pmsm_cosim.engine.master import Master
+from pmsm_cosim.engine.recording import read_results
+from pmsm_cosim.engine.system import read_toml
 from pmsm_ev import kernels as _k
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import (SENSORLESS_EKF, EkfParams, MotorParams, ParameterError, PlantParams, StartupParams,
-                            VehicleParams, equivalent_inertia)
+from pmsm_ev.params import (
+    SENSORLESS_EKF,
+    EkfParams,
+    MotorParams,
+    ParameterError,
+    PlantParams,
+    StartupParams,
+    VehicleParams,
+    equivalent_inertia,
+)
 from pmsm_ev.plant import Plant
-from pmsm_cosim.app.reference import run_reference
-from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.results import ALL_COLUMNS, SENSORLESS_COLUMNS
-from pmsm_ev.scenarios import (HILL_START_DEG, HILL_START_OMEGA_REF, HILL_START_STOP_TIME, SENSORLESS_START_DELAY,
-                               Profile, hill_start_route, speed_reference)
+from pmsm_ev.scenarios import (
+    HILL_START_DEG,
+    HILL_START_OMEGA_REF,
+    HILL_START_STOP_TIME,
+    SENSORLESS_START_DELAY,
+    Profile,
+    hill_start_route,
+    speed_reference,
+)
 
 DT = 1e-4
 ALIGN, IF, EKF = _k.MODE_ALIGN, _k.MODE_IF, _k.MODE_EKF
@@ -55,7 +70,8 @@ def drive(theta0=0.0, stop=20.0, delta_deg=((0, 0), (15, 5)), omega_ref=None, fe
     for k in range(n + 1):
         t = k * DT
         w = w_ref(t)
-        for key, value in (("t", t), ("omega_ref", w), ("omega_m", plant.omega_m), ("omega_hat", unit.observer.omega_hat),
+        for key, value in (("t", t), ("omega_ref", w), ("omega_m", plant.omega_m),
+                           ("omega_hat", unit.observer.omega_hat),
                            ("theta_e", plant.theta_e), ("theta_hat", unit.observer.theta_hat), ("T_e", plant.T_e),
                            ("x", plant.x_vehicle), ("mode", unit.mode), ("v_alpha", unit.v_alpha),
                            ("v_beta", unit.v_beta), ("T_L_hat", unit.observer.T_L_hat), ("T_L_mech", plant.T_L_mech)):

@@ -37,13 +37,13 @@ import numpy as np
 import pytest
 
 import pmsm_cosim.app
+from orchestrator_support import project_fmus
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.drive import export_ssp, load_system
 from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.engine.master import Master
-from pmsm_cosim.app.drive import export_ssp, load_system
-from pmsm_cosim.engine.ssp import NS, load_ssp, schema_errors
-from orchestrator_support import project_fmus
 from pmsm_cosim.engine.recording import read_results
+from pmsm_cosim.engine.ssp import NS, load_ssp, schema_errors
 from pmsm_ev.results import ALL_COLUMNS
 
 RTOL = ATOL = 1e-9

@@ -10,11 +10,11 @@ import textwrap
 
 import pytest
 
-from pmsm_cosim.app.cli import main
-from pmsm_cosim.engine.errors import CosimError
-from pmsm_cosim.app.studies import load_sweep, parse_sweep
-from pmsm_cosim.sweeps import read_summary, run_sweep
 from orchestrator_support import project_fmus
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.studies import load_sweep, parse_sweep
+from pmsm_cosim.engine.errors import CosimError
+from pmsm_cosim.sweeps import read_summary, run_sweep
 
 STOP = 0.5  # [s] short runs: the start-up ramp, 5000 steps
 
@@ -122,7 +122,8 @@ def test_random_samples_are_seeded_and_in_range(tmp_path):
     ('[set]\n"ctrl.q_TL" = 1e-3\n', "nothing to sweep"),
     ('[grid]\n"scale.deltaa" = [1.0]\n', "grid.scale.deltaa: the system has no signal 'deltaa' (did you mean: delta"),
     ('[grid]\n"scale.delta" = ["big"]\n', "scale.delta (a factor on the signal's values) must be a finite number"),
-    ('[set]\n"ctrl.q_TLL" = 1e-3\n[grid]\n"ctrl.q_i" = [1]\n', "set.ctrl.q_TLL: ctrl (FocEkf5.fmu) has no variable 'q_TLL' (did you mean: q_TL"),
+    ('[set]\n"ctrl.q_TLL" = 1e-3\n[grid]\n"ctrl.q_i" = [1]\n',
+     "set.ctrl.q_TLL: ctrl (FocEkf5.fmu) has no variable 'q_TLL' (did you mean: q_TL"),
 ])
 def test_sweep_file_errors_are_one_line(tmp_path, capsys, body, message):
     path = write_sweep(tmp_path, body)

@@ -20,7 +20,7 @@ __all__ = ["simulate", "__version__"]
 
 def __getattr__(name: str):
     if name == "simulate":  # the application's API, loaded on first use: the engine needs none of it
-        from .app.api import simulate  # noqa: PLC0415
+        from .app.api import simulate  # noqa: PLC0415 - the application, loaded on first use (see above)
 
         return simulate
     raise AttributeError(f"module 'pmsm_cosim' has no attribute {name!r}")

@@ -109,7 +109,7 @@ def _load():
         # exit, and the process dies in free(); compiled code is for Python processes only
         return _source, "plain Python (embedded interpreter)"
     try:
-        import numba
+        import numba  # noqa: PLC0415 - numba: heavy (LLVM), loaded only to compile the kernels
     except Exception:  # not installed, or broken (e.g. an llvmlite that does not load)
         return _source, "plain Python (numba not available)"
     source = _SOURCE
@@ -154,7 +154,7 @@ def compiled() -> bool:
 def vector(n: int):
     """A zeroed vector of n floats for the kernels."""
     if compiled():
-        import numpy as np
+        import numpy as np  # noqa: PLC0415 - numpy only with compiled kernels: the FMUs' plain path needs none
 
         return np.zeros(n)
     return [0.0] * n

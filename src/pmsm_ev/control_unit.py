@@ -37,8 +37,15 @@ from . import accel
 from . import kernels as _k
 from .controller import CurrentController, SpeedController
 from .observers import make_observer
-from .params import (ANGLE_SOURCES, SENSORLESS_EKF, ControllerParams, EkfParams, MotorParams, ParameterError,
-                     StartupParams)
+from .params import (
+    ANGLE_SOURCES,
+    SENSORLESS_EKF,
+    ControllerParams,
+    EkfParams,
+    MotorParams,
+    ParameterError,
+    StartupParams,
+)
 
 #: mode names of the sensorless unit, by ``pmsm_ev.kernels`` MODE_* value
 MODES = ("align", "I-f", "EKF")

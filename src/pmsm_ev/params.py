@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields, replace
 
+from .kernels import winding_resistance as kernel_winding_resistance
+
 LOAD_MODELS = ("physical", "paper")
 DECOUPLING_MODES = ("physical", "paper")
 ANGLE_SOURCES = ("measured", "estimated")
@@ -118,9 +120,7 @@ TEMPERATURE_REF = 20.0
 def winding_resistance(R_s20: float, T: float, alpha_R: float) -> float:
     """R_s(T) = R_s20 (1 + alpha_R (T - 20 degC)) [Ohm]: copper's linear law
     (``pmsm_ev.kernels.winding_resistance``, which the thermal model uses at every step)."""
-    from .kernels import winding_resistance as law  # noqa: PLC0415
-
-    return law(R_s20, T, alpha_R, TEMPERATURE_REF)
+    return kernel_winding_resistance(R_s20, T, alpha_R, TEMPERATURE_REF)
 
 
 def magnet_flux(psi20: float, T: float, alpha_psi: float) -> float:
@@ -224,10 +224,12 @@ class PlantParams:
                      f"{name} must be > 0 (got {getattr(self, name)})")
         _require(float(self.adc_bits).is_integer() and 0 <= self.adc_bits <= 32,
                  f"adc_bits must be a whole number in 0..32 (got {self.adc_bits})")
-        _require(math.isfinite(self.adc_range) and self.adc_range > 0, f"adc_range must be > 0 A (got {self.adc_range})")
+        _require(math.isfinite(self.adc_range) and self.adc_range > 0,
+                 f"adc_range must be > 0 A (got {self.adc_range})")
         _require(math.isfinite(self.v_dc) and self.v_dc >= 0, f"v_dc must be >= 0 V (got {self.v_dc})")
         _require(self.inverter_delay in (0, 1), f"inverter_delay must be 0 or 1 (got {self.inverter_delay})")
-        _require(math.isfinite(self.dead_time) and self.dead_time >= 0, f"dead_time must be >= 0 s (got {self.dead_time})")
+        _require(math.isfinite(self.dead_time) and self.dead_time >= 0,
+                 f"dead_time must be >= 0 s (got {self.dead_time})")
         _require(self.dead_time == 0 or self.v_dc > 0,
                  f"dead_time = {self.dead_time} s needs the DC-link voltage: set v_dc > 0 V")
         _require(math.isfinite(self.dead_time_i0) and self.dead_time_i0 > 0,
@@ -235,8 +237,10 @@ class PlantParams:
         for name in ("sat_i_q", "sat_i_d"):
             value = getattr(self, name)
             _require(math.isfinite(value) and value >= 0, f"{name} must be >= 0 A, 0 = off (got {value})")
-        _require(math.isfinite(self.thermal_R) and self.thermal_R >= 0, f"thermal_R must be >= 0 K/W, 0 = off (got {self.thermal_R})")
-        _require(math.isfinite(self.thermal_C) and self.thermal_C > 0, f"thermal_C must be > 0 J/K (got {self.thermal_C})")
+        _require(math.isfinite(self.thermal_R) and self.thermal_R >= 0,
+                 f"thermal_R must be >= 0 K/W, 0 = off (got {self.thermal_R})")
+        _require(math.isfinite(self.thermal_C) and self.thermal_C > 0,
+                 f"thermal_C must be > 0 J/K (got {self.thermal_C})")
         for name in ("T_winding", "T_magnet", "alpha_R", "alpha_psi", "T_ambient"):
             _require(math.isfinite(getattr(self, name)), f"{name} must be finite (got {getattr(self, name)})")
         for name in ("T_winding", "T_magnet", "T_ambient"):
@@ -336,7 +340,8 @@ class ControllerParams:
         for name in ("kp_w", "ki_w", "kp_id", "ki_id", "kp_iq", "ki_iq", "angle_advance"):
             _require(getattr(self, name) >= 0, f"{name} must be >= 0 (got {getattr(self, name)})")
         _require(self.T_d > 0, f"T_d must be > 0 s (got {self.T_d})")
-        _require(self.delay_compensation in (0, 1), f"delay_compensation must be 0 or 1 (got {self.delay_compensation})")
+        _require(self.delay_compensation in (0, 1),
+                 f"delay_compensation must be 0 or 1 (got {self.delay_compensation})")
         _require(self.i_q_max > 0, f"i_q_max must be > 0 A (got {self.i_q_max})")
         _require(self.u_max > 0, f"u_max must be > 0 V (got {self.u_max})")
         _require(math.isfinite(self.dead_time_comp) and self.dead_time_comp >= 0,

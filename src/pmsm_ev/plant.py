@@ -25,8 +25,15 @@ import math
 
 from . import accel
 from . import kernels as _k
-from .params import (TEMPERATURE_REF, MotorParams, PlantParams, VehicleParams, equivalent_inertia, magnet_flux,
-                     winding_resistance)
+from .params import (
+    TEMPERATURE_REF,
+    MotorParams,
+    PlantParams,
+    VehicleParams,
+    equivalent_inertia,
+    magnet_flux,
+    winding_resistance,
+)
 from .transforms import clarke, wrap_angle
 
 

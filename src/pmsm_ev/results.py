@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from .params import MotorParams, VehicleParams
+
 #: columns every results.csv has, in this order (more may follow)
 CONTRACT_COLUMNS = (
     "time", "delta_deg", "omega_ref", "omega_m", "omega_hat", "theta_e", "theta_hat",
@@ -50,8 +52,6 @@ def eq31_load_torque(r: dict[str, np.ndarray], motor=None, vehicle=None) -> np.n
     J_m only, so T_L_hat absorbs friction and the reflected vehicle inertia:
     T_L_mech + B_m omega + T_m0 + (J_eq - J_m) d(omega)/dt [N m], d(omega)/dt by central
     differences of the recorded speed. Default parameters unless given."""
-    from .params import MotorParams, VehicleParams  # noqa: PLC0415
-
     motor, vehicle = motor or MotorParams(), vehicle or VehicleParams()
     w, t = r["omega_m"], r["time"]
     dw = np.gradient(w, t) if len(t) >= 2 else np.zeros_like(w)

@@ -17,8 +17,6 @@ A *route* is the pair of profiles that drives a run, ``delta`` [rad] and ``omega
 from __future__ import annotations
 
 import bisect
-import csv
-import io
 import json
 import math
 from dataclasses import dataclass

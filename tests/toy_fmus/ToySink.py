@@ -35,7 +35,8 @@ class ToySink(Fmi2Slave):
         self.register_variable(Integer("count", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         self.register_variable(Boolean("flag", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         self.register_variable(Integer("fail_at", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
-        self.register_variable(Integer("raise_at", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
+        self.register_variable(Integer("raise_at", causality=Fmi2Causality.parameter,
+                                       variability=Fmi2Variability.fixed))
         self.register_variable(String("label", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         for name in ("last_u", "last_w", "acc", "calls", "last_t", "last_h", "u_sets",
                      "echo_gain", "echo_count", "echo_flag", "echo_label_len"):

@@ -20,6 +20,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
+
 from pmsm_ev_fmus.build import FMUS, OBSERVER_FMUS
 
 from ..engine.errors import CosimError

@@ -97,10 +97,10 @@ def libcosim_us_per_step(stop_time: float, plant: Path, ctrl: Path) -> tuple[flo
     """(d): libcosim's fixed-step execution of the same system, (wall, CPU of all the
     process's threads) per step [us]; None without libcosimpy."""
     try:
-        from libcosimpy.CosimExecution import CosimExecution  # noqa: PLC0415
-        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level  # noqa: PLC0415
-        from libcosimpy.CosimManipulator import CosimManipulator  # noqa: PLC0415
-        from libcosimpy.CosimSlave import CosimLocalSlave  # noqa: PLC0415
+        from libcosimpy.CosimExecution import CosimExecution  # noqa: PLC0415 - libcosimpy: optional (case d)
+        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level  # noqa: PLC0415 - libcosimpy: optional (case d)
+        from libcosimpy.CosimManipulator import CosimManipulator  # noqa: PLC0415 - libcosimpy: optional (case d)
+        from libcosimpy.CosimSlave import CosimLocalSlave  # noqa: PLC0415 - libcosimpy: optional (case d)
     except ImportError:
         return None
     spec = _spec(stop_time, plant, ctrl)

@@ -1,4 +1,5 @@
-"""``pmsm-cosim``: run, sweep, build, inspect, plot and compare co-simulations; report; export a system as an SSP package.
+"""``pmsm-cosim``: run, sweep, build, inspect, plot and compare co-simulations; report; export a
+system as an SSP package.
 
 Every user error (missing file, bad system file, unknown variable, a value an FMU
 refuses, ...) ends in one line ``error: ...`` on stderr and exit code 2.
@@ -25,8 +26,15 @@ from ..engine.progress import ProgressBar
 from ..engine.system import ALGORITHMS
 from ..sweeps import prepare_runs, run_sweep
 from . import bench, compare, report
-from .drive import (PACKAGED_SCENARIOS, draw_figures, drive_metrics, ensure_fmus, export_ssp, load_system,
-                    project_fmu_dir)
+from .drive import (
+    PACKAGED_SCENARIOS,
+    draw_figures,
+    drive_metrics,
+    ensure_fmus,
+    export_ssp,
+    load_system,
+    project_fmu_dir,
+)
 from .studies import load_sweep
 
 #: the instances --plant and --controller replace the FMU of
@@ -127,7 +135,8 @@ def cmd_export_ssp(a) -> int:
     ensure_fmus(spec, a.quiet)
     summary = export_ssp(spec, Path(a.output), a.quiet)
     print(f"wrote {summary.path}: components {', '.join(summary.components)}; {summary.connections} connections; "
-          f"{summary.parameters} parameter value{'' if summary.parameters == 1 else 's'}; step {spec.step_size:g} s, stop {spec.stop_time:g} s, "
+          f"{summary.parameters} parameter value{'' if summary.parameters == 1 else 's'}; "
+          f"step {spec.step_size:g} s, stop {spec.stop_time:g} s, "
           f"{spec.algorithm}")
     return 0
 
@@ -389,7 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--force", action="store_true", help="rerun the (selected) configurations even when up to date")
     rp.add_argument("--list", action="store_true", help="list the configuration ids and exit")
     rp.add_argument("--robustness", action="store_true",
-                    help="instead: run the robustness sweeps (orchestrator/pmsm_cosim/app/sweeps/robust_*.toml) on a local Dask "
+                    help="instead: run the robustness sweeps (orchestrator/pmsm_cosim/app/sweeps/robust_*.toml) "
+                         "on a local Dask "
                          "cluster of --jobs workers and write OUT/robustness.md and OUT/robustness/*.png")
     rp.add_argument("--small", action="store_true",
                     help="with --robustness: 3 x 3 grids and a few Monte-Carlo samples (a quick check)")

@@ -188,8 +188,8 @@ def _envelope(t, y, buckets: int = BUCKETS):
 
 
 def _figure(size=FIGSIZE):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: PLC0415
-    from matplotlib.figure import Figure  # noqa: PLC0415
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+    from matplotlib.figure import Figure  # noqa: PLC0415 - matplotlib: heavy, only when drawing
 
     fig = Figure(figsize=size, dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import CosimError, one_line
-from .fmu import FmuInstance, STATUS, real_array, variable_unit, vr_array
+from .fmu import STATUS, FmuInstance, real_array, variable_unit, vr_array
 from .recording import ResultWriter, write_metrics
 from .system import COLUMN_CONVERSIONS, SystemSpec
 

@@ -50,11 +50,12 @@ from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
 from xml.etree import ElementTree as ET
 
+import fmpy.ssp
+
 from .errors import CosimError, close_matches, one_line
 from .fmu import convert_start, read_description, variable_unit
 from .master import Master
-from .system import (ALGORITHMS, COLUMN_CONVERSIONS, ColumnSpec, ComponentSpec, Connection, SystemSpec,
-                     check_references)
+from .system import ALGORITHMS, COLUMN_CONVERSIONS, ColumnSpec, ComponentSpec, Connection, SystemSpec, check_references
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -339,10 +340,6 @@ def export_ssp(spec: SystemSpec, dest, *, signal_fmu=None, carries_starts=None, 
 
 def schema_dir() -> Path | None:
     """The SSP 1.0 schemas fmpy ships (``fmpy/ssp/schema``), or None."""
-    try:
-        import fmpy.ssp  # noqa: PLC0415
-    except ImportError:
-        return None
     path = Path(fmpy.ssp.__file__).parent / "schema"
     return path if path.is_dir() else None
 
@@ -352,7 +349,7 @@ def schema_errors(data: bytes, schema: str) -> list[str]:
     [] when valid (or when lxml or the schemas are not available)."""
     folder = schema_dir()
     try:
-        from lxml import etree  # noqa: PLC0415
+        from lxml import etree  # noqa: PLC0415 - lxml (fmpy's XML library): optional, for the schema check only
     except ImportError:
         return []
     if folder is None:

@@ -379,7 +379,8 @@ def parse_system(data: dict, path: Path | None = None, base_dir: Path | None = N
         for var, val in start.items():
             if not isinstance(val, (bool, int, float, str)):
                 raise CosimError(f"{cw}.start.{var} must be a number, boolean or string (got {val!r})")
-        components.append(ComponentSpec(name, resolve_fmu_path(fmu, base_dir, f"{cw}.fmu", fmu_dir), mult, dict(start), fmu))
+        path_ = resolve_fmu_path(fmu, base_dir, f"{cw}.fmu", fmu_dir)
+        components.append(ComponentSpec(name, path_, mult, dict(start), fmu))
 
     connections: list[Connection] = []
     conns_raw = data.get("connections", [])

@@ -6,10 +6,18 @@ application adds), ``execute`` (runs prepared on the client, executed on Dask wo
 scenarios by name and the FMUs by name come from the application's hooks.
 """
 
-from .execute import (SweepOutcome, cpu_count, dask_client, execute_run, is_done, local_cluster, prepare_runs,
-                      run_signature, run_sweep)
-from .spec import (Param, RunPlan, SweepHooks, SweepSpec, load_sweep, parse_param, parse_sweep,
-                   run_id)
+from .execute import (
+    SweepOutcome,
+    cpu_count,
+    dask_client,
+    execute_run,
+    is_done,
+    local_cluster,
+    prepare_runs,
+    run_signature,
+    run_sweep,
+)
+from .spec import Param, RunPlan, SweepHooks, SweepSpec, load_sweep, parse_param, parse_sweep, run_id
 from .summary import plot_summary, read_summary, write_summary
 
 __all__ = ["Param", "RunPlan", "SweepHooks", "SweepOutcome", "SweepSpec", "cpu_count", "dask_client", "execute_run",

@@ -37,7 +37,6 @@ from dataclasses import dataclass, replace
 from importlib.metadata import version
 from pathlib import Path
 
-
 from ..engine.errors import CosimError, close_matches, one_line
 from ..engine.fmu import FmuInstance, convert_start, variable_unit
 from ..engine.master import Master
@@ -46,7 +45,6 @@ from ..engine.recording import write_metrics
 from ..engine.system import SystemSpec, resolve_fmu_path
 from .spec import RUNS_DIR, Param, RunPlan, SweepHooks, SweepSpec, parse_param
 from .summary import _row, plot_summary, write_summary
-
 
 # --- the runs, prepared on the client -------------------------------------------------
 

@@ -53,11 +53,11 @@ def read_summary(path) -> list[dict]:
 def plot_summary(sweep: SweepSpec, rows: list[dict], path: Path) -> Path | None:
     """Each chosen metric (rows of panels) against each swept parameter (columns); failed
     runs as red crosses on the x axis. None when matplotlib is missing."""
-    try:  # matplotlib: heavy, loaded only to draw (and optional for the sweep engine)
-        import matplotlib  # noqa: PLC0415
+    try:  # optional for the sweep engine
+        import matplotlib  # noqa: PLC0415 - matplotlib: heavy, only when drawing
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt  # noqa: PLC0415
-        from matplotlib.transforms import blended_transform_factory  # noqa: PLC0415
+        import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+        from matplotlib.transforms import blended_transform_factory  # noqa: PLC0415 - matplotlib: heavy, only when drawing
     except ImportError:
         return None
     params, metrics = sweep.swept, sweep.metrics

@@ -22,6 +22,7 @@ a quick look).
 from __future__ import annotations
 
 import copy
+import json
 import math
 import os
 import time
@@ -107,7 +108,7 @@ def run_sweeps(runs_dir: Path, workers: int = 2, small: bool = False, stop_time:
     """Run the sweeps ``names`` into ``runs_dir/<name>`` on one local cluster of ``workers``
     processes (or ``client``). Returns {"runs": runs made now, "elapsed": s, "run_walls": s}:
     the sum of the runs' own wall times over the elapsed time is the parallel speed-up seen."""
-    from distributed import Client  # noqa: PLC0415
+    from distributed import Client  # noqa: PLC0415 - dask: heavy, only when the sweeps run
 
 
     specs = [(name, sweep_spec(name, small, stop_time)) for name in names]
@@ -134,8 +135,6 @@ def run_sweeps(runs_dir: Path, workers: int = 2, small: bool = False, stop_time:
 
 
 def _wall(out: Path, run: str) -> float:
-    import json  # noqa: PLC0415
-
     try:
         m = json.loads((out / "runs" / run / "metrics.json").read_text(encoding="utf-8"))
         return float(m.get("wall_time_s") or 0.0)
@@ -209,8 +208,9 @@ def grid_of(rows: list[dict], m: Map) -> dict:
     ys = sorted({float(r[m.y]) for r in rows})
     shape = (len(ys), len(xs))
     g = {"x": _axis(xs, m.x_nominal), "y": _axis(ys, m.y_nominal),
-         "speed": np.full(shape, np.nan), "bias": np.full(shape, np.nan), "angle": np.full(shape, np.nan), "slips": np.zeros(shape, int),
-         "stable": np.zeros(shape, bool), "diverged": np.zeros(shape, bool), "status": np.full(shape, "not run", dtype=object)}
+         "speed": np.full(shape, np.nan), "bias": np.full(shape, np.nan), "angle": np.full(shape, np.nan),
+         "slips": np.zeros(shape, int), "stable": np.zeros(shape, bool), "diverged": np.zeros(shape, bool),
+         "status": np.full(shape, "not run", dtype=object)}
     for r in rows:
         i, j = ys.index(float(r[m.y])), xs.index(float(r[m.x]))
         g["speed"][i, j] = r["speed_rms_after"]
@@ -226,10 +226,10 @@ def grid_of(rows: list[dict], m: Map) -> dict:
 # --- figures -----------------------------------------------------------------------------------
 
 def _plt():
-    import matplotlib  # noqa: PLC0415
+    import matplotlib  # noqa: PLC0415 - matplotlib: heavy, only when drawing
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
 
     return plt
 
@@ -241,8 +241,10 @@ def _outline(ax, stable: np.ndarray) -> None:
         for j in range(nx):
             if not stable[i, j]:
                 continue
-            for di, dj, seg in ((-1, 0, ((j - .5, j + .5), (i - .5, i - .5))), (1, 0, ((j - .5, j + .5), (i + .5, i + .5))),
-                                (0, -1, ((j - .5, j - .5), (i - .5, i + .5))), (0, 1, ((j + .5, j + .5), (i - .5, i + .5)))):
+            for di, dj, seg in ((-1, 0, ((j - .5, j + .5), (i - .5, i - .5))),
+                                (1, 0, ((j - .5, j + .5), (i + .5, i + .5))),
+                                (0, -1, ((j - .5, j - .5), (i - .5, i + .5))),
+                                (0, 1, ((j + .5, j + .5), (i - .5, i + .5)))):
                 a, b = i + di, j + dj
                 if not (0 <= a < ny and 0 <= b < nx) or not stable[a, b]:
                     ax.plot(*seg, color="k", lw=2.2)
@@ -251,7 +253,7 @@ def _outline(ax, stable: np.ndarray) -> None:
 def map_figure(m: Map, grids: dict, path: Path) -> Path:
     """Heat maps (one column per controller) of the speed RMS error and the angle RMS error after
     T_FROM; cells annotated, runs that did not complete crossed, the stable region outlined."""
-    from matplotlib.colors import LogNorm  # noqa: PLC0415
+    from matplotlib.colors import LogNorm  # noqa: PLC0415 - matplotlib: heavy, only when drawing
 
     plt = _plt()
     keys = [k for k, _ in CONTROLLERS if k in grids]
@@ -414,7 +416,8 @@ def render(grids: dict, mc: list[dict], dead: list[tuple[dict, dict]], figs: dic
               "L_d ±10 % (uniform, all at once: hot copper, hot magnet, saturation and tolerances) with "
               "σ = 1 A noise on each phase current, road step to 11° after the start; the same samples "
               f"with the EKF's ψ adaptation (`{MONTE_CARLO_ADAPT}.toml`).", "",
-              "| controller | samples | failure rate (not stable) | 95 % interval (Wilson) | diverged | 95 % interval | "
+              "| controller | samples | failure rate (not stable) | 95 % interval (Wilson) | diverged "
+              "| 95 % interval | "
               "did not complete |", "|---|---|---|---|---|---|---|"]
         for k, (label, rows) in enumerate(mc.items()):
             n = len(rows)
@@ -422,7 +425,8 @@ def render(grids: dict, mc: list[dict], dead: list[tuple[dict, dict]], figs: dic
             div = sum(1 for r in rows if r["diverged"])
             lo, hi = wilson(fails, n)
             dlo, dhi = wilson(div, n)
-            L.append(f"| {label} | {n} | **{fails}/{n} = {100 * fails / n:.1f} %** | {100 * lo:.1f} … {100 * hi:.1f} % | "
+            L.append(f"| {label} | {n} | **{fails}/{n} = {100 * fails / n:.1f} %** | "
+                     f"{100 * lo:.1f} … {100 * hi:.1f} % | "
                      f"{div}/{n} = {100 * div / n:.1f} % | {100 * dlo:.1f} … {100 * dhi:.1f} % | "
                      f"{sum(1 for r in rows if r['status'] != 'completed')} |")
         L.append("")
@@ -481,7 +485,8 @@ def render(grids: dict, mc: list[dict], dead: list[tuple[dict, dict]], figs: dic
     if timing:
         L += ["## Cost", "",
               f"{timing['runs']} runs made by the last generation that ran any in {timing['elapsed']:.0f} s on "
-              f"{timing['workers']} Dask worker(s) ({timing.get('cores', os.cpu_count())} cores, load average at the end "
+              f"{timing['workers']} Dask worker(s) ({timing.get('cores', os.cpu_count())} cores, "
+              f"load average at the end "
               f"{timing['load']}); the runs' own wall times add up to {timing['run_walls']:.0f} s: a "
               f"speed-up of {timing['run_walls'] / max(timing['elapsed'], 1e-9):.2f} over running them one "
               "after the other (`benchmarks/sweep_speedup.py` measures it on equal runs).", ""]
@@ -590,8 +595,6 @@ def generate(out: Path | str = "docs", runs_dir: Path | str = "runs/robustness",
     """Run the sweeps (unless ``run`` is False: then the runs in ``runs_dir`` as they are) and write
     ``out/robustness.md`` with its figures in ``out/robustness/``. Returns the page's path."""
     out, runs_dir = Path(out), Path(runs_dir)
-    import json  # noqa: PLC0415
-
     timing = None
     record = runs_dir / "generation.json"  # the cost of the last generation that made runs
     if run:

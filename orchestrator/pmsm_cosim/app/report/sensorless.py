@@ -17,8 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from pmsm_ev.params import DT_DEFAULT, MotorParams, StartupParams
-from pmsm_ev.results import (STARTUP_BAND, STARTUP_FROM, row_timing_corrected_angle_error, roll_back,
-                             sensorless_metrics)
+from pmsm_ev.results import STARTUP_BAND, STARTUP_FROM, roll_back, row_timing_corrected_angle_error, sensorless_metrics
 from pmsm_ev.scenarios import SENSORLESS_START_DELAY
 
 #: the runs: (short name, shipped scenario, title)
@@ -79,10 +78,10 @@ def _finish(plt, fig, axes, path: Path, mode_axis=None) -> Path:
 
 def figures(data, fig_dir: Path) -> list[Path]:
     """The first 15 s of the start-up from the 8 angles, and the hill stop and restart."""
-    import matplotlib  # noqa: PLC0415 (lazy: matplotlib costs ~0.5 s to import)
+    import matplotlib  # noqa: PLC0415 - matplotlib: heavy (~0.5 s), only when drawing
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
 
     made = []
     runs = [(k, data.runs.get(f"sl-start{k}-exact-sensorless")) for k in range(len(ANGLES))]
@@ -229,7 +228,8 @@ def _table(data) -> list[str]:
                     f"{_num(f.get('speed_rms_after'), '.3f')} | {_num(ratio)} | {_num(f.get('step_dev_max'))} | "
                     f"{_num(dip_ratio)} | {_num(f.get('settling_max'))} | {_num(extra)} | "
                     f"{_num(f['angle_max_after'], '.4f')} | {_num(f['turns'], '.1f')} | "
-                    f"{_num(100 * f['roll_back_start'])} | {_num(None if f['roll_back_after'] is None else 100 * f['roll_back_after'])} |")
+                    f"{_num(100 * f['roll_back_start'])} | "
+                    f"{_num(None if f['roll_back_after'] is None else 100 * f['roll_back_after'])} |")
     return lines
 
 

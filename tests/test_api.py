@@ -1,0 +1,89 @@
+"""The Python API (``pmsm_cosim.simulate``): the numbers of ``pmsm-cosim run``, as a numpy
+structured array and the metrics dict, with no file written unless asked; a user's system
+without the drive's columns runs and says it has no drive metrics."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import pmsm_cosim
+from orchestrator_support import project_fmus, toy_system
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.engine.errors import CosimError
+from pmsm_cosim.engine.recording import read_results
+
+STOP = 0.3
+
+
+@pytest.fixture(scope="module")
+def fmus():
+    return project_fmus()
+
+
+@pytest.fixture(scope="module")
+def cli_run(fmus, tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "run"
+    assert main(["run", "scenario2", "--stop-time", str(STOP), "--no-figures", "--quiet", "--out", str(out),
+                 "--controller", str(fmus["FocEkf4"]), "--set", "ctrl.angle_source=estimated"]) == 0
+    return read_results(out), json.loads((out / "metrics.json").read_text())
+
+
+def test_simulate_gives_the_numbers_of_the_command_line_and_writes_nothing(fmus, cli_run, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result, metrics = pmsm_cosim.simulate("scenario2", stop_time=STOP, controller="ekf4",
+                                          set={"ctrl.angle_source": "estimated"})
+    columns, cli_metrics = cli_run
+    assert isinstance(result, np.ndarray) and result.dtype.names == tuple(columns)
+    assert len(result) == round(STOP / 0.01) + 1
+    for name, values in columns.items():
+        assert np.array_equal(result[name], values), name  # bit for bit
+    assert metrics["status"] == "completed"
+    for key in ("speed_rms_error", "theta_error_max", "omega_hat_rms_error"):
+        assert metrics[key] == cli_metrics[key]
+    ctrl = next(c for c in metrics["settings"]["components"] if c["name"] == "ctrl")
+    assert ctrl["fmu"].endswith("FocEkf4.fmu") and ctrl["start"]["angle_source"] == "estimated"
+    assert list(tmp_path.iterdir()) == []  # no runs/ directory, no file
+
+
+def test_simulate_writes_the_run_files_when_asked(fmus, tmp_path):
+    out = tmp_path / "run"
+    result, metrics = pmsm_cosim.simulate("scenario1", stop_time=0.1, output_dir=out,
+                                          set=["ctrl.q_TL=0.02"])
+    assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "results.csv"]
+    assert np.array_equal(read_results(out)["omega_m"], result["omega_m"])
+    assert json.loads((out / "metrics.json").read_text())["speed_rms_error"] == metrics["speed_rms_error"]
+
+
+def test_a_user_system_without_the_drive_columns_runs_and_says_so(tmp_path, capsys):
+    path = toy_system(tmp_path, stop_time=0.01)
+    result, metrics = pmsm_cosim.simulate(path)
+    assert metrics["status"] == "completed"
+    assert "speed_rms_error" not in metrics
+    assert metrics["metrics_note"].startswith("no drive metrics: the recorded columns lack delta_deg, omega_ref")
+    assert result.dtype.names == ("time", "y", "src_calls", "last_u", "snk_calls", "last_h", "last_t")
+    assert len(result) == 11
+    out = tmp_path / "cli"
+    assert main(["run", str(path), "--out", str(out), "--no-figures"]) == 0
+    assert "note: no drive metrics: the recorded columns lack" in capsys.readouterr().err
+    assert json.loads((out / "metrics.json").read_text())["metrics_note"] == metrics["metrics_note"]
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    ({"stop_time": -1.0}, "stop_time must be a finite number > 0 s (got -1.0)"),
+    ({"controller": "ekf6"}, "controller='ekf6': give an .fmu file, a shipped FMU"),
+    ({"set": {"ctrl.nope": 1}}, "has no variable 'nope'"),
+    ({"set": ["ctrl.q_TL"]}, "expected INSTANCE.VAR=VALUE"),
+    ({"algorithm": "euler"}, "algorithm must be gauss-seidel or jacobi"),
+])
+def test_bad_input_is_a_one_line_error(fmus, kwargs, message):
+    with pytest.raises(CosimError) as e:
+        pmsm_cosim.simulate("scenario2", **{"stop_time": 0.01, **kwargs})
+    assert message in str(e.value) and "\n" not in str(e.value)
+
+
+def test_an_unknown_scenario_names_the_close_ones():
+    with pytest.raises(CosimError, match="no scenario or system file 'scenario3'.*did you mean"):
+        pmsm_cosim.simulate("scenario3")
