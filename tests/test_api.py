@@ -5,6 +5,7 @@ without the drive's columns runs and says it has no drive metrics."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -87,3 +88,14 @@ def test_bad_input_is_a_one_line_error(fmus, kwargs, message):
 def test_an_unknown_scenario_names_the_close_ones():
     with pytest.raises(CosimError, match="no scenario or system file 'scenario3'.*did you mean"):
         pmsm_cosim.simulate("scenario3")
+
+
+def test_the_readme_example_runs_as_written(fmus, tmp_path, monkeypatch, capsys):
+    text = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
+    block = text.split("**From Python.**", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(block, "README.md", "exec"), scope)  # noqa: S102 - the README's own example
+    status, rms = capsys.readouterr().out.split()
+    assert status == "completed" and 0 < float(rms) < 20
+    assert len(scope["omega_error"]) == 6001 and list(tmp_path.iterdir()) == []

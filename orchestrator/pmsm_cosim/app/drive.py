@@ -22,7 +22,7 @@ from pmsm_ev.results import CONTRACT_COLUMNS, compute_metrics
 from pmsm_ev.scenarios import ROUTE_SIGNALS, ProfileError, route_to_json
 from pmsm_ev_fmus import build as fmu_build
 
-from ..engine import ssp as engine_ssp
+from ..engine import ssp_export
 from ..engine.errors import CosimError, close_matches, one_line
 from ..engine.loading import load_system as load_system_file
 from ..engine.recording import read_results
@@ -146,7 +146,7 @@ def draw_figures(run_dir: Path, scenario_label, quiet: bool = False) -> list[Pat
 
 # --- SSP export ----------------------------------------------------------------------------
 
-def export_ssp(spec: SystemSpec, dest, quiet: bool = False, route_fmu: Path | None = None) -> engine_ssp.ExportSummary:
+def export_ssp(spec: SystemSpec, dest, quiet: bool = False, route_fmu: Path | None = None) -> ssp_export.ExportSummary:
     """``spec`` as an SSP 1.0 package: its signals (the route ``delta``, ``omega_ref``) in a
     copy of the RouteProfile FMU (``route_fmu``, default the project's, built if needed),
     String parameters of the project's FMUs in copies of them."""
@@ -169,7 +169,7 @@ def export_ssp(spec: SystemSpec, dest, quiet: bool = False, route_fmu: Path | No
         source = route_fmu if route_fmu is not None else project_route_fmu(quiet)
         return fmu_build.write_route_fmu(route_json, work / "RouteProfile.fmu", source=source)
 
-    return engine_ssp.export_ssp(spec, dest, signal_fmu=signal_fmu if spec.signals else None,
+    return ssp_export.export_ssp(spec, dest, signal_fmu=signal_fmu if spec.signals else None,
                                  carries_starts=fmu_build.takes_packaged_starts,
                                  string_start_fmu=fmu_build.write_fmu_with_starts,
                                  tool=f"pmsm-ev-cosim {__version__}")

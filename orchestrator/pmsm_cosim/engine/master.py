@@ -41,8 +41,9 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .checks import check_wiring, time_grid, unconnected_inputs
 from .errors import CosimError, one_line
-from .fmu import STATUS, FmuInstance, real_array, variable_unit, vr_array
+from .fmu import STATUS, FmuInstance, real_array, vr_array
 from .recording import ResultWriter, write_metrics
 from .system import COLUMN_CONVERSIONS, SystemSpec
 
@@ -53,11 +54,6 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _NEVER = sys.maxsize
 #: connections per transfer up to which the finiteness check is an unrolled sum
 _UNROLL = 8
-
-
-def _a(word: str) -> str:
-    """``word`` with its indefinite article."""
-    return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"
 
 
 class _StepFailed(Exception):
@@ -118,110 +114,20 @@ class Master:
     def __init__(self, spec: SystemSpec):
         self.spec = spec
         self.h = spec.step_size
-        self.n_steps, self.every = self._grid()
+        self.n_steps, self.every = time_grid(spec)
         self.instances: dict[str, FmuInstance] = {}
         try:
             for comp in spec.components:
                 self.instances[comp.name] = FmuInstance(comp.name, comp.fmu)
-            self._check()
+            check_wiring(spec, self.instances)
         except BaseException:
             self.close()
             raise
-        self.warnings: list[str] = self._unconnected_inputs()
+        self.warnings: list[str] = unconnected_inputs(spec, self.instances)
         self._stop_requested = False
         self._stop_signal = ""  #: the name of the signal that asked for the stop
         self._finishing = False
         self.loop_cpu_time = 0.0
-
-    # -- checks at load ----------------------------------------------------------
-    def _grid(self) -> tuple[int, int]:
-        s, h = self.spec, self.spec.step_size
-        where = f"{s.path}: " if s.path else ""
-        if h is None:  # an SSP package need not declare one
-            raise CosimError(f"{where}no communication step size is given (give one with --step)")
-        if s.stop_time is None:
-            raise CosimError(f"{where}no stop time is given (give one with --stop-time)")
-        if s.output_interval is None:
-            s.output_interval = h
-        n = round(s.stop_time / h)
-        if n < 1:
-            raise CosimError(f"{where}stop time {s.stop_time:g} s is shorter than one {h:g} s step")
-        if abs(n * h - s.stop_time) > 1e-9 * max(1.0, s.stop_time):
-            below, above = math.floor(s.stop_time / h), math.ceil(s.stop_time / h)
-            hint = " or ".join(f"{k * h:.12g}" for k in sorted({below, above}) if k >= 1)
-            raise CosimError(f"{where}stop time {s.stop_time:g} s is not a whole number of {h:g} s steps "
-                             f"(the nearest that are: {hint} s)")
-        every = round(s.output_interval / h)
-        if every < 1 or abs(every * h - s.output_interval) > 1e-9 * max(1.0, s.output_interval):
-            below, above = max(1, math.floor(s.output_interval / h)), max(1, math.ceil(s.output_interval / h))
-            hint = " or ".join(f"{k * h:.12g}" for k in sorted({below, above}))
-            raise CosimError(f"{where}output interval {s.output_interval:g} s is not a multiple of the {h:g} s "
-                             f"step (the nearest that are: {hint} s)")
-        for c in s.components:
-            if n % c.step_multiple:
-                raise CosimError(f"{where}stop time {s.stop_time} s is not a multiple of {c.name}'s step "
-                                 f"({c.step_multiple} x {h} s)")
-        return n, every
-
-    def _check(self) -> None:
-        s = self.spec
-        where = f"{s.path}: " if s.path else ""
-        for conn in s.connections:
-            ctx = f"{where}connection {conn}"
-            src = self.instances[conn.src].variable(conn.src_var, ctx)
-            dst = self.instances[conn.dst].variable(conn.dst_var, ctx)
-            if src.causality != "output":
-                raise CosimError(f"{ctx}: {conn.src}.{conn.src_var} is {_a(src.causality)}, not an output "
-                                 f"(a connection goes from an output to an input)")
-            if dst.causality != "input":
-                raise CosimError(f"{ctx}: {conn.dst}.{conn.dst_var} is {_a(dst.causality)}, not an input "
-                                 f"(a connection goes from an output to an input)")
-            for ref, sv in ((f"{conn.src}.{conn.src_var}", src), (f"{conn.dst}.{conn.dst_var}", dst)):
-                if sv.type != "Real":
-                    raise CosimError(f"{ctx}: {ref} is {_a(sv.type)}; only Real variables can be connected")
-            u_src, u_dst = variable_unit(src), variable_unit(dst)
-            if u_src and u_dst and u_src != u_dst:
-                raise CosimError(f"{ctx}: units differ ({u_src!r} -> {u_dst!r})")
-        for sig in s.signals.values():
-            for inst, var in sig.drives:
-                ctx = f"{where}signal {sig.name}"
-                sv = self.instances[inst].variable(var, ctx)
-                if sv.causality != "input" or sv.type != "Real":
-                    raise CosimError(f"{ctx}: {inst}.{var} is {_a(sv.type)} {sv.causality}; "
-                                     f"a signal drives Real inputs")
-                u = variable_unit(sv)
-                if u and sig.unit and u != sig.unit:
-                    raise CosimError(f"{ctx}: the signal is in {sig.unit!r} but {inst}.{var} is in {u!r}")
-        for col in s.columns:
-            if col.kind != "variable":
-                continue
-            ctx = f"{where}record.{col.name}"
-            sv = self.instances[col.instance].variable(col.variable, ctx)
-            if sv.type not in ("Real", "Integer", "Enumeration", "Boolean"):
-                raise CosimError(f"{ctx}: {col.instance}.{col.variable} is {_a(sv.type)}; "
-                                 f"only numbers can be recorded")
-            if col.unit:
-                need = COLUMN_CONVERSIONS[col.unit][0]
-                u = variable_unit(sv)
-                if sv.type != "Real" or (u and u != need):
-                    raise CosimError(f"{ctx}: cannot convert {col.instance}.{col.variable} "
-                                     f"({u or sv.type}) to {col.unit!r}")
-        for comp in s.components:
-            inst = self.instances[comp.name]
-            for var in comp.start:
-                inst.check_settable(var, f"start value {comp.name}.{var}")
-
-    def _unconnected_inputs(self) -> list[str]:
-        driven = {(c.dst, c.dst_var) for c in self.spec.connections}
-        driven |= {d for sig in self.spec.signals.values() for d in sig.drives}
-        out = []
-        for name, inst in self.instances.items():
-            for sv in inst.md.modelVariables:
-                if sv.causality == "input" and (name, sv.name) not in driven \
-                        and sv.name not in self.spec.component(name).start:
-                    out.append(f"input {name}.{sv.name} is not connected; it keeps its start value "
-                               f"({sv.start if sv.start is not None else 'none declared'})")
-        return out
 
     # -- set-up --------------------------------------------------------------------
     def _build(self) -> None:
