@@ -3,10 +3,12 @@
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from pmsm_cosim.engine.signals import TableError, load_table_csv
+from pmsm_cosim.engine.signals import Table, TableError, load_table_csv
 from pmsm_ev.params import ScenarioParams
-from pmsm_ev.scenarios import ProfileError, elevation_profile, speed_reference
+from pmsm_ev.scenarios import Profile, ProfileError, elevation_profile, speed_reference
 
 
 def deg(p, t):
@@ -59,3 +61,20 @@ def test_csv_profile_errors_name_file_and_line(tmp_path, text, where):
     with pytest.raises(TableError) as e:
         load_table_csv(f)
     assert "bad.csv" in str(e.value) and where in str(e.value)
+
+
+# The engine's signal tables (system files) and the physics' profiles (the paper's routes, carried
+# inside the RouteProfile FMU, which bundles pmsm_ev only) are two classes on purpose: the engine
+# imports no pmsm_ev. They must give the same number at every time, bit for bit, or a route
+# played by the master and by the RouteProfile FMU would differ.
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(-1e3, 1e3), st.floats(-1e6, 1e6)), min_size=1, max_size=8,
+                unique_by=lambda p: p[0]),
+       st.sampled_from(("previous", "linear")),
+       st.lists(st.floats(-2e3, 2e3), min_size=1, max_size=20))
+def test_engine_tables_and_physics_profiles_agree_bit_for_bit(points, interpolation, times):
+    points = sorted(points)
+    ts, vs = tuple(p[0] for p in points), tuple(p[1] for p in points)
+    table, profile = Table(ts, vs, interpolation), Profile(ts, vs, interpolation)
+    for t in list(times) + list(ts):
+        assert table(t) == profile(t) or (math.isnan(table(t)) and math.isnan(profile(t)))

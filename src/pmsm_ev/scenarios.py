@@ -36,6 +36,8 @@ class Profile:
     """A signal given at breakpoints: piecewise-constant ("previous") or linear.
 
     Before the first breakpoint the first value holds, after the last the last value.
+    The co-simulation engine's ``pmsm_cosim.engine.signals.Table`` (system files) evaluates
+    the same way; ``tests/test_scenarios.py`` holds the two equal, bit for bit.
     """
 
     times: tuple[float, ...]

@@ -27,6 +27,9 @@ class Table:
     """A signal given at breakpoints: piecewise-constant ("previous") or linear.
 
     Before the first breakpoint the first value holds, after the last the last value.
+    ``pmsm_ev.scenarios.Profile`` evaluates the same way (the routes the RouteProfile FMU
+    carries, which bundles ``pmsm_ev`` only); the engine imports no ``pmsm_ev``, so the two
+    stay apart and ``tests/test_scenarios.py`` holds them equal, bit for bit.
     """
 
     times: tuple[float, ...]
