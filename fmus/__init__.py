@@ -1,5 +1,6 @@
-"""FMI 2.0 co-simulation units of the drive: pythonfmu slaves around ``pmsm_ev`` and
-their build (``build_all``, ``main``; see ``pmsm_ev_fmus.build``).
+"""pmsm_ev_fmus (the folder ``fmus/``, where the built FMUs are too): FMI 2.0 co-simulation
+units of the drive, pythonfmu slaves around ``pmsm_ev``, and their build (``build_all``,
+``main``; see ``pmsm_ev_fmus.build``).
 
 FMUs: ``PmsmEvPlant`` (vehicle + PMSM) and one controller-plus-observer FMU per observer,
 all with one interface: ``FocEkf5`` (the paper's EKF), ``FocEkf4``, ``FocEkf5AB``,
