@@ -16,8 +16,9 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 ENGINE = ROOT / "orchestrator" / "pmsm_cosim" / "engine"
 #: what the engine may import besides the standard library and itself (lxml: fmpy's XML library,
-#: for the SSP schema check; tomli: the standard library's tomllib on Python 3.10)
-ENGINE_ALLOWED = {"numpy", "fmpy", "lxml", "tomli"}
+#: for the SSP schema check; tomllib, in the standard library from Python 3.11, and tomli, the
+#: same parser as a package on Python 3.10, whose standard library names neither)
+ENGINE_ALLOWED = {"numpy", "fmpy", "lxml", "tomllib", "tomli"}
 #: the package folders, as pyproject.toml maps them to import names
 PACKAGES = {"pmsm_ev": ROOT / "src" / "pmsm_ev", "pmsm_ev_fmus": ROOT / "fmus",
             "pmsm_cosim": ROOT / "orchestrator" / "pmsm_cosim"}
