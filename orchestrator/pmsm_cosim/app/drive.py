@@ -76,7 +76,7 @@ def load_system(name_or_path) -> SystemSpec:
 
 # --- figures of merit ------------------------------------------------------------------
 
-def has_drive_columns(columns) -> list[str]:
+def missing_drive_columns(columns) -> list[str]:
     """The drive's contract columns (``pmsm_ev.results.CONTRACT_COLUMNS``) missing from ``columns``."""
     present = set(columns)
     return [c for c in CONTRACT_COLUMNS if c not in present]
@@ -86,7 +86,7 @@ def drive_metrics(out_dir, columns, rows: int) -> dict:
     """The drive's figures of merit of a run in ``out_dir`` (the master's ``metrics_of``):
     ``pmsm_ev.results.compute_metrics`` of its results.csv; a note instead when the recorded
     columns are not the drive's (a user's own system), nothing when no row was written."""
-    missing = has_drive_columns(columns)
+    missing = missing_drive_columns(columns)
     if missing:
         return {"metrics_note": "no drive metrics: the recorded columns lack " + ", ".join(missing)
                                 + " (pmsm_ev.results.CONTRACT_COLUMNS)"}
