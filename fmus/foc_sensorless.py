@@ -18,8 +18,14 @@ class FocSensorless(FocSlave):
             "then an I-f (current-frequency) start following omega_ref, handover to FOC on the EKF's angle and "
             "speed once omega_hat agrees with the I-f speed above omega_up, and back to I-f below omega_down "
             "(stop and hold on a slope). Truly sensorless: the inputs theta_meas and omega_meas are never read. "
-            "Start-up: t_ramp + t_hold + t_sweep + t_settle (2.3 s by default) of alignment before the rotor "
-            "turns, so a route should hold omega_ref = 0 that long",
+            "The speed reference may do anything from t = 0: during the alignment (t_ramp + t_hold + t_sweep + "
+            "t_settle, 2.3 s by default) it is not read, and then the I-f speed starts from the rotor's and "
+            "follows it as fast as the vector's torque allows (if_accel at most, the current sized for the load "
+            "and the acceleration at the load angle if_load_angle); the vector never leads or trails the EKF's "
+            "angle by more than guard_angle (the rotor cannot fall out of step); a loss of synchronism is "
+            "detected (slip_tol, slip_time), recovered (a flying handover to FOC, or the vector put back on the "
+            "rotor), and reported on the output fault, which latches the safe state (stop and hold at i_q_max) "
+            "when the recovery fails within fault_time",
             parameter_notes={"q_omega_ekf4": "not used by this observer",
                              "x0_omega": "not used (the EKF restarts at rest after the alignment)",
                              "x0_theta": "not used (the EKF restarts at the aligned angle)",

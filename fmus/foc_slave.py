@@ -101,6 +101,17 @@ class FocSlave(DriveSlave):
                                       "drive, 2 FOC on the observer's angle and speed (only the sensorless "
                                       "unit has modes 0 and 1; the others are always 2)" + hold,
                         discrete=True, start=0.0 if observer == "sensorless" else 2.0)
+        self.add_output("fault", None, "fault: 0 none, 1 a loss of synchronism (or the current limit reached "
+                                       "under a load the drive cannot hold) detected and being recovered, 2 the "
+                                       "recovery failed: the safe state latched (stop and hold at the current "
+                                       "limit) until the unit is reset (only the sensorless unit detects; the "
+                                       "others are always 0)" + hold, discrete=True)
+        self.add_output("theta_ctrl", "rad", "electrical angle of the control frame (before angle_advance): the "
+                                             "alignment or I-f current vector's in those modes, else the angle the "
+                                             "controller uses (theta_hat, or theta_meas)" + hold, discrete=True)
+        self.add_output("omega_ctrl", "rad/s", "mechanical speed of the control frame: the I-f speed in I-f, else "
+                                               "the speed the controller uses (omega_hat)" + hold, discrete=True,
+                        display_unit="rpm")
         self._sensorless = observer == "sensorless"
         if self._sensorless:
             self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams)
@@ -126,6 +137,7 @@ class FocSlave(DriveSlave):
         self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
                                  self.parameters(ControllerParams), self.parameters(EkfParams), dt,
                                  self.parameters(StartupParams) if self._sensorless else None)
+        self._measured_frame = self._unit.angle_source == "measured"
         self.mark_built()
         self._copy_outputs()
 
@@ -154,6 +166,9 @@ class FocSlave(DriveSlave):
         self.i_qref = u.i_qref
         self.i_d_hat, self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat = u.estimates
         self.mode = u.mode
+        self.fault = u.fault
+        self.theta_ctrl = u.theta_ctrl if self._sensorless or u.angle_source == "estimated" else self.theta_meas
+        self.omega_ctrl = u.omega_ctrl
 
     def _start_clock(self, current_time: float, step_size: float) -> None:
         """First step: the sample period (the parameter, else ``step_size``) and the first
@@ -182,12 +197,14 @@ class FocSlave(DriveSlave):
             while n > 0:  # (one per step when h = dt: no range object on the per-step path)
                 if self._sensorless:  # never reads theta_meas, omega_meas
                     (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
-                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode) = self._unit.step(
-                        self.i_alpha, self.i_beta, self.omega_ref)
+                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode, self.fault, self.theta_ctrl,
+                     self.omega_ctrl) = self._unit.step(self.i_alpha, self.i_beta, self.omega_ref)
                 else:
                     (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
                      self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
                         self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
+                    self.omega_ctrl = self.omega_hat
+                    self.theta_ctrl = self.theta_meas if self._measured_frame else self.theta_hat
                 n -= 1
                 self._k_next = k_end
         except Exception as exc:

@@ -26,7 +26,8 @@ The step is ``pmsm_ev.kernels.control_step`` (compiled with numba when available
 Observer "sensorless" is the truly sensorless unit from standstill: the stationary-frame
 EKF5 with a low-speed range (alignment, I-f drive, handover to and from the EKF,
 ``pmsm_ev.params.StartupParams``); its step is ``pmsm_ev.kernels.sensorless_step``, it
-never reads theta_meas or omega_meas, and it returns the mode as a 13th output.
+never reads theta_meas or omega_meas, and it returns the mode, the fault and the control
+frame's angle and speed as outputs 13-16.
 """
 
 from __future__ import annotations
@@ -54,10 +55,14 @@ _STARTUP_SLOTS = (
     ("t_ramp", _k.C_T_RAMP), ("t_hold", _k.C_T_HOLD), ("t_sweep", _k.C_T_SWEEP), ("t_settle", _k.C_T_SETTLE),
     ("i_align", _k.C_I_ALIGN), ("i_if", _k.C_I_IF), ("if_accel", _k.C_IF_ACCEL), ("i_rate", _k.C_I_RATE),
     ("omega_up", _k.C_W_UP), ("omega_down", _k.C_W_DOWN), ("agree_tol", _k.C_AGREE_TOL),
-    ("agree_time", _k.C_AGREE_TIME), ("if_margin", _k.C_IF_MARGIN))
+    ("agree_time", _k.C_AGREE_TIME), ("if_margin", _k.C_IF_MARGIN), ("if_load_angle", _k.C_E_MAX),
+    ("i_rate_load", _k.C_I_RATE_LOAD), ("sync_guard", _k.C_GUARD), ("guard_angle", _k.C_E_GUARD),
+    ("slip_tol", _k.C_SLIP_TOL), ("slip_time", _k.C_SLIP_TIME), ("recover_time", _k.C_RECOVER_TIME),
+    ("fault_time", _k.C_FAULT_TIME))
 #: state slots of the sensorless start-up, saved and restored with the unit
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
-                  _k.S_SLIP)
+                  _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
+                  _k.S_OMEGA_CTRL)
 #: the vector sent to the inverter with dead-time compensation, saved and restored with the unit
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 
@@ -135,6 +140,9 @@ class ControlUnit:
         c[_k.C_IF_DAMP] = 2.0 * self.startup.if_damping * math.sqrt(self.observer.J / self.motor.psi) \
             if self.sensorless else 0.0
         c[_k.C_SLIP_FILTER] = min(dt / st.if_damping_filter, 1.0) if st.if_damping_filter > 0 else 1.0
+        # the I-f sizing: the EKF model's inertia and the sine of the design load angle
+        c[_k.C_J_IF] = float(self.observer.J) if self.sensorless else 0.0
+        c[_k.C_SIN_E] = math.sin(st.if_load_angle)
         self.reset()
 
     def reset(self) -> None:
@@ -163,6 +171,31 @@ class ControlUnit:
     def psi_ratio(self) -> float:
         """The EKF's magnet flux over the nominal psi (1 without ``EkfParams.psi_adapt``)."""
         return float(self._s[_k.S_PSI_RATIO])
+
+    @property
+    def fault(self) -> float:
+        """The sensorless unit's fault (``pmsm_ev.kernels`` FAULT_*): 0 none, 1 a loss of synchronism
+        being recovered, 2 the recovery failed, the safe state latched; 0 for the others."""
+        if not self.sensorless:
+            return _k.FAULT_NONE
+        s = self._s
+        return float(s[_k.S_FAULT]) if s[_k.S_FAULT] == _k.FAULT_LATCHED else (
+            _k.FAULT_RECOVERING if s[_k.S_EPISODE] > 0.0 else _k.FAULT_NONE)
+
+    @property
+    def theta_ctrl(self) -> float:
+        """The control frame's electrical angle of the last period [rad] (before the angle advance):
+        the I-f or alignment vector's for the sensorless unit in those modes, else the EKF's angle;
+        NaN for a unit on the measured angle (the caller has it: theta_meas)."""
+        if self.sensorless:
+            return float(self._s[_k.S_THETA_CTRL])
+        return float(self._s[_k.S_X + 3]) if self.angle_source == "estimated" else math.nan
+
+    @property
+    def omega_ctrl(self) -> float:
+        """The control frame's mechanical speed of the last period [rad/s]: the I-f speed in I-f,
+        else the speed the controller uses (omega_hat; the measured speed for the sensored drive)."""
+        return float(self._s[_k.S_OMEGA_CTRL]) if self.sensorless else float(self._s[_k.S_X + 2])
 
     @property
     def mode(self) -> float:

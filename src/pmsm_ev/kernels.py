@@ -86,7 +86,12 @@ S_MODE, S_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE = range(92, 99)
 S_SLIP = 99  #: I-f: omega_hat - omega_if, low-pass filtered (the damping's input) [rad/s]
 S_V_OUT_ALPHA, S_V_OUT_BETA = 100, 101  #: with dead-time compensation: the vector sent to the inverter
 S_PSI_RATIO = 102  #: with psi adaptation: the EKF's magnet flux over the nominal psi [-]
-UNIT_STATE = 103
+# the sensorless unit's synchronism (``sync_guard``, ``slip_detector``): 1.0 while the load-angle
+# guard holds the I-f vector back; how long the slip has exceeded its bound [s]; the age of the
+# present loss-of-synchronism episode [s] (0: none); how long it has been in synchronism since [s];
+# the fault (FAULT_*); the control frame's angle [rad] and speed [rad/s] of the last period
+S_GUARD, S_LOS, S_EPISODE, S_INSYNC, S_FAULT, S_THETA_CTRL, S_OMEGA_CTRL = range(103, 110)
+UNIT_STATE = 110
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -110,10 +115,20 @@ C_DTC_V, C_DTC_I0 = 66, 67
 #: psi adaptation of the stationary-frame EKF5 (``EkfParams.psi_adapt``): gain [1/s] (0 = off) and
 #: the least |omega_hat| it adapts at [rad/s]
 C_PSI_ADAPT, C_PSI_ADAPT_W = 68, 69
-UNIT_PARAMS = 70
+#: the sensorless unit's I-f sizing and synchronism (``pmsm_ev.params.StartupParams``): the EKF
+#: model's inertia [kg m^2], the design load angle [rad] and its sine, the current rate when the
+#: load exceeds the vector [A/s], the guard on (1.0) or off, the slip bound [rad/s] and time [s],
+#: the time in synchronism that ends an episode [s], the episode's age that latches the fault [s],
+#: the guard's angle [rad]
+(C_J_IF, C_E_MAX, C_SIN_E, C_I_RATE_LOAD, C_GUARD, C_SLIP_TOL, C_SLIP_TIME, C_RECOVER_TIME,
+ C_FAULT_TIME, C_E_GUARD) = range(70, 80)
+UNIT_PARAMS = 80
 
 #: modes of the sensorless unit (``S_MODE``)
 MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
+#: its fault output (``S_FAULT``): none; a loss of synchronism detected, recovery under way; the
+#: recovery failed: the safe state (stop and hold at the current limit) latched
+FAULT_NONE, FAULT_RECOVERING, FAULT_LATCHED = 0.0, 1.0, 2.0
 
 #: observers (``C_OBSERVER``)
 OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
@@ -746,18 +761,108 @@ def restart_ekf(s, c, theta, i_d, i_q):
     s[S_THETA_PRIOR] = theta
 
 
-@kernel(_sig(f"UniTuple({_F}, 13)", _V, _V, _F, _F, _F))
+@kernel()
+def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
+    """Hand the drive to FOC on the EKF (mode EKF), seated on the present state: the speed PI's
+    integral so that (14) returns the present q current in the EKF's frame (``on_load``: the
+    current of the load the EKF sees, T_L_hat / (N psi), after a loss of synchronism, when the
+    present current says nothing of the load), the current PIs on the voltage held, turned by
+    one period of the I-f vector's rotation (``seat_current_pis``)."""
+    theta = s[S_X + 3]
+    i_d, i_q = park(i_alpha, i_beta, theta)
+    i_seat = s[S_X + 4] / (c[C_N] * c[C_PSI]) if on_load else i_q
+    s[S_W_INT] = i_seat - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_seat now
+    seat_current_pis(s, c, theta + c[C_ADVANCE] * omega_hat, c[C_N] * s[S_OMEGA_IF] * c[C_DT],
+                     c[C_I_D_REF], i_q, i_d, i_q, omega_hat)
+    s[S_AGREE] = 0.0
+
+
+@kernel()
+def if_vector_step(s, c, omega_ref):
+    """I-f: turn the vector and size its current from the torque it can give (eq 12 with the rotor
+    lagging the vector by the load angle e: T_e = N psi i sin e; docs/sensorless.md).
+
+    The I-f speed follows ``omega_ref`` with at most ``C_IF_ACCEL`` and at most what the vector's
+    torque at the design load angle ``C_E_MAX`` leaves over the load the EKF sees,
+    J dw/dt = N psi i sin(e_max) - T_L_hat (never forced to turn against the reference by it:
+    a load beyond the vector is the guard's, ``sync_guard``). The target current is at least what
+    the acceleration asked for and that load need at e_max, and ``C_IF_MARGIN`` times the load's
+    current; it never falls in I-f. The magnitude ramps at ``C_I_RATE``, at ``C_I_RATE_LOAD``
+    while the guard holds the vector back (the load exceeds the vector)."""
+    dt = c[C_DT]
+    k_t = c[C_N] * c[C_PSI]
+    t_l = s[S_X + 4]
+    j = c[C_J_IF]
+    t_cap = k_t * s[S_I_MAG] * c[C_SIN_E]
+    step = c[C_IF_ACCEL] * dt
+    hi = min(step, max((t_cap - t_l) / j * dt, 0.0))
+    lo = max(-step, min((-t_cap - t_l) / j * dt, 0.0))
+    w_if = s[S_OMEGA_IF]
+    want = min(max(omega_ref - w_if, -step), step)  # the step the reference asks for
+    s[S_OMEGA_IF] = w_if + min(max(want, lo), hi)
+    s[S_PHI] = wrap_angle(s[S_PHI] + c[C_N] * s[S_OMEGA_IF] * dt)  # (13)
+    need = abs(t_l + j * want / dt) / (k_t * c[C_SIN_E])
+    load_current = c[C_IF_MARGIN] * abs(t_l) / k_t  # eq 12 with i_d = 0, times the margin
+    s[S_I_TGT] = min(max(s[S_I_TGT], need, load_current), c[C_I_Q_MAX])
+    rate = (c[C_I_RATE_LOAD] if s[S_GUARD] != 0.0 else c[C_I_RATE]) * dt
+    s[S_I_MAG] += min(max(s[S_I_TGT] - s[S_I_MAG], -rate), rate)
+
+
+#: the guard counts as holding the vector while it is within this of the guard angle [rad]: 3 deg, so
+#: that a vector held there and turning with the rotor does not flicker in and out
+_GUARD_BAND = math.radians(3.0)
+
+
+@kernel()
+def sync_guard(s, c, omega_hat):
+    """Keep the I-f vector within +-``C_E_GUARD`` of the EKF's rotor angle (electrical): a vector
+    that would lead (or trail) the rotor by more is held there and turns at the rotor's speed, so
+    the rotor cannot fall out of step while the EKF holds its angle. ``S_GUARD`` is 1 from then on
+    until the vector is back by more than ``_GUARD_BAND``."""
+    e = wrap_angle(s[S_PHI] - s[S_X + 3])
+    e_max = c[C_E_GUARD]
+    if e > e_max or e < -e_max:
+        s[S_PHI] = wrap_angle(s[S_X + 3] + (e_max if e > 0.0 else -e_max))
+        s[S_OMEGA_IF] = omega_hat
+        s[S_GUARD] = 1.0
+    elif abs(e) < e_max - _GUARD_BAND:  # released once the vector is back by more than the band
+        s[S_GUARD] = 0.0
+
+
+@kernel()
+def relock(s, c, omega_hat):
+    """Recovery at low speed from a loss of synchronism: the vector put back within the design
+    load angle of the EKF's angle, turning at the EKF's speed, its current raised to the limit."""
+    e = wrap_angle(s[S_PHI] - s[S_X + 3])
+    e_max = c[C_E_MAX]
+    s[S_PHI] = wrap_angle(s[S_X + 3] + min(max(e, -e_max), e_max))
+    s[S_OMEGA_IF] = omega_hat
+    s[S_I_TGT] = c[C_I_Q_MAX]
+    s[S_SLIP] = 0.0
+
+
+@kernel(_sig(f"UniTuple({_F}, 16)", _V, _V, _F, _F, _F))
 def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     """One control period of the sensorless unit (``pmsm_ev.control_unit``, observer
-    "sensorless"): never reads the rotor angle or speed. Returns ``control_step``'s outputs
-    and the mode (``MODE_ALIGN``, ``MODE_IF``, ``MODE_EKF``).
+    "sensorless"): never reads the rotor angle or speed. Returns ``control_step``'s outputs,
+    the mode (``MODE_ALIGN``, ``MODE_IF``, ``MODE_EKF``), the fault (``FAULT_*``) and the control
+    frame's angle [rad] and speed [rad/s].
 
     1. The stationary-frame EKF5 (eqs 23-27 with h = inverse Park) runs in every mode.
     2. Alignment (``C_T_RAMP`` .. ``C_T_SETTLE``): the current vector ramped up on +90 deg,
-       held, swept to 0 deg, held; then the EKF restarts at the aligned angle, at rest.
-    3. I-f: the vector turns at the I-f speed (the reference, slew-limited); its magnitude
-       ramps to its target; handover up once omega_hat agrees with the I-f speed.
+       held, swept to 0 deg, held; then the EKF restarts at the aligned angle, at rest. The
+       speed reference is not read.
+    3. I-f: the vector turns at the I-f speed (the reference, slew-limited by what the vector's
+       torque allows: ``if_vector_step``), within the guard angle of the EKF's angle
+       (``sync_guard``); handover up once omega_hat agrees with the I-f speed.
     4. EKF: FOC (eqs 14-20) on the EKF's angle and speed; back to I-f at low speed.
+    5. Loss of synchronism (I-f): |omega_hat - omega_if| (filtered) above ``C_SLIP_TOL`` +
+       ``C_AGREE_TOL`` |omega_if| for ``C_SLIP_TIME`` (or, a limit reached, the guard holding the
+       vector back with the current at ``C_I_Q_MAX`` that long: an episode, no action); recovery: a flying handover to FOC when
+       |omega_hat| >= ``C_W_DOWN``, else ``relock``; the guard is on while an episode lasts (also when
+       ``C_GUARD`` is off) and in the safe state. An episode ends after ``C_RECOVER_TIME`` in
+       synchronism; one older than ``C_FAULT_TIME`` latches the fault: the safe state is a stop
+       and hold (the reference taken as 0, the I-f current at the limit).
     In alignment and I-f the current PIs work in the vector's frame (reference on its d
     axis, no decoupling: the back-EMF is small there and the integrators carry it).
     """
@@ -771,6 +876,8 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
     if c[C_PSI_ADAPT] != 0.0 and s[S_MODE] == MODE_EKF:
         adapt_psi(s, c)
+    if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
+        omega_ref = 0.0
     t = s[S_CLOCK] * dt
     s[S_CLOCK] += 1.0
     mode = s[S_MODE]
@@ -804,30 +911,48 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         seat_current_pis(s, c, s[S_PHI] + c[C_ADVANCE] * omega_hat, c[C_N] * omega_hat * dt,
                          i_mag, 0.0, i_mag, 0.0, 0.0)
         mode = MODE_IF
+    slipping = False
     if mode == MODE_IF:
         if t > 0.0 and s[S_MODE] == MODE_IF:  # turn the vector (not in the period it was placed)
-            step = c[C_IF_ACCEL] * dt
-            w_if = s[S_OMEGA_IF]
-            s[S_OMEGA_IF] = w_if + min(max(omega_ref - w_if, -step), step)
-            s[S_PHI] = wrap_angle(s[S_PHI] + c[C_N] * s[S_OMEGA_IF] * dt)  # (13)
-            # the target never falls in I-f: at least margin x the load the EKF sees (eq 12 with i_d = 0)
-            load_current = c[C_IF_MARGIN] * abs(s[S_X + 4]) / (c[C_N] * c[C_PSI])
-            s[S_I_TGT] = min(max(s[S_I_TGT], load_current), c[C_I_Q_MAX])
-            rate = c[C_I_RATE] * dt
-            s[S_I_MAG] += min(max(s[S_I_TGT] - s[S_I_MAG], -rate), rate)
+            if s[S_FAULT] == FAULT_LATCHED:
+                s[S_I_TGT] = c[C_I_Q_MAX]
+            if_vector_step(s, c, omega_ref)
+            if c[C_GUARD] != 0.0 or s[S_EPISODE] > 0.0 or s[S_FAULT] == FAULT_LATCHED:  # on while recovering
+                sync_guard(s, c, omega_hat)
         w_if = s[S_OMEGA_IF]
-        if abs(w_if) > c[C_W_UP] and abs(omega_hat - w_if) < c[C_AGREE_TOL] * abs(w_if):
-            s[S_AGREE] += dt
-        else:
-            s[S_AGREE] = 0.0
-        if s[S_AGREE] >= c[C_AGREE_TIME]:  # handover up: FOC on the EKF, seated on the present state
-            theta = s[S_X + 3]
-            i_d, i_q = park(i_alpha, i_beta, theta)
-            s[S_W_INT] = i_q - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_q now
-            seat_current_pis(s, c, theta + c[C_ADVANCE] * omega_hat, c[C_N] * s[S_OMEGA_IF] * dt,
-                             c[C_I_D_REF], i_q, i_d, i_q, omega_hat)
-            s[S_AGREE] = 0.0
-            mode = MODE_EKF
+        slipping = abs(s[S_SLIP]) > c[C_SLIP_TOL] + c[C_AGREE_TOL] * abs(w_if)
+        # in trouble: out of step, or pushed back by a load beyond the vector at the current limit
+        trouble = slipping or (s[S_GUARD] != 0.0 and s[S_I_MAG] >= c[C_I_Q_MAX])
+        s[S_LOS] = s[S_LOS] + dt if trouble else 0.0
+        if s[S_LOS] >= c[C_SLIP_TIME]:
+            s[S_LOS] = 0.0
+            s[S_INSYNC] = 0.0
+            if s[S_EPISODE] == 0.0:
+                s[S_EPISODE] = dt
+            if not slipping:  # at the limit: nothing more to give; the episode runs on to the fault
+                pass
+            elif abs(omega_hat) >= c[C_W_DOWN]:  # loss of synchronism, the rotor turns and the EKF
+                seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)  # holds its angle: flying handover
+                mode = MODE_EKF
+            else:  # at low speed: the vector put back on the rotor
+                relock(s, c, omega_hat)
+            w_if = s[S_OMEGA_IF]
+        slipping = trouble
+        if mode == MODE_IF:
+            if abs(w_if) > c[C_W_UP] and abs(omega_hat - w_if) < c[C_AGREE_TOL] * abs(w_if):
+                s[S_AGREE] += dt
+            else:
+                s[S_AGREE] = 0.0
+            if s[S_AGREE] >= c[C_AGREE_TIME]:  # handover up: FOC on the EKF, seated on the present state
+                seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, False)
+                mode = MODE_EKF
+    if s[S_EPISODE] > 0.0:  # a loss-of-synchronism episode: recovered, or the fault latched
+        s[S_EPISODE] += dt
+        s[S_INSYNC] = 0.0 if slipping else s[S_INSYNC] + dt
+        if s[S_INSYNC] >= c[C_RECOVER_TIME]:
+            s[S_EPISODE] = 0.0
+        elif s[S_EPISODE] >= c[C_FAULT_TIME]:
+            s[S_FAULT] = FAULT_LATCHED
     s[S_MODE] = mode
     if mode == MODE_EKF:
         theta_ctrl = s[S_X + 3]
@@ -847,7 +972,10 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
         i_qref = 0.0
         v_d, v_q = current_step(s, c, s[S_I_MAG], 0.0, i_d, i_q, 0.0)  # (15)-(16), no decoupling
+    s[S_THETA_CTRL] = theta_ctrl
+    s[S_OMEGA_CTRL] = omega_ctrl
+    fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
     v_alpha, v_beta = inverse_park(v_d, v_q, theta_ctrl + c[C_ADVANCE] * omega_ctrl)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
-            s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode)
+            s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta_ctrl, omega_ctrl)

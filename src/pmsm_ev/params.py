@@ -460,9 +460,10 @@ class StartupParams:
     #: I-f current [A] [chosen]: 60 A gives N psi i = 21.5 N m, 1.5x the ~14 N m of the
     #: level-road start (10.5 N m to accelerate J_eq at 20 rad/s^2 plus the rolling load)
     i_if: float = 60.0
-    #: largest I-f acceleration [rad/s^2] [chosen]: 2x the routes' 20 rad/s^2 ramp, so the
-    #: I-f speed follows them; a jump of the reference becomes a ramp the rotor can follow
-    if_accel: float = 40.0
+    #: largest I-f acceleration [rad/s^2] [chosen]: 80 rad/s^2 (1.9 m/s^2 at the car, a brisk
+    #: driver; 4x the routes' 20 rad/s^2 ramp). A jump of the reference becomes a ramp; below
+    #: this, the torque the vector gives sets the acceleration (``if_load_angle``)
+    if_accel: float = 80.0
     #: rate of change of the I-f current magnitude [A/s] [chosen]: 300 A/s, 0.03 A per period.
     #: After a handover down the vector sits on the q axis, where the magnet's spring is
     #: softest; a faster rise kicks the rotor into a swing (measured at the stop on 22 deg:
@@ -491,6 +492,35 @@ class StartupParams:
     #: corrections on noisy currents would jolt omega_hat and with it the I-f damping
     p0_omega_aligned: float = 1.0
     p0_theta_aligned: float = 0.01
+    #: design load angle of the I-f drive [rad] [chosen]: 60 deg. The I-f acceleration is held to
+    #: what N psi i sin(60 deg) leaves over the load the EKF sees, and the current raised to what
+    #: the asked acceleration and the load need at 60 deg: sin 60 = 0.87 of the pull-out torque
+    #: is used, 13 % kept for what changes within the current's rise (docs/sensorless.md)
+    if_load_angle: float = math.pi / 3.0
+    #: rate of the I-f current while the guard holds the vector back [A/s] [chosen]: the load
+    #: exceeds the vector's torque, the rotor is being pushed back: 5000 A/s, 60 -> 400 A in 68 ms
+    #: (the current PIs follow that: their bandwidth is ~600 rad/s); the swing this kicks is the
+    #: lesser evil against a rotor that rolls back
+    i_rate_load: float = 5000.0
+    #: the synchronism guard on (True) or off: the I-f vector never leads or trails the EKF's angle by
+    #: more than ``guard_angle`` (``pmsm_ev.kernels.sync_guard``); off: the plain I-f until a loss of
+    #: synchronism is detected (the guard is then on while it is recovered), to test the detector
+    sync_guard: bool = True
+    #: the guard's angle [rad] [chosen]: 100 deg, past the pull-out angle (90 deg: the most torque per
+    #: ampere) so that it never acts on a vector that sits on the q axis after a handover down, and
+    #: close enough to keep sin(e) >= 0.98 of the pull-out torque while it holds the vector
+    guard_angle: float = math.radians(100.0)
+    #: loss-of-synchronism detector, I-f: |omega_hat - omega_if| (filtered, 10 ms) above ``slip_tol`` +
+    #: ``agree_tol`` |omega_if| for ``slip_time`` [chosen]: 10 rad/s (the swing on the vector stays
+    #: within +-3 rad/s; a rotor out of step differs by the vector's whole speed) and 0.1 s
+    slip_tol: float = 10.0
+    slip_time: float = 0.1
+    #: a loss-of-synchronism episode ends after ``recover_time`` in synchronism [s] [chosen]; one that
+    #: has not ended after ``fault_time`` [s] latches the fault: the safe state, a stop and hold (the
+    #: speed reference taken as 0, FOC braking to a stand, the I-f vector holding at i_q_max), until
+    #: the unit is reset; zero torque is not safe on a slope [chosen: 1 s, 3 s]
+    recover_time: float = 1.0
+    fault_time: float = 3.0
 
     @property
     def align_time(self) -> float:
@@ -506,6 +536,14 @@ class StartupParams:
         _require(self.omega_down < self.omega_up,
                  f"omega_down must be < omega_up (got {self.omega_down} >= {self.omega_up} rad/s)")
         _require(self.if_margin >= 1.0, f"if_margin must be >= 1 (got {self.if_margin})")
+        _require(0.0 < self.if_load_angle < 0.5 * math.pi,
+                 f"if_load_angle must be in (0, pi/2) rad (got {self.if_load_angle})")
+        _require(self.if_load_angle <= self.guard_angle < math.pi,
+                 f"guard_angle must be in [if_load_angle, pi) rad (got {self.guard_angle})")
+        for name in ("i_rate_load", "slip_time", "recover_time"):
+            _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
+        _require(self.fault_time > self.recover_time,
+                 f"fault_time must be > recover_time (got {self.fault_time} <= {self.recover_time} s)")
 
 
 #: the EKF of the sensorless unit: the paper's covariances, the drive's whole inertia J_eq
