@@ -858,11 +858,11 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     4. EKF: FOC (eqs 14-20) on the EKF's angle and speed; back to I-f at low speed.
     5. Loss of synchronism (I-f): |omega_hat - omega_if| (filtered) above ``C_SLIP_TOL`` +
        ``C_AGREE_TOL`` |omega_if| for ``C_SLIP_TIME`` (or, a limit reached, the guard holding the
-       vector back with the current at ``C_I_Q_MAX`` that long: an episode, no action); recovery: a flying handover to FOC when
-       |omega_hat| >= ``C_W_DOWN``, else ``relock``; the guard is on while an episode lasts (also when
-       ``C_GUARD`` is off) and in the safe state. An episode ends after ``C_RECOVER_TIME`` in
-       synchronism; one older than ``C_FAULT_TIME`` latches the fault: the safe state is a stop
-       and hold (the reference taken as 0, the I-f current at the limit).
+       vector back with the current at ``C_I_Q_MAX`` that long: an episode, no action); recovery:
+       a flying handover to FOC when |omega_hat| >= ``C_W_DOWN``, else ``relock``; the guard is on
+       while an episode lasts (also when ``C_GUARD`` is off) and in the safe state. An episode
+       ends after ``C_RECOVER_TIME`` in synchronism; one older than ``C_FAULT_TIME`` latches the
+       fault: the safe state is a stop and hold (the reference taken as 0, the I-f current at the limit).
     In alignment and I-f the current PIs work in the vector's frame (reference on its d
     axis, no decoupling: the back-EMF is small there and the integrators carry it).
     """
