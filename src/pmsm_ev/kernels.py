@@ -122,7 +122,8 @@ C_PSI_ADAPT, C_PSI_ADAPT_W = 68, 69
 #: the guard's angle [rad]
 (C_J_IF, C_E_MAX, C_SIN_E, C_I_RATE_LOAD, C_GUARD, C_SLIP_TOL, C_SLIP_TIME, C_RECOVER_TIME,
  C_FAULT_TIME, C_E_GUARD) = range(70, 80)
-UNIT_PARAMS = 80
+C_ALIGN_DAMP = 80  #: 1.0: the alignment damped on the back-EMF (``StartupParams.align_damping``)
+UNIT_PARAMS = 81
 
 #: modes of the sensorless unit (``S_MODE``)
 MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
@@ -778,22 +779,49 @@ def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
 
 
 @kernel()
+def vector_torque(c, i, sin_e, cos_e):
+    """Eq 12 for a current vector of magnitude ``i`` leading the rotor's d axis by e:
+    T_e = N (psi i sin e + (L_d - L_q) i^2 sin e cos e) [N m] (the controller's motor model); with
+    L_q > L_d the reluctance term takes torque below e = 90 deg and adds it above."""
+    return c[C_N] * i * sin_e * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i * cos_e)
+
+
+@kernel()
+def vector_current(c, torque, sin_e, cos_e):
+    """The least magnitude whose vector at the load angle e gives ``torque`` [A] (``vector_torque``
+    solved for i, the smaller root); inf if no current does."""
+    a = (c[C_L_Q] - c[C_L_D]) * cos_e  # N sin e (psi i - a i^2) = torque
+    t = abs(torque) / (c[C_N] * sin_e)
+    if abs(a) < 1e-12:
+        return t / c[C_PSI]
+    disc = c[C_PSI] * c[C_PSI] - 4.0 * a * t
+    if disc < 0.0:
+        return math.inf
+    return 2.0 * t / (c[C_PSI] + math.sqrt(disc))  # = (psi - sqrt(disc)) / (2 a), without cancellation
+
+
+@kernel()
 def if_vector_step(s, c, omega_ref):
     """I-f: turn the vector and size its current from the torque it can give (eq 12 with the rotor
-    lagging the vector by the load angle e: T_e = N psi i sin e; docs/sensorless.md).
+    lagging the vector by the load angle e, ``vector_torque``; docs/sensorless.md).
 
     The I-f speed follows ``omega_ref`` with at most ``C_IF_ACCEL`` and at most what the vector's
     torque at the design load angle ``C_E_MAX`` leaves over the load the EKF sees,
-    J dw/dt = N psi i sin(e_max) - T_L_hat (never forced to turn against the reference by it:
-    a load beyond the vector is the guard's, ``sync_guard``). The target current is at least what
-    the acceleration asked for and that load need at e_max, and ``C_IF_MARGIN`` times the load's
+    J dw/dt = T_e(i, e_max) - T_L_hat (never forced to turn against the reference by it: a load
+    beyond the vector is the guard's, ``sync_guard``; at the current limit, the torque at 90 deg,
+    the reserve spent). The target current is at least what the
+    acceleration asked for and that load need at e_max, and ``C_IF_MARGIN`` times the load's
     current; it never falls in I-f. The magnitude ramps at ``C_I_RATE``, at ``C_I_RATE_LOAD``
     while the guard holds the vector back (the load exceeds the vector)."""
     dt = c[C_DT]
-    k_t = c[C_N] * c[C_PSI]
+    sin_e = c[C_SIN_E]
+    cos_e = math.cos(c[C_E_MAX])
     t_l = s[S_X + 4]
     j = c[C_J_IF]
-    t_cap = k_t * s[S_I_MAG] * c[C_SIN_E]
+    if s[S_I_MAG] < c[C_I_Q_MAX]:
+        t_cap = vector_torque(c, s[S_I_MAG], sin_e, cos_e)
+    else:  # at the current limit the reserve is spent: the torque at 90 deg (up to the soft guard)
+        t_cap = c[C_N] * c[C_PSI] * s[S_I_MAG]
     step = c[C_IF_ACCEL] * dt
     hi = min(step, max((t_cap - t_l) / j * dt, 0.0))
     lo = max(-step, min((-t_cap - t_l) / j * dt, 0.0))
@@ -801,31 +829,42 @@ def if_vector_step(s, c, omega_ref):
     want = min(max(omega_ref - w_if, -step), step)  # the step the reference asks for
     s[S_OMEGA_IF] = w_if + min(max(want, lo), hi)
     s[S_PHI] = wrap_angle(s[S_PHI] + c[C_N] * s[S_OMEGA_IF] * dt)  # (13)
-    need = abs(t_l + j * want / dt) / (k_t * c[C_SIN_E])
-    load_current = c[C_IF_MARGIN] * abs(t_l) / k_t  # eq 12 with i_d = 0, times the margin
+    need = vector_current(c, t_l + j * want / dt, sin_e, cos_e)
+    load_current = c[C_IF_MARGIN] * abs(t_l) / (c[C_N] * c[C_PSI])  # eq 12 with i_d = 0, times the margin
     s[S_I_TGT] = min(max(s[S_I_TGT], need, load_current), c[C_I_Q_MAX])
     rate = (c[C_I_RATE_LOAD] if s[S_GUARD] != 0.0 else c[C_I_RATE]) * dt
     s[S_I_MAG] += min(max(s[S_I_TGT] - s[S_I_MAG], -rate), rate)
 
 
-#: the guard counts as holding the vector while it is within this of the guard angle [rad]: 3 deg, so
-#: that a vector held there and turning with the rotor does not flicker in and out
+#: the guard: beyond this lead of the vector over the EKF's angle [rad] the vector turns no faster than
+#: the rotor away from it (90 deg: past it, more lead gives more torque only through the reluctance term)
+_SOFT_GUARD = 0.5 * math.pi
+#: it counts as holding the vector until the vector is back by this much [rad]: 3 deg, so that a vector
+#: held there and turning with the rotor does not flicker in and out
 _GUARD_BAND = math.radians(3.0)
+#: ``S_GUARD`` values: the soft limit holds the vector's speed, the hard one its angle
+GUARD_SOFT, GUARD_HARD = 1.0, 2.0
 
 
 @kernel()
-def sync_guard(s, c, omega_hat):
-    """Keep the I-f vector within +-``C_E_GUARD`` of the EKF's rotor angle (electrical): a vector
-    that would lead (or trail) the rotor by more is held there and turns at the rotor's speed, so
-    the rotor cannot fall out of step while the EKF holds its angle. ``S_GUARD`` is 1 from then on
-    until the vector is back by more than ``_GUARD_BAND``."""
-    e = wrap_angle(s[S_PHI] - s[S_X + 3])
+def sync_guard(s, c, omega_hat, lag):
+    """Keep the applied I-f vector (``S_PHI`` less ``lag``, the damping's pull-back) within
+    +-``C_E_GUARD`` of the EKF's rotor angle (electrical): a vector that would lead (or trail) the
+    rotor by more is held there and turns at the rotor's speed, so the rotor cannot fall out of
+    step while the EKF holds its angle (``GUARD_HARD``). Beyond ``_SOFT_GUARD`` its speed is held to
+    the rotor's (``GUARD_SOFT``): the lead stops growing before the EKF, whose load state lags a
+    sudden load, shows the rotor slowing. ``S_GUARD`` is released once the vector is back within
+    ``_SOFT_GUARD`` by ``_GUARD_BAND``."""
+    e = wrap_angle(s[S_PHI] - lag - s[S_X + 3])
     e_max = c[C_E_GUARD]
     if e > e_max or e < -e_max:
-        s[S_PHI] = wrap_angle(s[S_X + 3] + (e_max if e > 0.0 else -e_max))
+        s[S_PHI] = wrap_angle(s[S_X + 3] + lag + (e_max if e > 0.0 else -e_max))
         s[S_OMEGA_IF] = omega_hat
-        s[S_GUARD] = 1.0
-    elif abs(e) < e_max - _GUARD_BAND:  # released once the vector is back by more than the band
+        s[S_GUARD] = GUARD_HARD
+    elif (e > _SOFT_GUARD and s[S_OMEGA_IF] > omega_hat) or (e < -_SOFT_GUARD and s[S_OMEGA_IF] < omega_hat):
+        s[S_OMEGA_IF] = omega_hat
+        s[S_GUARD] = GUARD_SOFT
+    elif abs(e) < _SOFT_GUARD - _GUARD_BAND:
         s[S_GUARD] = 0.0
 
 
@@ -857,8 +896,9 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
        (``sync_guard``); handover up once omega_hat agrees with the I-f speed.
     4. EKF: FOC (eqs 14-20) on the EKF's angle and speed; back to I-f at low speed.
     5. Loss of synchronism (I-f): |omega_hat - omega_if| (filtered) above ``C_SLIP_TOL`` +
-       ``C_AGREE_TOL`` |omega_if| for ``C_SLIP_TIME`` (or, a limit reached, the guard holding the
-       vector back with the current at ``C_I_Q_MAX`` that long: an episode, no action); recovery:
+       ``C_AGREE_TOL`` |omega_if| for ``C_SLIP_TIME`` (or a limit reached: the guard holding the
+       vector with the current at ``C_I_Q_MAX`` and the rotor as far from the reference, that long:
+       an episode, nothing more to give); recovery:
        a flying handover to FOC when |omega_hat| >= ``C_W_DOWN``, else ``relock``; the guard is on
        while an episode lasts (also when ``C_GUARD`` is off) and in the safe state. An episode
        ends after ``C_RECOVER_TIME`` in synchronism; one older than ``C_FAULT_TIME`` latches the
@@ -898,6 +938,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             restart_ekf(s, c, s[S_PHI], i_d, i_q)
             omega_hat = 0.0
             s[S_OMEGA_IF] = 0.0
+            s[S_SLIP] = 0.0
             s[S_I_TGT] = max(c[C_I_IF], s[S_I_MAG])
             mode = MODE_IF
     elif mode == MODE_EKF and abs(omega_hat) < c[C_W_DOWN]:
@@ -908,6 +949,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         s[S_I_TGT] = max(c[C_IF_MARGIN] * i_mag, c[C_I_IF])
         s[S_OMEGA_IF] = omega_hat
         s[S_AGREE] = 0.0
+        s[S_SLIP] = 0.0
         seat_current_pis(s, c, s[S_PHI] + c[C_ADVANCE] * omega_hat, c[C_N] * omega_hat * dt,
                          i_mag, 0.0, i_mag, 0.0, 0.0)
         mode = MODE_IF
@@ -917,12 +959,16 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             if s[S_FAULT] == FAULT_LATCHED:
                 s[S_I_TGT] = c[C_I_Q_MAX]
             if_vector_step(s, c, omega_ref)
+            # the damping's input, omega_hat - omega_if low-pass filtered (see below)
+            s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - s[S_OMEGA_IF] - s[S_SLIP])
             if c[C_GUARD] != 0.0 or s[S_EPISODE] > 0.0 or s[S_FAULT] == FAULT_LATCHED:  # on while recovering
-                sync_guard(s, c, omega_hat)
+                sync_guard(s, c, omega_hat, c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP])
         w_if = s[S_OMEGA_IF]
         slipping = abs(s[S_SLIP]) > c[C_SLIP_TOL] + c[C_AGREE_TOL] * abs(w_if)
-        # in trouble: out of step, or pushed back by a load beyond the vector at the current limit
-        trouble = slipping or (s[S_GUARD] != 0.0 and s[S_I_MAG] >= c[C_I_Q_MAX])
+        # in trouble: out of step, or a limit reached: the guard holding the vector at the current
+        # limit while the rotor does not follow the reference (a load beyond what the drive gives)
+        trouble = slipping or (s[S_GUARD] != 0.0 and s[S_I_MAG] >= c[C_I_Q_MAX] and abs(omega_ref - omega_hat)
+                               > c[C_SLIP_TOL] + c[C_AGREE_TOL] * abs(omega_ref))
         s[S_LOS] = s[S_LOS] + dt if trouble else 0.0
         if s[S_LOS] >= c[C_SLIP_TIME]:
             s[S_LOS] = 0.0
@@ -964,8 +1010,14 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         theta_ctrl = s[S_PHI]
         omega_ctrl = s[S_OMEGA_IF]
         if mode == MODE_IF:  # damp the rotor's swing on the vector: pull the vector back by
-            # k (omega_hat - omega_if), filtered, k = 2 zeta sqrt(J / (psi i)) (docs/sensorless.md)
-            s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - omega_ctrl - s[S_SLIP])
+            # k (omega_hat - omega_if), filtered (updated with the vector's turn, above; 0 in the period
+            # it is placed), k = 2 zeta sqrt(J / (psi i)) (docs/sensorless.md)
+            theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP]
+        elif c[C_ALIGN_DAMP] != 0.0:  # alignment: the same damping on the speed the back-EMF shows
+            # on the vector's q axis, v_q / (N psi) = omega_m cos(e) (e the vector's lead; the EKF's
+            # angle is unknown here): the torque it adds is -N psi i k omega_m cos^2(e), a damping
+            # whatever the angle (docs/sensorless.md)
+            s[S_SLIP] += c[C_SLIP_FILTER] * (s[S_V_Q] / (c[C_N] * c[C_PSI]) - s[S_SLIP])
             theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP]
         else:
             s[S_SLIP] = 0.0

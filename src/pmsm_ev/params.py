@@ -492,6 +492,11 @@ class StartupParams:
     #: corrections on noisy currents would jolt omega_hat and with it the I-f damping
     p0_omega_aligned: float = 1.0
     p0_theta_aligned: float = 0.01
+    #: the alignment damped (True) or plain [chosen]: a rotor that starts near the +90 deg vector's
+    #: unstable point (-90 deg) falls onto it at up to 5.7 rad/s undamped. The vector is pulled back
+    #: by the I-f damping's k times the speed the back-EMF shows on its q axis, v_q / (N psi) =
+    #: omega_m cos(e), which needs no angle (docs/sensorless.md)
+    align_damping: bool = True
     #: design load angle of the I-f drive [rad] [chosen]: 60 deg. The I-f acceleration is held to
     #: what N psi i sin(60 deg) leaves over the load the EKF sees, and the current raised to what
     #: the asked acceleration and the load need at 60 deg: sin 60 = 0.87 of the pull-out torque

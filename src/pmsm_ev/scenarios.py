@@ -116,6 +116,53 @@ HILL_START_OMEGA_REF = ((0.0, 0.0), (SENSORLESS_START_DELAY, 0.0), (SENSORLESS_S
 HILL_START_STOP_TIME = 80.0
 
 
+@dataclass(frozen=True)
+class SyncCase:
+    """A case of the synchronism test matrix (docs/sensorless.md, "Never lose the car"): a route that
+    does not wait for the sensorless unit's start-up, or a load that changes while it creeps or
+    stands. Tables: grade (time [s], deg; held, or ``grade_linear``), omega_ref (time [s], rad/s;
+    linear); ``t_disturbance``: when the reference starts or the grade changes [s]."""
+
+    name: str
+    description: str
+    grade_deg: tuple[tuple[float, float], ...]
+    omega_ref: tuple[tuple[float, float], ...]
+    stop_time: float
+    t_disturbance: float = 0.0
+    grade_linear: bool = False
+
+    def route(self) -> dict[str, Profile]:
+        g = self.grade_deg
+        return {"delta": Profile(tuple(float(t) for t, _ in g), tuple(math.radians(d) for _, d in g),
+                                 "linear" if self.grade_linear else "previous", "delta", "rad"),
+                "omega_ref": Profile(tuple(float(t) for t, _ in self.omega_ref),
+                                     tuple(float(w) for _, w in self.omega_ref), "linear", "omega_ref", "rad/s")}
+
+
+#: the synchronism test matrix [chosen]: references that ramp from t = 0 at 20, 40 and 80 rad/s^2
+#: (0.5, 0.9, 1.9 m/s^2 at the car) and a step to 200 rad/s, all during the 2.3 s alignment;
+#: creeping at 5, 10 and 20 rad/s (0.4-1.7 km/h) into a 22 deg grade (a step, and a rise over 3 s);
+#: a grade that rises in two steps under a standing car; reversing to -60 rad/s and forward again
+SYNC_MATRIX = (
+    SyncCase("ramp20", "0 -> 200 rad/s at 20 rad/s² from t = 0, level", ((0, 0),), ((0, 0), (10, 200)), 14.0),
+    SyncCase("ramp40", "0 -> 200 rad/s at 40 rad/s² from t = 0, level", ((0, 0),), ((0, 0), (5, 200)), 10.0),
+    SyncCase("ramp80", "0 -> 200 rad/s at 80 rad/s² from t = 0, level", ((0, 0),), ((0, 0), (2.5, 200)), 10.0),
+    SyncCase("step200", "a step to 200 rad/s at t = 0, level", ((0, 0),), ((0, 200),), 10.0),
+    SyncCase("creep5", "creep at 5 rad/s, 0 -> 22° at 6 s", ((0, 0), (6, 22)), ((0, 0), (1, 5)), 12.0, 6.0),
+    SyncCase("creep10", "creep at 10 rad/s, 0 -> 22° at 6 s", ((0, 0), (6, 22)), ((0, 0), (1, 10)), 12.0, 6.0),
+    SyncCase("creep20", "creep at 20 rad/s, 0 -> 22° at 6 s", ((0, 0), (6, 22)), ((0, 0), (1, 20)), 12.0, 6.0),
+    SyncCase("creep10-rise", "creep at 10 rad/s, 0 -> 22° over 6-9 s", ((0, 0), (6, 0), (9, 22)),
+             ((0, 0), (1, 10)), 14.0, 6.0, grade_linear=True),
+    SyncCase("stand", "standing (omega_ref = 0), 0 -> 8° at 4 s, 8 -> 20° at 7 s", ((0, 0), (4, 8), (7, 20)),
+             ((0, 0),), 12.0, 4.0),
+    SyncCase("reverse", "0 -> -60 rad/s over 0-3 s, hold, -> 0 at 11 s, -> 60 at 14 s, level", ((0, 0),),
+             ((0, 0), (3, -60), (8, -60), (11, 0), (14, 60)), 18.0),
+)
+#: the initial rotor angles of the matrix [rad]: 8, evenly spread, offset by 0.3 rad from the
+#: angles the start-up was designed on (0, +-pi/2, pi)
+SYNC_ANGLES = tuple(round(-math.pi + 0.3 + k * math.pi / 4.0, 6) for k in range(8))
+
+
 def speed_reference(p: ScenarioParams | None = None, delay: float = 0.0) -> Profile:
     """omega_ref [rad/s]: ramp from 0 to ``omega_ref`` in ``startup_time``, then constant;
     with ``delay`` [s] the ramp starts that late (0 until then)."""

@@ -42,11 +42,13 @@ def grid(stop_time: float, dt: float, output_interval: float) -> tuple[int, int]
 def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_STOP_TIME,
                   observer: str = "ekf5", angle_source: str = "measured",
                   params: DriveParams | None = None, output_interval: float = 0.01,
-                  elevation: Profile | None = None, omega_ref: Profile | None = None) -> dict:
+                  elevation: Profile | None = None, omega_ref: Profile | None = None,
+                  startup_columns: bool | None = None) -> dict:
     """Run, write results.csv and metrics.json into ``out_dir``, return the metrics.
 
     ``elevation`` [rad] and ``omega_ref`` [rad/s] replace the scenario's profiles. Without
-    ``params``, the sensorless unit's EKF is ``SENSORLESS_EKF`` (its model on J_eq)."""
+    ``params``, the sensorless unit's EKF is ``SENSORLESS_EKF`` (its model on J_eq).
+    ``startup_columns`` records ``SENSORLESS_COLUMNS`` too (default: for the sensorless unit)."""
     sensorless = observer == "sensorless"
     p = (params or (DriveParams(ekf=SENSORLESS_EKF) if sensorless else DriveParams())).validate()
     dt = p.dt
@@ -55,7 +57,9 @@ def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_
     omega_ref_of = omega_ref or speed_reference(p.scenario)
     plant = Plant(p.motor, p.vehicle, p.plant)
     ctrl = ControlUnit(observer, angle_source, p.motor, p.controller, p.ekf, dt, p.startup)
-    columns = ALL_COLUMNS + SENSORLESS_COLUMNS if sensorless else ALL_COLUMNS
+    startup_columns = sensorless if startup_columns is None else startup_columns
+    columns = ALL_COLUMNS + SENSORLESS_COLUMNS if startup_columns else ALL_COLUMNS
+    theta_meas = plant.theta_e  # the angle the unit was last given (the row's theta_ctrl when it uses it)
     out = Path(out_dir)
     status = "completed"
     t0, cpu0 = time.perf_counter(), time.process_time()
@@ -72,11 +76,14 @@ def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_
                            o.theta_hat, plant.i_d, plant.i_q, o.i_d_hat, o.i_q_hat, plant.T_e,
                            plant.T_L_mech, o.T_L_hat, ctrl.v_d, ctrl.v_q, plant.i_alpha, plant.i_beta,
                            *ctrl.v_out, ctrl.i_qref, plant.v_vehicle)
-                    w.write(row + (plant.x_vehicle, ctrl.mode) if sensorless else row)
+                    if startup_columns:
+                        theta_ctrl = ctrl.theta_ctrl if ctrl.angle_source == "estimated" else theta_meas
+                        row += (plant.x_vehicle, ctrl.mode, ctrl.fault, theta_ctrl, ctrl.omega_ctrl)
+                    w.write(row)
                 if k == n_steps:
                     break
-                v_alpha, v_beta = ctrl.step(plant.i_alpha, plant.i_beta, w_ref, plant.theta_e,
-                                            plant.omega_m)[:2]
+                theta_meas = plant.theta_e
+                v_alpha, v_beta = ctrl.step(plant.i_alpha, plant.i_beta, w_ref, theta_meas, plant.omega_m)[:2]
                 plant.step(v_alpha, v_beta, delta, dt)
                 if not math.isfinite(plant.omega_m + plant.i_d + plant.i_q):
                     raise FloatingPointError(f"plant state is not finite at t = {(k + 1) * dt:.6g} s")
