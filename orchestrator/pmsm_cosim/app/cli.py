@@ -382,7 +382,8 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Co-simulate every configuration of the observer comparison (both paper "
                                     "scenarios x EKF5 paper mode / sensorless, stationary-frame EKF5, EKF4 paper "
                                     "mode / sensorless, sensored; scenario 2 under sensor noise, offsets and an "
-                                    "initial angle error), JOBS runs at a time, and write OUT/results.md with "
+                                    "initial angle error; the sensorless unit from standstill; the synchronism matrix, "
+                                    "in-process), JOBS runs at a time, and write OUT/results.md with "
                                     "its figures in OUT/results/. A run in RUNS whose metrics.json is "
                                     "'completed' with the same settings and FMU builds is reused.")
     rp.add_argument("--out", metavar="DIR", default="docs", help="where results.md goes (default: docs)")

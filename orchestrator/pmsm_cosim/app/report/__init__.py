@@ -18,27 +18,36 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import robustness, sensorless
+from . import robustness, sensorless, synchronism
 from .configs import CONFIGS, OBSERVER_FMUS, SETUPS, T_FROM, Config, select
 from .document import RECOVERED, TABLE_KEYS, Data, _figures, load_split, recovery, render
 from .runs import _fmu_hashes, _key, reusable, run_configs
 
 __all__ = ["CONFIGS", "OBSERVER_FMUS", "RECOVERED", "SETUPS", "TABLE_KEYS", "T_FROM", "Config", "Data", "generate",
            "load_split", "recovery", "render", "reusable", "robustness", "run_configs", "select", "sensorless",
+           "synchronism",
            "_fmu_hashes", "_key"]
 
 
 def generate(out="docs", runs_dir="runs/report", jobs: int = 2, stop_time: float | None = None,
              only=None, force: bool = False, configs: list[Config] | None = None, log=print,
-             command: str = "pmsm-cosim report", t_from: float = T_FROM) -> Path:
-    """Run (or reuse) the configurations, then write ``OUT/results.md`` and ``OUT/results/*.png``."""
+             command: str = "pmsm-cosim report", t_from: float = T_FROM, sync: bool | None = None) -> Path:
+    """Run (or reuse) the configurations and the synchronism matrix (``sync``: rerun it, else take its
+    runs in RUNS/sync as they are; default: rerun for the whole report unless ``only`` names no
+    pattern of "sync"), then write ``OUT/results.md`` and ``OUT/results/*.png``."""
+    if sync is None:  # the whole report reruns it; a report of chosen configurations or --only does not
+        sync = configs is None and (not only or any(p in "sync" or "sync" in p for p in only))
     configs = list(configs or CONFIGS)
     run_dirs = run_configs(configs, Path(runs_dir), jobs=jobs, stop_time=stop_time, only=only, force=force,
                            log=log)
     data = Data(configs, run_dirs, t_from)
+    # the synchronism matrix (its own short runs, in-process): rerun unless --only leaves it out
+    sync_dir = Path(runs_dir) / "sync"
+    data.sync = synchronism.run_matrix(sync_dir, jobs=jobs, log=log) if sync else synchronism.load_matrix(sync_dir)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     figs = _figures(data, out / "results")
+    figs += synchronism.figures(data.sync, sync_dir, out / "results") if data.sync else []
     text = render(data, [p.stem for p in figs], stop_time, command)
     path = out / "results.md"
     tmp = path.with_name(path.name + ".tmp")

@@ -23,7 +23,7 @@ from pmsm_ev.params import (
 from pmsm_ev.results import angle_error_unwrapped
 
 from ..compare import COLUMNS, Run, format_value, load_run, markdown_table, plot_overlay, summarize
-from . import sensorless
+from . import sensorless, synchronism
 from .configs import FIG_NAMES, FLYING_SPEED, REALISM_SCENARIOS, REALISM_SETUPS, SETUPS, T_FROM, Config
 
 # --- the document ------------------------------------------------------------------------
@@ -50,6 +50,7 @@ class Data:
 
     def __init__(self, configs: list[Config], run_dirs: dict[str, Path], t_from: float = T_FROM):
         self.t_from = t_from
+        self.sync: list[dict] = []  #: the synchronism matrix's figures (``synchronism.run_matrix``)
         self.configs = {c.id: c for c in configs}
         self.runs: dict[str, Run] = {}
         self.rows: dict[str, dict] = {}
@@ -493,6 +494,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
 
     # --- errata and what would change ------------------------------------------------------
     L += sensorless.render(d, fig_names)
+    L += synchronism.render(d.sync, fig_names)
     L.append("## The paper's errata and how the project handles them\n")
     L.append(
         "- **Eq 20** prints v_q = u_q − N ω L_d i_dl − N ω ψ: its terms add to, rather than cancel, the "

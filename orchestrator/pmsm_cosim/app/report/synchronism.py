@@ -73,6 +73,16 @@ def run_matrix(runs_dir, jobs: int = 2, cases=SYNC_MATRIX, angles: int = len(SYN
     return results
 
 
+def load_matrix(runs_dir) -> list[dict]:
+    """The figures of the matrix's runs already in ``runs_dir`` (their metrics.json)."""
+    out = []
+    for path in sorted(Path(runs_dir).glob("*/metrics.json")):
+        sync = json.loads(path.read_text(encoding="utf-8")).get("synchronism")
+        if isinstance(sync, dict) and sync.get("case") in CASES:
+            out.append(sync)
+    return out
+
+
 def _worst(rows: list[dict], key: str, sign: float = 1.0):
     vals = [r[key] for r in rows]
     if any(v is None for v in vals):
