@@ -228,6 +228,10 @@ def test_the_sensorless_ekf_models_the_whole_drive_inertia():
     ({"i_if": 0.0}, "i_if must be > 0"),
     ({"if_margin": 0.5}, "if_margin must be >= 1"),
     ({"t_sweep": -1.0}, "t_sweep must be finite and >= 0"),
+    ({"if_load_angle": 1.6}, r"if_load_angle must be in \(0, pi/2\)"),
+    ({"guard_angle": 0.5}, r"guard_angle must be in \[if_load_angle, pi\)"),
+    ({"i_rate_load": 0.0}, "i_rate_load must be > 0"),
+    ({"fault_time": 0.5}, "fault_time must be > recover_time"),
 ])
 def test_startup_parameters_are_checked(changes, message):
     with pytest.raises(ParameterError, match=message):
