@@ -58,7 +58,8 @@ _STARTUP_SLOTS = (
     ("agree_time", _k.C_AGREE_TIME), ("if_margin", _k.C_IF_MARGIN), ("if_load_angle", _k.C_E_MAX),
     ("i_rate_load", _k.C_I_RATE_LOAD), ("sync_guard", _k.C_GUARD), ("guard_angle", _k.C_E_GUARD),
     ("slip_tol", _k.C_SLIP_TOL), ("slip_time", _k.C_SLIP_TIME), ("recover_time", _k.C_RECOVER_TIME),
-    ("fault_time", _k.C_FAULT_TIME), ("align_damping", _k.C_ALIGN_DAMP))
+    ("fault_time", _k.C_FAULT_TIME), ("align_damping", _k.C_ALIGN_DAMP),
+    ("align_slip", _k.C_ALIGN_SLIP), ("align_slip_time", _k.C_ALIGN_SLIP_TIME))
 #: state slots of the sensorless start-up, saved and restored with the unit
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,

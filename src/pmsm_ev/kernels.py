@@ -123,7 +123,9 @@ C_PSI_ADAPT, C_PSI_ADAPT_W = 68, 69
 (C_J_IF, C_E_MAX, C_SIN_E, C_I_RATE_LOAD, C_GUARD, C_SLIP_TOL, C_SLIP_TIME, C_RECOVER_TIME,
  C_FAULT_TIME, C_E_GUARD) = range(70, 80)
 C_ALIGN_DAMP = 80  #: 1.0: the alignment damped on the back-EMF (``StartupParams.align_damping``)
-UNIT_PARAMS = 81
+C_ALIGN_SLIP = 81  #: |omega_hat| that ends the alignment: the rotor runs away under its vector [rad/s]
+C_ALIGN_SLIP_TIME = 82  #: ... for this long [s]
+UNIT_PARAMS = 83
 
 #: modes of the sensorless unit (``S_MODE``)
 MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
@@ -869,15 +871,21 @@ def sync_guard(s, c, omega_hat, lag):
 
 
 @kernel()
-def relock(s, c, omega_hat):
-    """Recovery at low speed from a loss of synchronism: the vector put back within the design
-    load angle of the EKF's angle, turning at the EKF's speed, its current raised to the limit."""
-    e = wrap_angle(s[S_PHI] - s[S_X + 3])
-    e_max = c[C_E_MAX]
-    s[S_PHI] = wrap_angle(s[S_X + 3] + min(max(e, -e_max), e_max))
+def relock(s, c, omega_hat, omega_ref):
+    """Recovery at low speed (a loss of synchronism, or a rotor running away under the alignment):
+    the vector put on the EKF's angle, leading it by the design load angle in the direction of the
+    torque needed to hold the load the EKF sees and to bring the speed to the reference within
+    ``_RELOCK_TIME``, turning at the EKF's speed, its current set to the limit at once."""
+    push = s[S_X + 4] + c[C_J_IF] * (omega_ref - omega_hat) / _RELOCK_TIME
+    s[S_PHI] = wrap_angle(s[S_X + 3] + (c[C_E_MAX] if push >= 0.0 else -c[C_E_MAX]))
     s[S_OMEGA_IF] = omega_hat
     s[S_I_TGT] = c[C_I_Q_MAX]
+    s[S_I_MAG] = c[C_I_Q_MAX]  # at once: the rotor is running away (the current PIs follow in ~5 ms)
     s[S_SLIP] = 0.0
+
+
+#: the time in which a relocked vector's torque is meant to bring the speed to the reference [s]
+_RELOCK_TIME = 0.5
 
 
 @kernel(_sig(f"UniTuple({_F}, 16)", _V, _V, _F, _F, _F))
@@ -889,8 +897,10 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
 
     1. The stationary-frame EKF5 (eqs 23-27 with h = inverse Park) runs in every mode.
     2. Alignment (``C_T_RAMP`` .. ``C_T_SETTLE``): the current vector ramped up on +90 deg,
-       held, swept to 0 deg, held; then the EKF restarts at the aligned angle, at rest. The
-       speed reference is not read.
+       held, swept to 0 deg, held (damped on the back-EMF); then the EKF restarts at the aligned
+       angle, at rest. The speed reference is not read. A rotor that runs away under the vector
+       (|omega_hat| > ``C_ALIGN_SLIP`` for ``C_ALIGN_SLIP_TIME``: a load beyond it) ends the alignment: I-f on the EKF's
+       angle (``relock``), as a loss-of-synchronism episode.
     3. I-f: the vector turns at the I-f speed (the reference, slew-limited by what the vector's
        torque allows: ``if_vector_step``), within the guard angle of the EKF's angle
        (``sync_guard``); handover up once omega_hat agrees with the I-f speed.
@@ -922,7 +932,21 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_CLOCK] += 1.0
     mode = s[S_MODE]
     omega_hat = s[S_X + 2]
-    if mode == MODE_ALIGN:
+    if mode == MODE_ALIGN:  # how long the EKF has seen the rotor turn faster than C_ALIGN_SLIP
+        s[S_LOS] = s[S_LOS] + dt if (c[C_ALIGN_SLIP] > 0.0 and abs(omega_hat) > c[C_ALIGN_SLIP]) else 0.0
+    if mode == MODE_ALIGN and s[S_LOS] >= c[C_ALIGN_SLIP_TIME]:
+        # the rotor runs away under the alignment's vector, faster than the alignment's own swing: a
+        # load beyond the vector (a car parked on a slope). Its motion has shown the EKF the angle
+        # (back-EMF): the EKF is kept (not restarted) and I-f takes over on its angle, the vector put
+        # ahead of the rotor against the load at the current limit, as a loss-of-synchronism episode
+        s[S_OMEGA_IF] = omega_hat
+        relock(s, c, omega_hat, omega_ref)
+        s[S_LOS] = 0.0
+        s[S_EPISODE] = dt
+        s[S_INSYNC] = 0.0
+        s[S_AGREE] = 0.0
+        mode = MODE_IF
+    elif mode == MODE_ALIGN:
         t_hold = c[C_T_RAMP] + c[C_T_HOLD]
         t_sweep = t_hold + c[C_T_SWEEP]
         if t < t_sweep + c[C_T_SETTLE]:
@@ -981,7 +1005,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
                 seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)  # holds its angle: flying handover
                 mode = MODE_EKF
             else:  # at low speed: the vector put back on the rotor
-                relock(s, c, omega_hat)
+                relock(s, c, omega_hat, omega_ref)
             w_if = s[S_OMEGA_IF]
         slipping = trouble
         if mode == MODE_IF:

@@ -497,6 +497,15 @@ class StartupParams:
     #: by the I-f damping's k times the speed the back-EMF shows on its q axis, v_q / (N psi) =
     #: omega_m cos(e), which needs no angle (docs/sensorless.md)
     align_damping: bool = True
+    #: a rotor turning faster than this under the alignment's vector [rad/s] (|omega_hat|: the EKF,
+    #: not yet restarted, sees its speed by the back-EMF) is pushed by a load beyond the vector (a car
+    #: parked on a slope): the alignment ends and I-f takes over on the EKF's angle at the current
+    #: limit [chosen: 6 rad/s, above the damped alignment's own swing, at most 4.5 rad/s from 48
+    #: initial angles on a level road]; 0: never
+    align_slip: float = 6.0
+    #: ... for this long [s] [chosen]: 20 ms; the EKF's first corrections from its unknown start last
+    #: under 0.3 ms above 6 rad/s with sigma = 1 A of current noise (8 angles, 3 seeds)
+    align_slip_time: float = 0.02
     #: design load angle of the I-f drive [rad] [chosen]: 60 deg. The I-f acceleration is held to
     #: what N psi i sin(60 deg) leaves over the load the EKF sees, and the current raised to what
     #: the asked acceleration and the load need at 60 deg: sin 60 = 0.87 of the pull-out torque

@@ -142,7 +142,8 @@ class SyncCase:
 #: the synchronism test matrix [chosen]: references that ramp from t = 0 at 20, 40 and 80 rad/s^2
 #: (0.5, 0.9, 1.9 m/s^2 at the car) and a step to 200 rad/s, all during the 2.3 s alignment;
 #: creeping at 5, 10 and 20 rad/s (0.4-1.7 km/h) into a 22 deg grade (a step, and a rise over 3 s);
-#: a grade that rises in two steps under a standing car; reversing to -60 rad/s and forward again
+#: a grade that rises in two steps under a standing car; a car parked on 8 and 16 deg that drives off
+#: (the grade there during the alignment); reversing to -60 rad/s and forward again
 SYNC_MATRIX = (
     SyncCase("ramp20", "0 -> 200 rad/s at 20 rad/s² from t = 0, level", ((0, 0),), ((0, 0), (10, 200)), 14.0),
     SyncCase("ramp40", "0 -> 200 rad/s at 40 rad/s² from t = 0, level", ((0, 0),), ((0, 0), (5, 200)), 10.0),
@@ -155,6 +156,10 @@ SYNC_MATRIX = (
              ((0, 0), (1, 10)), 14.0, 6.0, grade_linear=True),
     SyncCase("stand", "standing (omega_ref = 0), 0 -> 8° at 4 s, 8 -> 20° at 7 s", ((0, 0), (4, 8), (7, 20)),
              ((0, 0),), 12.0, 4.0),
+    SyncCase("park8", "parked on 8°: standing 1 s, then 0 -> 100 rad/s over 1-5 s", ((0, 8),),
+             ((0, 0), (1, 0), (5, 100)), 10.0),
+    SyncCase("park16", "parked on 16°: standing 1 s, then 0 -> 100 rad/s over 1-5 s", ((0, 16),),
+             ((0, 0), (1, 0), (5, 100)), 10.0),
     SyncCase("reverse", "0 -> -60 rad/s over 0-3 s, hold, -> 0 at 11 s, -> 60 at 14 s, level", ((0, 0),),
              ((0, 0), (3, -60), (8, -60), (11, 0), (14, 60)), 18.0),
 )
