@@ -953,10 +953,13 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             s[S_I_MAG] = c[C_I_ALIGN] * min(t / c[C_T_RAMP], 1.0) if c[C_T_RAMP] > 0.0 else c[C_I_ALIGN]
             if t < t_hold:
                 s[S_PHI] = _HALF_PI
+                s[S_OMEGA_IF] = 0.0
             elif t < t_sweep:
                 s[S_PHI] = _HALF_PI * (1.0 - (t - t_hold) / c[C_T_SWEEP])
+                s[S_OMEGA_IF] = -_HALF_PI / (c[C_T_SWEEP] * c[C_N])  # the sweep's speed [rad/s]
             else:
                 s[S_PHI] = 0.0
+                s[S_OMEGA_IF] = 0.0
         else:  # aligned: the magnet is on the vector; the EKF restarts there, at rest
             i_d, i_q = park(i_alpha, i_beta, s[S_PHI])
             restart_ekf(s, c, s[S_PHI], i_d, i_q)
@@ -1039,9 +1042,9 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP]
         elif c[C_ALIGN_DAMP] != 0.0:  # alignment: the same damping on the speed the back-EMF shows
             # on the vector's q axis, v_q / (N psi) = omega_m cos(e) (e the vector's lead; the EKF's
-            # angle is unknown here): the torque it adds is -N psi i k omega_m cos^2(e), a damping
-            # whatever the angle (docs/sensorless.md)
-            s[S_SLIP] += c[C_SLIP_FILTER] * (s[S_V_Q] / (c[C_N] * c[C_PSI]) - s[S_SLIP])
+            # angle is unknown here), less the sweep's own speed: the torque it adds is
+            # -N psi i k omega_m cos^2(e), a damping whatever the angle (docs/sensorless.md)
+            s[S_SLIP] += c[C_SLIP_FILTER] * (s[S_V_Q] / (c[C_N] * c[C_PSI]) - omega_ctrl - s[S_SLIP])
             theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP]
         else:
             s[S_SLIP] = 0.0
