@@ -170,6 +170,23 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                                 "damping (0 = none)"),
     "p0_omega_aligned": ("rad2/s2", "EKF covariance of the speed at its restart after the alignment"),
     "p0_theta_aligned": ("rad2", "EKF covariance of the angle at its restart after the alignment"),
+    "if_load_angle": ("rad", "design load angle of the I-f drive: its acceleration and current are sized from "
+                             "eq 12's torque at this angle against the EKF's load"),
+    "i_rate_load": ("A/s", "rate of the I-f current while the synchronism guard holds the vector (the load "
+                           "exceeds it)"),
+    "sync_guard": (None, "synchronism guard on: the I-f vector never leads or trails the EKF's angle by more than "
+                         "guard_angle, nor turns away from the rotor past 90 deg (off: only while recovering)"),
+    "guard_angle": ("rad", "the synchronism guard's angle (I-f vector against the EKF's angle)"),
+    "slip_tol": ("rad/s", "loss-of-synchronism detector: |omega_hat - omega_if| above slip_tol + agree_tol "
+                          "|omega_if| ..."),
+    "slip_time": ("s", "... for this long"),
+    "recover_time": ("s", "a loss-of-synchronism episode ends after this long in synchronism"),
+    "fault_time": ("s", "an episode older than this latches the fault output (2) and the safe state: stop and "
+                        "hold at i_q_max, until reset"),
+    "align_damping": (None, "the alignment damped on the back-EMF of the vector's q axis"),
+    "align_slip": ("rad/s", "a rotor turning faster than this under the alignment's vector (|omega_hat|) ends "
+                            "the alignment: I-f on the EKF's angle at i_q_max (a car parked on a slope); 0 = never"),
+    "align_slip_time": ("s", "... for this long"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),
