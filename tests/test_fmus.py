@@ -257,8 +257,9 @@ def test_model_description_is_complete(fmus, name):
     outputs = PLANT_OUTPUTS if name == "PmsmEvPlant" else CTRL_OUTPUTS
     assert [v.name for v in md.modelVariables if v.causality == "input"] == list(inputs)
     assert [v.name for v in md.modelVariables if v.causality == "output"] == list(outputs)
-    for n in inputs + outputs:  # all with units, but the mode (a number, 0 / 1 / 2)
-        assert by_name[n].type == "Real" and (by_name[n].unit in units if n != "mode" else by_name[n].unit is None)
+    for n in inputs + outputs:  # all with units, but the mode and the fault (numbers, 0 / 1 / 2)
+        assert by_name[n].type == "Real" and (by_name[n].unit in units if n not in ("mode", "fault")
+                                              else by_name[n].unit is None)
     assert by_name["omega_m" if name == "PmsmEvPlant" else "omega_hat"].unit == "rad/s"
     # no direct feedthrough: every output's dependency list is empty
     assert len(md.outputs) == len(outputs)
