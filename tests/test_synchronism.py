@@ -8,12 +8,14 @@ paper's scenario 2 with FocSensorless swapped in, co-simulated.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
 
 from orchestrator_support import project_fmus
+from pmsm_cosim.app.cli import main
 from pmsm_cosim.app.drive import load_system
 from pmsm_cosim.app.report import synchronism
 from pmsm_cosim.engine.master import Master
@@ -247,3 +249,18 @@ def test_scenario2_with_the_sensorless_unit_swapped_in(tmp_path):
         assert np.max(np.abs(r["omega_m"][late] - r["omega_ref"][late])) < 5.0, theta0
         assert r["mode"][-1] == _k.MODE_EKF and r["fault"].max() == 0.0
         assert np.min(r["omega_m"]) > -6.0
+
+
+def test_the_command_line_reports_the_fault(tmp_path, capsys):
+    """``pmsm-cosim run hill-start`` with a route of the user's (creeping into 45 deg): the run
+    completes, prints a note of the episode and the latched safe state, and metrics.json has them."""
+    project_fmus()
+    (tmp_path / "delta.csv").write_text("time,delta\n0,0\n8,45\n", encoding="utf-8")
+    (tmp_path / "w.csv").write_text("time,omega_ref\n0,0\n1,10\n", encoding="utf-8")
+    out = tmp_path / "run"
+    assert main(["run", "hill-start", "--stop-time", "12.5", "--profile", f"delta={tmp_path / 'delta.csv'}",
+                 "--profile", f"omega_ref={tmp_path / 'w.csv'}", "--out", str(out), "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    assert "1 loss-of-synchronism episode(s), the first at 8.27 s; safe state latched at 11.27 s" in err
+    sync = json.loads((out / "metrics.json").read_text(encoding="utf-8"))["synchronism"]
+    assert sync["fault_latched"] and sync["episodes"] == 1

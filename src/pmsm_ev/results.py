@@ -110,6 +110,7 @@ def compute_metrics(r: dict[str, np.ndarray]) -> dict:
     m["steps"] = steps
     if all(c in r for c in SENSORLESS_COLUMNS):
         m["sensorless"] = sensorless_metrics(r)
+        m["synchronism"] = synchronism_metrics(r)
     return m
 
 
@@ -291,6 +292,8 @@ def synchronism_metrics(r: dict[str, np.ndarray], t_disturbance: float = 0.0, po
         t_rec = float(t[bad[-1] + 1])
     fault = r["fault"]
     rises = np.nonzero((fault[1:] >= 1.0) & (fault[:-1] < 1.0))[0] + 1
+    if len(fault) and fault[0] >= 1.0:
+        rises = np.concatenate(([0], rises))
     latched = np.nonzero(fault >= 2.0)[0]
     from_rec = t >= (max(t_rec, t_disturbance) if t_rec is not None else np.inf)
     return {
@@ -302,7 +305,7 @@ def synchronism_metrics(r: dict[str, np.ndarray], t_disturbance: float = 0.0, po
         "t_recovered": t_rec,
         "recovery_time": None if t_rec is None else max(0.0, t_rec - t_disturbance),
         "speed_rms_after": _rms(w_m[from_rec] - w_ref[from_rec]) if np.any(from_rec) else None,
-        "episodes": int(len(rises) + (1 if len(fault) and fault[0] >= 1.0 else 0)),
+        "episodes": int(len(rises)),
         "t_first_episode": float(t[rises[0]]) if len(rises) else None,
         "fault_latched": bool(len(latched)),
         "t_fault": float(t[latched[0]]) if len(latched) else None,

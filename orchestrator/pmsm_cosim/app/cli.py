@@ -123,6 +123,11 @@ def cmd_run(a) -> int:
     fig_note = f", {len(figures)} figures" if figures else ""
     print(f"{m['status']}: {m['macro_steps']} steps in {m['wall_time_s']:.2f} s "
           f"({m['us_per_step']:.1f} us/step), {m['rows']} rows{fig_note}; results in {out}")
+    sync = m.get("synchronism")
+    if isinstance(sync, dict) and (sync.get("episodes") or sync.get("fault_latched")):
+        latched = f"; safe state latched at {sync['t_fault']:.2f} s" if sync.get("fault_latched") else ""
+        _note(f"the controller reported {sync['episodes']} loss-of-synchronism episode(s), the first at "
+              f"{sync['t_first_episode']:.2f} s{latched} (output fault; metrics.json 'synchronism')", a.quiet)
     if m["status"] == "completed":
         return 0
     return EXIT_INTERRUPTED if m["status"] == "interrupted" else EXIT_FAILED
