@@ -17,6 +17,7 @@ import pytest
 from orchestrator_support import project_fmus
 from pmsm_cosim.app.cli import main
 from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.app.report import synchronism
 from pmsm_cosim.engine.master import Master
 from pmsm_cosim.engine.recording import read_results
@@ -24,10 +25,10 @@ from pmsm_cosim.engine.system import ColumnSpec
 from pmsm_ev import accel
 from pmsm_ev import kernels as _k
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import MotorParams, PlantParams, StartupParams
+from pmsm_ev.params import SENSORLESS_EKF, DriveParams, MotorParams, PlantParams, StartupParams
 from pmsm_ev.plant import Plant
 from pmsm_ev.results import slipped_turns, synchronism_metrics, wrong_way_travel
-from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase
+from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase, hill_start_route
 
 DT = 1e-4
 N = MotorParams().N
@@ -264,3 +265,21 @@ def test_the_command_line_reports_the_fault(tmp_path, capsys):
     assert "1 loss-of-synchronism episode(s), the first at 8.27 s; safe state latched at 11.27 s" in err
     sync = json.loads((out / "metrics.json").read_text(encoding="utf-8"))["synchronism"]
     assert sync["fault_latched"] and sync["episodes"] == 1
+
+
+def test_a_restart_after_a_long_stand_with_offset_sensors(tmp_path):
+    """The hill start with +2 / -1 A current-sensor offsets: standing 10 s on 22 deg, the EKF's angle
+    (no back-EMF) would drift by 0.7 rad and put the guard on a wrong angle; held while the car stands
+    (``still_speed``), it lets the car restart: back in FOC on the way up and at 200 rad/s by the end."""
+    route = hill_start_route()
+    params = DriveParams(ekf=SENSORLESS_EKF, plant=PlantParams(sensor_offset_a=2.0, sensor_offset_b=-1.0))
+    run_reference(tmp_path, "hill-start", 70.0, "sensorless", params=params, elevation=route["delta"],
+                  omega_ref=route["omega_ref"])
+    r = read_results(tmp_path)
+    t = r["time"]
+    stand = (t > 41.0) & (t < 50.0)
+    assert np.all(r["mode"][stand] == _k.MODE_IF) and np.ptp(r["x_vehicle"][stand]) < 0.005
+    late = t > 65.0
+    assert np.all(r["mode"][late] == _k.MODE_EKF)
+    assert np.max(np.abs(r["omega_m"][late] - 200.0)) < 10.0
+    assert r["fault"].max() == _k.FAULT_NONE

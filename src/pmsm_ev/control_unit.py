@@ -59,11 +59,12 @@ _STARTUP_SLOTS = (
     ("i_rate_load", _k.C_I_RATE_LOAD), ("sync_guard", _k.C_GUARD), ("guard_angle", _k.C_E_GUARD),
     ("slip_tol", _k.C_SLIP_TOL), ("slip_time", _k.C_SLIP_TIME), ("recover_time", _k.C_RECOVER_TIME),
     ("fault_time", _k.C_FAULT_TIME), ("align_damping", _k.C_ALIGN_DAMP),
-    ("align_slip", _k.C_ALIGN_SLIP), ("align_slip_time", _k.C_ALIGN_SLIP_TIME))
+    ("align_slip", _k.C_ALIGN_SLIP), ("align_slip_time", _k.C_ALIGN_SLIP_TIME),
+    ("still_speed", _k.C_STILL))
 #: state slots of the sensorless start-up, saved and restored with the unit
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
-                  _k.S_OMEGA_CTRL)
+                  _k.S_OMEGA_CTRL, _k.S_ANCHOR, _k.S_ANCHORED)
 #: the vector sent to the inverter with dead-time compensation, saved and restored with the unit
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 

@@ -91,7 +91,9 @@ S_PSI_RATIO = 102  #: with psi adaptation: the EKF's magnet flux over the nomina
 # present loss-of-synchronism episode [s] (0: none); how long it has been in synchronism since [s];
 # the fault (FAULT_*); the control frame's angle [rad] and speed [rad/s] of the last period
 S_GUARD, S_LOS, S_EPISODE, S_INSYNC, S_FAULT, S_THETA_CTRL, S_OMEGA_CTRL = range(103, 110)
-UNIT_STATE = 110
+#: the car standing in I-f: the EKF's angle held (``C_STILL``), and 1.0 while it is
+S_ANCHOR, S_ANCHORED = 110, 111
+UNIT_STATE = 112
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -125,7 +127,8 @@ C_PSI_ADAPT, C_PSI_ADAPT_W = 68, 69
 C_ALIGN_DAMP = 80  #: 1.0: the alignment damped on the back-EMF (``StartupParams.align_damping``)
 C_ALIGN_SLIP = 81  #: |omega_hat| that ends the alignment: the rotor runs away under its vector [rad/s]
 C_ALIGN_SLIP_TIME = 82  #: ... for this long [s]
-UNIT_PARAMS = 83
+C_STILL = 83  #: below this |omega_hat| and |omega_if| in I-f the car stands: the EKF's angle is held [rad/s]
+UNIT_PARAMS = 84
 
 #: modes of the sensorless unit (``S_MODE``)
 MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
@@ -924,6 +927,15 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     else:
         ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
     ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
+    if s[S_MODE] == MODE_IF and abs(s[S_X + 2]) < c[C_STILL] and abs(s[S_OMEGA_IF]) < c[C_STILL]:
+        # the car stands on the I-f vector: no back-EMF shows the angle, and the EKF's would drift with
+        # the sensors' noise and offsets; the rotor is held, so its angle is held where the stand began
+        if s[S_ANCHORED] == 0.0:
+            s[S_ANCHOR] = s[S_X + 3]
+            s[S_ANCHORED] = 1.0
+        s[S_X + 3] = s[S_ANCHOR]
+    else:
+        s[S_ANCHORED] = 0.0
     if c[C_PSI_ADAPT] != 0.0 and s[S_MODE] == MODE_EKF:
         adapt_psi(s, c)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold

@@ -506,6 +506,11 @@ class StartupParams:
     #: ... for this long [s] [chosen]: 20 ms; the EKF's first corrections from its unknown start last
     #: under 0.3 ms above 6 rad/s with sigma = 1 A of current noise (8 angles, 3 seeds)
     align_slip_time: float = 0.02
+    #: the car stands in I-f below this |omega_hat| and |omega_if| [rad/s] [chosen: 0.5 rad/s, back-EMF
+    #: 0.18 V]: the rotor is held by the vector and no back-EMF shows its angle, so the EKF's angle is
+    #: held where the stand began (it would drift with current-sensor noise and offsets: 0.7 rad in
+    #: 10 s on 22 deg with +2/-1 A); 0: never held
+    still_speed: float = 0.5
     #: design load angle of the I-f drive [rad] [chosen]: 60 deg. The I-f acceleration is held to
     #: what N psi i sin(60 deg) leaves over the load the EKF sees, and the current raised to what
     #: the asked acceleration and the load need at 60 deg: sin 60 = 0.87 of the pull-out torque
