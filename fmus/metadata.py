@@ -187,8 +187,9 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "align_slip": ("rad/s", "a rotor turning faster than this under the alignment's vector (|omega_hat|) ends "
                             "the alignment: I-f on the EKF's angle at i_q_max (a car parked on a slope); 0 = never"),
     "align_slip_time": ("s", "... for this long"),
-    "still_speed": ("rad/s", "below this |omega_hat| and |omega_if| in I-f the car stands: the EKF's angle is held "
-                             "where the stand began (no back-EMF shows it); 0 = never"),
+    "still_speed": ("rad/s", "below this |omega_hat| and |omega_if| in I-f the car stands: the guard and the I-f "
+                             "sizing use the EKF's angle and load of when the stand began, the EKF is put back "
+                             "there when it ends (no back-EMF shows the angle); 0 = never"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),

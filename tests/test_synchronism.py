@@ -269,8 +269,8 @@ def test_the_command_line_reports_the_fault(tmp_path, capsys):
 
 def test_a_restart_after_a_long_stand_with_offset_sensors(tmp_path):
     """The hill start with +2 / -1 A current-sensor offsets: standing 10 s on 22 deg, the EKF's angle
-    (no back-EMF) would drift by 0.7 rad and put the guard on a wrong angle; held while the car stands
-    (``still_speed``), it lets the car restart: back in FOC on the way up and at 200 rad/s by the end."""
+    (no back-EMF) drifts by 0.8 rad and would put the guard on a wrong angle; with the angle and load of
+    the stand's start (``still_speed``) the car restarts: back in FOC on the way up, at 200 rad/s by the end."""
     route = hill_start_route()
     params = DriveParams(ekf=SENSORLESS_EKF, plant=PlantParams(sensor_offset_a=2.0, sensor_offset_b=-1.0))
     run_reference(tmp_path, "hill-start", 70.0, "sensorless", params=params, elevation=route["delta"],

@@ -91,9 +91,10 @@ S_PSI_RATIO = 102  #: with psi adaptation: the EKF's magnet flux over the nomina
 # present loss-of-synchronism episode [s] (0: none); how long it has been in synchronism since [s];
 # the fault (FAULT_*); the control frame's angle [rad] and speed [rad/s] of the last period
 S_GUARD, S_LOS, S_EPISODE, S_INSYNC, S_FAULT, S_THETA_CTRL, S_OMEGA_CTRL = range(103, 110)
-#: the car standing in I-f: the EKF's angle held (``C_STILL``), and 1.0 while it is
+#: the car standing in I-f (``C_STILL``): the EKF's angle when the stand began, and 1.0 while it stands
 S_ANCHOR, S_ANCHORED = 110, 111
-UNIT_STATE = 112
+S_ANCHOR_TL = 112  #: ... and the EKF's load then [N m]
+UNIT_STATE = 113
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -127,7 +128,7 @@ C_PSI_ADAPT, C_PSI_ADAPT_W = 68, 69
 C_ALIGN_DAMP = 80  #: 1.0: the alignment damped on the back-EMF (``StartupParams.align_damping``)
 C_ALIGN_SLIP = 81  #: |omega_hat| that ends the alignment: the rotor runs away under its vector [rad/s]
 C_ALIGN_SLIP_TIME = 82  #: ... for this long [s]
-C_STILL = 83  #: below this |omega_hat| and |omega_if| in I-f the car stands: the EKF's angle is held [rad/s]
+C_STILL = 83  #: below this |omega_hat| and |omega_if| in I-f the car stands: its angle is held [rad/s]
 UNIT_PARAMS = 84
 
 #: modes of the sensorless unit (``S_MODE``)
@@ -806,7 +807,7 @@ def vector_current(c, torque, sin_e, cos_e):
 
 
 @kernel()
-def if_vector_step(s, c, omega_ref):
+def if_vector_step(s, c, omega_ref, t_l):
     """I-f: turn the vector and size its current from the torque it can give (eq 12 with the rotor
     lagging the vector by the load angle e, ``vector_torque``; docs/sensorless.md).
 
@@ -817,11 +818,10 @@ def if_vector_step(s, c, omega_ref):
     the reserve spent). The target current is at least what the
     acceleration asked for and that load need at e_max, and ``C_IF_MARGIN`` times the load's
     current; it never falls in I-f. The magnitude ramps at ``C_I_RATE``, at ``C_I_RATE_LOAD``
-    while the guard holds the vector back (the load exceeds the vector)."""
+    while the guard holds the vector back (the load exceeds the vector). ``t_l``: the load [N m]."""
     dt = c[C_DT]
     sin_e = c[C_SIN_E]
     cos_e = math.cos(c[C_E_MAX])
-    t_l = s[S_X + 4]
     j = c[C_J_IF]
     if s[S_I_MAG] < c[C_I_Q_MAX]:
         t_cap = vector_torque(c, s[S_I_MAG], sin_e, cos_e)
@@ -852,18 +852,19 @@ GUARD_SOFT, GUARD_HARD = 1.0, 2.0
 
 
 @kernel()
-def sync_guard(s, c, omega_hat, lag):
+def sync_guard(s, c, omega_hat, lag, theta):
     """Keep the applied I-f vector (``S_PHI`` less ``lag``, the damping's pull-back) within
-    +-``C_E_GUARD`` of the EKF's rotor angle (electrical): a vector that would lead (or trail) the
+    +-``C_E_GUARD`` of the rotor's angle ``theta`` (electrical: the EKF's, or while the car stands
+    the one it had when the stand began): a vector that would lead (or trail) the
     rotor by more is held there and turns at the rotor's speed, so the rotor cannot fall out of
     step while the EKF holds its angle (``GUARD_HARD``). Beyond ``_SOFT_GUARD`` its speed is held to
     the rotor's (``GUARD_SOFT``): the lead stops growing before the EKF, whose load state lags a
     sudden load, shows the rotor slowing. ``S_GUARD`` is released once the vector is back within
     ``_SOFT_GUARD`` by ``_GUARD_BAND``."""
-    e = wrap_angle(s[S_PHI] - lag - s[S_X + 3])
+    e = wrap_angle(s[S_PHI] - lag - theta)
     e_max = c[C_E_GUARD]
     if e > e_max or e < -e_max:
-        s[S_PHI] = wrap_angle(s[S_X + 3] + lag + (e_max if e > 0.0 else -e_max))
+        s[S_PHI] = wrap_angle(theta + lag + (e_max if e > 0.0 else -e_max))
         s[S_OMEGA_IF] = omega_hat
         s[S_GUARD] = GUARD_HARD
     elif (e > _SOFT_GUARD and s[S_OMEGA_IF] > omega_hat) or (e < -_SOFT_GUARD and s[S_OMEGA_IF] < omega_hat):
@@ -928,13 +929,17 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
     ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
     if s[S_MODE] == MODE_IF and abs(s[S_X + 2]) < c[C_STILL] and abs(s[S_OMEGA_IF]) < c[C_STILL]:
-        # the car stands on the I-f vector: no back-EMF shows the angle, and the EKF's would drift with
-        # the sensors' noise and offsets; the rotor is held, so its angle is held where the stand began
+        # the car stands on the I-f vector: no back-EMF shows the angle, and the EKF's (and with it its
+        # load) drifts with the sensors' noise and offsets; the rotor is held, so the guard and the I-f
+        # sizing take the angle and the load of when the stand began, and the EKF is put back there
+        # when the stand ends
         if s[S_ANCHORED] == 0.0:
             s[S_ANCHOR] = s[S_X + 3]
+            s[S_ANCHOR_TL] = s[S_X + 4]
             s[S_ANCHORED] = 1.0
+    elif s[S_ANCHORED] != 0.0:
         s[S_X + 3] = s[S_ANCHOR]
-    else:
+        s[S_X + 4] = s[S_ANCHOR_TL]
         s[S_ANCHORED] = 0.0
     if c[C_PSI_ADAPT] != 0.0 and s[S_MODE] == MODE_EKF:
         adapt_psi(s, c)
@@ -997,11 +1002,13 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         if t > 0.0 and s[S_MODE] == MODE_IF:  # turn the vector (not in the period it was placed)
             if s[S_FAULT] == FAULT_LATCHED:
                 s[S_I_TGT] = c[C_I_Q_MAX]
-            if_vector_step(s, c, omega_ref)
+            anchored = s[S_ANCHORED] != 0.0
+            if_vector_step(s, c, omega_ref, s[S_ANCHOR_TL] if anchored else s[S_X + 4])
             # the damping's input, omega_hat - omega_if low-pass filtered (see below)
             s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - s[S_OMEGA_IF] - s[S_SLIP])
             if c[C_GUARD] != 0.0 or s[S_EPISODE] > 0.0 or s[S_FAULT] == FAULT_LATCHED:  # on while recovering
-                sync_guard(s, c, omega_hat, c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP])
+                sync_guard(s, c, omega_hat, c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP],
+                           s[S_ANCHOR] if anchored else s[S_X + 3])
         w_if = s[S_OMEGA_IF]
         slipping = abs(s[S_SLIP]) > c[C_SLIP_TOL] + c[C_AGREE_TOL] * abs(w_if)
         # in trouble: out of step, or a limit reached: the guard holding the vector at the current

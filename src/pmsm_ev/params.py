@@ -507,9 +507,10 @@ class StartupParams:
     #: under 0.3 ms above 6 rad/s with sigma = 1 A of current noise (8 angles, 3 seeds)
     align_slip_time: float = 0.02
     #: the car stands in I-f below this |omega_hat| and |omega_if| [rad/s] [chosen: 0.5 rad/s, back-EMF
-    #: 0.18 V]: the rotor is held by the vector and no back-EMF shows its angle, so the EKF's angle is
-    #: held where the stand began (it would drift with current-sensor noise and offsets: 0.7 rad in
-    #: 10 s on 22 deg with +2/-1 A); 0: never held
+    #: 0.18 V]: the rotor is held by the vector and no back-EMF shows its angle, which the EKF lets
+    #: drift with current-sensor noise and offsets (0.7 rad in 10 s on 22 deg with +2/-1 A), and its load
+    #: with it; the guard and the I-f sizing take the angle and the load of when the stand began, and
+    #: the EKF is put back there when it ends; 0: never
     still_speed: float = 0.5
     #: design load angle of the I-f drive [rad] [chosen]: 60 deg. The I-f acceleration is held to
     #: what N psi i sin(60 deg) leaves over the load the EKF sees, and the current raised to what
