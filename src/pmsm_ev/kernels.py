@@ -771,16 +771,21 @@ def restart_ekf(s, c, theta, i_d, i_q):
 @kernel()
 def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
     """Hand the drive to FOC on the EKF (mode EKF), seated on the present state: the speed PI's
-    integral so that (14) returns the present q current in the EKF's frame (``on_load``: the
-    current of the load the EKF sees, T_L_hat / (N psi), after a loss of synchronism, when the
-    present current says nothing of the load), the current PIs on the voltage held, turned by
-    one period of the I-f vector's rotation (``seat_current_pis``)."""
+    integral so that (14) returns the q current that gives the present torque once i_d is at its
+    reference (eq 12: the I-f vector's d current adds a reluctance torque N (L_d - L_q) i_d i_q that
+    FOC's i_d = 0 takes away), or with ``on_load`` the current of the load the EKF sees,
+    T_L_hat / (N psi), after a loss of synchronism, when the present current says nothing of the
+    load; the current PIs on the voltage held, turned by one period of the I-f vector's rotation
+    (``seat_current_pis``)."""
     theta = s[S_X + 3]
     i_d, i_q = park(i_alpha, i_beta, theta)
-    i_seat = s[S_X + 4] / (c[C_N] * c[C_PSI]) if on_load else i_q
+    if on_load:
+        i_seat = s[S_X + 4] / (c[C_N] * c[C_PSI])
+    else:  # N i_q (psi + (L_d - L_q) i_d) = N i_seat (psi + (L_d - L_q) i_dref)
+        i_seat = i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d) / (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * c[C_I_D_REF])
     s[S_W_INT] = i_seat - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_seat now
     seat_current_pis(s, c, theta + c[C_ADVANCE] * omega_hat, c[C_N] * s[S_OMEGA_IF] * c[C_DT],
-                     c[C_I_D_REF], i_q, i_d, i_q, omega_hat)
+                     c[C_I_D_REF], i_seat, i_d, i_q, omega_hat)
     s[S_AGREE] = 0.0
 
 
