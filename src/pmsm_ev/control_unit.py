@@ -64,7 +64,8 @@ _STARTUP_SLOTS = (
 #: state slots of the sensorless start-up, saved and restored with the unit
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
-                  _k.S_OMEGA_CTRL, _k.S_ANCHOR, _k.S_ANCHORED, _k.S_ANCHOR_TL)
+                  _k.S_OMEGA_CTRL, _k.S_ANCHOR, _k.S_ANCHORED, _k.S_ANCHOR_TL,
+                  _k.S_STILL_OUT)
 #: the vector sent to the inverter with dead-time compensation, saved and restored with the unit
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 

@@ -94,7 +94,8 @@ S_GUARD, S_LOS, S_EPISODE, S_INSYNC, S_FAULT, S_THETA_CTRL, S_OMEGA_CTRL = range
 #: the car standing in I-f (``C_STILL``): the EKF's angle when the stand began, and 1.0 while it stands
 S_ANCHOR, S_ANCHORED = 110, 111
 S_ANCHOR_TL = 112  #: ... and the EKF's load then [N m]
-UNIT_STATE = 113
+S_STILL_OUT = 113  #: how long |omega_hat| has been above C_STILL while standing [s] (the stand ends at C_SLIP_TIME / 2)
+UNIT_STATE = 114
 
 # -- parameter vector of the control unit ------------------------------------------------------
 C_DT = 0
@@ -933,7 +934,11 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     else:
         ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
     ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
-    if s[S_MODE] == MODE_IF and abs(s[S_X + 2]) < c[C_STILL] and abs(s[S_OMEGA_IF]) < c[C_STILL]:
+    # the rotor's speed above C_STILL counts only once it lasts (the EKF's speed noise at a stand with
+    # 1 A of sensor noise crosses 0.5 rad/s for a few periods at a time)
+    s[S_STILL_OUT] = s[S_STILL_OUT] + c[C_DT] if abs(s[S_X + 2]) >= c[C_STILL] else 0.0
+    if (s[S_MODE] == MODE_IF and abs(s[S_OMEGA_IF]) < c[C_STILL]
+            and (abs(s[S_X + 2]) < c[C_STILL] or (s[S_ANCHORED] != 0.0 and s[S_STILL_OUT] < 0.5 * c[C_SLIP_TIME]))):
         # the car stands on the I-f vector: no back-EMF shows the angle, and the EKF's (and with it its
         # load) drifts with the sensors' noise and offsets; the rotor is held, so the guard and the I-f
         # sizing take the angle and the load of when the stand began, and the EKF is put back there
@@ -942,8 +947,12 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             s[S_ANCHOR] = s[S_X + 3]
             s[S_ANCHOR_TL] = s[S_X + 4]
             s[S_ANCHORED] = 1.0
-    elif s[S_ANCHORED] != 0.0:
-        s[S_X + 3] = s[S_ANCHOR]
+    elif s[S_ANCHORED] != 0.0:  # the stand ends
+        if abs(s[S_X + 2]) < c[C_STILL]:  # the vector starts to turn (a restart): the EKF restarted at
+            i_d, i_q = park(i_alpha, i_beta, s[S_ANCHOR])  # the stand's angle, at rest (as after the
+            restart_ekf(s, c, s[S_ANCHOR], i_d, i_q)  # alignment), on the stand's load
+        else:  # the rotor moves (a load that changed): the EKF, which sees it, put back on that angle
+            s[S_X + 3] = s[S_ANCHOR]
         s[S_X + 4] = s[S_ANCHOR_TL]
         s[S_ANCHORED] = 0.0
     if c[C_PSI_ADAPT] != 0.0 and s[S_MODE] == MODE_EKF:
