@@ -1011,7 +1011,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         seat_current_pis(s, c, s[S_PHI] + c[C_ADVANCE] * omega_hat, c[C_N] * omega_hat * dt,
                          i_mag, 0.0, i_mag, 0.0, 0.0)
         mode = MODE_IF
-    slipping = False
+    trouble = False  # this period, in I-f: out of step, or a limit reached (the episode's clock)
     if mode == MODE_IF:
         if t > 0.0 and s[S_MODE] == MODE_IF:  # turn the vector (not in the period it was placed)
             if s[S_FAULT] == FAULT_LATCHED:
@@ -1035,15 +1035,13 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             s[S_INSYNC] = 0.0
             if s[S_EPISODE] == 0.0:
                 s[S_EPISODE] = dt
-            if not slipping:  # at the limit: nothing more to give; the episode runs on to the fault
-                pass
-            elif abs(omega_hat) >= c[C_W_DOWN]:  # loss of synchronism, the rotor turns and the EKF
-                seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)  # holds its angle: flying handover
+            # at the limit (not slipping) there is nothing more to give: the episode runs on to the fault
+            if slipping and abs(omega_hat) >= c[C_W_DOWN]:  # loss of synchronism, the rotor turns and the
+                seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)  # EKF holds its angle: flying handover
                 mode = MODE_EKF
-            else:  # at low speed: the vector put back on the rotor
+            elif slipping:  # at low speed: the vector put back on the rotor
                 relock(s, c, omega_hat, omega_ref)
             w_if = s[S_OMEGA_IF]
-        slipping = trouble
         if mode == MODE_IF:
             if abs(w_if) > c[C_W_UP] and abs(omega_hat - w_if) < c[C_AGREE_TOL] * abs(w_if):
                 s[S_AGREE] += dt
@@ -1054,7 +1052,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
                 mode = MODE_EKF
     if s[S_EPISODE] > 0.0:  # a loss-of-synchronism episode: recovered, or the fault latched
         s[S_EPISODE] += dt
-        s[S_INSYNC] = 0.0 if slipping else s[S_INSYNC] + dt
+        s[S_INSYNC] = 0.0 if trouble else s[S_INSYNC] + dt
         if s[S_INSYNC] >= c[C_RECOVER_TIME]:
             s[S_EPISODE] = 0.0
         elif s[S_EPISODE] >= c[C_FAULT_TIME]:
