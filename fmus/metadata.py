@@ -92,14 +92,21 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "i_q0": ("A", "initial q-axis current"),
     "omega_m0": ("rad/s", "initial mechanical rotor speed"),
     "theta_e0": ("rad", "initial electrical rotor angle"),
-    # ControllerParams: FOC, eqs 14-20
-    "kp_w": ("A.s/rad", "speed PI proportional gain (eq 14)"),
-    "ki_w": ("A/rad", "speed PI integral gain (eq 14)"),
-    "kp_id": ("V/A", "d-current PI proportional gain (eq 15)"),
-    "ki_id": ("V/(A.s)", "d-current PI integral gain (eq 15)"),
-    "kp_iq": ("V/A", "q-current PI proportional gain (eq 16)"),
-    "ki_iq": ("V/(A.s)", "q-current PI integral gain (eq 16)"),
-    "T_d": ("s", "time constant of the decoupling low-pass filters (eqs 17-18)"),
+    # ControllerParams: FOC, eqs 14-20; the gains derived at initialisation (pmsm_ev.controller.controller_gains)
+    "omega_c": ("rad/s", "current-loop bandwidth: the current PIs get K_p = L omega_c, K_i = R_s omega_c (L_d, L_q, "
+                         "R_s of this controller's motor model), T_d = 1/omega_c"),
+    "omega_n": ("rad/s", "speed-loop natural frequency: K_p = 2 zeta omega_n J / (N psi), K_i = omega_n^2 J / (N psi), "
+                         "J = J_m + J_load"),
+    "zeta": (None, "speed-loop damping ratio"),
+    "J_load": ("kg.m2", "vehicle inertia at the motor shaft the speed-loop design assumes, r_w^2 m_v / (eta n_g^2) "
+                        "of eq 9 (Table II); the speed PI is tuned on J_m + J_load"),
+    "kp_w": ("A.s/rad", "speed PI proportional gain (eq 14); 0 = derived, 2 zeta omega_n (J_m + J_load) / (N psi)"),
+    "ki_w": ("A/rad", "speed PI integral gain (eq 14); 0 = derived, omega_n^2 (J_m + J_load) / (N psi)"),
+    "kp_id": ("V/A", "d-current PI proportional gain (eq 15); 0 = derived, L_d omega_c"),
+    "ki_id": ("V/(A.s)", "d-current PI integral gain (eq 15); 0 = derived, R_s omega_c"),
+    "kp_iq": ("V/A", "q-current PI proportional gain (eq 16); 0 = derived, L_q omega_c"),
+    "ki_iq": ("V/(A.s)", "q-current PI integral gain (eq 16); 0 = derived, R_s omega_c"),
+    "T_d": ("s", "time constant of the decoupling low-pass filters (eqs 17-18); 0 = derived, 1/omega_c"),
     "i_d_ref": ("A", "d-current reference"),
     "i_q_max": ("A", "q-current reference limit"),
     "u_max": ("V", "voltage-vector magnitude limit"),

@@ -200,11 +200,11 @@ def test_voltage_limit_and_current_antiwindup():
 
 def test_speed_pi_limit_and_antiwindup():
     p = ControllerParams()
-    sc = SpeedController(p, DT)
+    sc = SpeedController(p, M, DT)
     for _ in range(50000):  # 5 s of a large error
         out = sc.step(200.0, 0.0)
         assert abs(out) <= p.i_q_max
-    assert sc.integral <= p.i_q_max + p.ki_w * 200.0 * DT  # did not wind up
+    assert sc.integral <= p.i_q_max + sc.gains.ki_w * 200.0 * DT  # did not wind up
     # and it leaves saturation as soon as the error reverses
     assert sc.step(0.0, 10.0) < p.i_q_max
 

@@ -19,6 +19,9 @@ Per control period, at t_k, with the plant's measured currents at t_k:
 
 The controller's motor model is its own ``MotorParams`` (nominal): a plant with another
 R_s, psi, L_q, saturation, temperature or dead time is a model mismatch for the observer.
+The PI gains are derived from that model and the bandwidths of ``ControllerParams`` when
+the unit is built (``pmsm_ev.controller.controller_gains``, the unit's ``gains``), so the
+model's L_d, L_q, R_s, N, psi and J_m also tune the controllers.
 
 The step is ``pmsm_ev.kernels.control_step`` (compiled with numba when available, see
 ``pmsm_ev.accel``) on one state vector that the observer and the controllers share.
@@ -36,7 +39,7 @@ import math
 
 from . import accel
 from . import kernels as _k
-from .controller import CurrentController, SpeedController
+from .controller import CurrentController, SpeedController, controller_gains
 from .observers import make_observer
 from .params import (
     ANGLE_SOURCES,
@@ -115,8 +118,13 @@ class ControlUnit:
         # the sensorless unit has no other
         self.angle_source = ("measured" if observer == "sensored" else
                              "estimated" if self.sensorless else angle_source)
-        self.speed = SpeedController(self.params, dt, state=self._s, params=self._c)
-        self.current = CurrentController(self.params, self.motor, dt, state=self._s, params=self._c)
+        # the gains, from the design and this unit's own motor model (and, for the I-f damping,
+        # the inertia of its EKF's model)
+        self.gains = controller_gains(self.params, self.motor, self.startup if self.sensorless else None,
+                                      self.observer.J if self.sensorless else 0.0)
+        self.speed = SpeedController(self.params, self.motor, dt, state=self._s, params=self._c, gains=self.gains)
+        self.current = CurrentController(self.params, self.motor, dt, state=self._s, params=self._c,
+                                         gains=self.gains)
         c = self._c
         c[_k.C_I_D_REF] = float(self.params.i_d_ref)
         c[_k.C_ADVANCE] = self.params.angle_advance * dt * self.motor.N
@@ -139,9 +147,7 @@ class ControlUnit:
         e = self.ekf_params
         for i, p0 in enumerate((e.p0_i, e.p0_i, st.p0_omega_aligned, st.p0_theta_aligned, e.p0_TL)):
             c[_k.C_P0_ALIGNED + i] = float(p0)
-        # I-f damping gain over sqrt(i): the linearised swing J s^2 + N psi i (k s + N) = 0
-        c[_k.C_IF_DAMP] = 2.0 * self.startup.if_damping * math.sqrt(self.observer.J / self.motor.psi) \
-            if self.sensorless else 0.0
+        c[_k.C_IF_DAMP] = self.gains.k_if  # the I-f damping gain times sqrt(i)
         c[_k.C_SLIP_FILTER] = min(dt / st.if_damping_filter, 1.0) if st.if_damping_filter > 0 else 1.0
         # the I-f sizing: the EKF model's inertia and the sine of the design load angle
         c[_k.C_J_IF] = float(self.observer.J) if self.sensorless else 0.0

@@ -4,8 +4,9 @@ Sources are marked in each docstring line:
 
 * ``[T1]``/``[T2]``: the paper's Table I (PMSM) and Table II (mechanical part).
 * ``[chosen]``: the paper is silent (or its appendix prints a garbled "2"); the value
-  is chosen here, with the reasoning next to it. ``docs/parameters.md`` repeats the
-  reasoning for readers who do not read code.
+  is chosen here, with the reasoning next to it. README.md ("Choices where the paper is
+  silent") sums the choices up for readers who do not read code; each FMU's
+  modelDescription.xml gives every parameter's unit and description (``pmsm_ev_fmus.metadata``).
 
 Everything is SI: V, A, Ohm, H, Wb (= V s/rad), N m, kg m^2, rad, rad/s, s.
 """
@@ -254,53 +255,47 @@ class PlantParams:
 # --- Controller design ------------------------------------------------------------
 #: control period [s] [chosen]: 10 kHz, a common PWM/sampling rate of EV inverters.
 DT_DEFAULT = 1.0e-4
-#: current-loop bandwidth [rad/s] [chosen]: ~320 Hz, 1/30 of the 10 kHz sampling rate,
-#: so the sampled loop behaves like the continuous design (phase lag < 4 deg).
-CURRENT_BANDWIDTH = 2000.0
-#: speed-loop natural frequency [rad/s] and damping [chosen]. The paper reports speed
-#: dips of 15 rad/s (scenario 1) and up to 33 rad/s (22 deg steps); a PI loop on J_eq
-#: with omega_n = 2 rad/s, zeta = 1 gives dips of that order (6.6 rad/s for a 5 deg
-#: step, 28 rad/s for 22 deg). A stiff loop (omega_n ~ 100 rad/s) is fine with a speed
-#: sensor but unstable with the EKF5, whose model carries J_m = J_eq/52 (eqs 30-31).
-SPEED_NATURAL_FREQUENCY = 2.0
-SPEED_DAMPING = 1.0
-
-
-def _default_gains() -> dict:
-    m, v = MotorParams(), VehicleParams()
-    j_eq = equivalent_inertia(m, v)
-    k_t = m.N * m.psi  # torque constant of eq 12 with i_d = 0 [N m/A] (no 3/2: the paper's scaling)
-    wc = CURRENT_BANDWIDTH
-    wn, zeta = SPEED_NATURAL_FREQUENCY, SPEED_DAMPING
-    return {
-        # PI zero cancels the R/L pole: Kp = L wc, Ki = R wc -> first-order loop, 1/wc.
-        "kp_id": m.L_d * wc,
-        "ki_id": m.R_s * wc,
-        "kp_iq": m.L_q * wc,
-        "ki_iq": m.R_s * wc,
-        # J_eq s^2 + k_t Kp s + k_t Ki = 0 -> Kp = 2 zeta wn J_eq / k_t, Ki = wn^2 J_eq / k_t.
-        "kp_w": 2 * zeta * wn * j_eq / k_t,
-        "ki_w": wn**2 * j_eq / k_t,
-        # Decoupling filters (17-18) with the closed current loop's time constant, so
-        # i_dl, i_ql follow the references the way the real currents do.
-        "T_d": 1.0 / wc,
-    }
-
-
-_G = _default_gains()
 
 
 @dataclass(frozen=True)
 class ControllerParams:
-    """FOC gains and limits (eqs 14-20). Gains are derived in ``_default_gains``."""
+    """FOC design and limits (eqs 14-20).
 
-    kp_w: float = _G["kp_w"]  #: speed PI proportional gain [A s/rad] (eq 14) [chosen]
-    ki_w: float = _G["ki_w"]  #: speed PI integral gain [A/rad] (eq 14) [chosen]
-    kp_id: float = _G["kp_id"]  #: d-current PI proportional gain [V/A] (eq 15) [chosen]
-    ki_id: float = _G["ki_id"]  #: d-current PI integral gain [V/(A s)] (eq 15) [chosen]
-    kp_iq: float = _G["kp_iq"]  #: q-current PI proportional gain [V/A] (eq 16) [chosen]
-    ki_iq: float = _G["ki_iq"]  #: q-current PI integral gain [V/(A s)] (eq 16) [chosen]
-    T_d: float = _G["T_d"]  #: decoupling low-pass time constant [s] (eqs 17-18) [chosen]
+    The paper gives the structure of its PIs (eqs 14-16) and filters (17-18) but no gains.
+    Here the gains follow from bandwidths and the controller's own motor model when the
+    control unit is built (``pmsm_ev.controller.controller_gains``, which has the formulas):
+    current PIs K_p = L omega_c, K_i = R_s omega_c; speed PI K_p = 2 zeta omega_n J / k_t,
+    K_i = omega_n^2 J / k_t on J = J_m + ``J_load``, k_t = N psi; T_d = 1 / omega_c. So a
+    controller given another L_q (``ctrl.L_q``) retunes its q-current PI with it. A gain
+    field other than 0 overrides its derived value.
+    """
+
+    #: current-loop bandwidth [rad/s] [chosen]: ~320 Hz, 1/30 of the 10 kHz sampling rate,
+    #: so the sampled loop behaves like the continuous design (phase lag < 4 deg). With the
+    #: PI zero on the R/L pole each current loop is first order, 1 / (1 + s / omega_c):
+    #: a step rises 10-90 % in 2.2 / omega_c (1.1 ms).
+    omega_c: float = 2000.0
+    #: speed-loop natural frequency [rad/s] and damping [-] [chosen]. The paper reports speed
+    #: dips of 15 rad/s (scenario 1) and up to 33 rad/s (22 deg steps); a PI loop on J_eq
+    #: with omega_n = 2 rad/s, zeta = 1 gives dips of that order (6.6 rad/s for a 5 deg
+    #: step, 28 rad/s for 22 deg). A stiff loop (omega_n ~ 100 rad/s) is fine with a speed
+    #: sensor but unstable with the EKF5, whose model carries J_m = J_eq/52 (eqs 30-31).
+    omega_n: float = 2.0
+    zeta: float = 1.0
+    #: the vehicle's inertia at the motor shaft that the speed-loop design assumes [kg m^2]
+    #: [T2]: r_w^2 m_v / (eta n_g^2) of eq 9 (0.516 kg m^2); the speed PI is tuned on
+    #: J_m + J_load = J_eq (0.526 kg m^2). The controller has no vehicle parameters of its own.
+    J_load: float = VehicleParams().reflected_inertia
+    #: gain overrides, 0 = derived from the bandwidths (``pmsm_ev.controller.controller_gains``)
+    kp_w: float = 0.0  #: speed PI proportional gain [A s/rad] (eq 14); 0 = 2 zeta omega_n J / k_t
+    ki_w: float = 0.0  #: speed PI integral gain [A/rad] (eq 14); 0 = omega_n^2 J / k_t
+    kp_id: float = 0.0  #: d-current PI proportional gain [V/A] (eq 15); 0 = L_d omega_c
+    ki_id: float = 0.0  #: d-current PI integral gain [V/(A s)] (eq 15); 0 = R_s omega_c
+    kp_iq: float = 0.0  #: q-current PI proportional gain [V/A] (eq 16); 0 = L_q omega_c
+    ki_iq: float = 0.0  #: q-current PI integral gain [V/(A s)] (eq 16); 0 = R_s omega_c
+    #: decoupling low-pass time constant [s] (eqs 17-18); 0 = 1 / omega_c, the closed current
+    #: loop's time constant, so i_dl, i_ql follow the references the way the real currents do
+    T_d: float = 0.0
     i_d_ref: float = 0.0  #: d-current reference [A]: 0, the usual choice below base speed
     #: q-current limit [A] [chosen]: 400 A gives 144 N m, 1.5x the 94 N m of the 25 deg plateau.
     i_q_max: float = 400.0
@@ -334,12 +329,18 @@ class ControllerParams:
     dead_time_comp_i0: float = 2.0
 
     def validate(self) -> None:
-        for name in ("kp_w", "ki_w", "kp_id", "ki_id", "kp_iq", "ki_iq", "T_d", "i_q_max", "u_max"):
+        for name in ("omega_c", "omega_n", "zeta", "J_load", "kp_w", "ki_w", "kp_id", "ki_id", "kp_iq", "ki_iq",
+                     "T_d", "i_q_max", "u_max"):
             value = getattr(self, name)
             _require(math.isfinite(value), f"{name} must be finite (got {value})")
-        for name in ("kp_w", "ki_w", "kp_id", "ki_id", "kp_iq", "ki_iq", "angle_advance"):
-            _require(getattr(self, name) >= 0, f"{name} must be >= 0 (got {getattr(self, name)})")
-        _require(self.T_d > 0, f"T_d must be > 0 s (got {self.T_d})")
+        _require(self.omega_c > 0, f"omega_c must be > 0 rad/s (got {self.omega_c})")
+        _require(self.omega_n > 0, f"omega_n must be > 0 rad/s (got {self.omega_n})")
+        _require(self.zeta > 0, f"zeta must be > 0 (got {self.zeta})")
+        _require(self.J_load >= 0, f"J_load must be >= 0 kg m^2 (got {self.J_load})")
+        for name in ("kp_w", "ki_w", "kp_id", "ki_id", "kp_iq", "ki_iq"):
+            _require(getattr(self, name) >= 0, f"{name} must be >= 0, 0 = derived (got {getattr(self, name)})")
+        _require(self.T_d >= 0, f"T_d must be >= 0 s, 0 = 1/omega_c (got {self.T_d})")
+        _require(self.angle_advance >= 0, f"angle_advance must be >= 0 (got {self.angle_advance})")
         _require(self.delay_compensation in (0, 1),
                  f"delay_compensation must be 0 or 1 (got {self.delay_compensation})")
         _require(self.i_q_max > 0, f"i_q_max must be > 0 A (got {self.i_q_max})")

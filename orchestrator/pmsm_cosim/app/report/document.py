@@ -8,11 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from pmsm_ev.controller import controller_gains
 from pmsm_ev.params import (
-    CURRENT_BANDWIDTH,
     DT_DEFAULT,
-    SPEED_DAMPING,
-    SPEED_NATURAL_FREQUENCY,
     ControllerParams,
     EkfParams,
     MotorParams,
@@ -231,17 +229,18 @@ def recovery(run: Run) -> dict:
 def _param_lines(t_from: float) -> list[str]:
 
     c, e, m, v = ControllerParams(), EkfParams(), MotorParams(), VehicleParams()
+    g = controller_gains(c, m)
     return [
         f"- Motor and vehicle: Tables I-II of the paper (N = {m.N}, ψ = {m.psi} Wb, L_d = {m.L_d * 1e3:g} mH, "
         f"L_q = {m.L_q * 1e3:g} mH, R_s = {m.R_s * 1e3:g} mΩ, J_m = {m.J_m} kg m², m_v = {v.m_v:g} kg, "
         f"n_g = {v.n_g}); chosen friction B_m = {m.B_m:g} N m s/rad, T_m0 = {m.T_m0:g} N m; "
         f"J_eq = {equivalent_inertia(m, v):.3f} kg m².",
         f"- Control period = communication step = {DT_DEFAULT:g} s (10 kHz), Gauss-Seidel (controller, then plant).",
-        f"- Current PIs (eqs 15-16): K_p = L ω_c, K_i = R_s ω_c with ω_c = {CURRENT_BANDWIDTH:g} rad/s "
-        f"(K_p,d = {c.kp_id:.3f}, K_p,q = {c.kp_iq:.3f} V/A, K_i = {c.ki_id:.2f} V/(A s)); decoupling filters "
-        f"T_d = {c.T_d * 1e3:g} ms; decoupling signs `{c.decoupling}` (eq 20 corrected).",
-        f"- Speed PI (eq 14): ω_n = {SPEED_NATURAL_FREQUENCY:g} rad/s, ζ = {SPEED_DAMPING:g} on J_eq: "
-        f"K_p = {c.kp_w:.3f} A s/rad, K_i = {c.ki_w:.3f} A/rad; i_q limit {c.i_q_max:g} A, voltage limit "
+        f"- Current PIs (eqs 15-16): K_p = L ω_c, K_i = R_s ω_c with ω_c = {c.omega_c:g} rad/s "
+        f"(K_p,d = {g.kp_id:.3f}, K_p,q = {g.kp_iq:.3f} V/A, K_i = {g.ki_id:.2f} V/(A s)); decoupling filters "
+        f"T_d = {g.T_d * 1e3:g} ms; decoupling signs `{c.decoupling}` (eq 20 corrected).",
+        f"- Speed PI (eq 14): ω_n = {c.omega_n:g} rad/s, ζ = {c.zeta:g} on J_eq: "
+        f"K_p = {g.kp_w:.3f} A s/rad, K_i = {g.ki_w:.3f} A/rad; i_q limit {c.i_q_max:g} A, voltage limit "
         f"{c.u_max:.1f} V; inverse-Park angle advanced by {c.angle_advance:g} period.",
         f"- EKF covariances (the appendix prints every entry as \"2\"): Q = diag(q_i = {e.q_i:g} A², "
         f"q_ω = {e.q_omega:g} (rad/s)², q_θ = {e.q_theta:g} rad², q_TL = {e.q_TL:g} (N m)²) per step, "
@@ -295,6 +294,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
     # --- the questions -----------------------------------------------------------------
 
     j_eq = equivalent_inertia(MotorParams(), VehicleParams())
+    omega_n = ControllerParams().omega_n
     L.append("## The paper's claims, checked\n")
     L.append("### Speed transients at the load steps\n")
 
@@ -310,7 +310,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
     s1, s2 = dips("s1-ekf5-paper"), dips("s2-ekf5-paper")
     dt1, dt2 = load_step("s1-ekf5-paper", 0), load_step("s2-ekf5-paper", 0)
     def pred(dT):
-        return dT / (j_eq * SPEED_NATURAL_FREQUENCY * math.e) if dT is not None else None
+        return dT / (j_eq * omega_n * math.e) if dT is not None else None
 
     L.append(
         f"The paper reports speed dips of about 15 rad/s at the 5° steps of scenario 1 and up to 33 rad/s at "
@@ -322,7 +322,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
         f" rad/s. The dip is set by the speed loop, not by the observer: for a PI loop with ζ = 1 a load step "
         f"ΔT gives a largest deviation ΔT / (J_eq ω_n e). The first steps change T_L,mech by "
         f"{_f(dt1)} N m (scenario 1) and {_f(dt2)} N m (scenario 2), so with J_eq = {j_eq:.3f} kg m² and "
-        f"ω_n = {SPEED_NATURAL_FREQUENCY:g} rad/s the formula predicts {_f(pred(dt1))} and {_f(pred(dt2))} "
+        f"ω_n = {omega_n:g} rad/s the formula predicts {_f(pred(dt1))} and {_f(pred(dt2))} "
         f"rad/s against the measured first-step dips {_f(s1[0] if s1 else None)} and {_f(s2[0] if s2 else None)} "
         f"rad/s. The paper does not give its gains (nor its control period, EKF covariances "
         f"or start-up); its 15 rad/s for a ~{_f(dt1, '.0f')} N m step would need ω_n ≈ "
