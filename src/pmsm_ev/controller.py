@@ -41,9 +41,9 @@ def controller_gains(p: ControllerParams, motor: MotorParams, startup: StartupPa
     ``zeta``, ``J_load``) and the controller's motor model ``motor``. A gain of ``p`` other
     than 0 is taken as it is.
 
-    * Current PIs (15-16), the PI zero on the stator's R/L pole (technical optimum / internal
-      model control; e.g. Harnefors and Nee, "Model-based current control of AC machines
-      using the internal model control method", IEEE Trans. Ind. Appl. 34(1), 1998):
+    * Current PIs (15-16), the PI zero on the stator's R/L pole (internal model control:
+      Harnefors and Nee, "Model-based current control of AC machines using the internal
+      model control method", IEEE Trans. Ind. Appl. 34(1), 1998):
       K_p = L omega_c, K_i = R_s omega_c, with L = L_d (d axis) or L_q (q axis). With the
       back-EMF and cross-coupling cancelled by the decoupling (19-20) the loop is
       omega_c / (s + omega_c): first order, time constant 1 / omega_c.
