@@ -238,6 +238,10 @@ class FmuInstance:
         except Exception:  # FMICallException, or a slave without the status
             return False
 
+    def logged_error(self) -> bool:
+        """Whether a message of status fmi2Error or worse was logged since ``mark``."""
+        return any(status >= FMI2_ERROR for status, _text in self.messages[self._mark:])
+
     def mark(self) -> None:
         """Forget older messages for ``last_problem`` (called before each FMI phase)."""
         self._mark = len(self.messages)

@@ -33,8 +33,11 @@ model.
 Termination: an FMU whose fmi2DoStep from t_n returns fmi2Discard with
 fmi2GetBooleanStatus(fmi2Terminated) true ends the run there as "completed", with
 ``terminated_by`` (the instance) and ``terminated_at`` (t_n) in metrics.json; the rows
-recorded up to t_n are kept. (A discard without that request is a failed step: this
-master does not retry a step with a smaller size.)
+recorded up to t_n are kept. It is a failed step, like any other status above fmi2Warning,
+if the FMU logged a message of status fmi2Error or worse during the run (a pythonfmu FMU
+whose ``do_step`` returns False asks to terminate: with an error logged, that is a failure),
+or if it discards the step without asking to terminate (this master does not retry a step
+with a smaller size).
 
 Two loops step the system, the same FMI calls in the same order (so bit-identical
 results): the *generated* one (default), source text unrolled over the components and
@@ -380,11 +383,9 @@ class Master:
         """The exception for an fmi2DoStep from t that returned ``status`` > fmi2Warning:
         :class:`_Terminated` if the FMU discarded the step to end the simulation."""
         st.inst.note_status(status)
-        if status == FMI2_DISCARD and st.inst.terminate_requested():
+        if status == FMI2_DISCARD and st.inst.terminate_requested() and not st.inst.logged_error():
             return _Terminated(st.inst.name, t)
-        action = "fmi2DoStep" if status != FMI2_DISCARD else \
-            "fmi2DoStep (discard, without a termination request; the step is not retried)"
-        return _StepFailed(self._describe(st.inst, action, t))
+        return _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
 
     def _plain_steps(self, n0: int, n1: int, sig_next: int) -> int:
         """The stepping loop as ordinary Python: the same calls, in the same order, as the
