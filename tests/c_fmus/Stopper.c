@@ -21,7 +21,7 @@ static void model_outputs(Model *m) { (void)m; }
 static fmi2Status model_step(Model *m, double t, double h) {
     double stop = m->r[R_STOP_AT];
     if (t >= stop - 1e-9 * fmax(1.0, fabs(stop))) {
-        logf_(m, fmi2Discard, m->b[B_DISCARD_ONLY] ? "step refused" : "the stop time is reached");
+        log_text(m, fmi2Discard, m->b[B_DISCARD_ONLY] ? "step refused" : "the stop time is reached");
         m->terminated = m->b[B_DISCARD_ONLY] ? fmi2False : fmi2True;
         return fmi2Discard;
     }

@@ -33,12 +33,13 @@ static void model_start(Model *m);
 static void model_outputs(Model *m);
 static fmi2Status model_step(Model *m, double t, double h);
 
-static void logf_(Model *m, fmi2Status status, const char *text) {
-    if (m->cb.logger) m->cb.logger(m->cb.componentEnvironment, m->name, status, "logAll", "%s", text);
+/* text is passed as the format, with no arguments (a master's logger may not format): no '%' in it */
+static void log_text(Model *m, fmi2Status status, const char *text) {
+    if (m->cb.logger) m->cb.logger(m->cb.componentEnvironment, m->name, status, "logAll", text);
 }
 
 #define CHECK_VRS(N) do { for (size_t k = 0; k < nvr; k++) if (vr[k] >= (N)) { \
-    logf_(m, fmi2Error, "value reference out of range"); return fmi2Error; } } while (0)
+    log_text(m, fmi2Error, "value reference out of range"); return fmi2Error; } } while (0)
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
@@ -114,7 +115,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String v[]) {
     Model *m = (Model *)c; CHECK_VRS(N_STRING);
     for (size_t k = 0; k < nvr; k++) {
-        if (!v[k]) { logf_(m, fmi2Error, "fmi2SetString: NULL string"); return fmi2Error; }
+        if (!v[k]) { log_text(m, fmi2Error, "fmi2SetString: NULL string"); return fmi2Error; }
         snprintf(m->s[vr[k]], STRING_SIZE, "%s", v[k]);
     }
     return fmi2OK;
@@ -123,7 +124,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior) {
     Model *m = (Model *)c;
     (void)no_prior;
-    if (m->terminated) { logf_(m, fmi2Error, "fmi2DoStep after a termination request"); return fmi2Error; }
+    if (m->terminated) { log_text(m, fmi2Error, "fmi2DoStep after a termination request"); return fmi2Error; }
     fmi2Status status = model_step(m, t, h);
     if (status <= fmi2Warning) m->time = t + h;
     return status;
