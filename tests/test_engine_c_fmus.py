@@ -135,6 +135,20 @@ def test_typed_start_values_from_the_command_line(tmp_path, c_fmus):
     assert list(r["flag_seen"][1:4]) == [0, 0, 0]  # even counts, not inverted
 
 
+@pytest.mark.parametrize("value, seen", [("High", 3), ("2", 2), ("Low", 1)])
+def test_an_enumeration_start_value_by_item_name_or_number(tmp_path, c_fmus, value, seen):
+    path = system(tmp_path, c_fmus, [("consumer", "Consumer", "")], record={"lvl_seen": "consumer.lvl_seen"})
+    _, r = run(path, tmp_path / "out", sets=(f"consumer.lvl={value}",))
+    assert list(r["lvl_seen"][:3]) == [1, seen, seen]
+
+
+def test_an_unknown_enumeration_item_is_refused(tmp_path, c_fmus):
+    path = system(tmp_path, c_fmus, [("consumer", "Consumer", "")], record={"lvl_seen": "consumer.lvl_seen"})
+    with pytest.raises(CosimError, match=r"^start value consumer\.lvl: 'Top' is not a valid Enumeration value "
+                                         r"\(items: Low=1, Mid=2, High=3\)$"):
+        run(path, tmp_path / "out", sets=("consumer.lvl=Top",))
+
+
 @pytest.mark.parametrize("connection, message", [
     ("counter.count -> consumer.u", "counter.count is an Integer, consumer.u is a Real: a connection joins "
                                     "variables of the same type (no conversion)"),

@@ -147,7 +147,8 @@ def read_description(path: Path, label: str = ""):
 
 
 def convert_start(sv, value, where: str):
-    """A start value in the Python type fmpy's setter of ``sv``'s type expects."""
+    """A start value in the Python type fmpy's setter of ``sv``'s type expects (an
+    Enumeration: its integer value, or the name of one of its items)."""
     kind = sv.type
     try:
         if kind == "Real":
@@ -160,6 +161,10 @@ def convert_start(sv, value, where: str):
         if kind in ("Integer", "Enumeration"):
             if isinstance(value, bool):
                 raise ValueError
+            if kind == "Enumeration" and isinstance(value, str):
+                items = {item.name: int(item.value) for item in getattr(sv.declaredType, "items", None) or ()}
+                if value.strip() in items:  # an item by its name
+                    return items[value.strip()]
             if isinstance(value, str):
                 value = float(value) if any(ch in value for ch in ".eE") else int(value, 0)
             if isinstance(value, float):
@@ -179,7 +184,9 @@ def convert_start(sv, value, where: str):
             return value if isinstance(value, str) else str(value)
     except (ValueError, TypeError, OverflowError):
         pass
-    raise CosimError(f"{where}: {value!r} is not a valid {kind} value")
+    items = getattr(getattr(sv, "declaredType", None), "items", None) if kind == "Enumeration" else None
+    listed = f" (items: {', '.join(f'{item.name}={item.value}' for item in items)})" if items else ""
+    raise CosimError(f"{where}: {value!r} is not a valid {kind} value{listed}")
 
 
 class FmuInstance:

@@ -179,6 +179,7 @@ class Master:
 
     def __init__(self, spec: SystemSpec, loop: str | None = None):
         self.loop = loop_choice(loop)  #: "generated" or "plain" (see the module's docstring)
+        self.step_source = ""  #: the generated loop's source (after the set-up of a generated run)
         self.spec = spec
         self.h = spec.step_size
         self.n_steps, self.every = time_grid(spec)
