@@ -87,6 +87,19 @@ def test_integer_enumeration_boolean_and_string_connections(tmp_path, c_fmus):
     assert list(r["text_len"][1:]) == [len(f"c{k}") for k in seen]
 
 
+def test_a_string_is_copied_before_the_source_is_called_again(tmp_path, c_fmus):
+    """The Counter's strings are valid only until its next call; the Integer and Boolean
+    gets after the String get (the connections' order) spoil them. The consumer gets the
+    label all the same."""
+    connections = (TYPED[3], *TYPED[:3])
+    path = system(tmp_path, c_fmus, [("counter", "Counter", 'prefix = "c"'), ("consumer", "Consumer", "")],
+                  connections, CONSUMER_COLUMNS, stop_time=0.05)
+    for loop in ("generated", "plain"):
+        _, r = run(path, tmp_path / loop, loop)
+        assert list(r["text_number"]) == [-1, 0, 1, 2, 3, 4], loop
+        assert list(r["text_len"]) == [0, 2, 2, 2, 2, 2], loop
+
+
 def test_gauss_seidel_passes_the_freshest_typed_values(tmp_path, c_fmus):
     _, r = run(typed_system(tmp_path, c_fmus, algorithm="gauss-seidel"), tmp_path / "out")
     assert list(r["k_seen"][1:]) == list(r["count"][1:])  # the counter stepped first

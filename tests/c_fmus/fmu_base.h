@@ -9,6 +9,8 @@
        static fmi2Status model_step(Model *m, double t, double h);   one fmi2DoStep
    (model_outputs is called by fmi2ExitInitializationMode; model_step calls it itself.)
    model_step may set m->terminated = fmi2True and return fmi2Discard to end the simulation.
+   The strings fmi2GetString gives are valid only until the next call to the instance, as
+   FMI 2.0 allows: the next call overwrites them with "stale" (a master must copy them).
    Built with the FMI 2.0 headers (fmpy ships them in fmpy/c-code). */
 #include <stdio.h>
 #include <stdlib.h>
@@ -22,7 +24,7 @@ typedef struct {
     fmi2Integer i[N_INTEGER];
     fmi2Boolean b[N_BOOLEAN];
     char s[N_STRING][STRING_SIZE];
-    const char *s_ptr[N_STRING];
+    char s_out[N_STRING][STRING_SIZE];  /* what fmi2GetString gave, until the next call */
     double time;
     fmi2Boolean terminated;
     fmi2CallbackFunctions cb;
@@ -38,7 +40,12 @@ static void log_text(Model *m, fmi2Status status, const char *text) {
     if (m->cb.logger) m->cb.logger(m->cb.componentEnvironment, m->name, status, "logAll", text);
 }
 
-#define CHECK_VRS(N) do { for (size_t k = 0; k < nvr; k++) if (vr[k] >= (N)) { \
+static void spoil_strings(Model *m) {
+    for (int k = 0; k < N_STRING; k++) snprintf(m->s_out[k], STRING_SIZE, "stale");
+}
+
+/* every get and set: spoil the strings given before, check the value references */
+#define CHECK_VRS(N) do { spoil_strings(m); for (size_t k = 0; k < nvr; k++) if (vr[k] >= (N)) { \
     log_text(m, fmi2Error, "value reference out of range"); return fmi2Error; } } while (0)
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
@@ -55,7 +62,6 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     if (!m) return NULL;
     m->cb = *cb;
     snprintf(m->name, STRING_SIZE, "%s", name ? name : "");
-    for (int k = 0; k < N_STRING; k++) m->s_ptr[k] = m->s[k];
     model_start(m);
     return m;
 }
@@ -94,7 +100,10 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 }
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String v[]) {
     Model *m = (Model *)c; CHECK_VRS(N_STRING);
-    for (size_t k = 0; k < nvr; k++) v[k] = m->s_ptr[vr[k]];
+    for (size_t k = 0; k < nvr; k++) {
+        memcpy(m->s_out[vr[k]], m->s[vr[k]], STRING_SIZE);
+        v[k] = m->s_out[vr[k]];
+    }
     return fmi2OK;
 }
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real v[]) {
@@ -124,6 +133,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior) {
     Model *m = (Model *)c;
     (void)no_prior;
+    spoil_strings(m);
     if (m->terminated) { log_text(m, fmi2Error, "fmi2DoStep after a termination request"); return fmi2Error; }
     fmi2Status status = model_step(m, t, h);
     if (status <= fmi2Warning) m->time = t + h;

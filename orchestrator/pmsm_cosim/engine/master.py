@@ -22,7 +22,8 @@ piecewise-constant table) and an input they drive is set only when its value cha
 
 Connections join variables of the same FMI type (Real, Integer, Boolean, String, or
 Enumeration of the same enumeration type): per (destination, source, type) one fmi2Get and
-one fmi2Set call of that type. A Real value read is checked to be finite before it is set.
+one fmi2Set call of that type. A Real value read is checked to be finite before it is set;
+a String read is copied at once (the FMU's strings are valid only until its next call).
 
 Recording: the row of t_n is written before step n is taken, every output interval
 and at the stop time: FMU variables as they are (a component's outputs as of its last
@@ -94,6 +95,12 @@ def loop_choice(loop: str | None = None) -> str:
     if loop not in LOOPS:
         raise CosimError(f"{where}: {loop!r} is not a stepping loop; choose one of {', '.join(LOOPS)}")
     return loop
+
+
+def hold_strings(buf) -> None:
+    """Copy the strings an fmi2GetString just pointed ``buf`` at into Python bytes that ``buf``
+    keeps alive (FMI 2.0: the FMU's own strings may change or go at its next call)."""
+    buf[:] = buf[:]
 
 
 def call_type(sv_type: str) -> str:
@@ -229,7 +236,7 @@ class Master:
                 # than indexing (or iterating) the ctypes array
                 values = array.array("d", [0.0] * len(conns))
                 buf = (ctypes.c_double * len(conns)).from_buffer(values)
-            else:  # a String value is a pointer the source owns until its next call: set at once
+            else:  # String: pointers, copied at once by hold_strings (the source owns the strings)
                 buf = (_CTYPES[kind] * len(conns))()
             count = si.lean.count(len(conns))
             get, set_ = si.lean.getter(kind), di.lean.setter(kind)
@@ -427,6 +434,8 @@ class Master:
                 raise self._get_failed(st, j, t, status)
             if tr.kind == "Real" and not all(math.isfinite(v) for v in tr.values):
                 self._check_finite(st, j, t)
+            elif tr.kind == "String":
+                hold_strings(tr.buf)
 
     def _write_inputs(self, st: _Stepper, t: float) -> None:
         """fmi2Set<type> of ``st``'s connected inputs, then its queued signal inputs."""
@@ -479,6 +488,9 @@ class Master:
                     # NaN or inf in the values read: x - x is 0.0 for a finite sum, NaN otherwise
                     read += [f"{ind}x = {total}",
                              f"{ind}if x - x: check_finite(st{i}, {j}, t)"]
+                elif tr.kind == "String":
+                    ns[f"hold{i}_{j}"] = functools.partial(hold_strings, tr.buf)
+                    read += [f"{ind}hold{i}_{j}()"]
                 write += [f"{ind}if (s := set{i}_{j}()) > 1: raise fail_set(st{i}, {j}, t, s)"]
             flush = []
             if st.multiple > 1 and any(tg.stepper is st for sig in self.signals for tg in sig.targets):
