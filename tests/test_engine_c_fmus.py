@@ -16,6 +16,8 @@ from pmsm_cosim.app.cli import main
 from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.engine.master import Master
 from pmsm_cosim.engine.recording import read_results
+from pmsm_cosim.engine.ssp import load_ssp
+from pmsm_cosim.engine.ssp_export import export_ssp
 from pmsm_cosim.engine.system import load_system_file
 
 H = 0.01
@@ -232,3 +234,21 @@ def test_cli_run_of_a_terminated_system_exits_0(tmp_path, c_fmus, capsys):
     assert capsys.readouterr().out.startswith("completed: 50 steps")
     metrics = json.loads((out / "metrics.json").read_text())
     assert (metrics["loop"], metrics["terminated_by"], metrics["terminated_at"]) == ("plain", "stopper", 0.5)
+
+
+# --- SSP ------------------------------------------------------------------------------------
+
+def test_typed_connections_travel_in_an_ssp_package(tmp_path, c_fmus):
+    """Integer, Boolean and String connectors and start values: the package runs as the
+    system file does; an Enumeration connection is refused (no ssc:Enumeration definitions)."""
+    spec = load_system_file(system(tmp_path, c_fmus, [("counter", "Counter", 'step_by = 3, prefix = "c"'),
+                                                      ("consumer", "Consumer", "invert = true")],
+                                   (TYPED[0], TYPED[2], TYPED[3]), {**COUNTER_COLUMNS, **CONSUMER_COLUMNS}))
+    export_ssp(spec, tmp_path / "typed.ssp")
+    Master(spec).run(tmp_path / "toml", catch_sigint=False)
+    Master(load_ssp(tmp_path / "typed.ssp")).run(tmp_path / "ssp", catch_sigint=False)
+    assert (tmp_path / "ssp" / "results.csv").read_bytes() == (tmp_path / "toml" / "results.csv").read_bytes()
+    assert list(read_results(tmp_path / "ssp")["text_number"][1:4]) == [0, 3, 6]
+    with pytest.raises(CosimError, match=r"export-ssp: connection counter\.level -> consumer\.lvl: Enumeration "
+                                         r"connectors cannot be written to an SSP package"):
+        export_ssp(load_system_file(typed_system(tmp_path, c_fmus)), tmp_path / "enum.ssp")
