@@ -175,7 +175,7 @@ def test_bad_start_values(tmp_path, assignment, message):
     ('"srcc.y -> snk.u"', r"unknown instance 'srcc' \(did you mean: src"),
     ('"snk.u -> src.slope"', "is a input, not an output|not an output"),
     ('"src.y -> snk.last_u"', "not an input"),
-    ('"src.n_steps -> snk.u"', "only Real variables"),
+    ('"src.n_steps -> snk.u"', "is an Integer, snk.u is a Real: a connection joins variables of the same type"),
 ])
 def test_connections_are_checked_at_load(tmp_path, connection, message):
     with pytest.raises(CosimError, match=message) as exc:

@@ -150,7 +150,8 @@ def test_unknown_instance_or_variable_lists_close_matches(tmp_path, capsys, conn
     ("snk.u -> src.slope", "snk.u is an input, not an output"),
     ("src.y -> snk.last_u", "snk.last_u is an output, not an input"),
     ("src.y -> snk.gain", "snk.gain is a parameter, not an input"),
-    ("src.n_steps -> snk.u", "src.n_steps is an Integer; only Real variables can be connected"),
+    ("src.n_steps -> snk.u", "src.n_steps is an Integer, snk.u is a Real: a connection joins variables of the "
+                             "same type (no conversion)"),
     ("plant.omega_m -> ctrl.i_alpha", "units differ ('rad/s' -> 'A')"),
 ])
 def test_a_bad_connection_names_both_ends(tmp_path, capsys, connection, message):

@@ -108,7 +108,7 @@ def cmd_run(a) -> int:
     spec = _load_with_overrides(a)
     out = Path(a.out) if a.out else Path("runs") / spec.name
     ensure_fmus(spec, a.quiet)
-    master = Master(spec)
+    master = Master(spec, loop="plain" if a.plain_loop else None)
     if not a.quiet:
         for w in master.warnings:
             _note(w)
@@ -308,6 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
     _system_options(r)
     r.add_argument("--out", metavar="DIR", help="output directory (default: runs/<scenario name>)")
     r.add_argument("--no-figures", action="store_true", help="do not draw figures")
+    r.add_argument("--plain-loop", action="store_true",
+                   help="step with the plain Python loop (for a debugger; same results, slower) instead of the "
+                        "generated one (also: PMSM_COSIM_LOOP=plain)")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes")
     r.set_defaults(func=cmd_run)
 

@@ -1,10 +1,12 @@
 """The checks of a system against its time grid and its FMUs, before anything runs.
 
 :func:`time_grid`: the stop time, the output interval and every component's step are whole
-numbers of base steps. :func:`check_wiring`: every connection goes from a Real output to a
-Real input of the same unit, every signal drives Real inputs, every recorded column is a
-number (convertible when a unit is asked), every start value is settable. Each problem is
-a one-line :class:`~pmsm_cosim.engine.errors.CosimError` naming the system file.
+numbers of base steps. :func:`check_wiring`: every connection goes from an output to an
+input of the same type (Real of the same unit, Integer, Boolean, String, or Enumeration of
+the same items; no conversion between types), every signal drives Real inputs, every
+recorded column is a number (convertible when a unit is asked), every start value is
+settable. Each problem is a one-line :class:`~pmsm_cosim.engine.errors.CosimError` naming
+the system file.
 """
 
 from __future__ import annotations
@@ -53,6 +55,25 @@ def time_grid(s: SystemSpec) -> tuple[int, int]:
                              f"({c.step_multiple} x {h} s)")
     return n, every
 
+def enumeration_items(sv) -> tuple:
+    """((name, value), ...) of an Enumeration variable's declared type (() if none is declared)."""
+    dt = getattr(sv, "declaredType", None)
+    return tuple((item.name, int(item.value)) for item in getattr(dt, "items", None) or ())
+
+
+def connection_types_problem(src, dst) -> str:
+    """Why an output of ``src``'s type cannot feed an input of ``dst``'s ("" if it can)."""
+    if src.type != dst.type:
+        return "a connection joins variables of the same type (no conversion)"
+    if src.type == "Enumeration":
+        a, b = enumeration_items(src), enumeration_items(dst)
+        if a and b and a != b:
+            def items(sv, pairs):
+                return f"{getattr(sv.declaredType, 'name', '?')}: {', '.join(f'{k}={v}' for k, v in pairs)}"
+            return f"their enumeration types have different items ({items(src, a)}; {items(dst, b)})"
+    return ""
+
+
 def check_wiring(s: SystemSpec, instances: dict[str, FmuInstance]) -> None:
     """Connections, signals, recorded columns and start values against the FMUs' variables:
     names (with close matches), causality, type, units."""
@@ -67,9 +88,10 @@ def check_wiring(s: SystemSpec, instances: dict[str, FmuInstance]) -> None:
         if dst.causality != "input":
             raise CosimError(f"{ctx}: {conn.dst}.{conn.dst_var} is {_a(dst.causality)}, not an input "
                              f"(a connection goes from an output to an input)")
-        for ref, sv in ((f"{conn.src}.{conn.src_var}", src), (f"{conn.dst}.{conn.dst_var}", dst)):
-            if sv.type != "Real":
-                raise CosimError(f"{ctx}: {ref} is {_a(sv.type)}; only Real variables can be connected")
+        problem = connection_types_problem(src, dst)
+        if problem:
+            raise CosimError(f"{ctx}: {conn.src}.{conn.src_var} is {_a(src.type)}, {conn.dst}.{conn.dst_var} is "
+                             f"{_a(dst.type)}: {problem}")
         u_src, u_dst = variable_unit(src), variable_unit(dst)
         if u_src and u_dst and u_src != u_dst:
             raise CosimError(f"{ctx}: units differ ({u_src!r} -> {u_dst!r})")
@@ -89,8 +111,8 @@ def check_wiring(s: SystemSpec, instances: dict[str, FmuInstance]) -> None:
         ctx = f"{where}record.{col.name}"
         sv = instances[col.instance].variable(col.variable, ctx)
         if sv.type not in ("Real", "Integer", "Enumeration", "Boolean"):
-            raise CosimError(f"{ctx}: {col.instance}.{col.variable} is {_a(sv.type)}; "
-                             f"only numbers can be recorded")
+            raise CosimError(f"{ctx}: {col.instance}.{col.variable} is {_a(sv.type)}; only numbers can be "
+                             f"recorded (Real, Integer, Enumeration, Boolean as 0/1): results.csv holds numbers")
         if col.unit:
             need = COLUMN_CONVERSIONS[col.unit][0]
             u = variable_unit(sv)

@@ -5,9 +5,10 @@ system can be checked before anything is instantiated; :meth:`FmuInstance.instan
 then extracts the FMU, loads its library and runs instantiate, setupExperiment, the
 start values, enterInitializationMode; :meth:`exit_initialization` completes the
 initialization. For the stepping loop it exposes the raw ctypes entry points
-(``get_real``, ``set_real``, ``do_step``) and the instance handle ``handle``: they
+(``get_real``, ``set_real``, ``do_step``, ...) and the instance handle ``handle``: they
 are called with preallocated value-reference and value arrays, no per-call wrapping;
-and leaner copies of the three (``lean``, see :class:`LeanCalls`) for the hot loop.
+and leaner copies of fmi2DoStep and of fmi2Get/fmi2Set of every type (``lean``, see
+:class:`LeanCalls`) for the hot loop.
 The FMU's log messages are collected so a refusal can be reported in one line.
 """
 
@@ -33,6 +34,7 @@ from fmpy.fmi2 import (
     fmi2CallbackFreeMemoryTYPE,
     fmi2CallbackFunctions,
     fmi2CallbackLoggerTYPE,
+    fmi2Terminated,
     free,
 )
 from fmpy.model_description import ValidationError
@@ -40,10 +42,12 @@ from fmpy.model_description import ValidationError
 from .errors import CosimError, close_matches, one_line
 
 STATUS = ("OK", "warning", "discard", "error", "fatal", "pending")
-FMI2_ERROR, FMI2_FATAL = 3, 4
+FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL = 2, 3, 4
 #: instances left alone after fmi2Fatal (FMI 2.0: no further call to any function of
 #: the instance, fmi2FreeInstance included); kept referenced so their callbacks stay alive
 _ABANDONED: list = []
+#: the FMI 2.0 value types by their get/set calls (an Enumeration is an Integer to them)
+VALUE_KINDS = ("Real", "Integer", "Boolean", "String")
 #: causalities whose value may be set before initialization
 SETTABLE_CAUSALITIES = ("parameter", "input")
 _EXC_REPR = re.compile(r"^([A-Za-z_][A-Za-z0-9_.]*(?:Error|Exception))\((.*)\)$", re.S)
@@ -143,7 +147,8 @@ def read_description(path: Path, label: str = ""):
 
 
 def convert_start(sv, value, where: str):
-    """A start value in the Python type fmpy's setter of ``sv``'s type expects."""
+    """A start value in the Python type fmpy's setter of ``sv``'s type expects (an
+    Enumeration: its integer value, or the name of one of its items)."""
     kind = sv.type
     try:
         if kind == "Real":
@@ -156,6 +161,10 @@ def convert_start(sv, value, where: str):
         if kind in ("Integer", "Enumeration"):
             if isinstance(value, bool):
                 raise ValueError
+            if kind == "Enumeration" and isinstance(value, str):
+                items = {item.name: int(item.value) for item in getattr(sv.declaredType, "items", None) or ()}
+                if value.strip() in items:  # an item by its name
+                    return items[value.strip()]
             if isinstance(value, str):
                 value = float(value) if any(ch in value for ch in ".eE") else int(value, 0)
             if isinstance(value, float):
@@ -175,7 +184,9 @@ def convert_start(sv, value, where: str):
             return value if isinstance(value, str) else str(value)
     except (ValueError, TypeError, OverflowError):
         pass
-    raise CosimError(f"{where}: {value!r} is not a valid {kind} value")
+    items = getattr(getattr(sv, "declaredType", None), "items", None) if kind == "Enumeration" else None
+    listed = f" (items: {', '.join(f'{item.name}={item.value}' for item in items)})" if items else ""
+    raise CosimError(f"{where}: {value!r} is not a valid {kind} value{listed}")
 
 
 class FmuInstance:
@@ -225,6 +236,18 @@ class FmuInstance:
                 if status >= threshold:
                     return fmu_reason(text)
         return fmu_reason(recent[-1][1]) if recent else ""
+
+    def terminate_requested(self) -> bool:
+        """fmi2GetBooleanStatus(fmi2Terminated): the slave asks to end the simulation (FMI 2.0:
+        asked after an fmi2DoStep returned fmi2Discard). False if the FMU cannot say."""
+        try:
+            return self.fmu.getBooleanStatus(fmi2Terminated)
+        except Exception:  # FMICallException, or a slave without the status
+            return False
+
+    def logged_error(self) -> bool:
+        """Whether a message of status fmi2Error or worse was logged since ``mark``."""
+        return any(status >= FMI2_ERROR for status, _text in self.messages[self._mark:])
 
     def mark(self) -> None:
         """Forget older messages for ``last_problem`` (called before each FMI phase)."""
@@ -349,7 +372,7 @@ class FmuInstance:
 
 
 class LeanCalls:
-    """fmi2GetReal, fmi2SetReal and fmi2DoStep of a loaded FMU, for the stepping loop.
+    """fmi2Get/fmi2Set of each type and fmi2DoStep of a loaded FMU, for the stepping loop.
 
     fmpy's function objects declare ``argtypes``, and ctypes then checks and converts every
     argument on every call (for the pointer arguments that is the larger part of a call's
@@ -372,8 +395,9 @@ class LeanCalls:
         else:
             lib = ctypes.CDLL(dll._name, handle=dll._handle)
         self.handle = ctypes.c_void_p(fmu.component)
-        self.get_real = self._function(lib, "fmi2GetReal", None)
-        self.set_real = self._function(lib, "fmi2SetReal", None)
+        self._get = {kind: self._function(lib, f"fmi2Get{kind}", None) for kind in VALUE_KINDS}
+        self._set = {kind: self._function(lib, f"fmi2Set{kind}", None) for kind in VALUE_KINDS}
+        self.get_real, self.set_real = self._get["Real"], self._set["Real"]
         self.do_step = self._function(lib, "fmi2DoStep",
                                       [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int])
 
@@ -383,6 +407,14 @@ class LeanCalls:
         f.restype = ctypes.c_int
         f.argtypes = argtypes
         return f
+
+    def getter(self, kind: str):
+        """fmi2Get<kind> (kind: one of VALUE_KINDS)."""
+        return self._get[kind]
+
+    def setter(self, kind: str):
+        """fmi2Set<kind> (kind: one of VALUE_KINDS)."""
+        return self._set[kind]
 
     @staticmethod
     def count(n: int) -> ctypes.c_size_t:

@@ -20,11 +20,34 @@ Scenario signals are evaluated as ``profile(n * h)`` (re-evaluated only when the
 profile can have changed: every step on a linear ramp, at the breakpoints of a
 piecewise-constant table) and an input they drive is set only when its value changed.
 
+Connections join variables of the same FMI type (Real, Integer, Boolean, String, or
+Enumeration of the same enumeration type): per (destination, source, type) one fmi2Get and
+one fmi2Set call of that type. A Real value read is checked to be finite before it is set;
+a String read is copied at once (the FMU's strings are valid only until its next call).
+
 Recording: the row of t_n is written before step n is taken, every output interval
 and at the stop time: FMU variables as they are (a component's outputs as of its last
 step), signals at t_n. Rows are streamed through :class:`~pmsm_cosim.engine.recording.ResultWriter`;
 figures of merit, if any, are the caller's (``run(..., metrics=...)``): the master knows no
 model.
+
+Termination: an FMU whose fmi2DoStep from t_n returns fmi2Discard with
+fmi2GetBooleanStatus(fmi2Terminated) true ends the run there as "completed", with
+``terminated_by`` (the instance) and ``terminated_at`` (t_n) in metrics.json; the rows
+recorded up to t_n are kept. It is a failed step, like any other status above fmi2Warning,
+if the FMU logged a message of status fmi2Error or worse during the run (a pythonfmu FMU
+whose ``do_step`` returns False asks to terminate: with an error logged, that is a failure),
+or if it discards the step without asking to terminate (this master does not retry a step
+with a smaller size).
+
+Two loops step the system, the same FMI calls in the same order (so bit-identical
+results): the *generated* one (default), source text unrolled over the components and
+compiled once per run, the fastest; and the *plain* one (:meth:`Master._plain_steps`),
+ordinary Python over the components a debugger can step through. ``Master(spec,
+loop="plain")`` or the environment variable ``PMSM_COSIM_LOOP=plain`` selects it
+(``pmsm-cosim run --plain-loop``). The generated source is registered in :mod:`linecache`
+under ``<generated steps of SYSTEM>``, so tracebacks show its lines
+(``Master.step_source`` holds it).
 """
 
 from __future__ import annotations
@@ -33,7 +56,9 @@ import array
 import bisect
 import ctypes
 import functools
+import linecache
 import math
+import os
 import signal
 import sys
 import threading
@@ -43,7 +68,7 @@ from pathlib import Path
 
 from .checks import check_wiring, time_grid, unconnected_inputs
 from .errors import CosimError, one_line
-from .fmu import STATUS, FmuInstance, real_array, vr_array
+from .fmu import FMI2_DISCARD, STATUS, FmuInstance, real_array, vr_array
 from .recording import ResultWriter, write_metrics
 from .system import COLUMN_CONVERSIONS, SystemSpec
 
@@ -54,12 +79,48 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _NEVER = sys.maxsize
 #: connections per transfer up to which the finiteness check is an unrolled sum
 _UNROLL = 8
+#: the stepping loops: "generated" (unrolled source, compiled per run), "plain" (for debugging)
+LOOPS = ("generated", "plain")
+#: the environment variable that selects the loop when ``Master(loop=None)``
+LOOP_ENV = "PMSM_COSIM_LOOP"
+#: ctypes type of a value of each FMI type in fmi2Get*/fmi2Set* (Enumeration: Integer calls)
+_CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int, "String": ctypes.c_char_p}
+
+
+def loop_choice(loop: str | None = None) -> str:
+    """The stepping loop to use: ``loop`` if given, else $PMSM_COSIM_LOOP, else "generated"."""
+    where = "loop"
+    if loop is None:
+        loop, where = os.environ.get(LOOP_ENV, "").strip() or "generated", LOOP_ENV
+    if loop not in LOOPS:
+        raise CosimError(f"{where}: {loop!r} is not a stepping loop; choose one of {', '.join(LOOPS)}")
+    return loop
+
+
+def hold_strings(buf) -> None:
+    """Copy the strings an fmi2GetString just pointed ``buf`` at into Python bytes that ``buf``
+    keeps alive (FMI 2.0: the FMU's own strings may change or go at its next call)."""
+    buf[:] = buf[:]
+
+
+def call_type(sv_type: str) -> str:
+    """The FMI call family of a variable type: Enumeration values go through fmi2Get/SetInteger."""
+    return "Integer" if sv_type == "Enumeration" else sv_type
 
 
 class _StepFailed(Exception):
     """An FMU returned an error status in the stepping loop."""
 
     n: int | None = None  #: the base step that failed (= macro steps completed)
+
+
+class _Terminated(_StepFailed):
+    """An FMU asked to end the simulation (fmi2Discard + fmi2Terminated) in its step from t."""
+
+    def __init__(self, instance: str, t: float):
+        super().__init__(f"{instance} requested termination at t = {t:.9g} s")
+        self.instance = instance
+        self.t = t
 
 
 class _Interrupted(Exception):
@@ -93,6 +154,21 @@ class _Signal:
 
 
 @dataclass
+class _Transfer:
+    """The connections from one source instance to one destination of one FMI type."""
+
+    get: object  #: zero-argument fmi2Get<kind> of the connected outputs into ``buf``
+    set: object  #: zero-argument fmi2Set<kind> of the connected inputs from ``buf``
+    src: str  #: the source instance
+    kind: str  #: "Real", "Integer" (Integer and Enumeration), "Boolean", "String"
+    buf: object  #: the ctypes value array the calls see
+    conns: list  #: the connections, in the order of ``buf``
+    #: Real: an array.array whose memory ``buf`` is (the loop sums it several times faster
+    #: than it could index the ctypes array); other types: None
+    values: object = None
+
+
+@dataclass
 class _Stepper:
     """Everything the loop needs to step one component, prebuilt."""
 
@@ -101,17 +177,16 @@ class _Stepper:
     step_size: float
     handle: object = None
     do_step: object = None
-    #: [(get, set, source name, buffer, connections, values)]: zero-argument fmi2GetReal of
-    #: the connected outputs of one source instance into the buffer (a ctypes array on the
-    #: memory of ``values``, an array.array) and fmi2SetReal of the inputs from it
-    transfers: list = field(default_factory=list)
+    transfers: list = field(default_factory=list)  #: [_Transfer] into this component's inputs
     pending: list = field(default_factory=list)  #: queued signal targets (multi-rate)
 
 
 class Master:
     """Check a :class:`SystemSpec` against its FMUs and run it."""
 
-    def __init__(self, spec: SystemSpec):
+    def __init__(self, spec: SystemSpec, loop: str | None = None):
+        self.loop = loop_choice(loop)  #: "generated" or "plain" (see the module's docstring)
+        self.step_source = ""  #: the generated loop's source (after the set-up of a generated run)
         self.spec = spec
         self.h = spec.step_size
         self.n_steps, self.every = time_grid(spec)
@@ -128,6 +203,7 @@ class Master:
         self._stop_signal = ""  #: the name of the signal that asked for the stop
         self._finishing = False
         self.loop_cpu_time = 0.0
+        self.terminated: tuple[str, float] | None = None  #: (instance, t) of a termination request
 
     # -- set-up --------------------------------------------------------------------
     def _build(self) -> None:
@@ -144,23 +220,29 @@ class Master:
                           handle=inst.lean.handle, do_step=inst.lean.do_step)
             self.steppers.append(st)
             by_name[comp.name] = st
-        # connections grouped by (destination, source): one get and one set per group
-        groups: dict[tuple[str, str], list] = {}
+        # connections grouped by (destination, source, type): one get and one set per group
+        groups: dict[tuple[str, str, str], list] = {}
         for conn in s.connections:
-            groups.setdefault((conn.dst, conn.src), []).append(conn)
-        for (dst, src), conns in groups.items():
+            kind = call_type(self.instances[conn.src].variables[conn.src_var].type)
+            groups.setdefault((conn.dst, conn.src, kind), []).append(conn)
+        for (dst, src, kind), conns in groups.items():
             si, di = self.instances[src], self.instances[dst]
             svr = vr_array([si.variables[c.src_var].valueReference for c in conns])
             dvr = vr_array([di.variables[c.dst_var].valueReference for c in conns])
-            # the values in an array.array, seen by the FMI calls through a ctypes array on
-            # its memory: the loop reads them from the array.array, several times faster
-            # than indexing (or iterating) the ctypes array
-            values = array.array("d", [0.0] * len(conns))
-            buf = (ctypes.c_double * len(conns)).from_buffer(values)
+            values = None
+            if kind == "Real":
+                # the values in an array.array, seen by the FMI calls through a ctypes array on
+                # its memory: the loop reads them from the array.array, several times faster
+                # than indexing (or iterating) the ctypes array
+                values = array.array("d", [0.0] * len(conns))
+                buf = (ctypes.c_double * len(conns)).from_buffer(values)
+            else:  # String: pointers, copied at once by hold_strings (the source owns the strings)
+                buf = (_CTYPES[kind] * len(conns))()
             count = si.lean.count(len(conns))
-            by_name[dst].transfers.append((functools.partial(si.lean.get_real, si.lean.handle, svr, count, buf),
-                                           functools.partial(di.lean.set_real, di.lean.handle, dvr, count, buf),
-                                           src, buf, conns, values))
+            get, set_ = si.lean.getter(kind), di.lean.setter(kind)
+            by_name[dst].transfers.append(_Transfer(functools.partial(get, si.lean.handle, svr, count, buf),
+                                                    functools.partial(set_, di.lean.handle, dvr, count, buf),
+                                                    src, kind, buf, conns, values))
         # scenario signals; their inputs get the value at t = 0 in initialization mode
         self.signals = []
         for spec in s.signals.values():
@@ -181,7 +263,7 @@ class Master:
         for comp in s.components:
             self.instances[comp.name].exit_initialization()
         self._build_recorder()
-        self._steps = self._compile_steps()
+        self._steps = self._compile_steps() if self.loop == "generated" else self._plain_steps
 
     def _build_recorder(self) -> None:
         """Per instance, one get call per type for the recorded variables; a row plan."""
@@ -286,26 +368,88 @@ class Master:
         return _StepFailed(self._describe(tg.stepper.inst, f"setting {tg.label} = {tg.buf[0]!r}", t))
 
     def _get_failed(self, st: _Stepper, j: int, t: float, status: int) -> _StepFailed:
-        src = self.instances[st.transfers[j][2]]
+        tr = st.transfers[j]
+        src = self.instances[tr.src]
         src.note_status(status)
-        return _StepFailed(self._describe(src, "fmi2GetReal", t))
+        return _StepFailed(self._describe(src, f"fmi2Get{tr.kind}", t))
 
     def _put_failed(self, st: _Stepper, j: int, t: float, status: int) -> _StepFailed:
+        tr = st.transfers[j]
         st.inst.note_status(status)
-        return _StepFailed(self._describe(st.inst, f"fmi2SetReal of the inputs from {st.transfers[j][2]}", t))
+        return _StepFailed(self._describe(st.inst, f"fmi2Set{tr.kind} of the inputs from {tr.src}", t))
 
     def _check_finite(self, st: _Stepper, j: int, t: float) -> None:
-        """Raise if a value just read for a connection is NaN or infinite (the loop calls this
-        when the sum of the values is not finite, which a finite overflow can also cause)."""
-        _get, _set, _src, buf, conns, _values = st.transfers[j]
-        for k, conn in enumerate(conns):
-            if not math.isfinite(buf[k]):
-                raise _StepFailed(f"{conn.src}.{conn.src_var} is not finite ({buf[k]!r}) at t = {t:.9g} s, "
+        """Raise if a Real value just read for a connection is NaN or infinite (the loop calls
+        this when the sum of the values is not finite, which a finite overflow can also cause)."""
+        tr = st.transfers[j]
+        for k, conn in enumerate(tr.conns):
+            if not math.isfinite(tr.buf[k]):
+                raise _StepFailed(f"{conn.src}.{conn.src_var} is not finite ({tr.buf[k]!r}) at t = {t:.9g} s, "
                                   f"before it reached {conn.dst}.{conn.dst_var}")
 
     def _step_failed(self, st: _Stepper, t: float, status: int = 3) -> _StepFailed:
+        """The exception for an fmi2DoStep from t that returned ``status`` > fmi2Warning:
+        :class:`_Terminated` if the FMU discarded the step to end the simulation."""
         st.inst.note_status(status)
+        if status == FMI2_DISCARD and st.inst.terminate_requested() and not st.inst.logged_error():
+            return _Terminated(st.inst.name, t)
         return _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
+
+    def _plain_steps(self, n0: int, n1: int, sig_next: int) -> int:
+        """The stepping loop as ordinary Python: the same calls, in the same order, as the
+        generated one (:meth:`_compile_steps`), for reading and debugging."""
+        h = self.h
+        jacobi = self.spec.algorithm == "jacobi"
+        n = n0
+        try:
+            for n in range(n0, n1):
+                if n >= sig_next:
+                    sig_next = self._update_signals(n)
+                t = n * h
+                due = [st for st in self.steppers if n % st.multiple == 0]
+                if jacobi:  # every due component reads the outputs at t_n, then all are stepped
+                    for st in due:
+                        self._read_inputs(st, t)
+                    for st in due:
+                        self._write_inputs(st, t)
+                    for st in due:
+                        self._do_step(st, t)
+                else:  # Gauss-Seidel: component by component, the freshest outputs
+                    for st in due:
+                        self._read_inputs(st, t)
+                        self._write_inputs(st, t)
+                        self._do_step(st, t)
+        except _StepFailed as exc:
+            exc.n = n
+            raise
+        except KeyboardInterrupt:
+            raise _Interrupted(n) from None
+        return sig_next
+
+    def _read_inputs(self, st: _Stepper, t: float) -> None:
+        """fmi2Get<type> of the outputs connected to ``st``'s inputs; Real values checked finite."""
+        for j, tr in enumerate(st.transfers):
+            status = tr.get()
+            if status > 1:
+                raise self._get_failed(st, j, t, status)
+            if tr.kind == "Real" and not all(math.isfinite(v) for v in tr.values):
+                self._check_finite(st, j, t)
+            elif tr.kind == "String":
+                hold_strings(tr.buf)
+
+    def _write_inputs(self, st: _Stepper, t: float) -> None:
+        """fmi2Set<type> of ``st``'s connected inputs, then its queued signal inputs."""
+        for j, tr in enumerate(st.transfers):
+            status = tr.set()
+            if status > 1:
+                raise self._put_failed(st, j, t, status)
+        if st.pending:
+            self._flush_pending(st, t)
+
+    def _do_step(self, st: _Stepper, t: float) -> None:
+        status = st.do_step(st.handle, t, st.step_size, 1)
+        if status > 1:
+            raise self._step_failed(st, t, status)
 
     def _compile_steps(self):
         """The stepping loop of this system, generated once, unrolled over its components.
@@ -332,17 +476,21 @@ class Master:
                 return ([guard] if guard and lines else []) + lines
 
             read, write = [], []
-            for j, (get, set_, _src, buf, _conns, values) in enumerate(st.transfers):
-                ns[f"get{i}_{j}"], ns[f"set{i}_{j}"], ns[f"buf{i}_{j}"] = get, set_, values
-                if len(buf) <= _UNROLL:
-                    total = " + ".join(f"buf{i}_{j}[{k}]" for k in range(len(buf)))
-                else:
-                    total = f"vsum(buf{i}_{j})"
-                # the status of each call; then NaN or inf in the values read: x - x is 0.0
-                # for a finite sum, NaN otherwise
-                read += [f"{ind}if (s := get{i}_{j}()) > 1: raise fail_get(st{i}, {j}, t, s)",
-                         f"{ind}x = {total}",
-                         f"{ind}if x - x: check_finite(st{i}, {j}, t)"]
+            for j, tr in enumerate(st.transfers):
+                ns[f"get{i}_{j}"], ns[f"set{i}_{j}"] = tr.get, tr.set
+                read += [f"{ind}if (s := get{i}_{j}()) > 1: raise fail_get(st{i}, {j}, t, s)"]
+                if tr.kind == "Real":
+                    ns[f"buf{i}_{j}"] = tr.values
+                    if len(tr.values) <= _UNROLL:
+                        total = " + ".join(f"buf{i}_{j}[{k}]" for k in range(len(tr.values)))
+                    else:
+                        total = f"vsum(buf{i}_{j})"
+                    # NaN or inf in the values read: x - x is 0.0 for a finite sum, NaN otherwise
+                    read += [f"{ind}x = {total}",
+                             f"{ind}if x - x: check_finite(st{i}, {j}, t)"]
+                elif tr.kind == "String":
+                    ns[f"hold{i}_{j}"] = functools.partial(hold_strings, tr.buf)
+                    read += [f"{ind}hold{i}_{j}()"]
                 write += [f"{ind}if (s := set{i}_{j}()) > 1: raise fail_set(st{i}, {j}, t, s)"]
             flush = []
             if st.multiple > 1 and any(tg.stepper is st for sig in self.signals for tg in sig.targets):
@@ -372,7 +520,10 @@ class Master:
             "    return sig_next",
         ])
         self.step_source = src
-        exec(compile(src, f"<orchestrator steps: {self.spec.name}>", "exec"), ns)
+        # registered in linecache (as doctest does) so that tracebacks show the generated lines
+        filename = f"<generated steps of {self.spec.name}>"
+        linecache.cache[filename] = (len(src), None, [line + "\n" for line in src.splitlines()], filename)
+        exec(compile(src, filename, "exec"), ns)
         return ns["steps"]
 
     # -- recording -------------------------------------------------------------------
@@ -465,6 +616,7 @@ class Master:
         N, every, h = self.n_steps, self.every, self.h
         steps = self._steps
         status = "completed"
+        self.terminated = None
         n = 0
         sig_next = self._update_signals(0)
         t0, cpu0 = time.perf_counter(), time.process_time()
@@ -484,6 +636,8 @@ class Master:
                 n1 = min(N, (n // every + 1) * every, n + MAX_CHUNK)
                 sig_next = steps(n, n1, sig_next)
                 n = n1
+        except _Terminated as exc:
+            n, self.terminated = exc.n, (exc.instance, exc.t)
         except _StepFailed as exc:
             n = exc.n if exc.n is not None else n
             status = f"failed: {exc}"
@@ -514,6 +668,8 @@ class Master:
         out = {"status": status}
         if status == "interrupted" and self._stop_signal:
             out["stop_signal"] = self._stop_signal
+        if status == "completed" and self.terminated:
+            out["terminated_by"], out["terminated_at"] = self.terminated
         out.update({
             "wall_time_s": wall,
             "init_time_s": init_time,
@@ -525,6 +681,7 @@ class Master:
             "step_size": s.step_size,
             "stop_time": s.stop_time,
             "output_interval": s.output_interval,
+            "loop": self.loop,
             "settings": {**s.settings(), **(extra or {})},
         })
         return out

@@ -36,7 +36,7 @@ this master does not implement (sub-systems, signal dictionaries, connection
 transformations, parameter mappings, components that are not FMUs, ...). Without the
 ``org.pmsm-ev-cosim`` annotation (a package written by another tool) the coupling is
 Jacobi, the stepping order the order of the components, and every output connector is
-recorded.
+recorded but the String ones (results.csv holds numbers).
 """
 
 from __future__ import annotations
@@ -398,7 +398,7 @@ def load_ssp(path) -> SystemSpec:
     else:
         columns = [ColumnSpec("time", "time")] + [
             ColumnSpec(f"{inst}.{var}", "variable", inst, var) for inst, var, kind in outputs
-            if kind in ("", "Real", "Integer", "Boolean")]
+            if kind in ("", "Real", "Integer", "Enumeration", "Boolean")]
 
     spec = SystemSpec(name=name, components=components, connections=connections, signals={}, columns=columns,
                       step_size=step, stop_time=stop, output_interval=interval if interval is not None else step,

@@ -132,6 +132,11 @@ def export_ssp(spec: SystemSpec, dest, *, signal_fmu=None, carries_starts=None, 
             columns = [ColumnSpec(c.name, "variable", route, c.variable, c.unit) if c.kind == "signal" else c
                        for c in columns]
         descriptions = {c.name: read_description(paths[c.name], c.name) for c in components}
+        for c in connections:  # the connector types written: TYPES (no ssc:Enumeration definitions)
+            sv = next((v for v in descriptions[c.src].modelVariables if v.name == c.src_var), None)
+            if sv is not None and sv.type not in TYPES:
+                raise CosimError(f"{where}export-ssp: connection {c}: {sv.type} connectors cannot be written "
+                                 f"to an SSP package ({', '.join(TYPES)} only)")
         starts: dict[str, list[tuple[str, str, str]]] = {}  # instance -> [(name, type, text)] for its .ssv
         n_parameters = 0
         for comp in components:
