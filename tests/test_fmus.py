@@ -165,9 +165,9 @@ def test_build_is_incremental_and_follows_the_sources(fmus, tmp_path, monkeypatc
     assert fmu_build.build_fmu("PmsmEvPlant", tmp_path, force=True)[1] is True
     # a changed physics source changes the hash and triggers a rebuild
     physics = tmp_path / "pmsm_ev"
-    physics.mkdir()
-    for src in fmu_build.physics_dir().glob("*.py"):
-        (physics / src.name).write_bytes(src.read_bytes())
+    (physics / "kernels").mkdir(parents=True)
+    for src in [*fmu_build.physics_dir().glob("*.py"), *fmu_build.physics_dir().glob("kernels/*.py")]:
+        (physics / src.relative_to(fmu_build.physics_dir())).write_bytes(src.read_bytes())
     (physics / "plant.py").write_text((physics / "plant.py").read_text() + "\n# changed\n")
     before = {name: fmu_build.source_hash(name) for name in ("PmsmEvPlant", "FocEkf5")}
     monkeypatch.setattr(fmu_build, "physics_dir", lambda: physics)
@@ -176,6 +176,13 @@ def test_build_is_incremental_and_follows_the_sources(fmus, tmp_path, monkeypatc
     assert fmu_build.build_fmu("PmsmEvPlant", tmp_path)[1] is True
     # a controller does not bundle plant.py: its hash does not depend on it
     assert fmu_build.source_hash("FocEkf5") == before["FocEkf5"]
+    # both bundle the whole kernels package: a change in any of its files changes both
+    with zipfile.ZipFile(tmp_path / "PmsmEvPlant.fmu") as zf:
+        bundled = {n.split("/", 2)[2] for n in zf.namelist() if n.startswith("resources/pmsm_ev_") and "/" in n[10:]}
+    assert {f"kernels/{p.name}" for p in (physics / "kernels").glob("*.py")} <= bundled
+    now = {name: fmu_build.source_hash(name) for name in ("PmsmEvPlant", "FocEkf5")}
+    (physics / "kernels" / "startup.py").write_text((physics / "kernels" / "startup.py").read_text() + "\n# changed\n")
+    assert all(fmu_build.source_hash(name) != now[name] for name in now)
     assert not (tmp_path / ".build").exists()
 
 
@@ -572,8 +579,37 @@ def test_the_state_holds_the_whole_control_unit(unzipped):
         c.step()
     state = json.loads(c.fmu.serializeFMUstate(c.fmu.getFMUstate()))
     unit = ControlUnit("ekf5", "estimated", dt=DT)
-    assert len(state["physics"]["unit"]) == len(unit.get_state())  # EKF x and P, integrators, filters
+    saved = state["physics"]["unit"]  # EKF x and P, integrators, filters, by name
+    assert {k: len(v) for k, v in saved.items()} == {k: len(v) for k, v in unit.get_state().items()}
+    assert len(saved["x"]) == 5 and len(saved["p"]) == 25 and "pht" not in saved  # no scratch
+    assert saved["theta_prior"] != [0.0] and saved["w_int"] != [0.0]
     assert state["variables"]["angle_source"] == "estimated"
+    c.free()
+
+
+def test_a_state_of_another_fmu_or_version_is_refused_naming_the_field(unzipped):
+    """fmi2SetFMUstate checks the state's named fields, and the lengths of the unit's, before
+    using it: a controller's state into the plant, a unit field too short, one left out."""
+    messages = []
+    p = Instance(unzipped, "PmsmEvPlant", instance_name="plant", messages=messages)
+    c = Instance(unzipped, "FocEkf5", instance_name="ctrl", messages=messages)
+    c.step()
+    good = json.loads(c.fmu.serializeFMUstate(c.fmu.getFMUstate()))
+    short = json.loads(json.dumps(good))
+    short["physics"]["unit"]["p"] = short["physics"]["unit"]["p"][:16]
+    missing = json.loads(json.dumps(good))
+    del missing["physics"]["unit"]["w_int"]
+    cases = [(p, good, "PmsmEvPlant FMU state, variables: the fields differ from this FMU's"),
+             (c, short, "field 'p' of the saved state has 16 values, expected 25"),
+             (c, missing, "the saved state has no field 'w_int'")]
+    for fmu, state, expected in cases:
+        del messages[:]
+        blob = json.dumps(state).encode()
+        with pytest.raises(Exception, match="fmi2SetFMUstate"):
+            fmu.fmu.setFMUstate(fmu.fmu.deSerializeFMUstate(blob))
+        assert any(expected in m for _, m in messages), messages
+    p.free()
+    c.free()
 
 
 # -- errors ------------------------------------------------------------------------------------
