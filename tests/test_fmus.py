@@ -340,6 +340,24 @@ def test_plant_with_rotor_held_settles_to_ohmic_currents(fmus):
     assert np.allclose(r["T_e"], m.N * (m.psi * r["i_q"] + (m.L_d - m.L_q) * r["i_d"] * r["i_q"]))
 
 
+@pytest.mark.parametrize("step", [DT, DT / 3])
+def test_plant_fmu_dead_time_and_delay_follow_the_switching_period(fmus, step):
+    """The plant FMU's switching_period (1e-4 s by default), not its communication step, sets the dead
+    time's error and the inverter delay: 12 V on alpha into the held rotor from t = 0, delayed by one
+    switching period, settles at (12 V - 4/3 v_dc t_d / T_s) / R_s stepped at 1e-4 s or at a third of it."""
+    md = fmpy.read_model_description(str(fmus["PmsmEvPlant"]))
+    var = {v.name: v for v in md.modelVariables}["switching_period"]
+    assert (var.causality, var.unit, float(var.start)) == ("parameter", "s", 1e-4)
+    signals = np.array([(0.0, 12.0, 0.0, 0.0), (1.0, 12.0, 0.0, 0.0)],
+                       dtype=[("time", float), ("v_alpha", float), ("v_beta", float), ("delta", float)])
+    r = fmpy.simulate_fmu(str(fmus["PmsmEvPlant"]), stop_time=0.3, step_size=step, output_interval=step,
+                          input=signals, output=["i_d"],
+                          start_values={"m_v": 1e12, "v_dc": 360.0, "dead_time": 2e-6, "inverter_delay": 1})
+    assert r["i_d"][-1] == pytest.approx((12.0 - 4.0 / 3.0 * 7.2) / MotorParams().R_s, rel=1e-4)
+    first = np.argmax(np.abs(r["i_d"]) > 1e-6)  # the first output after a step with a voltage applied
+    assert r["time"][first] == pytest.approx(DT + step, rel=1e-9)  # applied from t = 1e-4 s on
+
+
 @pytest.mark.parametrize("name", CONTROLLERS)
 @pytest.mark.parametrize("angle_source", ["measured", "estimated"])
 def test_controller_with_constant_inputs_gives_bounded_voltages(fmus, name, angle_source):
