@@ -155,8 +155,8 @@ def store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_
 
 @kernel(_sig(f"UniTuple({_F}, 12)", _V, _V, _F, _F, _F, _F, _F))
 def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
-    """One control period (see ``pmsm_ev.control_unit``); returns (v_alpha, v_beta, v_d,
-    v_q, i_d, i_q, i_qref, i_d_hat, i_q_hat, omega_hat, theta_hat, T_L_hat)."""
+    """One control period (see ``pmsm_ev.control_unit``): the observer's eqs 23-27, eqs 14-20; returns
+    (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref, i_d_hat, i_q_hat, omega_hat, theta_hat, T_L_hat)."""
     # (23)-(24) with the voltage applied over the last period: the last command, or with a
     # one-period actuation delay, the command before it; the dq command, or for the
     # stationary-frame EKF5 the alpha-beta vector sent to the inverter

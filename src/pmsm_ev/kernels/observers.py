@@ -126,7 +126,7 @@ def adapt_psi(s, c):
 
 @kernel()
 def ekf5_predict(s, c, v_d, v_q):
-    """The paper's EKF5 time update with the dq voltage command of the period."""
+    """The paper's EKF5 time update (eqs 23-24, A2-A32) with the dq voltage command of the period."""
     ekf5_time_update(s, c, v_d, v_q, 0.0, 0.0, 0.0)
 
 
@@ -149,7 +149,7 @@ def ekf5ab_predict(s, c, v_alpha, v_beta):
 
 @kernel()
 def ekf4_predict(s, c, v_d, v_q):
-    """EKF4 time update: the EKF5 model without T_L, omega a random walk (dw/dt = 0).
+    """EKF4 time update (eqs 23-24): the EKF5 model (A2, A3, A5) without T_L, omega a random walk (dw/dt = 0).
 
     J_f rows: r0 = [f00 f01 f02 0], r1 = [f10 f11 f12 0], r2 = [0 0 1 0], r3 = [0 0 f32 1].
     """
@@ -244,7 +244,7 @@ def ekf5ab_correct(s, c, i_alpha, i_beta):
 
 @kernel(_sig("none", _V, _V, _F, _F))
 def observer_predict(s, c, u0, u1):
-    """The time update of the observer ``C_OBSERVER`` (none for the sensored baseline) with
+    """The time update (eqs 23-24) of the observer ``C_OBSERVER`` (none for the sensored baseline) with
     the voltage of the period: (v_d, v_q), or (v_alpha, v_beta) for the stationary-frame EKF5."""
     kind = c[C_OBSERVER]
     if kind == OBS_EKF5:
@@ -257,7 +257,7 @@ def observer_predict(s, c, u0, u1):
 
 @kernel(_sig("none", _V, _V, _F, _F, _F, _F, _F, _F))
 def observer_correct(s, c, i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas):
-    """The measurement update of the observer ``C_OBSERVER``; the sensored baseline takes
+    """The measurement update (eqs 25-27) of the observer ``C_OBSERVER``; the sensored baseline takes
     the measured currents, speed and angle."""
     kind = c[C_OBSERVER]
     if kind == OBS_EKF5:

@@ -196,7 +196,9 @@ def plant_load_torque(omega_m, delta, pp):
 
 @kernel()
 def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
-    """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage."""
+    """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage: eqs 10-11 (or their flux form
+    with saturation) at the true angle, eq 12, the friction (eq 8), the road load (eq 29), the motion
+    (eq 9 = 28) and eq 13; the dead time's error added to the voltage first."""
     c = math.cos(theta_e)
     s = math.sin(theta_e)
     if pp[P_DT_V] != 0.0:  # the inverter's dead time: the applied voltage loses its error
@@ -223,7 +225,7 @@ def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
 
 @kernel(_sig(f"UniTuple({_F}, 5)", _F, _F, _F, _F, _F, _V))
 def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
-    """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state."""
+    """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state: inverse Park, eq 12, eq 29, eqs 1, 6."""
     i_alpha, i_beta = inverse_park(i_d, i_q, theta_e)
     if pp[P_SAT] != 0.0:
         t_e = saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N], pp[P_SAT_AD], pp[P_SAT_AQ])
