@@ -135,7 +135,8 @@ def _fmus_modules(script: str) -> list[str]:
 
 def _physics_files(script: str) -> list[Path]:
     """The ``pmsm_ev`` modules the slave needs: those the ``fmus`` modules import and,
-    recursively, their relative imports (plus ``__init__.py``)."""
+    recursively, their relative imports (plus ``__init__.py``); a subpackage (``kernels``)
+    with all its modules, which import nothing outside it."""
     root = physics_dir()
     todo = ["__init__"]
     for module in _fmus_modules(script):
@@ -144,14 +145,26 @@ def _physics_files(script: str) -> list[Path]:
             if head == PHYSICS_PACKAGE and rest:
                 todo.append(rest.split(".")[0])
     seen: set[str] = set()
+    files: list[Path] = []
     while todo:
         name = todo.pop()
         if name in seen:
             continue
+        seen.add(name)
+        if (root / name).is_dir():  # a subpackage, bundled whole
+            package = sorted((root / name).glob("*.py"))
+            if not (root / name / "__init__.py").is_file():
+                raise BuildError(f"missing module {root / name / '__init__.py'}")
+            for path in package:
+                for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+                    if isinstance(node, ast.ImportFrom) and node.level > 1:
+                        raise BuildError(f"{path}:{node.lineno}: import from outside the package {name}")
+            files.extend(package)
+            continue
         path = root / f"{name}.py"
         if not path.is_file():
             raise BuildError(f"missing module {path}")
-        seen.add(name)
+        files.append(path)
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
             if isinstance(node, ast.ImportFrom) and node.level == 1:
                 if node.module:
@@ -160,7 +173,7 @@ def _physics_files(script: str) -> list[Path]:
                     todo.extend(alias.name for alias in node.names)
             elif isinstance(node, ast.ImportFrom) and node.level > 1:
                 raise BuildError(f"{path}:{node.lineno}: import from outside the package")
-    return sorted(root / f"{name}.py" for name in seen)
+    return sorted(files)
 
 
 def _recipe(name: str) -> tuple[str, bool]:
@@ -188,7 +201,7 @@ def source_hash(name: str) -> str:
     for module in sorted(_fmus_modules(script)):
         add(f"fmus/{module}", (HERE / module).read_bytes())
     for path in _physics_files(script):
-        add(f"pmsm_ev/{path.name}", path.read_bytes())
+        add(f"pmsm_ev/{path.relative_to(physics_dir()).as_posix()}", path.read_bytes())
     return h.hexdigest()
 
 
@@ -245,8 +258,10 @@ def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]
     physics.mkdir()
     files: dict[str, str] = {}
     for path in _physics_files(script):  # relative imports inside the package: a verbatim copy
-        shutil.copyfile(path, physics / path.name)
-        files[f"{physics.name}/{path.name}"] = hashlib.sha256(path.read_bytes()).hexdigest()
+        relative = path.relative_to(physics_dir()).as_posix()
+        (physics / relative).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, physics / relative)
+        files[f"{physics.name}/{relative}"] = hashlib.sha256(path.read_bytes()).hexdigest()
     project_files: list[Path] = [physics]
     staged_script = None
     for module in _fmus_modules(script):

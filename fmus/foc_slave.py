@@ -30,7 +30,7 @@ from pmsm_ev.params import (
     ParameterError,
     StartupParams,
 )
-from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
+from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, check_fields
 
 #: an instant within this fraction of dt of a communication point counts as that point:
 #: far above the drift of time accumulated as t += h (1.6e-4 dt after 350 s at h = dt,
@@ -142,10 +142,13 @@ class FocSlave(DriveSlave):
         self._copy_outputs()
 
     def physics_state(self):
-        return {"dt": self._dt, "unit_dt": self._unit.dt, "unit": list(self._unit.get_state()),
+        """The sample clock and the control unit's state (``ControlUnit.get_state``: its vector's
+        slots by name)."""
+        return {"dt": self._dt, "unit_dt": self._unit.dt, "unit": self._unit.get_state(),
                 "t0": self._t0, "k_next": self._k_next}
 
     def restore_physics(self, snapshot) -> None:
+        check_fields(f"{type(self).__name__} FMU state, physics", snapshot, ("dt", "unit_dt", "unit", "t0", "k_next"))
         if self._unit is None or self.needs_rebuild() or self._unit.dt != snapshot["unit_dt"]:
             self._build_unit(snapshot["unit_dt"])
         self._unit.set_state(snapshot["unit"])

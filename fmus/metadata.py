@@ -134,9 +134,12 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "adc_bits": (None, "ADC resolution in bits (0 = no quantisation)"),
     "adc_range": ("A", "ADC full scale: the converter spans -adc_range..+adc_range"),
     "v_dc": ("V", "DC-link voltage; the voltage vector is limited to v_dc/sqrt(3) (0 = ideal inverter)"),
-    "inverter_delay": (None, "actuation delay in communication steps, 0 or 1"),
-    "dead_time": ("s", "inverter dead time per leg (0 = off); per-phase voltage error v_dc dead_time / step "
-                       "in the sign of the phase current; needs v_dc > 0"),
+    "switching_period": ("s", "switching (PWM) period T_s of the inverter, independent of the communication "
+                              "step: the dead time's voltage error and the inverter delay use it"),
+    "inverter_delay": (None, "actuation delay in switching periods, 0 or 1 (rounded to whole communication "
+                             "steps)"),
+    "dead_time": ("s", "inverter dead time per leg (0 = off); per-phase voltage error v_dc dead_time / "
+                       "switching_period in the sign of the phase current; needs v_dc > 0"),
     "dead_time_i0": ("A", "current scale of the dead-time error's soft sign tanh(i / dead_time_i0)"),
     "sat_i_q": ("A", "q-axis saturation current: psi_q = L_q i_q / (1 + |i_q| / sat_i_q) (0 = off, linear)"),
     "sat_i_d": ("A", "d-axis saturation current: psi_d = psi + L_d i_d / (1 + |i_d| / sat_i_d) (0 = off)"),

@@ -78,7 +78,8 @@ class PmsmEvPlant(DriveSlave):
         self._copy_outputs()
 
     def physics_state(self):
-        return list(self._plant.get_state())
+        """The plant's state (``Plant.get_state``: named fields)."""
+        return self._plant.get_state()
 
     def restore_physics(self, snapshot) -> None:
         if self._plant is None or self.needs_rebuild():

@@ -21,7 +21,9 @@ top of pythonfmu 0.7.0:
   parameters, so that a host that cannot set String parameters runs a chosen value;
 * ``fmi2SetupExperiment`` with a stop time before the start time is refused;
 * the FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``, JSON-serialisable) holds every
-  variable plus the full state of the wrapped physics (subclass hooks).
+  variable plus the full state of the wrapped physics (subclass hooks), all as named fields:
+  a state whose fields are not this FMU's (another FMU's, another version's) is refused with
+  the field named (``FmuStateError``).
 
 Errors: pythonfmu 0.7.0's C wrapper turns every Python exception into ``fmi2Fatal``
 (there is no way to return ``fmi2Error`` from Python) and logs it, with status
@@ -70,6 +72,22 @@ START_VALUES_FILE = "start_values.json"
 
 class FmuUsageError(RuntimeError):
     """An FMI call that the FMU cannot honour (illegal value or call sequence)."""
+
+
+class FmuStateError(ValueError):
+    """A state given to ``fmi2SetFMUstate`` that is not one of this FMU's (its fields differ)."""
+
+
+def check_fields(what: str, state, names) -> dict:
+    """``state`` if it is a dict with exactly the fields ``names``; else ``FmuStateError`` naming the
+    missing and unknown ones."""
+    if not isinstance(state, dict):
+        raise FmuStateError(f"{what}: a dict of named fields expected (got {type(state).__name__})")
+    missing, unknown = sorted(set(names) - set(state)), sorted(set(state) - set(names))
+    if missing or unknown:
+        raise FmuStateError(f"{what}: the fields differ from this FMU's (a state of another FMU or version?): "
+                            f"missing {missing}, unknown {unknown}")
+    return state
 
 
 class SimulationError(RuntimeError):
@@ -350,6 +368,9 @@ class DriveSlave(Fmi2Slave):
 
     def _set_fmu_state(self, state):
         try:
+            check_fields(f"{type(self).__name__} FMU state", state, ("variables", "initialized", "physics"))
+            check_fields(f"{type(self).__name__} FMU state, variables", state["variables"],
+                         [var.name for var in self.vars.values()])
             for name, value in state["variables"].items():
                 setattr(self, name, value)
             self._initialized = bool(state["initialized"])

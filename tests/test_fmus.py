@@ -165,9 +165,9 @@ def test_build_is_incremental_and_follows_the_sources(fmus, tmp_path, monkeypatc
     assert fmu_build.build_fmu("PmsmEvPlant", tmp_path, force=True)[1] is True
     # a changed physics source changes the hash and triggers a rebuild
     physics = tmp_path / "pmsm_ev"
-    physics.mkdir()
-    for src in fmu_build.physics_dir().glob("*.py"):
-        (physics / src.name).write_bytes(src.read_bytes())
+    (physics / "kernels").mkdir(parents=True)
+    for src in [*fmu_build.physics_dir().glob("*.py"), *fmu_build.physics_dir().glob("kernels/*.py")]:
+        (physics / src.relative_to(fmu_build.physics_dir())).write_bytes(src.read_bytes())
     (physics / "plant.py").write_text((physics / "plant.py").read_text() + "\n# changed\n")
     before = {name: fmu_build.source_hash(name) for name in ("PmsmEvPlant", "FocEkf5")}
     monkeypatch.setattr(fmu_build, "physics_dir", lambda: physics)
@@ -176,6 +176,13 @@ def test_build_is_incremental_and_follows_the_sources(fmus, tmp_path, monkeypatc
     assert fmu_build.build_fmu("PmsmEvPlant", tmp_path)[1] is True
     # a controller does not bundle plant.py: its hash does not depend on it
     assert fmu_build.source_hash("FocEkf5") == before["FocEkf5"]
+    # both bundle the whole kernels package: a change in any of its files changes both
+    with zipfile.ZipFile(tmp_path / "PmsmEvPlant.fmu") as zf:
+        bundled = {n.split("/", 2)[2] for n in zf.namelist() if n.startswith("resources/pmsm_ev_") and "/" in n[10:]}
+    assert {f"kernels/{p.name}" for p in (physics / "kernels").glob("*.py")} <= bundled
+    now = {name: fmu_build.source_hash(name) for name in ("PmsmEvPlant", "FocEkf5")}
+    (physics / "kernels" / "startup.py").write_text((physics / "kernels" / "startup.py").read_text() + "\n# changed\n")
+    assert all(fmu_build.source_hash(name) != now[name] for name in now)
     assert not (tmp_path / ".build").exists()
 
 
@@ -331,6 +338,24 @@ def test_plant_with_rotor_held_settles_to_ohmic_currents(fmus):
     assert np.allclose(r["i_alpha"], c * r["i_d"] - s * r["i_q"], rtol=1e-12, atol=1e-9)
     assert np.allclose(r["i_beta"], s * r["i_d"] + c * r["i_q"], rtol=1e-12, atol=1e-9)
     assert np.allclose(r["T_e"], m.N * (m.psi * r["i_q"] + (m.L_d - m.L_q) * r["i_d"] * r["i_q"]))
+
+
+@pytest.mark.parametrize("step", [DT, DT / 3])
+def test_plant_fmu_dead_time_and_delay_follow_the_switching_period(fmus, step):
+    """The plant FMU's switching_period (1e-4 s by default), not its communication step, sets the dead
+    time's error and the inverter delay: 12 V on alpha into the held rotor from t = 0, delayed by one
+    switching period, settles at (12 V - 4/3 v_dc t_d / T_s) / R_s stepped at 1e-4 s or at a third of it."""
+    md = fmpy.read_model_description(str(fmus["PmsmEvPlant"]))
+    var = {v.name: v for v in md.modelVariables}["switching_period"]
+    assert (var.causality, var.unit, float(var.start)) == ("parameter", "s", 1e-4)
+    signals = np.array([(0.0, 12.0, 0.0, 0.0), (1.0, 12.0, 0.0, 0.0)],
+                       dtype=[("time", float), ("v_alpha", float), ("v_beta", float), ("delta", float)])
+    r = fmpy.simulate_fmu(str(fmus["PmsmEvPlant"]), stop_time=0.3, step_size=step, output_interval=step,
+                          input=signals, output=["i_d"],
+                          start_values={"m_v": 1e12, "v_dc": 360.0, "dead_time": 2e-6, "inverter_delay": 1})
+    assert r["i_d"][-1] == pytest.approx((12.0 - 4.0 / 3.0 * 7.2) / MotorParams().R_s, rel=1e-4)
+    first = np.argmax(np.abs(r["i_d"]) > 1e-6)  # the first output after a step with a voltage applied
+    assert r["time"][first] == pytest.approx(DT + step, rel=1e-9)  # applied from t = 1e-4 s on
 
 
 @pytest.mark.parametrize("name", CONTROLLERS)
@@ -572,8 +597,37 @@ def test_the_state_holds_the_whole_control_unit(unzipped):
         c.step()
     state = json.loads(c.fmu.serializeFMUstate(c.fmu.getFMUstate()))
     unit = ControlUnit("ekf5", "estimated", dt=DT)
-    assert len(state["physics"]["unit"]) == len(unit.get_state())  # EKF x and P, integrators, filters
+    saved = state["physics"]["unit"]  # EKF x and P, integrators, filters, by name
+    assert {k: len(v) for k, v in saved.items()} == {k: len(v) for k, v in unit.get_state().items()}
+    assert len(saved["x"]) == 5 and len(saved["p"]) == 25 and "pht" not in saved  # no scratch
+    assert saved["theta_prior"] != [0.0] and saved["w_int"] != [0.0]
     assert state["variables"]["angle_source"] == "estimated"
+    c.free()
+
+
+def test_a_state_of_another_fmu_or_version_is_refused_naming_the_field(unzipped):
+    """fmi2SetFMUstate checks the state's named fields, and the lengths of the unit's, before
+    using it: a controller's state into the plant, a unit field too short, one left out."""
+    messages = []
+    p = Instance(unzipped, "PmsmEvPlant", instance_name="plant", messages=messages)
+    c = Instance(unzipped, "FocEkf5", instance_name="ctrl", messages=messages)
+    c.step()
+    good = json.loads(c.fmu.serializeFMUstate(c.fmu.getFMUstate()))
+    short = json.loads(json.dumps(good))
+    short["physics"]["unit"]["p"] = short["physics"]["unit"]["p"][:16]
+    missing = json.loads(json.dumps(good))
+    del missing["physics"]["unit"]["w_int"]
+    cases = [(p, good, "PmsmEvPlant FMU state, variables: the fields differ from this FMU's"),
+             (c, short, "field 'p' of the saved state has 16 values, expected 25"),
+             (c, missing, "the saved state has no field 'w_int'")]
+    for fmu, state, expected in cases:
+        del messages[:]
+        blob = json.dumps(state).encode()
+        with pytest.raises(Exception, match="fmi2SetFMUstate"):
+            fmu.fmu.setFMUstate(fmu.fmu.deSerializeFMUstate(blob))
+        assert any(expected in m for _, m in messages), messages
+    p.free()
+    c.free()
 
 
 # -- errors ------------------------------------------------------------------------------------
@@ -781,13 +835,15 @@ def test_fmus_run_where_the_project_is_not_installed(fmus, tmp_path, host):
     out = json.loads(r.stdout.strip().splitlines()[-1])
     tags = {fmu_build.read_build_info(fmus[n])["tag"] for n in ("PmsmEvPlant", "FocEkf5")}
     assert {f"pmsm_ev_{tag}" for tag in tags} <= set(out["modules"])
-    # the bundled code, or (compiled with numba) the copy of the bundled kernels.py that
+    # the bundled code, or (compiled with numba) the copy of the bundled kernels package that
     # pmsm_ev.accel keeps in the user's cache (here under HOME = tmp_path)
     cache = tmp_path / ".cache" / "pmsm-ev-cosim"
-    compiled = [f for f in out["files"] if Path(f).parent == cache]
+    compiled = [f for f in out["files"] if Path(f).parent.parent == cache]
     assert all("/resources/" in f and "/work/" not in f.replace(str(tmp_path), "")
                for f in out["files"] if f not in compiled)
-    assert len(compiled) == (1 if host == "numba" else 0), out["files"]
+    assert len({Path(f).parent for f in compiled}) == (1 if host == "numba" else 0), out["files"]
+    kernel_files = len(list((fmu_build.physics_dir() / "kernels").glob("*.py")))
+    assert len(compiled) == (kernel_files if host == "numba" else 0), out["files"]
     # the numbers of this process (fmpy's steps are t_next - t: round-off in h)
     plant = Plant(vehicle=VehicleParams(m_v=1e12), plant=PlantParams(theta_e0=0.3))
     for _ in range(100):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,7 @@ import pytest
 
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import accel, kernels
+from pmsm_ev.kernels import layout
 from pmsm_ev.results import ALL_COLUMNS
 from regression_runs import CASES
 
@@ -74,8 +76,9 @@ def test_plant_effects_give_the_same_bits_compiled_or_not(tmp_path, observer):
 
 
 def test_kernels_are_cached_by_content(tmp_path):
-    """The compiled kernels come from a copy of kernels.py named by its hash, with a fixed time
-    stamp, in PMSM_EV_CACHE_DIR: a second process loads numba's cache instead of compiling."""
+    """The compiled kernels come from a copy of the kernels package in a directory named by the
+    hash of all its files, with a fixed time stamp, in PMSM_EV_CACHE_DIR: a second process loads
+    numba's cache instead of compiling."""
     pytest.importorskip("numba")
     cache = tmp_path / "cache"
     probe = ("from pmsm_ev import accel; import json; k = accel.kernels(); "
@@ -88,13 +91,32 @@ def test_kernels_are_cached_by_content(tmp_path):
         return json.loads(r.stdout.strip().splitlines()[-1])
 
     mode, path = load()
-    copy = Path(path)
+    copy = Path(path).parent
     assert copy.parent == cache and copy.name.startswith("kernels_") and str(cache) in mode
-    assert copy.read_bytes() == Path(kernels.__file__).read_bytes()
-    compiled = {p.name: p.stat().st_mtime_ns for p in (cache / "__pycache__").iterdir()}
-    assert any(name.endswith(".nbc") for name in compiled)
+    package = Path(kernels.__file__).parent
+    sources = sorted(p.name for p in package.glob("*.py"))
+    assert {"__init__.py", "layout.py", "plant.py", "control.py", "observers.py", "startup.py"} <= set(sources)
+    assert sorted(p.name for p in copy.glob("*.py")) == sources
+    for name in sources:
+        assert (copy / name).read_bytes() == (package / name).read_bytes(), name
+        assert int((copy / name).stat().st_mtime) == accel._STAMP
+    compiled = {p.name: p.stat().st_mtime_ns for p in (copy / "__pycache__").iterdir()}
+    # compiled code of every file that defines kernels
+    assert {n.split(".")[0] for n in compiled if n.endswith(".nbi")} >= {"plant", "control", "observers", "startup"}
     assert load()[1] == path
-    assert {p.name: p.stat().st_mtime_ns for p in (cache / "__pycache__").iterdir()} == compiled  # no recompiling
+    assert {p.name: p.stat().st_mtime_ns for p in (copy / "__pycache__").iterdir()} == compiled  # no recompiling
+
+
+def test_a_change_in_any_kernel_file_gives_another_cache(tmp_path):
+    """The cache's key covers every file of the package: a caller in startup.py inlines the kernels of
+    control.py, so a change in control.py alone must not reuse startup.py's compiled code."""
+    sources = accel._SOURCES
+    digest = accel._digest(sources, "0")
+    for name in sources:
+        changed = {**sources, name: sources[name] + b"\n"}
+        assert accel._digest(changed, "0") != digest, name
+    assert accel._digest({**sources, "extra.py": b""}, "0") != digest
+    assert accel._digest(sources, "1") != digest  # and numba's version
 
 
 def test_vectors_follow_the_mode():
@@ -104,3 +126,62 @@ def test_vectors_follow_the_mode():
     else:
         assert v == [0.0, 0.0, 0.0]
 
+
+
+# -- the vectors' layouts ---------------------------------------------------------------------------
+LAYOUTS = [(layout.PLANT_PARAMS_LAYOUT, kernels.PLANT_PARAMS), (layout.UNIT_STATE_LAYOUT, kernels.UNIT_STATE),
+           (layout.UNIT_PARAMS_LAYOUT, kernels.UNIT_PARAMS)]
+
+
+@pytest.mark.parametrize("table,size", LAYOUTS, ids=["plant params", "unit state", "unit params"])
+def test_each_slot_is_a_module_constant_and_no_two_overlap(table, size):
+    assert len(table) == size
+    taken = [None] * size
+    for slot in table.slots:
+        offset = getattr(kernels, slot.name)
+        assert type(offset) is int and offset == table.offsets[slot.name]
+        for i in table.span(slot.name):
+            assert taken[i] is None, (slot.name, taken[i])
+            taken[i] = slot.name
+    assert None not in taken  # and no gaps
+
+
+def test_the_offsets_are_those_the_kernels_were_written_with():
+    assert (kernels.P_SUBSTEPS, kernels.P_DT_V, kernels.P_SAT_AQ, kernels.PLANT_PARAMS) == (21, 22, 26, 27)
+    assert (kernels.S_X, kernels.S_THETA_PRIOR, kernels.S_P, kernels.S_PHT, kernels.S_K, kernels.S_A,
+            kernels.S_STARTED, kernels.S_MODE, kernels.S_STILL_OUT, kernels.UNIT_STATE) == (
+        15, 20, 21, 46, 56, 66, 91, 92, 113, 114)
+    assert (kernels.C_Q, kernels.C_C_MID, kernels.C_P0, kernels.C_T_RAMP, kernels.C_P0_ALIGNED,
+            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 84)
+
+
+@pytest.mark.parametrize("rows,size,message", [
+    ((("S_A", 1, ""), ("S_A", 2, "")), 3, "slot S_A declared twice"),
+    ((("S_A", 0, ""),), 0, "slot S_A has length 0; it must be a whole number >= 1"),
+    ((("S_A", 2.0, ""),), 2, "slot S_A has length 2.0"),
+    ((("C_A", 1, ""),), 1, "slot name 'C_A' is not an upper-case identifier starting with 'S_'"),
+    ((("S_a", 1, ""),), 1, "slot name 'S_a'"),
+    ((("S_A", 5, ""), ("S_B", 1, "")), 5, "the slots take 6 floats, the vector is declared with 5"),
+])
+def test_a_wrong_layout_table_is_refused_at_import(rows, size, message):
+    with pytest.raises(layout.LayoutError, match="test vector: " + re.escape(message)):
+        layout.Layout("test vector", "S_", rows, size)
+
+
+def test_a_layout_saves_and_restores_named_fields_and_refuses_others():
+    table = layout.Layout("test vector", "S_", (("S_A", 1, ""), ("S_B", 2, ""), ("S_TMP", 3, "", False)), 6)
+    v = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    saved = table.save(v)
+    assert saved == {"a": [1.0], "b": [2.0, 3.0]}  # no scratch
+    w = [0.0] * 6
+    table.restore(w, json.loads(json.dumps(saved)))
+    assert w == [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]
+    with pytest.raises(layout.LayoutError, match="field 'b' of the saved state has 1 values, expected 2"):
+        table.restore(w, {"a": [1.0], "b": [2.0]})
+    with pytest.raises(layout.LayoutError, match="the saved state has no field 'b'"):
+        table.restore(w, {"a": [1.0]})
+    with pytest.raises(layout.LayoutError, match="a field 'c' that this version does not know"):
+        table.restore(w, {"a": [1.0], "b": [2.0, 3.0], "c": [0.0]})
+    with pytest.raises(layout.LayoutError, match="a dict of named fields"):
+        table.restore(w, [1.0, 2.0, 3.0])
+    assert w == [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]  # a refused state changes nothing

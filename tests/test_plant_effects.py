@@ -5,6 +5,7 @@ tests/test_regression.py and tests/test_equality.py; here the physics and the nu
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -12,7 +13,16 @@ import pytest
 
 from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import ControllerParams, MotorParams, ParameterError, PlantParams, magnet_flux, winding_resistance
+from pmsm_ev.kernels.layout import LayoutError
+from pmsm_ev.params import (
+    ControllerParams,
+    MotorParams,
+    ParameterError,
+    PlantParams,
+    VehicleParams,
+    magnet_flux,
+    winding_resistance,
+)
 from pmsm_ev.plant import Plant
 
 DT = 1e-4
@@ -54,6 +64,71 @@ def test_dead_time_error_fades_with_the_current():
     e_large = np.array(k.dead_time_error(100.0, 0.0, V_ERR, 2.0))
     assert np.linalg.norm(e_small) < 0.01 * np.linalg.norm(e_large)
     assert e_large[0] == pytest.approx(-4.0 / 3.0 * V_ERR, rel=1e-6)  # phase a +, b and c -: 2/3 (2 V)
+
+
+def _held_rotor(dt: float, seconds: float, v_alpha: float, **plant) -> Plant:
+    """The plant with the rotor held (a vehicle of 1e12 kg, theta_e = 0: d on alpha) after ``seconds``
+    of ``v_alpha`` applied, stepped at ``dt``."""
+    p = Plant(vehicle=VehicleParams(m_v=1e12), plant=PlantParams(v_dc=V_DC, dead_time=T_D, **plant))
+    for _ in range(round(seconds / dt)):
+        p.step(v_alpha, 0.0, 0.0, dt)
+    return p
+
+
+@pytest.mark.parametrize("divisor", [1, 3])
+def test_the_dead_time_error_does_not_depend_on_the_communication_step(divisor):
+    """The error is v_dc t_d / T_s with T_s the switching period (1e-4 s), not the plant's step:
+    12 V on alpha into the held rotor settles (0.3 s, 13 time constants L_d / R_s) at
+    R_s i_d = 12 V - 4/3 v_err (phase a positive, b and c negative: ``dead_time_error``), the same
+    current whether the plant is stepped at 1e-4 s or at a third of it (with T_s = the step, the
+    third would take 3 x 7.2 V and drive the current negative)."""
+    dt = DT / divisor
+    plant = _held_rotor(dt, 0.3, 12.0)
+    assert plant._pp[k.P_DT_V] == V_DC * T_D / DT == V_ERR  # exactly as before at the 1e-4 s step: 7.2 V
+    expected = (12.0 - 4.0 / 3.0 * V_ERR) / MotorParams().R_s  # 276.9 A
+    assert plant.i_d == pytest.approx(expected, rel=1e-4)
+    assert abs(plant.omega_m) < 1e-6
+    reference = _held_rotor(DT, 0.3, 12.0)
+    assert plant.i_d == pytest.approx(reference.i_d, rel=1e-9)
+
+
+@pytest.mark.parametrize("dt,switching_period,lag", [(DT, DT, 1), (DT / 3, DT, 3), (DT, 2 * DT, 2),
+                                                      (DT / 4, 2.5e-5, 1)])
+def test_the_inverter_delay_is_a_switching_period_whatever_the_step(dt, switching_period, lag):
+    """inverter_delay = 1: the voltage received at t is applied from t + switching_period on: one step
+    at 1e-4 s, three at a third of it, two with a 2e-4 s period; 0 V before anything is due."""
+    p = Plant(vehicle=VehicleParams(m_v=1e12),
+              plant=PlantParams(inverter_delay=1, switching_period=switching_period))
+    assert p.delay == switching_period
+    applied = []
+    for j in range(12):
+        p.step(1.0 + j, -1.0 - j, 0.0, dt)
+        applied.append((p.v_alpha_applied, p.v_beta_applied))
+    assert applied == [(0.0, 0.0)] * lag + [(1.0 + j, -1.0 - j) for j in range(12 - lag)]
+    assert lag * dt == pytest.approx(switching_period, rel=1e-12)  # the delay in seconds
+    assert len(p._pending) <= lag + 1  # superseded voltages are dropped
+
+
+def test_the_inverter_delay_carries_over_a_saved_state():
+    """The pending voltages and the inverter's clock are part of the plant's state (JSON and back)."""
+    params = PlantParams(inverter_delay=1, omega_m0=50.0)
+    p = Plant(plant=params)
+    for j in range(5):
+        p.step(3.0 * j, 1.0, 0.0, DT / 3)
+    saved = json.loads(json.dumps(p.get_state()))
+    assert len(saved["pending"]) == 4 and saved["clock"] == pytest.approx(5 * DT / 3)
+    expected = [p.step(10.0 + j, 2.0, 0.0, DT / 3) for j in range(6)]
+    q = Plant(plant=params)
+    q.set_state(saved)
+    assert [q.step(10.0 + j, 2.0, 0.0, DT / 3) for j in range(6)] == expected
+    with pytest.raises(LayoutError, match="plant state: the saved state's fields differ: missing \\['clock'\\]"):
+        q.set_state({key: value for key, value in saved.items() if key != "clock"})
+
+
+def test_switching_period_is_checked():
+    for bad in (0.0, -1e-4, math.inf, math.nan):
+        with pytest.raises(ParameterError, match="switching_period must be > 0 s"):
+            PlantParams(switching_period=bad).validate()
 
 
 @pytest.mark.parametrize("omega_e", [2 * math.pi * 2.0, 80.0, 800.0])
@@ -300,7 +375,7 @@ def test_plant_winding_heats_to_copper_losses_times_thermal_resistance():
     assert plant.T_winding - T_amb > 10.0  # it did heat
     # the state (temperature included) saves and restores
     state = plant.get_state()
-    assert len(state) == 10 and state[-1] == plant.T_winding
+    assert set(state) == set(Plant.STATE_FIELDS) and state["T_winding"] == plant.T_winding
     other = Plant(plant=p)
     other.set_state(state)
     a = plant.step(v_d, 0.0, 0.0, DT)

@@ -1,15 +1,19 @@
-"""How the per-step kernels (``pmsm_ev.kernels``) run: compiled with numba when it is
-importable, plain Python otherwise.
+"""How the per-step kernels (the package ``pmsm_ev.kernels``) run: compiled with numba when it
+is importable, plain Python otherwise.
 
-``kernels()`` returns the module to call. With numba it is ``kernels.py`` compiled, loaded
-from a copy named after the SHA-256 of its source, ``<cache dir>/kernels_<hash>.py``:
+``kernels()`` returns the package to call. With numba it is ``pmsm_ev.kernels`` compiled, loaded
+from a copy of the package's files in a directory named after the SHA-256 of all of them,
+``<cache dir>/kernels_<hash>/``, imported as ``pmsm_ev_kernels_<hash>``:
 
-* numba's on-disk cache (``__pycache__`` next to that copy) is keyed on the copy's path and
-  time stamp, both fixed by the content, so compiled code is reused by every later process,
-  and by every FMU: a Python FMU is extracted to a new temporary directory per instance, so
-  a cache keyed on its own files would never be hit;
+* numba's on-disk cache (``__pycache__`` next to each copied file) is keyed, per function, on its
+  file's path and time stamp, both fixed by the content of the whole package: a change in any
+  kernel file, including one that only a caller in another file inlines, gives another directory
+  and so a fresh compilation (numba's own key would miss a change in a callee's file). Compiled
+  code is reused by every later process, and by every FMU: a Python FMU is extracted to a new
+  temporary directory per instance, so a cache keyed on its own files would never be hit
+  (``NUMBA_CACHE_DIR`` alone would not help: numba keys its index on the source file's path);
 * in one process the reference run and all the FMUs (each bundles its own copy of this
-  package under another name) share one compiled module.
+  package under another name) share one compiled package.
 
 The cache directory is ``$PMSM_EV_CACHE_DIR`` or ``$XDG_CACHE_HOME/pmsm-ev-cosim``
 (``~/.cache/pmsm-ev-cosim``). If it cannot be written, the kernels are compiled without a
@@ -32,7 +36,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import kernels as _source  # the plain-Python module (and the source to compile)
+from . import kernels as _source  # the plain-Python package (and the source to compile)
 
 ENV_JIT = "PMSM_EV_JIT"
 ENV_CACHE_DIR = "PMSM_EV_CACHE_DIR"
@@ -40,11 +44,28 @@ ENV_CACHE_DIR = "PMSM_EV_CACHE_DIR"
 _STAMP = 1_000_000_000
 
 _loaded = None  # (module, description)
-#: the kernels' source, read now: every FMU bundles this package under one content-hashed
+
+
+def _read_sources(directory: Path) -> dict[str, bytes]:
+    """The package's ``*.py`` files, {file name: content}, by name."""
+    return {path.name: path.read_bytes() for path in sorted(directory.glob("*.py"))}
+
+
+#: the kernels' sources, read now: every FMU bundles this package under one content-hashed
 #: name shared by all its instances in a process (sys.modules), and the instance whose
 #: extracted files it was imported from may be freed, its directory deleted, before
 #: another instance first calls ``kernels()``
-_SOURCE = Path(_source.__file__).read_bytes()
+_SOURCES = _read_sources(Path(_source.__file__).parent)
+
+
+def _digest(sources: dict[str, bytes], numba_version: str) -> str:
+    """The first 16 hex digits of the SHA-256 over every file (name, length, content) and numba's version."""
+    h = hashlib.sha256()
+    for name, data in sources.items():
+        h.update(f"{name}\0{len(data)}\0".encode())
+        h.update(data)
+    h.update(f"numba {numba_version}".encode())
+    return h.hexdigest()[:16]
 
 
 def jit_requested() -> bool:
@@ -59,44 +80,52 @@ def cache_dir() -> Path:
     return Path(base) / "pmsm-ev-cosim"
 
 
-def _stable_copy(source: bytes, digest: str) -> Path | None:
-    """``<cache dir>/kernels_<digest>.py`` with ``source`` and a fixed time stamp, or None."""
+def _write_stamped(path: Path, data: bytes) -> None:
+    """``path`` with ``data`` and the fixed time stamp (replaced atomically if it differs)."""
     try:
-        directory = cache_dir()
+        current = path.read_bytes()
+    except OSError:
+        current = None
+    if current != data:
+        fd, tmp = tempfile.mkstemp(prefix=".kernels-", suffix=".tmp", dir=path.parent)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.utime(tmp, (_STAMP, _STAMP))
+        os.replace(tmp, path)
+    elif int(path.stat().st_mtime) != _STAMP:
+        os.utime(path, (_STAMP, _STAMP))
+
+
+def _stable_copy(sources: dict[str, bytes], digest: str) -> Path | None:
+    """``<cache dir>/kernels_<digest>/`` with ``sources`` and a fixed time stamp, or None."""
+    try:
+        directory = cache_dir() / f"kernels_{digest}"
         directory.mkdir(parents=True, exist_ok=True)
-        path = directory / f"kernels_{digest}.py"
-        try:
-            current = path.read_bytes()
-        except OSError:
-            current = None
-        if current != source:
-            fd, tmp = tempfile.mkstemp(prefix=".kernels-", suffix=".tmp", dir=directory)
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(source)
-            os.utime(tmp, (_STAMP, _STAMP))
-            os.replace(tmp, path)
-        elif int(path.stat().st_mtime) != _STAMP:
-            os.utime(path, (_STAMP, _STAMP))
-        return path
+        for name, data in sources.items():
+            _write_stamped(directory / name, data)
+        return directory
     except OSError:
         return None
 
 
-def _exec(name: str, path: Path, cache: bool):
-    spec = importlib.util.spec_from_file_location(name, path)
+def _exec(name: str, directory: Path, cache: bool):
+    """Import the package in ``directory`` as ``name``, compiled (numba's cache on or off)."""
+    spec = importlib.util.spec_from_file_location(name, directory / "__init__.py",
+                                                  submodule_search_locations=[str(directory)])
     module = importlib.util.module_from_spec(spec)
-    module.JIT, module.CACHE = True, cache
+    module.JIT, module.CACHE = True, cache  # read by its submodule jit before any kernel is defined
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)  # compiles (or loads from the cache) the kernels
     except BaseException:
-        del sys.modules[name]
+        for loaded in [m for m in sys.modules if m == name or m.startswith(name + ".")]:
+            del sys.modules[loaded]
         raise
     return module
 
 
 def _compiled_description(module, version: str) -> str:
-    where = f"cache {Path(module.__file__).parent}" if module.CACHE else "no cache"
+    where = f"cache {Path(module.__file__).parent.parent}" if module.CACHE else "no cache"
     return f"numba {version}, {where}"
 
 
@@ -112,13 +141,12 @@ def _load():
         import numba  # noqa: PLC0415 - numba: heavy (LLVM), loaded only to compile the kernels
     except Exception:  # not installed, or broken (e.g. an llvmlite that does not load)
         return _source, "plain Python (numba not available)"
-    source = _SOURCE
-    digest = hashlib.sha256(source + f"numba {numba.__version__}".encode()).hexdigest()[:16]
+    digest = _digest(_SOURCES, numba.__version__)
     name = f"pmsm_ev_kernels_{digest}"
     module = sys.modules.get(name)
     if module is not None:  # compiled already, for another copy of this package (an FMU's)
         return module, _compiled_description(module, numba.__version__)
-    path = _stable_copy(source, digest)
+    path = _stable_copy(_SOURCES, digest)
     try:
         module = None
         if path is not None:
@@ -127,7 +155,7 @@ def _load():
             except RuntimeError:  # numba found no writable cache location
                 module = None
         if module is None:
-            module = _exec(name, Path(_source.__file__), False)
+            module = _exec(name, Path(_source.__file__).parent, False)
         return module, _compiled_description(module, numba.__version__)
     except Exception as exc:  # a numba that cannot compile them: run them as Python
         return _source, f"plain Python (numba failed: {type(exc).__name__}: {exc})"

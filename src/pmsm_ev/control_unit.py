@@ -64,12 +64,12 @@ _STARTUP_SLOTS = (
     ("fault_time", _k.C_FAULT_TIME), ("align_damping", _k.C_ALIGN_DAMP),
     ("align_slip", _k.C_ALIGN_SLIP), ("align_slip_time", _k.C_ALIGN_SLIP_TIME),
     ("still_speed", _k.C_STILL))
-#: state slots of the sensorless start-up, saved and restored with the unit
+#: state slots of the sensorless start-up, zeroed by ``reset``
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
                   _k.S_OMEGA_CTRL, _k.S_ANCHOR, _k.S_ANCHORED, _k.S_ANCHOR_TL,
                   _k.S_STILL_OUT)
-#: the vector sent to the inverter with dead-time compensation, saved and restored with the unit
+#: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 
 
@@ -229,22 +229,13 @@ class ControlUnit:
         o = self.observer
         return o.i_d_hat, o.i_q_hat, o.omega_hat, o.theta_hat, o.T_L_hat
 
-    def get_state(self) -> tuple:
-        startup = tuple(float(self._s[slot]) for slot in _STARTUP_STATE) if self.sensorless else ()
-        startup += tuple(float(self._s[slot]) for slot in _DTC_STATE) if self.params.dead_time_comp else ()
-        startup += (float(self._s[_k.S_PSI_RATIO]),) if self.psi_adapt else ()
-        return ((self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
-                 self.speed.integral, self.u_prev0, self.u_prev1)
-                + self.current.get_state() + startup + self.observer.get_state())
+    def get_state(self) -> dict:
+        """The unit's state as {field: [floats]} (JSON-serialisable): every saved slot of its state
+        vector by name (``pmsm_ev.kernels.layout.UNIT_STATE_LAYOUT``; the scratch slots left out), the
+        same fields whatever the observer and options."""
+        return _k.UNIT_STATE_LAYOUT.save(self._s)
 
     def set_state(self, state) -> None:
-        state = tuple(float(v) for v in state)
-        (self.v_d, self.v_q, self.v_alpha, self.v_beta, self.i_d, self.i_q, self.i_qref,
-         self.speed.integral, self.u_prev0, self.u_prev1) = state[:10]
-        self.current.set_state(state[10:15])
-        slots = ((_STARTUP_STATE if self.sensorless else ()) + (_DTC_STATE if self.params.dead_time_comp else ())
-                 + ((_k.S_PSI_RATIO,) if self.psi_adapt else ()))
-        n = len(slots)
-        for slot, value in zip(slots, state[15:15 + n]):
-            self._s[slot] = value
-        self.observer.set_state(state[15 + n:])
+        """Restore a ``get_state`` dict; ``LayoutError`` (naming the field) if its fields or their
+        lengths are not this version's."""
+        _k.UNIT_STATE_LAYOUT.restore(self._s, state)

@@ -160,12 +160,17 @@ class PlantParams:
     #: DC-link voltage [V]; the voltage vector is limited to the linear range v_dc/sqrt(3).
     #: 0 = ideal inverter, no limit.
     v_dc: float = 0.0
-    #: actuation delay [communication steps], 0 or 1: with 1 the voltage received at t_k is
-    #: applied over [t_{k+1}, t_{k+2}] (the computation delay of a real drive).
+    #: switching (PWM) period T_s of the inverter [s]: the dead time takes v_dc t_d / T_s from each
+    #: phase and the inverter delay counts it, whatever the plant's communication step. 1e-4 s: the
+    #: drive's control period (10 kHz, the paper's step), the inverter updating its PWM once a period.
+    switching_period: float = 1e-4
+    #: actuation delay [switching periods], 0 or 1: with 1 the voltage received at t is applied
+    #: from t + switching_period on (the computation delay of a real drive: one PWM period), rounded
+    #: to whole communication steps of the plant.
     inverter_delay: int = 0
     #: dead time of each inverter leg [s]; 0 = off. Each phase's pole voltage loses
-    #: v_dc t_d / T_s tanh(i_x / dead_time_i0) (the switching period T_s is the communication
-    #: step; ``pmsm_ev.kernels.dead_time_error``), so it needs v_dc > 0. Typical size: 1-3 us for
+    #: v_dc t_d / T_s tanh(i_x / dead_time_i0) (T_s = ``switching_period``;
+    #: ``pmsm_ev.kernels.dead_time_error``), so it needs v_dc > 0. Typical size: 1-3 us for
     #: IGBT inverters of this power class (2 us at 10 kHz and 360 V is 7.2 V per phase, 2 % of
     #: v_dc: the back-EMF at 20 rad/s).
     dead_time: float = 0.0
@@ -186,7 +191,7 @@ class PlantParams:
     #: self-saturation with i_d is the smaller (typical: 2-3x sat_i_q). No cross-saturation.
     sat_i_d: float = 0.0
 
-    # -- temperature (start values, constant over a run) --------------------------------
+    # -- temperature (the magnet's constant over a run; the winding's too unless thermal_R > 0) --
     #: winding temperature [degC] (at the start, with the thermal model); Table I's R_s is taken at
     #: ``TEMPERATURE_REF`` (20 degC). R_s(T) = R_s (1 + alpha_R (T - 20)). Typical: 20 (cold) .. 120
     #: degC (hot, +39 % R_s).
@@ -228,7 +233,10 @@ class PlantParams:
         _require(math.isfinite(self.adc_range) and self.adc_range > 0,
                  f"adc_range must be > 0 A (got {self.adc_range})")
         _require(math.isfinite(self.v_dc) and self.v_dc >= 0, f"v_dc must be >= 0 V (got {self.v_dc})")
-        _require(self.inverter_delay in (0, 1), f"inverter_delay must be 0 or 1 (got {self.inverter_delay})")
+        _require(math.isfinite(self.switching_period) and self.switching_period > 0,
+                 f"switching_period must be > 0 s (got {self.switching_period})")
+        _require(self.inverter_delay in (0, 1),
+                 f"inverter_delay must be 0 or 1 switching periods (got {self.inverter_delay})")
         _require(math.isfinite(self.dead_time) and self.dead_time >= 0,
                  f"dead_time must be >= 0 s (got {self.dead_time})")
         _require(self.dead_time == 0 or self.v_dc > 0,

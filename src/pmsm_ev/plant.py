@@ -7,12 +7,15 @@ true rotor angle with RK4 sub-steps. Truth signals are exposed for recording.
 
 Optional realism, all off by default (``PlantParams``): current sensors with white
 noise, offset, gain error and ADC quantisation per phase (two phase sensors, a and b;
-the truth outputs stay clean), and an inverter with a DC-link voltage limit and a
-one-step actuation delay. A motor that is not its data sheet: inverter dead time (a
-per-phase voltage error in the sign of the current), magnetic saturation of L_d, L_q
-(flux-form eqs 10-12) and the winding and magnet temperatures (R_s(T), psi(T), constant
-over a run). The controllers keep their own nominal parameters, so each is a model
-mismatch for the observers.
+the truth outputs stay clean), and an inverter with a DC-link voltage limit and an
+actuation delay of one switching period. A motor that is not its data sheet: inverter dead
+time (a per-phase voltage error in the sign of the current), magnetic saturation of L_d, L_q
+(flux-form eqs 10-12) and the winding and magnet temperatures (R_s(T), psi(T): the magnet's
+constant over a run, the winding's too unless the thermal model heats it, ``thermal_R``).
+The inverter's switching period (``PlantParams.switching_period``), not the communication
+step, sets the dead time's voltage error and the delay: a plant stepped at a fraction of the
+control period sees the same inverter. The controllers keep their own nominal parameters, so
+each is a model mismatch for the observers.
 
 The RK4 step, the model (eqs 8-13, 29) and the outputs are ``pmsm_ev.kernels.plant_step``
 (compiled with numba when available, see ``pmsm_ev.accel``); this class holds the state
@@ -25,6 +28,7 @@ import math
 
 from . import accel
 from . import kernels as _k
+from .kernels.layout import LayoutError, restore_fields
 from .params import (
     TEMPERATURE_REF,
     MotorParams,
@@ -66,8 +70,11 @@ class Plant:
                   _k.P_SUBSTEPS: p.rk4_substeps, _k.P_DT_I0: p.dead_time_i0,
                   _k.P_SAT: 1.0 if (p.sat_i_d > 0 or p.sat_i_q > 0) else 0.0,
                   _k.P_SAT_AD: 1.0 / p.sat_i_d if p.sat_i_d > 0 else 0.0,
-                  _k.P_SAT_AQ: 1.0 / p.sat_i_q if p.sat_i_q > 0 else 0.0}
-        self._dead_time_dt = None  # the step the dead time's voltage error was computed for
+                  _k.P_SAT_AQ: 1.0 / p.sat_i_q if p.sat_i_q > 0 else 0.0,
+                  # the dead time's per-phase voltage error: the volt-seconds v_dc t_d it takes per switching period
+                  _k.P_DT_V: p.v_dc * p.dead_time / p.switching_period if p.dead_time else 0.0}
+        #: the actuation delay [s]: inverter_delay switching periods
+        self.delay = p.inverter_delay * p.switching_period
         self._thermal = p.thermal_R > 0
         self._pp = accel.vector(_k.PLANT_PARAMS)
         for slot, value in values.items():
@@ -86,25 +93,39 @@ class Plant:
         self.T_winding = p.T_winding  # [degC]; changes only with the thermal model
         if self._thermal:
             self._pp[_k.P_R_S] = self.R_s
-        self._v_pending = (0.0, 0.0)  # voltage received, applied next step (inverter_delay)
+        self.clock = 0.0  # time since the start [s]: the sum of the steps (the inverter delay's clock)
+        self._pending = []  # voltages received, (time, v_alpha, v_beta), not yet superseded (inverter delay)
         self.v_alpha_applied = self.v_beta_applied = 0.0
         self._update_outputs()
 
-    # -- state as a tuple, for save/restore by wrappers --------------------------
-    def get_state(self) -> tuple:
-        state = (self.i_d, self.i_q, self.omega_m, self.theta_e, self.delta,
-                 float(self.samples - 1), self._v_pending[0], self._v_pending[1], self.x_vehicle)
-        return state + (self.T_winding,) if self._thermal else state
+    # -- state as named fields, for save/restore by wrappers ---------------------
+    #: the fields of ``get_state`` (None: a number; 0: a list of any length)
+    STATE_FIELDS = {"i_d": None, "i_q": None, "omega_m": None, "theta_e": None, "delta": None,
+                    "samples": None, "clock": None, "pending": 0, "x_vehicle": None, "T_winding": None}
+
+    def get_state(self) -> dict:
+        """The plant's state as {name: value} (JSON-serialisable): the dq state, the elevation, the
+        sensor samples taken, the inverter's clock and pending voltages, the distance, the winding's
+        temperature."""
+        return {"i_d": self.i_d, "i_q": self.i_q, "omega_m": self.omega_m, "theta_e": self.theta_e,
+                "delta": self.delta, "samples": self.samples, "clock": self.clock,
+                "pending": [list(entry) for entry in self._pending], "x_vehicle": self.x_vehicle,
+                "T_winding": self.T_winding}
 
     def set_state(self, state) -> None:
-        state = [float(x) for x in state]
+        """Restore a ``get_state`` dict; ``LayoutError`` if its fields are not these."""
+        state = restore_fields("plant state", state, self.STATE_FIELDS)
+        pending = [tuple(float(x) for x in entry) for entry in state["pending"]]
+        if any(len(entry) != 3 for entry in pending):
+            raise LayoutError("plant state: field 'pending' must hold (time, v_alpha, v_beta) triples")
+        self.i_d, self.i_q, self.omega_m, self.theta_e, self.delta, self.x_vehicle = (
+            float(state[name]) for name in ("i_d", "i_q", "omega_m", "theta_e", "delta", "x_vehicle"))
+        self.clock = float(state["clock"])
+        self._pending = pending
+        self.T_winding = float(state["T_winding"])
         if self._thermal:
-            self.T_winding = state.pop()
             self._pp[_k.P_R_S] = winding_resistance(self.motor.R_s, self.T_winding, self.params.alpha_R)
-        (self.i_d, self.i_q, self.omega_m, self.theta_e, self.delta, samples,
-         v_a, v_b, self.x_vehicle) = state
-        self.samples = int(samples)  # _update_outputs takes the same sample again
-        self._v_pending = (v_a, v_b)
+        self.samples = int(state["samples"]) - 1  # _update_outputs takes the present sample again
         self._update_outputs()
 
     def derivatives(self, i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta):
@@ -118,17 +139,15 @@ class Plant:
         after the step, also set as attributes (i_alpha, i_beta as measured)."""
         self.delta = delta
         p = self.params
-        if p.inverter_delay:
-            (v_alpha, v_beta), self._v_pending = self._v_pending, (v_alpha, v_beta)
+        if self.delay:
+            v_alpha, v_beta = self._delayed(v_alpha, v_beta, dt)
+        self.clock += dt
         if self._u_lim:  # linear range of the inverter: |v| <= v_dc / sqrt(3)
             mag = math.hypot(v_alpha, v_beta)
             if mag > self._u_lim:
                 v_alpha *= self._u_lim / mag
                 v_beta *= self._u_lim / mag
         self.v_alpha_applied, self.v_beta_applied = v_alpha, v_beta
-        if p.dead_time and dt != self._dead_time_dt:  # error per phase: v_dc t_d / T_s, T_s = the step
-            self._pp[_k.P_DT_V] = p.v_dc * p.dead_time / dt
-            self._dead_time_dt = dt
         out = self._kernels.plant_step(self.i_d, self.i_q, self.omega_m, self.theta_e,
                                        v_alpha, v_beta, delta, dt, self._pp)
         (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta,
@@ -145,6 +164,18 @@ class Plant:
             self.i_alpha, self.i_beta = self._measure(self.i_alpha, self.i_beta, self.samples - 1)
             out = out[:4] + (self.i_alpha, self.i_beta) + out[6:]
         return out
+
+    def _delayed(self, v_alpha: float, v_beta: float, dt: float) -> tuple[float, float]:
+        """The voltage applied over the step from ``clock``: the last one received at least ``delay``
+        before (to the nearest step; 0 V before any), given the one received now."""
+        pending = self._pending
+        pending.append((self.clock, v_alpha, v_beta))
+        due = self.clock - self.delay + 0.5 * dt
+        while len(pending) > 1 and pending[1][0] <= due:
+            pending.pop(0)
+        if pending[0][0] <= due:
+            return pending[0][1], pending[0][2]
+        return 0.0, 0.0
 
     def _update_outputs(self) -> None:
         """The outputs of the present state (after a reset or a restored state)."""

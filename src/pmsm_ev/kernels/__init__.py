@@ -1,0 +1,42 @@
+"""The per-step numerics of the drive, written once, in a form numba can compile.
+
+Every equation that runs at each control period lives in this package, one module per subject,
+each function's docstring citing its equations:
+
+* ``layout``: the slots of the flat vectors (``P_*``, ``S_*``, ``C_*``), declared once as tables
+  of (name, length, meaning) and checked at import, and the mode, fault and observer codes;
+* ``transforms``: Park, inverse Park, the angle wrap;
+* ``plant``: the PMSM (eqs 10-13), the road load (eqs 2-4, 8, 29), the plant's RK4 step, and the
+  inverter's dead time, saturation and temperature;
+* ``control``: the controller (eqs 14-20), the dead-time compensation and the control unit's step;
+* ``observers``: the EKFs (eqs 23-27, A2-A33) and the magnet flux adaptation;
+* ``startup``: the sensorless unit's step (alignment, I-f, handover, synchronism);
+* ``jit``: the ``kernel`` decorator (numba or plain Python).
+
+The functions take floats and flat float vectors (a numpy float64 array when compiled, a list of
+floats otherwise) whose slots are named by the layout's constants; they allocate nothing. This
+module re-exports them all: ``from pmsm_ev.kernels import plant_step``, ``kernels.S_X``.
+
+``pmsm_ev.accel`` loads this package either as plain Python (as it is) or compiled with numba
+(``JIT = True`` set on the package before its body runs, see ``jit``), so the reference run, the
+FMUs and the tests share one implementation whether numba is there or not. The other modules of
+``pmsm_ev`` keep the readable, dataclass-based interface (``pmsm.current_derivatives(..., m)``,
+``Plant``, ``ControlUnit``, the observer classes) on top of these functions. The package imports
+nothing outside itself but ``math`` (and numba): ``pmsm_ev.accel`` compiles a copy of it.
+
+Floating-point results are the same compiled or not: the operations are written in the
+order of the plain-Python formulas they replaced (numba does not reorder or fuse them
+without fastmath), and only functions that numba and CPython compute identically are
+used (sin, cos, tanh, sqrt, %; not math.hypot, whose CPython 3.10+ algorithm differs in
+the last bit).
+"""
+
+from __future__ import annotations
+
+from .control import *  # noqa: F403 - the package's interface is all its kernels and constants
+from .jit import CACHE, JIT  # noqa: F401 - how this copy was loaded (pmsm_ev.accel reads it)
+from .layout import *  # noqa: F403
+from .observers import *  # noqa: F403
+from .plant import *  # noqa: F403
+from .startup import *  # noqa: F403
+from .transforms import *  # noqa: F403

@@ -1,0 +1,194 @@
+"""The controller's kernels: the speed PI (eq 14), the current PIs (eqs 15-16) with the
+decoupling filters and terms (eqs 17-20), the dead-time compensation, and ``control_step``, one
+control period of the units with an observer (or the sensored baseline): the observer's time and
+measurement updates (eqs 23-27, ``pmsm_ev.kernels.observers``), eqs 14-20, the inverse Park to the
+voltage held (see ``pmsm_ev.control_unit``).
+
+The vectors ``s`` and ``c`` are laid out by ``pmsm_ev.kernels.layout`` (``S_*``, ``C_*``).
+"""
+
+from __future__ import annotations
+
+import math
+
+from .jit import F as _F
+from .jit import V as _V
+from .jit import kernel
+from .jit import sig as _sig
+from .layout import (
+    C_ADVANCE,
+    C_DELAYED,
+    C_DT,
+    C_DTC_I0,
+    C_DTC_V,
+    C_ESTIMATED,
+    C_HALF_PERIOD_N,
+    C_I_D_REF,
+    C_I_Q_MAX,
+    C_KI_ID,
+    C_KI_IQ,
+    C_KI_W,
+    C_KP_ID,
+    C_KP_IQ,
+    C_KP_W,
+    C_L_D,
+    C_L_Q,
+    C_N,
+    C_OBSERVER,
+    C_PAPER_SIGNS,
+    C_PSI,
+    C_PSI_ADAPT,
+    C_T_D,
+    C_U_MAX,
+    C_ZOH,
+    OBS_EKF5AB,
+    S_I_D,
+    S_I_DL,
+    S_I_Q,
+    S_I_QL,
+    S_I_QREF,
+    S_INT_D,
+    S_INT_Q,
+    S_SAT,
+    S_THETA_PRIOR,
+    S_U_PREV_0,
+    S_U_PREV_1,
+    S_V_ALPHA,
+    S_V_BETA,
+    S_V_D,
+    S_V_OUT_ALPHA,
+    S_V_OUT_BETA,
+    S_V_Q,
+    S_W_INT,
+    S_X,
+)
+from .observers import adapt_psi, observer_correct, observer_predict
+from .plant import dead_time_error
+from .transforms import inverse_park, park
+
+
+# -- controller, eqs 14-20 -----------------------------------------------------------------------
+@kernel(_sig(_F, _V, _V, _F, _F))
+def speed_step(s, c, omega_ref, omega_est):
+    """Speed PI, eq 14, i_qref limited to +-i_q_max, with conditional integration."""
+    i_q_max = c[C_I_Q_MAX]
+    e = omega_ref - omega_est
+    unsat = c[C_KP_W] * e + s[S_W_INT]  # (14)
+    i_qref = min(max(unsat, -i_q_max), i_q_max)
+    # anti-windup: integrate unless the output is clamped and e pushes further out
+    if i_qref == unsat or (unsat > i_q_max) != (e > 0):
+        s[S_W_INT] += c[C_KI_W] * e * c[C_DT]
+    return i_qref
+
+
+@kernel(_sig(f"UniTuple({_F}, 2)", _V, _V, _F, _F, _F, _F, _F))
+def current_step(s, c, i_dref, i_qref, i_d, i_q, omega_est):
+    """Current PIs (15-16), decoupling filters (17-18) and terms (19-20); the voltage
+    vector limited to u_max, the integrators held while it is limited."""
+    dt = c[C_DT]
+    e_d = i_dref - i_d
+    e_q = i_qref - i_q
+    u_d = c[C_KP_ID] * e_d + s[S_INT_D]  # (15)
+    u_q = c[C_KP_IQ] * e_q + s[S_INT_Q]  # (16)
+    w_e = c[C_N] * omega_est
+    v_d = u_d - w_e * c[C_L_Q] * s[S_I_QL]  # (19)
+    if c[C_PAPER_SIGNS] != 0.0:
+        v_q = u_q - w_e * c[C_L_D] * s[S_I_DL] - w_e * c[C_PSI]  # (20) as printed
+    else:
+        v_q = u_q + w_e * c[C_L_D] * s[S_I_DL] + w_e * c[C_PSI]  # (20) corrected to cancel (11)
+    s[S_I_DL] += dt / c[C_T_D] * (i_dref - s[S_I_DL])  # (17)
+    s[S_I_QL] += dt / c[C_T_D] * (i_qref - s[S_I_QL])  # (18)
+    u_max = c[C_U_MAX]
+    mag = math.sqrt(v_d * v_d + v_q * v_q)
+    if mag > u_max:
+        s[S_SAT] = 1.0
+        if mag == math.inf:  # the squares overflowed (|v| > 1e154 V): the length of the
+            big = max(abs(v_d), abs(v_q))  # scaled vector; NaN if a component is infinite
+            mag = big * math.sqrt((v_d / big) * (v_d / big) + (v_q / big) * (v_q / big))
+        scale = u_max / mag
+        v_d *= scale
+        v_q *= scale
+    else:
+        s[S_SAT] = 0.0
+        s[S_INT_D] += c[C_KI_ID] * e_d * dt
+        s[S_INT_Q] += c[C_KI_IQ] * e_q * dt
+    return v_d, v_q
+
+
+
+@kernel()
+def dead_time_compensated(c, v_alpha, v_beta, i_alpha, i_beta):
+    """The voltage sent to the inverter with dead-time compensation: the command minus the
+    error ``dead_time_error`` expects for the measured currents, so that the applied voltage
+    is the command again. The observers keep the command (``S_V_ALPHA``, ``S_V_BETA``) as
+    their voltage input: the compensation's aim is that the motor sees it."""
+    e_alpha, e_beta = dead_time_error(i_alpha, i_beta, c[C_DTC_V], c[C_DTC_I0])
+    return v_alpha - e_alpha, v_beta - e_beta
+
+
+@kernel()
+def compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta):
+    """``dead_time_compensated``, the result also kept in ``S_V_OUT_ALPHA``, ``S_V_OUT_BETA``."""
+    v_alpha, v_beta = dead_time_compensated(c, v_alpha, v_beta, i_alpha, i_beta)
+    s[S_V_OUT_ALPHA] = v_alpha
+    s[S_V_OUT_BETA] = v_beta
+    return v_alpha, v_beta
+
+
+# -- the control unit ----------------------------------------------------------------------------
+@kernel()
+def store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta):
+    """End of a control period, every unit alike: keep the period's currents, references and
+    command in the state; return the vector sent to the inverter (the command, plus the dead
+    time's expected loss with dead-time compensation on)."""
+    s[S_I_D] = i_d
+    s[S_I_Q] = i_q
+    s[S_I_QREF] = i_qref
+    s[S_V_D] = v_d
+    s[S_V_Q] = v_q
+    s[S_V_ALPHA] = v_alpha
+    s[S_V_BETA] = v_beta
+    if c[C_DTC_V] != 0.0:
+        return compensate_dead_time(s, c, v_alpha, v_beta, i_alpha, i_beta)
+    return v_alpha, v_beta
+
+
+@kernel(_sig(f"UniTuple({_F}, 12)", _V, _V, _F, _F, _F, _F, _F))
+def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
+    """One control period (see ``pmsm_ev.control_unit``): the observer's eqs 23-27, eqs 14-20; returns
+    (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref, i_d_hat, i_q_hat, omega_hat, theta_hat, T_L_hat)."""
+    # (23)-(24) with the voltage applied over the last period: the last command, or with a
+    # one-period actuation delay, the command before it; the dq command, or for the
+    # stationary-frame EKF5 the alpha-beta vector sent to the inverter
+    if c[C_OBSERVER] == OBS_EKF5AB:
+        u0 = s[S_V_ALPHA]
+        u1 = s[S_V_BETA]
+    else:
+        u0 = s[S_V_D]
+        u1 = s[S_V_Q]
+    if c[C_DELAYED] != 0.0:
+        observer_predict(s, c, s[S_U_PREV_0], s[S_U_PREV_1])
+        s[S_U_PREV_0] = u0
+        s[S_U_PREV_1] = u1
+    else:
+        observer_predict(s, c, u0, u1)
+    estimated = c[C_ESTIMATED] != 0.0
+    theta_frame = s[S_THETA_PRIOR] if estimated else theta_meas
+    i_d, i_q = park(i_alpha, i_beta, theta_frame)
+    observer_correct(s, c, i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas)  # (25)-(27)
+    if c[C_PSI_ADAPT] != 0.0:
+        adapt_psi(s, c)
+    if estimated:
+        theta_ctrl = s[S_X + 3]
+        i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
+    else:
+        theta_ctrl = theta_meas
+    omega_hat = s[S_X + 2]
+    i_qref = speed_step(s, c, omega_ref, omega_hat)  # (14)
+    v_d, v_q = current_step(s, c, c[C_I_D_REF], i_qref, i_d, i_q, omega_hat)  # (15)-(20)
+    half_arc = c[C_HALF_PERIOD_N] * omega_hat  # a = omega_e dt / 2
+    gain = half_arc / math.sin(half_arc) if c[C_ZOH] != 0.0 and abs(half_arc) > 1e-6 else 1.0
+    v_alpha, v_beta = inverse_park(gain * v_d, gain * v_q, theta_ctrl + c[C_ADVANCE] * omega_hat)
+    v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
+    return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
+            s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4])

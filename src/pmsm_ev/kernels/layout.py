@@ -1,0 +1,314 @@
+"""The slots of the kernels' flat vectors, each declared once: name, length, meaning.
+
+A ``Layout`` assigns the offsets from an ordered table of ``Slot(name, length, doc)`` rows
+(contiguous, in table order, so no two slots overlap) and checks the table when this module is
+imported: names unique and upper case with the vector's prefix, lengths whole numbers >= 1, the
+total the declared size. Each slot's offset is then a module-level int named after it (``S_X``,
+``C_Q``, ``P_R_S``, ...): numba reads such globals as compile-time constants, so the kernels
+index the vectors as fast as with literal numbers. A slot longer than 1 holds consecutive
+entries from its offset (``S_P + n * i + j``).
+
+Three vectors:
+
+* ``PLANT_PARAMS_LAYOUT`` (``P_*``): the plant's parameters (``pmsm_ev.plant.Plant``);
+* ``UNIT_STATE_LAYOUT`` (``S_*``): the control unit's state, shared by its controllers and its
+  observer (``pmsm_ev.control_unit.ControlUnit``); the slots marked ``saved=False`` are scratch
+  space, written before they are read in every step, and are not part of a saved state;
+* ``UNIT_PARAMS_LAYOUT`` (``C_*``): the control unit's parameters.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+
+class LayoutError(ValueError):
+    """A layout table that does not describe a vector (a duplicate or malformed name, a bad
+    length, a size that is not the declared one)."""
+
+
+class Slot(NamedTuple):
+    name: str  #: the constant's name: the vector's prefix and an upper-case identifier
+    length: int  #: how many consecutive floats
+    doc: str  #: what it holds, with its unit
+    saved: bool = True  #: part of a saved state (state vectors only; False: scratch)
+
+
+class Layout:
+    """Offsets of the slots of one flat float vector (see the module doc)."""
+
+    def __init__(self, what: str, prefix: str, slots, size: int):
+        self.what = what
+        self.prefix = prefix
+        self.slots: tuple[Slot, ...] = tuple(Slot(*row) for row in slots)
+        self.offsets: dict[str, int] = {}
+        offset = 0
+        for slot in self.slots:
+            name, length = slot.name, slot.length
+            if not (isinstance(name, str) and name.startswith(prefix) and name.isidentifier()
+                    and name == name.upper()):
+                raise LayoutError(f"{what}: slot name {name!r} is not an upper-case identifier starting "
+                                  f"with {prefix!r}")
+            if name in self.offsets:
+                raise LayoutError(f"{what}: slot {name} declared twice")
+            if isinstance(length, bool) or not isinstance(length, int) or length < 1:
+                raise LayoutError(f"{what}: slot {name} has length {length!r}; it must be a whole number >= 1")
+            self.offsets[name] = offset
+            offset += length
+        if offset != size:
+            raise LayoutError(f"{what}: the slots take {offset} floats, the vector is declared with {size}")
+        self.size = size
+
+    def __len__(self) -> int:
+        return self.size
+
+    def span(self, name: str) -> range:
+        """The indices of slot ``name``."""
+        slot = self._slot(name)
+        return range(self.offsets[name], self.offsets[name] + slot.length)
+
+    def _slot(self, name: str) -> Slot:
+        for slot in self.slots:
+            if slot.name == name:
+                return slot
+        raise KeyError(f"{self.what} has no slot {name!r}")
+
+    def export(self, namespace: dict) -> None:
+        """Put each slot's offset into ``namespace`` under its name (a module's globals)."""
+        for name, offset in self.offsets.items():
+            if name in namespace:
+                raise LayoutError(f"{self.what}: {name} is defined already in {namespace.get('__name__')}")
+            namespace[name] = offset
+
+    # -- saved states -------------------------------------------------------------------------
+    def field(self, name: str) -> str:
+        """The name of a slot in a saved state: without the prefix, lower case (``S_I_MAG`` -> ``i_mag``)."""
+        return name[len(self.prefix):].lower()
+
+    def save(self, vector) -> dict[str, list[float]]:
+        """The saved slots of ``vector`` as {field: [floats]} (JSON-serialisable)."""
+        return {self.field(s.name): [float(vector[i]) for i in self.span(s.name)] for s in self.slots if s.saved}
+
+    def restore(self, vector, state) -> None:
+        """Set the saved slots of ``vector`` from ``save``'s dict; the fields and their lengths must be
+        this layout's (``LayoutError`` names the first that is not)."""
+        if not isinstance(state, dict):
+            raise LayoutError(f"{self.what}: a saved state is a dict of named fields (got {type(state).__name__})")
+        expected = {self.field(s.name): s for s in self.slots if s.saved}
+        for name in state:
+            if name not in expected:
+                raise LayoutError(f"{self.what}: the saved state has a field {name!r} that this version does not "
+                                  f"know (expected {', '.join(expected)})")
+        for name, slot in expected.items():
+            if name not in state:
+                raise LayoutError(f"{self.what}: the saved state has no field {name!r}")
+            if len(state[name]) != slot.length:
+                raise LayoutError(f"{self.what}: field {name!r} of the saved state has {len(state[name])} values, "
+                                  f"expected {slot.length}")
+        for name, slot in expected.items():
+            for i, value in zip(self.span(slot.name), state[name]):
+                vector[i] = float(value)
+
+
+def restore_fields(what: str, state, lengths: dict[str, int | None]) -> dict:
+    """Check a saved state of named fields against the expected ``lengths`` (None: a number, else a
+    list of that many numbers, 0: a list of any length) and return it; ``LayoutError`` names the
+    first field that differs."""
+    if not isinstance(state, dict):
+        raise LayoutError(f"{what}: a saved state is a dict of named fields (got {type(state).__name__})")
+    if set(state) != set(lengths):
+        missing, extra = sorted(set(lengths) - set(state)), sorted(set(state) - set(lengths))
+        raise LayoutError(f"{what}: the saved state's fields differ: missing {missing}, unknown {extra}")
+    for name, length in lengths.items():
+        value = state[name]
+        if length is None:
+            if isinstance(value, (list, tuple, dict)):
+                raise LayoutError(f"{what}: field {name!r} of the saved state must be a number")
+        elif not isinstance(value, (list, tuple)) or (length and len(value) != length):
+            raise LayoutError(f"{what}: field {name!r} of the saved state must be a list of {length or 'any number'} "
+                              f"values")
+    return state
+
+
+#: the plant's parameter vector (``pmsm_ev.plant.Plant`` fills it)
+PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
+    ("P_R_S", 1, "stator resistance [Ohm] (at the winding's temperature)"),
+    ("P_L_D", 1, "d inductance [H]"),
+    ("P_L_Q", 1, "q inductance [H]"),
+    ("P_PSI", 1, "magnet flux [Wb] (at the magnet's temperature)"),
+    ("P_N", 1, "pole pairs [-]"),
+    ("P_B_M", 1, "viscous friction [N m s/rad]"),
+    ("P_T_M0", 1, "static friction [N m]"),
+    ("P_OMEGA_EPS", 1, "speed scale of the static friction's soft sign [rad/s]"),
+    ("P_J_EQ", 1, "equivalent inertia (eq 9) [kg m^2]"),
+    ("P_M_V", 1, "vehicle mass [kg]"),
+    ("P_G", 1, "gravity [m/s^2]"),
+    ("P_C_R", 1, "rolling resistance coefficient [-]"),
+    ("P_RHO_A", 1, "air density [kg/m^3]"),
+    ("P_C_D", 1, "drag coefficient [-]"),
+    ("P_A_F", 1, "frontal area [m^2]"),
+    ("P_R_W", 1, "wheel radius [m]"),
+    ("P_ETA", 1, "gear efficiency [-]"),
+    ("P_N_G", 1, "gear ratio [-]"),
+    ("P_V_A", 1, "head wind [m/s]"),
+    ("P_V_EPS", 1, "speed scale of the rolling resistance's soft sign [m/s]"),
+    ("P_PAPER", 1, "1.0: the paper's load model (eqs 3, 4, 8 as printed)"),
+    ("P_SUBSTEPS", 1, "RK4 sub-steps per step [-]"),
+    ("P_DT_V", 1, "inverter dead time: per-phase voltage error v_dc t_d / T_s [V] (0 = off; "
+                  "``PlantParams.dead_time``, ``switching_period``)"),
+    ("P_DT_I0", 1, "current scale of the dead time's soft sign [A] (``PlantParams.dead_time_i0``)"),
+    ("P_SAT", 1, "magnetic saturation: 1.0 = on (``saturated_flux``)"),
+    ("P_SAT_AD", 1, "1/I_sat of the d axis [1/A]"),
+    ("P_SAT_AQ", 1, "1/I_sat of the q axis [1/A]"),
+), size=27)
+
+#: the control unit's state vector (controller + observer)
+UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
+    ("S_V_D", 1, "the last command, d [V]"),
+    ("S_V_Q", 1, "the last command, q [V]"),
+    ("S_U_PREV_0", 1, "the observer's voltage input of one period earlier, d or alpha [V] (one-period "
+                      "actuation delay)"),
+    ("S_U_PREV_1", 1, "... q or beta [V]"),
+    ("S_V_ALPHA", 1, "the voltage held, alpha [V]"),
+    ("S_V_BETA", 1, "the voltage held, beta [V]"),
+    ("S_I_D", 1, "the d current in the control frame [A]"),
+    ("S_I_Q", 1, "the q current in the control frame [A]"),
+    ("S_I_QREF", 1, "the q-current reference [A]"),
+    ("S_W_INT", 1, "speed PI integral [A]"),
+    ("S_INT_D", 1, "d current PI integral [V]"),
+    ("S_INT_Q", 1, "q current PI integral [V]"),
+    ("S_I_DL", 1, "decoupling filter of i_dref (eq 17) [A]"),
+    ("S_I_QL", 1, "decoupling filter of i_qref (eq 18) [A]"),
+    ("S_SAT", 1, "1.0 while the voltage vector is limited"),
+    ("S_X", 5, "observer estimates: i_d, i_q, omega_m, theta_e, T_L (EKF4: T_L stays 0)"),
+    ("S_THETA_PRIOR", 1, "the observer's predicted angle [rad]"),
+    ("S_P", 25, "EKF covariance, n x n row by row (n = 4 or 5)"),
+    ("S_PHT", 10, "scratch: P H^T, n x 2", False),
+    ("S_K", 10, "scratch: Kalman gain, n x 2", False),
+    ("S_A", 25, "scratch: J_f P, n x n (J_f itself when P = I)", False),
+    ("S_STARTED", 1, "stationary-frame EKF5: 1.0 once past its first sample (x0 is the estimate there)"),
+    # sensorless start-up (``sensorless_step``)
+    ("S_MODE", 1, "the sensorless unit's mode (MODE_*)"),
+    ("S_CLOCK", 1, "control periods since its first step"),
+    ("S_PHI", 1, "the current vector of alignment and I-f: angle in the stationary frame [rad]"),
+    ("S_I_MAG", 1, "... its magnitude [A]"),
+    ("S_I_TGT", 1, "... its target magnitude [A]"),
+    ("S_OMEGA_IF", 1, "the I-f speed [rad/s]"),
+    ("S_AGREE", 1, "how long omega_hat has agreed with the I-f speed [s]"),
+    ("S_SLIP", 1, "I-f: omega_hat - omega_if, low-pass filtered (the damping's input) [rad/s]"),
+    ("S_V_OUT_ALPHA", 1, "with dead-time compensation: the vector sent to the inverter, alpha [V]"),
+    ("S_V_OUT_BETA", 1, "... beta [V]"),
+    ("S_PSI_RATIO", 1, "with psi adaptation: the EKF's magnet flux over the nominal psi [-]"),
+    # the sensorless unit's synchronism (``sync_guard``, ``slip_detector``)
+    ("S_GUARD", 1, "the load-angle guard holding the I-f vector back (GUARD_SOFT, GUARD_HARD; 0 = not)"),
+    ("S_LOS", 1, "how long the slip has exceeded its bound [s]"),
+    ("S_EPISODE", 1, "the age of the present loss-of-synchronism episode [s] (0: none)"),
+    ("S_INSYNC", 1, "how long it has been in synchronism since [s]"),
+    ("S_FAULT", 1, "the fault (FAULT_*)"),
+    ("S_THETA_CTRL", 1, "the control frame's angle of the last period [rad]"),
+    ("S_OMEGA_CTRL", 1, "the control frame's speed of the last period [rad/s]"),
+    # the car standing in I-f (``C_STILL``)
+    ("S_ANCHOR", 1, "the EKF's angle when the stand began [rad]"),
+    ("S_ANCHORED", 1, "1.0 while the car stands"),
+    ("S_ANCHOR_TL", 1, "the EKF's load when the stand began [N m]"),
+    ("S_STILL_OUT", 1, "how long |omega_hat| has been above C_STILL while standing [s] (the stand ends at "
+                       "C_SLIP_TIME / 2)"),
+), size=114)
+
+#: the control unit's parameter vector
+UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
+    ("C_DT", 1, "control period [s]"),
+    ("C_KP_W", 1, "speed PI proportional gain [A s/rad]"),
+    ("C_KI_W", 1, "speed PI integral gain [A/rad]"),
+    ("C_I_Q_MAX", 1, "q current limit [A]"),
+    ("C_KP_ID", 1, "d current PI proportional gain [V/A]"),
+    ("C_KI_ID", 1, "d current PI integral gain [V/(A s)]"),
+    ("C_KP_IQ", 1, "q current PI proportional gain [V/A]"),
+    ("C_KI_IQ", 1, "q current PI integral gain [V/(A s)]"),
+    ("C_T_D", 1, "decoupling filter time constant [s]"),
+    ("C_U_MAX", 1, "voltage limit [V]"),
+    # the controller's motor model
+    ("C_N", 1, "pole pairs [-]"),
+    ("C_L_D", 1, "d inductance [H]"),
+    ("C_L_Q", 1, "q inductance [H]"),
+    ("C_PSI", 1, "magnet flux [Wb]"),
+    ("C_PAPER_SIGNS", 1, "1.0: eq 20's signs as printed"),
+    ("C_I_D_REF", 1, "d current reference [A]"),
+    ("C_ADVANCE", 1, "angle advance per rad/s of omega_hat [s]: periods x dt x N"),
+    ("C_HALF_PERIOD_N", 1, "N dt / 2 (the ZOH compensation's half arc over omega)"),
+    ("C_ZOH", 1, "1.0: ZOH compensation on"),
+    ("C_DELAYED", 1, "1.0: the observer takes the command of one period earlier"),
+    ("C_ESTIMATED", 1, "1.0: the control frame on the estimated angle"),
+    ("C_OBSERVER", 1, "the observer (OBS_*)"),
+    # EKF model constants (A2-A32) and R
+    ("C_A_RD", 1, "1 - R_s dt / L_d (A8)"),
+    ("C_A_RQ", 1, "1 - R_s dt / L_q (A14)"),
+    ("C_C_WQ", 1, "N L_q dt / L_d (A9, A10)"),
+    ("C_C_WD", 1, "N L_d dt / L_q (A13)"),
+    ("C_C_WPSI", 1, "N psi dt / L_q (A15)"),
+    ("C_C_VD", 1, "dt / L_d"),
+    ("C_C_VQ", 1, "dt / L_q"),
+    ("C_C_TPSI", 1, "N psi dt / J (A19)"),
+    ("C_C_TDQ", 1, "N (L_d - L_q) dt / J (A18, A19)"),
+    ("C_C_TL", 1, "-dt / J (A22)"),
+    ("C_C_TH", 1, "N dt (A25)"),
+    ("C_R0", 1, "EKF R, first diagonal entry [A^2]"),
+    ("C_R1", 1, "EKF R, second diagonal entry [A^2]"),
+    ("C_Q", 5, "EKF Q diagonal, n entries"),
+    ("C_C_MID", 1, "stationary-frame EKF5: d(mid-period angle)/d(omega_m) = N dt / 2"),
+    ("C_P0", 5, "EKF P0 diagonal, n entries"),
+    # ``pmsm_ev.params.StartupParams``
+    ("C_T_RAMP", 1, "alignment: current ramp time [s]"),
+    ("C_T_HOLD", 1, "alignment: hold time at +90 deg [s]"),
+    ("C_T_SWEEP", 1, "alignment: sweep time to 0 deg [s]"),
+    ("C_T_SETTLE", 1, "alignment: settling time at 0 deg [s]"),
+    ("C_I_ALIGN", 1, "alignment current [A]"),
+    ("C_I_IF", 1, "least I-f current [A]"),
+    ("C_IF_ACCEL", 1, "I-f acceleration limit [rad/s^2]"),
+    ("C_I_RATE", 1, "I-f current rate [A/s]"),
+    ("C_W_UP", 1, "handover up above this speed [rad/s]"),
+    ("C_W_DOWN", 1, "handover down below this speed [rad/s]"),
+    ("C_AGREE_TOL", 1, "relative agreement of omega_hat and omega_if [-]"),
+    ("C_AGREE_TIME", 1, "... for this long [s]"),
+    ("C_IF_MARGIN", 1, "I-f current margin over the load's current [-]"),
+    ("C_IF_DAMP", 1, "I-f damping: 2 zeta sqrt(J / psi) [rad s sqrt(A)], divided by sqrt(i) in use"),
+    ("C_P0_ALIGNED", 5, "EKF P0 diagonal at the restart after the alignment"),
+    ("C_SLIP_FILTER", 1, "dt / time constant of the low-pass filter of the damping's input [-]"),
+    ("C_DTC_V", 1, "dead-time compensation: per-phase voltage amplitude [V] (0 = off; "
+                   "``ControllerParams.dead_time_comp``)"),
+    ("C_DTC_I0", 1, "... its soft sign's current scale [A] (``ControllerParams.dead_time_comp_i0``)"),
+    ("C_PSI_ADAPT", 1, "psi adaptation of the stationary-frame EKF5: gain [1/s] (0 = off; ``EkfParams.psi_adapt``)"),
+    ("C_PSI_ADAPT_W", 1, "... the least |omega_hat| it adapts at [rad/s]"),
+    # the sensorless unit's I-f sizing and synchronism (``pmsm_ev.params.StartupParams``)
+    ("C_J_IF", 1, "the EKF model's inertia [kg m^2]"),
+    ("C_E_MAX", 1, "the design load angle [rad]"),
+    ("C_SIN_E", 1, "its sine [-]"),
+    ("C_I_RATE_LOAD", 1, "the current rate when the load exceeds the vector [A/s]"),
+    ("C_GUARD", 1, "1.0: the load-angle guard on"),
+    ("C_SLIP_TOL", 1, "the slip bound [rad/s]"),
+    ("C_SLIP_TIME", 1, "... for this long: a loss of synchronism [s]"),
+    ("C_RECOVER_TIME", 1, "the time in synchronism that ends an episode [s]"),
+    ("C_FAULT_TIME", 1, "the episode's age that latches the fault [s]"),
+    ("C_E_GUARD", 1, "the guard's angle [rad]"),
+    ("C_ALIGN_DAMP", 1, "1.0: the alignment damped on the back-EMF (``StartupParams.align_damping``)"),
+    ("C_ALIGN_SLIP", 1, "|omega_hat| that ends the alignment: the rotor runs away under its vector [rad/s]"),
+    ("C_ALIGN_SLIP_TIME", 1, "... for this long [s]"),
+    ("C_STILL", 1, "below this |omega_hat| and |omega_if| in I-f the car stands: its angle is held [rad/s]"),
+), size=84)
+
+PLANT_PARAMS_LAYOUT.export(globals())
+UNIT_STATE_LAYOUT.export(globals())
+UNIT_PARAMS_LAYOUT.export(globals())
+PLANT_PARAMS = PLANT_PARAMS_LAYOUT.size  #: length of the plant's parameter vector
+UNIT_STATE = UNIT_STATE_LAYOUT.size  #: length of the control unit's state vector
+UNIT_PARAMS = UNIT_PARAMS_LAYOUT.size  #: length of the control unit's parameter vector
+
+#: modes of the sensorless unit (``S_MODE``)
+MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
+#: its fault output (``S_FAULT``): none; a loss of synchronism detected, recovery under way; the
+#: recovery failed: the safe state (stop and hold at the current limit) latched
+FAULT_NONE, FAULT_RECOVERING, FAULT_LATCHED = 0.0, 1.0, 2.0
+
+#: observers (``C_OBSERVER``)
+OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
+OBSERVER_CODES = {"ekf5": OBS_EKF5, "ekf4": OBS_EKF4, "ekf5ab": OBS_EKF5AB, "sensored": OBS_SENSORED}
