@@ -268,7 +268,12 @@ def _source_signature() -> tuple:
     files = []
     for root in (HERE, physics_dir()):
         for path in sorted(root.rglob("*.py")):
-            st = path.stat()
+            if ".build" in path.relative_to(root).parts:
+                continue  # a build's staging folder (FMUs built into this folder with --out)
+            try:
+                st = path.stat()
+            except OSError:
+                continue
             files.append((str(path), st.st_size, st.st_mtime_ns))
     return (_pythonfmu_version(), tuple(files))
 
@@ -534,7 +539,7 @@ def write_fmu_with_starts(source, dest, values: dict) -> Path:
 
 
 def build_all(out_dir=None, force: bool = False, names=None) -> dict[str, Path]:
-    """Build the FMUs ``names`` (default: all) into ``out_dir`` (default: ``fmus/``),
+    """Build the FMUs ``names`` (default: all) into ``out_dir`` (default: ``default_out_dir()``),
     skipping those whose sources did not change unless ``force``; return name -> path."""
     names = list(FMUS) if names is None else list(names)
     unknown = [n for n in names if n not in FMUS]
