@@ -53,6 +53,11 @@ def _named(option: str, value, cli: bool) -> str:
     return f"{CLI_FLAGS[option]} {value}" if cli else f"{option}={value!r}"
 
 
+def _named_item(option: str, key: str, value, cli: bool) -> str:
+    """How a message names one ``KEY=VALUE`` of an option: ``--set ctrl.x=1`` / ``set['ctrl.x']=1``."""
+    return f"{CLI_FLAGS[option]} {key}={value}" if cli else f"{option}[{key!r}]={value!r}"
+
+
 def fmu_choices() -> tuple[str, ...]:
     """The names an FMU may be given by: the observers', then the shipped FMUs'."""
     return (*OBSERVER_FMUS, *FMUS)
@@ -146,7 +151,7 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
             comp = spec.component(instance, what)
             comp.fmu, comp.fmu_text = resolve_fmu(value, what), str(value)
     for instance, value in _pairs(fmus or {}, "fmus", "INSTANCE=FMU", cli):
-        what = _named("fmus", f"{instance}={value}", cli)
+        what = _named_item("fmus", instance, value, cli)
         comp = spec.component(instance, what)
         comp.fmu, comp.fmu_text = resolve_fmu(value, what), str(value)
     for option, value in (("stop_time", stop_time), ("step_size", step_size), ("output_interval", output_interval)):
@@ -157,12 +162,12 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
             raise CosimError(f"{_named('algorithm', algorithm, cli)}: choose {' or '.join(ALGORITHMS)}")
         spec.algorithm = algorithm
     for target, value in _pairs(set or {}, "set", "INSTANCE.VAR=VALUE", cli):
-        what = _named("set", f"{target}={value}", cli)
+        what = _named_item("set", target, value, cli)
         instance, variable = split_reference(target, what)
         spec.component(instance, what).start[variable] = value
     for signal, csv in _pairs(profiles or {}, "profiles", "SIGNAL=CSV", cli):
         if signal not in spec.signals:
-            raise CosimError(f"{_named('profiles', f'{signal}={csv}', cli)}: unknown signal {signal!r}"
+            raise CosimError(f"{_named_item('profiles', signal, csv, cli)}: unknown signal {signal!r}"
                              f"{close_matches(signal, spec.signals)}; signals: {', '.join(spec.signals) or '(none)'}")
         spec.set_signal_csv(f"{signal}={csv}")
     if record is not None:
