@@ -10,8 +10,9 @@ extras, in a fresh virtual environment under ``.nox/``) and runs the tests. An
 interpreter is looked for on PATH (``python3.X``), then among pyenv's versions; one not
 found is skipped, saying so. An extra that has no wheel for an interpreter (libcosimpy) is
 left out, saying so; the tests that need it are then skipped by name. The sessions share
-the FMUs in ``fmus/`` (built by the first that needs them), so an FMU built under one
-Python runs in the hosts of the others.
+the FMUs in the user's cache (one folder per content of the sources and pythonfmu
+version, built by the first session that needs them), so an FMU built under one Python
+runs in the hosts of the others.
 """
 
 from __future__ import annotations

@@ -8,12 +8,24 @@ content hash (``pmsm_ev_<hash>``, ``pmsm_ev_fmus_<module>_<hash>``), so that
 * FMUs of different builds, and the installed project, share one interpreter (one
   ``sys.modules``) without colliding.
 
-The hash covers everything that goes into the FMU: the slave script, the ``fmus``
-modules, the ``pmsm_ev`` sources, this build module and the pythonfmu version. It is
-stored in ``resources/build_info.json``; ``build_all`` rebuilds an FMU only when the hash
-differs (or ``force``). The modelDescription is written by the slaves themselves
+The hash covers everything that goes into the FMU and runs there: the slave script, the
+``fmus`` modules it imports (``metadata.py``, ``slave_support.py``, ...), the ``pmsm_ev``
+modules and subpackages it needs, this build module and the pythonfmu version (not the
+documentation folder, a copy of ``README.md`` that computes nothing). It is stored in
+``resources/build_info.json``; ``build_all`` rebuilds an FMU only when the hash differs (or
+``force``). The modelDescription is written by the slaves themselves
 (``slave_support.DriveSlave.to_xml``: units, dependencies, InitialUnknowns); the build
 validates every FMU with ``fmpy.validation`` before it replaces the old file.
+
+Where the FMUs go by default (:func:`default_out_dir`): ``$PMSM_COSIM_FMU_DIR`` if set, else
+a folder of the user's cache named by the content key of all the FMUs (:func:`content_key`),
+``<user cache>/pmsm-ev-cosim/fmus/<key>/`` (:func:`user_cache_dir`: ``$XDG_CACHE_HOME`` or
+``~/.cache`` on Linux, ``~/Library/Caches`` on macOS, ``%LOCALAPPDATA%`` on Windows): never
+into the installed package (site-packages may not be writable, and is shared by every
+user of an installation). A change of any bundled source gives a new folder; FMUs of the
+same sources are found again by every later process. An FMU is built in a staging folder
+beside its target and moved into place with one ``os.replace``, so builds that run at the
+same time (pytest or Dask workers) never see or leave a half-written file.
 
 Usage::
 
@@ -34,6 +46,7 @@ import shutil
 import sys
 import tempfile
 import time
+import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
@@ -80,9 +93,35 @@ class BuildError(RuntimeError):
     """An FMU cannot be built."""
 
 
+#: the environment variable that names the folder of the project's FMUs (overrides the cache)
+ENV_FMU_DIR = "PMSM_COSIM_FMU_DIR"
+#: the project's folder in the user's cache
+CACHE_NAME = "pmsm-ev-cosim"
+
+
+def user_cache_dir() -> Path:
+    """The project's folder in the user's cache: ``$XDG_CACHE_HOME/pmsm-ev-cosim`` (default
+    ``~/.cache``) on Linux and other POSIX systems, ``~/Library/Caches/pmsm-ev-cosim`` on
+    macOS, ``%LOCALAPPDATA%\\pmsm-ev-cosim`` on Windows (``$XDG_CACHE_HOME`` wins when set)."""
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    if xdg:
+        base = Path(xdg).expanduser()
+    elif sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    else:
+        base = Path.home() / ".cache"
+    return base / CACHE_NAME
+
+
 def default_out_dir() -> Path:
-    """Where FMUs go by default: this package's directory (``fmus/`` in a checkout)."""
-    return HERE
+    """Where FMUs go by default: ``$PMSM_COSIM_FMU_DIR`` if set, else
+    ``user_cache_dir()/fmus/<content_key()>`` (see the module doc)."""
+    env = os.environ.get(ENV_FMU_DIR)
+    if env:
+        return Path(env).expanduser()
+    return user_cache_dir() / "fmus" / content_key()
 
 
 def physics_dir() -> Path:
@@ -133,47 +172,61 @@ def _fmus_modules(script: str) -> list[str]:
     return order
 
 
+def _module_file(root: Path, dotted: str) -> Path | None:
+    """The file of the module ``dotted`` of the package in ``root`` ("" is the package):
+    ``root/a/b.py`` or ``root/a/b/__init__.py``, or None."""
+    parts = [p for p in dotted.split(".") if p]
+    base = root.joinpath(*parts)
+    for path in ((base.parent / f"{base.name}.py") if parts else None, base / "__init__.py"):
+        if path is not None and path.is_file():
+            return path
+    return None
+
+
 def _physics_files(script: str) -> list[Path]:
-    """The ``pmsm_ev`` modules the slave needs: those the ``fmus`` modules import and,
-    recursively, their relative imports (plus ``__init__.py``); a subpackage (``kernels``)
-    with all its modules, which import nothing outside it."""
+    """The ``pmsm_ev`` files the slave needs, relative to the package folder: the modules
+    the ``fmus`` modules import and, recursively, their relative imports, with the
+    ``__init__.py`` of every package on the way. A module may be a single file
+    (``plant.py``) or a package folder (``kernels/__init__.py`` and its modules)."""
     root = physics_dir()
-    todo = ["__init__"]
+    todo = [""]  # the package itself (its __init__.py)
+
+    def wanted(dotted: str, names, where: str) -> None:
+        if _module_file(root, dotted) is None:
+            raise BuildError(f"{where}: missing module {root / dotted.replace('.', '/')}(.py)")
+        todo.append(dotted)
+        for name in names:  # ``from .pkg import mod``: a submodule if there is one
+            if _module_file(root, f"{dotted}.{name}".strip(".")) is not None:
+                todo.append(f"{dotted}.{name}".strip("."))
+
     for module in _fmus_modules(script):
-        for imported in _project_imports((HERE / module).read_text(encoding="utf-8"), module):
-            head, _, rest = imported.partition(".")
-            if head == PHYSICS_PACKAGE and rest:
-                todo.append(rest.split(".")[0])
-    seen: set[str] = set()
-    files: list[Path] = []
+        tree = ast.parse((HERE / module).read_text(encoding="utf-8"), module)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and not node.level and node.module:
+                head, _, rest = node.module.partition(".")
+                if head == PHYSICS_PACKAGE:
+                    wanted(rest, [a.name for a in node.names], f"{HERE / module}:{node.lineno}")
+    seen: dict[str, Path] = {}
     while todo:
-        name = todo.pop()
-        if name in seen:
+        dotted = todo.pop()
+        if dotted in seen:
             continue
-        seen.add(name)
-        if (root / name).is_dir():  # a subpackage, bundled whole
-            package = sorted((root / name).glob("*.py"))
-            if not (root / name / "__init__.py").is_file():
-                raise BuildError(f"missing module {root / name / '__init__.py'}")
-            for path in package:
-                for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
-                    if isinstance(node, ast.ImportFrom) and node.level > 1:
-                        raise BuildError(f"{path}:{node.lineno}: import from outside the package {name}")
-            files.extend(package)
-            continue
-        path = root / f"{name}.py"
-        if not path.is_file():
-            raise BuildError(f"missing module {path}")
-        files.append(path)
+        path = _module_file(root, dotted)
+        if path is None:
+            raise BuildError(f"missing module {root / dotted.replace('.', '/')}(.py)")
+        seen[dotted] = path
+        parts = dotted.split(".") if dotted else []
+        if parts:
+            todo.append(".".join(parts[:-1]))  # the enclosing package's __init__.py
+        package = parts if path.name == "__init__.py" else parts[:-1]
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
-            if isinstance(node, ast.ImportFrom) and node.level == 1:
-                if node.module:
-                    todo.append(node.module.split(".")[0])
-                else:
-                    todo.extend(alias.name for alias in node.names)
-            elif isinstance(node, ast.ImportFrom) and node.level > 1:
-                raise BuildError(f"{path}:{node.lineno}: import from outside the package")
-    return sorted(files)
+            if isinstance(node, ast.ImportFrom) and node.level:
+                if node.level - 1 > len(package):
+                    raise BuildError(f"{path}:{node.lineno}: import from outside the package")
+                base = package[:len(package) - (node.level - 1)]
+                target = ".".join(base + (node.module.split(".") if node.module else []))
+                wanted(target, [a.name for a in node.names], f"{path}:{node.lineno}")
+    return sorted(path.relative_to(root) for path in seen.values())
 
 
 def _recipe(name: str) -> tuple[str, bool]:
@@ -200,9 +253,43 @@ def source_hash(name: str) -> str:
     add("build.py", Path(__file__).read_bytes())
     for module in sorted(_fmus_modules(script)):
         add(f"fmus/{module}", (HERE / module).read_bytes())
-    for path in _physics_files(script):
-        add(f"pmsm_ev/{path.relative_to(physics_dir()).as_posix()}", path.read_bytes())
+    root = physics_dir()
+    for rel in _physics_files(script):
+        add(f"pmsm_ev/{rel.as_posix()}", (root / rel).read_bytes())
     return h.hexdigest()
+
+
+_content_keys: dict[tuple, str] = {}
+
+
+def _source_signature() -> tuple:
+    """What the hashes depend on, cheaply: the path, size and modification time of every
+    ``.py`` file of this package and of ``pmsm_ev``, and the pythonfmu version."""
+    files = []
+    for root in (HERE, physics_dir()):
+        for path in sorted(root.rglob("*.py")):
+            if ".build" in path.relative_to(root).parts:
+                continue  # a build's staging folder (FMUs built into this folder with --out)
+            try:
+                st = path.stat()
+            except OSError:
+                continue
+            files.append((str(path), st.st_size, st.st_mtime_ns))
+    return (_pythonfmu_version(), tuple(files))
+
+
+def content_key() -> str:
+    """A 16-hex key of the content of all the project's FMUs (``FMUS``): a SHA-256 over
+    their :func:`source_hash` es. The folder of the user's cache the FMUs are built into is
+    named by it. Computed once per state of the sources in a process."""
+    signature = _source_signature()
+    if signature not in _content_keys:
+        h = hashlib.sha256()
+        for name in sorted(FMUS):
+            h.update(f"{name}\0{source_hash(name)}\0".encode())
+        _content_keys.clear()
+        _content_keys[signature] = h.hexdigest()[:16]
+    return _content_keys[signature]
 
 
 def _bundled_module(module: str, tag: str) -> str:
@@ -257,11 +344,11 @@ def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]
     physics = stage / f"{PHYSICS_PACKAGE}_{tag}"
     physics.mkdir()
     files: dict[str, str] = {}
-    for path in _physics_files(script):  # relative imports inside the package: a verbatim copy
-        relative = path.relative_to(physics_dir()).as_posix()
-        (physics / relative).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(path, physics / relative)
-        files[f"{physics.name}/{relative}"] = hashlib.sha256(path.read_bytes()).hexdigest()
+    root = physics_dir()
+    for rel in _physics_files(script):  # relative imports inside the package: a verbatim copy
+        (physics / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(root / rel, physics / rel)
+        files[f"{physics.name}/{rel.as_posix()}"] = hashlib.sha256((root / rel).read_bytes()).hexdigest()
     project_files: list[Path] = [physics]
     staged_script = None
     for module in _fmus_modules(script):
@@ -367,14 +454,19 @@ def _check(fmu: Path, name: str) -> None:
 def _copy_fmu(source: Path, dest: Path, change) -> Path:
     """Write a copy of the FMU ``source`` to ``dest``; ``change(names)`` gives {member:
     new bytes} (members not in ``names`` are added)."""
-    tmp = dest.with_name(dest.name + ".tmp")
-    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
-        changed = change(zin.namelist())
-        for item in zin.infolist():
-            zout.writestr(item, changed.pop(item.filename) if item.filename in changed else zin.read(item))
-        for name, data in changed.items():
-            zout.writestr(name, data)
-    os.replace(tmp, dest)
+    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}-", suffix=".tmp", dir=dest.parent)
+    os.close(fd)
+    try:
+        with zipfile.ZipFile(source) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
+            changed = change(zin.namelist())
+            for item in zin.infolist():
+                zout.writestr(item, changed.pop(item.filename) if item.filename in changed else zin.read(item))
+            for name, data in changed.items():
+                zout.writestr(name, data)
+        os.replace(tmp, dest)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
     return dest
 
 
@@ -401,6 +493,33 @@ def takes_packaged_starts(fmu) -> bool:
     return (read_build_info(Path(fmu)) or {}).get("start_values") == START_VALUES_FILE
 
 
+def _start_text(value) -> str:
+    """A start value as the model description writes it (``true``/``false``, ``repr`` of a float)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(float(value)) if isinstance(value, float) else str(value)
+
+
+def with_parameter_starts(model_description: bytes, values: dict, where: str = "modelDescription.xml") -> bytes:
+    """``model_description`` (the bytes of a modelDescription.xml) with the ``start``
+    attribute of each parameter in ``values`` (name -> value) set to it; everything else
+    (elements, attributes and their order, comments) as it was. Parsed and written as XML
+    (``xml.etree.ElementTree``), UTF-8 with an XML declaration."""
+    try:
+        root = ET.fromstring(model_description, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
+    except ET.ParseError as exc:
+        raise BuildError(f"{where}: modelDescription.xml is not valid XML ({exc})") from None
+    variables = {v.get("name"): v for v in root.iter("ScalarVariable")}
+    for name, value in values.items():
+        var = variables.get(name)
+        typed = None if var is None else next(
+            (e for e in var if e.tag in ("Real", "Integer", "Boolean", "String") and "start" in e.attrib), None)
+        if var is None or var.get("causality") != "parameter" or typed is None:
+            raise BuildError(f"{where}: no parameter {name!r} with a start value")
+        typed.set("start", _start_text(value))
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+
+
 def write_fmu_with_starts(source, dest, values: dict) -> Path:
     """A copy of the project FMU ``source`` whose parameters ``values`` (name -> value)
     have other defaults: ``resources/start_values.json`` holds them (the slave reads it
@@ -412,24 +531,15 @@ def write_fmu_with_starts(source, dest, values: dict) -> Path:
 
     def change(names):
         with zipfile.ZipFile(source) as z:
-            text = z.read("modelDescription.xml").decode("utf-8")
-        for name, value in values.items():
-            pattern = re.compile(r'(<ScalarVariable name="' + re.escape(name) +
-                                 r'"[^>]*causality="parameter"[^>]*>\s*<(?:Real|Integer|Boolean|String) start=")'
-                                 r'([^"]*)(")')
-            if len(pattern.findall(text)) != 1:
-                raise BuildError(f"{source}: no parameter {name!r} with a start value")
-            shown = ("true" if value else "false") if isinstance(value, bool) else \
-                repr(float(value)) if isinstance(value, float) else str(value)
-            text = pattern.sub(lambda m: m.group(1) + html.escape(shown, quote=True) + m.group(3), text)
-        return {"modelDescription.xml": text.encode("utf-8"),
+            xml = z.read("modelDescription.xml")
+        return {"modelDescription.xml": with_parameter_starts(xml, values, str(source)),
                 f"resources/{START_VALUES_FILE}": (json.dumps(values, indent=2) + "\n").encode("utf-8")}
 
     return _copy_fmu(source, dest, change)
 
 
 def build_all(out_dir=None, force: bool = False, names=None) -> dict[str, Path]:
-    """Build the FMUs ``names`` (default: all) into ``out_dir`` (default: ``fmus/``),
+    """Build the FMUs ``names`` (default: all) into ``out_dir`` (default: ``default_out_dir()``),
     skipping those whose sources did not change unless ``force``; return name -> path."""
     names = list(FMUS) if names is None else list(names)
     unknown = [n for n in names if n not in FMUS]

@@ -4,6 +4,7 @@ without the drive's columns runs and says it has no drive metrics."""
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 
@@ -12,7 +13,9 @@ import pytest
 
 import pmsm_cosim
 from orchestrator_support import project_fmus, toy_system
+from pmsm_cosim.app.api import prepare
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.drive import load_system
 from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.engine.recording import read_results
 
@@ -28,7 +31,7 @@ def fmus():
 def cli_run(fmus, tmp_path_factory):
     out = tmp_path_factory.mktemp("cli") / "run"
     assert main(["run", "scenario2", "--stop-time", str(STOP), "--no-figures", "--quiet", "--out", str(out),
-                 "--controller", str(fmus["FocEkf4"]), "--set", "ctrl.angle_source=estimated"]) == 0
+                 "--controller", "ekf4", "--set", "ctrl.angle_source=estimated"]) == 0
     return read_results(out), json.loads((out / "metrics.json").read_text())
 
 
@@ -73,11 +76,17 @@ def test_a_user_system_without_the_drive_columns_runs_and_says_so(tmp_path, caps
 
 
 @pytest.mark.parametrize("kwargs,message", [
-    ({"stop_time": -1.0}, "stop_time must be a finite number > 0 s (got -1.0)"),
-    ({"controller": "ekf6"}, "controller='ekf6': give an .fmu file, a shipped FMU"),
+    ({"stop_time": -1.0}, "stop_time=-1.0: must be a finite number > 0 s"),
+    ({"controller": "ekf6"}, "controller='ekf6': not an .fmu file, an observer or a shipped FMU (did you mean: "),
     ({"set": {"ctrl.nope": 1}}, "has no variable 'nope'"),
-    ({"set": ["ctrl.q_TL"]}, "expected INSTANCE.VAR=VALUE"),
-    ({"algorithm": "euler"}, "algorithm must be gauss-seidel or jacobi"),
+    ({"set": ["ctrl.q_TL"]}, "set='ctrl.q_TL': expected INSTANCE.VAR=VALUE"),
+    ({"start_values": {"ctrl.nope": 1}}, "has no variable 'nope'"),
+    ({"algorithm": "euler"}, "algorithm='euler': choose gauss-seidel or jacobi"),
+    ({"record": ["omega"]}, "record='omega': not a column of scenario2 (did you mean: omega_m"),
+    ({"output": ["plnt.omega_m"]}, "unknown instance 'plnt' (did you mean: plant?)"),
+    ({"set": {"ctrl.q_TL": 0.02}, "start_values": {"ctrl.q_TL": 0.02}},
+     "give set= or start_values= (fmpy's name for it), not both"),
+    ({"record": ["omega_m"], "output": ["omega_m"]}, "give record= or output= (fmpy's name for it), not both"),
 ])
 def test_bad_input_is_a_one_line_error(fmus, kwargs, message):
     with pytest.raises(CosimError) as e:
@@ -99,3 +108,79 @@ def test_the_readme_example_runs_as_written(fmus, tmp_path, monkeypatch, capsys)
     status, rms = capsys.readouterr().out.split()
     assert status == "completed" and 0 < float(rms) < 20
     assert len(scope["omega_error"]) == 6001 and list(tmp_path.iterdir()) == []
+
+
+CHOICES = "choose one of ekf5, ekf4, ekf5ab, sensored, sensorless, PmsmEvPlant, FocEkf5, FocEkf4, FocEkf5AB, "
+
+
+@pytest.mark.parametrize("option, api", [("--controller", "controller"), ("--plant", "plant")])
+def test_an_unknown_fmu_name_is_one_line_listing_the_choices_on_both(option, api, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "scenario2", option, "ekf9", "--stop-time", "0.01", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {option} ekf9: not an .fmu file, an observer or a shipped FMU")
+    assert CHOICES in err[0] and err[0].endswith("or give an .fmu file")
+    with pytest.raises(CosimError) as e:
+        pmsm_cosim.simulate("scenario2", **{api: "ekf9"})
+    assert str(e.value) == err[0].removeprefix("error: ").replace(f"{option} ekf9", f"{api}='ekf9'")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_every_observer_name_and_fmu_name_is_taken_on_both(fmus, tmp_path, monkeypatch):
+    """The names resolve to the project's FMUs on both (one function), an FMU path and
+    {fmus}/X.fmu as well; --fmu INSTANCE=FMU is fmus={INSTANCE: FMU}."""
+    from pmsm_cosim.app.cli import _load_with_overrides, build_parser
+    from pmsm_cosim.app.drive import project_fmu_dir
+
+    monkeypatch.chdir(fmus["FocSensored"].parent)
+    for value, expected in (("ekf4", "FocEkf4"), ("ekf5", "FocEkf5"), ("ekf5ab", "FocEkf5AB"),
+                            ("sensored", "FocSensored"), ("sensorless", "FocSensorless"), ("FocEkf4", "FocEkf4"),
+                            ("{fmus}/FocEkf5AB.fmu", "FocEkf5AB"), ("FocSensored.fmu", fmus["FocSensored"])):
+        expected = expected if isinstance(expected, Path) else project_fmu_dir() / f"{expected}.fmu"
+        cli = _load_with_overrides(build_parser().parse_args(
+            ["run", "scenario1", "--controller", value, "--fmu", "plant=PmsmEvPlant"]))
+        api = prepare("scenario1", controller=value, fmus={"plant": "PmsmEvPlant"})
+        assert cli.component("ctrl").fmu == api.component("ctrl").fmu == expected, value
+        assert cli.component("plant").fmu == api.component("plant").fmu == project_fmu_dir() / "PmsmEvPlant.fmu"
+
+
+def test_simulate_leaves_the_system_given_unchanged(fmus):
+    spec = load_system("scenario2")
+    before = copy.deepcopy(spec)
+    starts = {"ctrl.angle_source": "estimated"}
+    result, metrics = pmsm_cosim.simulate(spec, stop_time=0.05, step_size=1e-4, output_interval=0.01,
+                                          algorithm="jacobi", controller="ekf4", plant="PmsmEvPlant", set=starts,
+                                          record=["omega_m", "plant.i_d"])
+    assert metrics["status"] == "completed" and len(result) == 6
+    assert spec == before and spec.stop_time == 350.0 and spec.component("ctrl").fmu.name == "FocEkf5.fmu"
+    assert spec.component("ctrl").start == {"angle_source": "measured"} and len(spec.columns) == 22
+    assert starts == {"ctrl.angle_source": "estimated"}
+    assert metrics["settings"]["components"][0]["start"] == {"angle_source": "estimated"}
+
+
+def test_fmpys_start_values_and_output_are_set_and_record(fmus):
+    """fmpy's names: start_values {"instance.var": value} is set, output [names] is record
+    (time first, then each column as named: the system's own or a variable)."""
+    ours, _ = pmsm_cosim.simulate("scenario2", stop_time=0.1, controller="ekf4", set={"ctrl.angle_source": "estimated",
+                                  "plant.m_v": 1500.0}, record=["omega_m", "plant.i_d", "signals.delta"])
+    fmpys, metrics = pmsm_cosim.simulate("scenario2", stop_time=0.1, controller="ekf4",
+                                         start_values={"ctrl.angle_source": "estimated", "plant.m_v": 1500.0},
+                                         output=["omega_m", "plant.i_d", "signals.delta"])
+    assert ours.dtype.names == fmpys.dtype.names == ("time", "omega_m", "plant.i_d", "signals.delta")
+    assert all(np.array_equal(ours[n], fmpys[n]) for n in ours.dtype.names) and len(ours) == 11
+    assert np.max(ours["omega_m"]) > 0 and metrics["metrics_note"].startswith("no drive metrics")
+    full, _ = pmsm_cosim.simulate("scenario2", stop_time=0.1, controller="ekf4",
+                                  set=["ctrl.angle_source=estimated", "plant.m_v=1500.0"])
+    assert np.array_equal(full["omega_m"], ours["omega_m"]) and np.array_equal(full["i_d"], ours["plant.i_d"])
+    assert not np.array_equal(full["omega_m"], pmsm_cosim.simulate("scenario2", stop_time=0.1,
+                                                                   controller="ekf4")[0]["omega_m"])
+
+
+def test_record_on_the_command_line(fmus, tmp_path):
+    out = tmp_path / "r"
+    assert main(["run", "scenario1", "--stop-time", "0.02", "-q", "--no-figures", "--out", str(out),
+                 "--record", "omega_m", "ctrl.omega_hat"]) == 0
+    columns = read_results(out)
+    result, _ = pmsm_cosim.simulate("scenario1", stop_time=0.02, output=["omega_m", "ctrl.omega_hat"])
+    assert list(columns) == list(result.dtype.names) == ["time", "omega_m", "ctrl.omega_hat"]
+    assert all(np.array_equal(columns[n], result[n]) for n in columns)

@@ -11,9 +11,11 @@ import dataclasses
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
+import xml.etree.ElementTree as ET
 import zipfile
 from ctypes import byref
 from pathlib import Path
@@ -191,6 +193,141 @@ def test_build_rejects_unknown_names(tmp_path):
         pmsm_ev_fmus.build_all(tmp_path, names=["NoSuchFmu"])
     with pytest.raises(SystemExit):
         pmsm_ev_fmus.main(["--out", str(tmp_path), "NoSuchFmu"])
+
+
+def test_fmus_go_to_the_user_cache_keyed_by_their_content(monkeypatch, tmp_path):
+    """Not into the package (site-packages for an installation): the user's cache, a folder
+    per content of all the FMUs' sources; $PMSM_COSIM_FMU_DIR instead when set."""
+    monkeypatch.delenv("PMSM_COSIM_FMU_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    key = fmu_build.content_key()
+    assert len(key) == 16 and int(key, 16) >= 0
+    assert fmu_build.default_out_dir() == tmp_path / "cache" / "pmsm-ev-cosim" / "fmus" / key
+    assert fmu_build.HERE not in fmu_build.default_out_dir().parents
+    # one changed physics source: another key
+    physics = tmp_path / "pmsm_ev"
+    shutil.copytree(fmu_build.physics_dir(), physics, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(fmu_build, "physics_dir", lambda: physics)
+    assert fmu_build.content_key() == key  # the same content elsewhere: the same key
+    (physics / "results.py").write_text((physics / "results.py").read_text() + "\n# changed\n")
+    assert fmu_build.content_key() == key  # in no FMU
+    (physics / "plant.py").write_text((physics / "plant.py").read_text() + "\n# changed\n")
+    assert fmu_build.content_key() != key
+    monkeypatch.setenv("PMSM_COSIM_FMU_DIR", str(tmp_path / "mine"))
+    assert fmu_build.default_out_dir() == tmp_path / "mine"
+
+
+@pytest.mark.parametrize("platform, expected", [("linux", ".cache/pmsm-ev-cosim"),
+                                                ("darwin", "Library/Caches/pmsm-ev-cosim"),
+                                                ("win32", "AppData/Local/pmsm-ev-cosim")])
+def test_the_user_cache_of_each_platform(monkeypatch, tmp_path, platform, expected):
+    for name in ("XDG_CACHE_HOME", "LOCALAPPDATA"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.setattr(fmu_build.sys, "platform", platform)
+    assert fmu_build.user_cache_dir() == tmp_path / expected
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert fmu_build.user_cache_dir() == tmp_path / "xdg" / "pmsm-ev-cosim"
+
+
+def test_a_physics_package_folder_is_bundled_whole(fmus, tmp_path, monkeypatch):
+    """A module of pmsm_ev may be a package folder (its __init__.py, the modules it imports,
+    ``from ..x import`` out of it): bundled with its layout, in the hash, and the FMU runs
+    with the same numbers."""
+    physics = tmp_path / "pmsm_ev"
+    shutil.copytree(fmu_build.physics_dir(), physics, ignore=shutil.ignore_patterns("__pycache__"))
+    (physics / "transforms").mkdir()
+    text = (physics / "transforms.py").read_text().replace("from .kernels import", "from ..kernels import")
+    (physics / "transforms" / "__init__.py").write_text(text + "\nfrom ._origin import ORIGIN  # noqa: E402,F401\n")
+    (physics / "transforms" / "_origin.py").write_text("from .. import __version__\n\nORIGIN = __version__\n")
+    (physics / "transforms.py").unlink()
+    monkeypatch.setattr(fmu_build, "physics_dir", lambda: physics)
+    files = fmu_build._physics_files("pmsm_ev_plant.py")
+    assert {Path("transforms/__init__.py"), Path("transforms/_origin.py"), Path("kernels.py"),
+            Path("__init__.py")} <= set(files) and Path("transforms.py") not in files
+    digest = fmu_build.source_hash("PmsmEvPlant")
+    (physics / "transforms" / "_origin.py").write_text("from .. import __version__\n\nORIGIN = 'x' + __version__\n")
+    assert fmu_build.source_hash("PmsmEvPlant") != digest
+    path, built = fmu_build.build_fmu("PmsmEvPlant", tmp_path / "out")
+    tag = fmu_build.read_build_info(path)["tag"]
+    with zipfile.ZipFile(path) as zf:
+        names = set(zf.namelist())
+    assert {f"resources/pmsm_ev_{tag}/transforms/__init__.py", f"resources/pmsm_ev_{tag}/transforms/_origin.py"} \
+        <= names and f"resources/pmsm_ev_{tag}/transforms.py" not in names
+    signals = np.array([(0.0, 1.0, 0.5, 0.0), (0.01, 1.0, 0.5, 0.0)],
+                       dtype=[("time", float), ("v_alpha", float), ("v_beta", float), ("delta", float)])
+    runs = [fmpy.simulate_fmu(str(fmu), stop_time=0.01, step_size=DT, output_interval=DT, input=signals,
+                              start_values={"theta_e0": 0.3}, output=["i_d", "i_q", "theta_e"])
+            for fmu in (fmus["PmsmEvPlant"], path)]
+    for name in ("i_d", "i_q", "theta_e"):
+        assert np.array_equal(runs[0][name], runs[1][name]) and np.max(np.abs(runs[0][name])) > 0
+
+
+def _xml_tree(data: bytes) -> list:
+    root = ET.fromstring(data)
+    return [(e.tag, dict(e.attrib), (e.text or "").strip()) for e in root.iter()]
+
+
+def test_changed_start_values_are_edited_as_xml(fmus, tmp_path):
+    """write_fmu_with_starts changes the start attributes it is given and nothing else of
+    the model description (every element, attribute and text as before)."""
+    values = {"angle_source": "estimated", "q_omega": 0.25, "R_s": 2, "dt": 1e-4}
+    copy = pmsm_ev_fmus.write_fmu_with_starts(fmus["FocEkf5"], tmp_path / "c.fmu", values)
+    with zipfile.ZipFile(fmus["FocEkf5"]) as z:
+        before = z.read("modelDescription.xml")
+    with zipfile.ZipFile(copy) as z:
+        after = z.read("modelDescription.xml")
+        assert json.loads(z.read("resources/start_values.json")) == values
+    old, new = _xml_tree(before), _xml_tree(after)
+    assert len(old) == len(new) and new[0] == old[0]
+    changed = {}
+    for (tag, attrs, text), (tag2, attrs2, text2) in zip(old, new):
+        assert (tag, text, list(attrs)) == (tag2, text2, list(attrs2))  # same attributes, in order
+        if attrs != attrs2:
+            assert {k for k in attrs if attrs[k] != attrs2[k]} == {"start"}
+            changed[attrs2["start"]] = attrs["start"]
+    assert sorted(changed) == ["0.0001", "0.25", "2", "estimated"]
+    md = fmpy.read_model_description(str(copy))
+    starts = {v.name: v.start for v in md.modelVariables if v.name in values}
+    assert starts == {"angle_source": "estimated", "q_omega": "0.25", "R_s": "2", "dt": "0.0001"}
+    assert validate_fmu(str(copy)) == []
+    with pytest.raises(pmsm_ev_fmus.BuildError, match="no parameter 'omega_m' with a start value"):
+        pmsm_ev_fmus.write_fmu_with_starts(fmus["FocEkf5"], tmp_path / "d.fmu", {"omega_m": 1.0})
+    assert not (tmp_path / "d.fmu").exists() and [p.name for p in tmp_path.iterdir()] == ["c.fmu"]
+
+
+def test_concurrent_builds_into_one_folder_do_not_clash(tmp_path):
+    """Two processes building the same FMU into the same folder at once (pytest or Dask
+    workers): both succeed, the FMU is whole, no staging file is left."""
+    out = tmp_path / "fmus"
+    cmd = [sys.executable, "-m", "pmsm_cosim.app.cli", "build", "--out", str(out), "--force", "RouteProfile"]
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for _ in range(2)]
+    outputs = [p.communicate(timeout=300)[0] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outputs
+    assert all(f"RouteProfile: {out / 'RouteProfile.fmu'}" in text for text in outputs), outputs
+    assert sorted(p.name for p in out.iterdir()) == ["RouteProfile.fmu"]
+    assert validate_fmu(str(out / "RouteProfile.fmu")) == []
+    assert fmu_build.read_build_info(out / "RouteProfile.fmu")["hash"] == fmu_build.source_hash("RouteProfile")
+
+
+def test_the_command_line_takes_the_fmu_folder(fmus, tmp_path, capsys, monkeypatch):
+    """--fmu-dir DIR (build: --out DIR): the project's FMUs are those in DIR ({fmus} and the
+    names of --controller, info); $PMSM_COSIM_FMU_DIR is as it was afterwards."""
+    from pmsm_cosim.app.cli import main
+
+    monkeypatch.delenv("PMSM_COSIM_FMU_DIR", raising=False)
+    folder = fmus["FocEkf4"].parent
+    assert main(["build", "--out", str(folder), "FocEkf4"]) == 0
+    assert capsys.readouterr().out.strip() == f"FocEkf4: {folder / 'FocEkf4.fmu'}"
+    assert main(["info", "ekf4", "--fmu-dir", str(folder), "--causality", "input"]) == 0
+    assert capsys.readouterr().out.startswith("FocEkf4 (FMI 2.0, co-simulation")
+    out = tmp_path / "run"
+    assert main(["run", "scenario1", "--controller", "ekf4", "--fmu-dir", str(folder), "--stop-time", "0.01",
+                 "-q", "--no-figures", "--out", str(out)]) == 0
+    components = json.loads((out / "metrics.json").read_text())["settings"]["components"]
+    assert [c["fmu"] for c in components] == [str(folder / "FocEkf4.fmu"), str(folder / "PmsmEvPlant.fmu")]
+    assert "PMSM_COSIM_FMU_DIR" not in os.environ and sorted(p.name for p in folder.iterdir()) == sorted(
+        f"{n}.fmu" for n in pmsm_ev_fmus.FMUS)
 
 
 def test_build_cli_reports_up_to_date(fmus, capsys):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import subprocess
 import sys
 
@@ -138,3 +139,32 @@ def test_progress_bar_is_rate_limited_and_cleared():
     assert "sim-s/s" in text and "ETA" in text and "/10 s" in text
     bar.close()
     assert stream.getvalue().endswith("\r")
+
+
+def test_the_fmu_folder_override_is_undone(tmp_path, monkeypatch):
+    """--fmu-dir sets $PMSM_COSIM_FMU_DIR for the command (its child processes see it too)
+    and puts back what was there."""
+    from pmsm_cosim.app.drive import fmu_dir_override, load_system, project_fmu_dir
+
+    monkeypatch.setenv("PMSM_COSIM_FMU_DIR", str(tmp_path / "before"))
+    with fmu_dir_override(tmp_path / "mine"):
+        assert project_fmu_dir() == tmp_path / "mine"
+        assert {c.fmu.parent for c in load_system("scenario1").components} == {tmp_path / "mine"}
+        child = subprocess.run([sys.executable, "-c", "import os; print(os.environ['PMSM_COSIM_FMU_DIR'])"],
+                               capture_output=True, text=True, check=True)
+        assert child.stdout.strip() == str(tmp_path / "mine")
+    assert project_fmu_dir() == tmp_path / "before"
+    with fmu_dir_override(None):
+        assert project_fmu_dir() == tmp_path / "before"
+    monkeypatch.delenv("PMSM_COSIM_FMU_DIR")
+    with fmu_dir_override(tmp_path / "mine"):
+        pass
+    assert "PMSM_COSIM_FMU_DIR" not in os.environ
+
+
+@pytest.mark.parametrize("argv", [["run", "scenario1"], ["export-ssp", "scenario1", "-o", "x.ssp"], ["sweep", "s"],
+                                  ["build"], ["info", "x.fmu"], ["report"], ["bench"]])
+def test_every_command_that_uses_the_fmus_takes_fmu_dir(argv, tmp_path):
+    from pmsm_cosim.app.cli import build_parser
+
+    assert build_parser().parse_args([*argv, "--fmu-dir", str(tmp_path)]).fmu_dir == str(tmp_path)

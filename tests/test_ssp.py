@@ -125,10 +125,13 @@ def test_package_layout_and_contents(package, bound, fmus):
     assert 'source="resources/FocEkf5_ctrl.fmu"' in ssd and "angle_source" not in ssd
     with zipfile.ZipFile(io.BytesIO(copy)) as z:
         assert json.loads(z.read("resources/start_values.json")) == {"angle_source": "estimated"}
-        md = z.read("modelDescription.xml").decode()
+        md = ET.fromstring(z.read("modelDescription.xml"))
     with zipfile.ZipFile(fmus["FocEkf5"]) as z:
-        original = z.read("modelDescription.xml").decode()
-    assert md == original.replace('<String start="measured"/>', '<String start="estimated"/>', 1) != original
+        original = ET.fromstring(z.read("modelDescription.xml"))
+    # the same model description as XML but the start value of angle_source
+    original.find("ModelVariables/ScalarVariable[@name='angle_source']/String").set("start", "estimated")
+    assert ET.tostring(md) == ET.tostring(original)
+    assert md.find("ModelVariables/ScalarVariable[@name='angle_source']/String").get("start") == "estimated"
 
 
 def test_ssd_and_ssv_validate_against_the_ssp_schemas_fmpy_ships(bound):

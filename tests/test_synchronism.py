@@ -237,7 +237,7 @@ def test_synchronism_metrics_of_a_spinning_vector():
 
 # -- a user's swap: the paper's own scenario with the sensorless unit ---------------------------------------
 def test_scenario2_with_the_sensorless_unit_swapped_in(tmp_path):
-    """``pmsm-cosim run scenario2 --controller fmus/FocSensorless.fmu``: the reference ramps from t = 0,
+    """``pmsm-cosim run scenario2 --controller sensorless``: the reference ramps from t = 0,
     the unit aligns for 2.3 s and then follows from where the rotor is. Co-simulated (the FMUs under the
     master), 14 s: on the reference by 14 s, in FOC on the EKF, no fault. The same from another angle."""
     fmus = project_fmus()

@@ -16,94 +16,63 @@ directory, removed before the call returns); with ``output_dir`` the files are t
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev_fmus.build import FMUS, OBSERVER_FMUS
-
 from ..engine.errors import CosimError
 from ..engine.master import Master
 from ..engine.recording import read_results
-from ..engine.system import SystemSpec, split_reference
-from .drive import draw_figures, drive_metrics, ensure_fmus, load_system, project_fmu_dir
+from ..engine.system import SystemSpec
+from .drive import draw_figures, drive_metrics, ensure_fmus
+from .overrides import apply_overrides
 
-#: the instances ``plant`` and ``controller`` replace the FMU of (as ``--plant``, ``--controller``)
-PLANT_INSTANCE = "plant"
-CONTROLLER_INSTANCE = "ctrl"
-
-
-def _fmu(value, what: str) -> Path:
-    """An FMU path, a shipped FMU's name (``FocEkf4``) or an observer's (``ekf4``)."""
-    text = str(value)
-    if text in OBSERVER_FMUS:
-        text = OBSERVER_FMUS[text]
-    if text in FMUS:
-        return project_fmu_dir() / f"{text}.fmu"
-    path = Path(text).expanduser()
-    if path.suffix.lower() != ".fmu":
-        raise CosimError(f"{what}={value!r}: give an .fmu file, a shipped FMU ({', '.join(FMUS)}) or an "
-                         f"observer ({', '.join(OBSERVER_FMUS)})")
-    return path.resolve()
+#: fmpy's names (``fmpy.simulate_fmu``) for two of the overrides: ours -> fmpy's
+FMPY_NAMES = {"set": "start_values", "record": "output"}
 
 
-def _starts(values) -> list[tuple[str, object]]:
-    """``{"ctrl.angle_source": "estimated"}`` or ``["ctrl.angle_source=estimated"]`` -> pairs."""
-    if isinstance(values, Mapping):
-        return list(values.items())
-    if isinstance(values, str) or not isinstance(values, Iterable):
-        raise CosimError(f"set={values!r}: give a dict {{'INSTANCE.VAR': value}} or a list of 'INSTANCE.VAR=VALUE'")
-    pairs = []
-    for text in values:
-        target, sep, value = str(text).partition("=")
-        if not sep:
-            raise CosimError(f"set: {text!r}: expected INSTANCE.VAR=VALUE")
-        pairs.append((target.strip(), value.strip()))
-    return pairs
+def _either(ours, fmpys, name: str):
+    """The value of an override given by our name or by fmpy's, not both."""
+    if ours is not None and fmpys is not None:
+        raise CosimError(f"give {name}= or {FMPY_NAMES[name]}= (fmpy's name for it), not both")
+    return ours if ours is not None else fmpys
 
 
 def prepare(system="scenario1", *, stop_time: float | None = None, step_size: float | None = None,
-            output_interval: float | None = None, algorithm: str | None = None, set=None,
-            plant=None, controller=None, fmus: Mapping | None = None,
-            profiles: Mapping | None = None) -> SystemSpec:
-    """The system of :func:`simulate` with its overrides, checked as far as it can be without the FMUs."""
-    spec = system if isinstance(system, SystemSpec) else load_system(system)
-    if plant is not None:
-        spec.set_fmu(PLANT_INSTANCE, _fmu(plant, "plant"), "plant")
-    if controller is not None:
-        spec.set_fmu(CONTROLLER_INSTANCE, _fmu(controller, "controller"), "controller")
-    for instance, fmu in (fmus or {}).items():
-        spec.set_fmu(instance, _fmu(fmu, f"fmus[{instance!r}]"), f"fmus[{instance!r}]")
-    for name, value in (("stop_time", stop_time), ("step_size", step_size), ("output_interval", output_interval)):
-        if value is not None:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
-                raise CosimError(f"{name} must be a finite number > 0 s (got {value!r})")
-            setattr(spec, name, float(value))
-    if algorithm is not None:
-        if algorithm not in ("gauss-seidel", "jacobi"):
-            raise CosimError(f"algorithm must be gauss-seidel or jacobi (got {algorithm!r})")
-        spec.algorithm = algorithm
-    for target, value in _starts(set or {}):
-        instance, variable = split_reference(str(target), f"set {target!r}")
-        spec.component(instance, f"set {target!r}").start[variable] = value
-    for signal, csv in (profiles or {}).items():
-        spec.set_signal_csv(f"{signal}={csv}")
-    return spec
+            output_interval: float | None = None, algorithm: str | None = None, set=None, start_values=None,
+            plant=None, controller=None, fmus: Mapping | None = None, profiles: Mapping | None = None,
+            record=None, output=None) -> SystemSpec:
+    """The system :func:`simulate` runs: ``system`` with its overrides
+    (:func:`pmsm_cosim.app.overrides.apply_overrides`), a new :class:`SystemSpec` (one given
+    is not changed), checked as far as it can be without the FMUs."""
+    return apply_overrides(system, plant=plant, controller=controller, fmus=fmus, stop_time=stop_time,
+                           step_size=step_size, output_interval=output_interval, algorithm=algorithm,
+                           set=_either(set, start_values, "set"), profiles=profiles,
+                           record=_either(record, output, "record"))
 
 
 def simulate(system="scenario1", *, stop_time: float | None = None, step_size: float | None = None,
-             output_interval: float | None = None, algorithm: str | None = None, set=None,
+             output_interval: float | None = None, algorithm: str | None = None, set=None, start_values=None,
              plant=None, controller=None, fmus: Mapping | None = None, profiles: Mapping | None = None,
-             output_dir=None, figures: bool = False) -> tuple[np.ndarray, dict]:
+             record=None, output=None, output_dir=None, figures: bool = False) -> tuple[np.ndarray, dict]:
     """Co-simulate and return ``(result, metrics)``.
 
     ``system``: a shipped scenario (``"scenario1"``, ``"hill-start"``, ...), a system file, an
-    SSP package, or a :class:`~pmsm_cosim.engine.system.SystemSpec`. Overrides as on the
-    command line: ``stop_time``, ``step_size``, ``output_interval`` [s], ``algorithm``;
-    ``set`` start values (``{"ctrl.angle_source": "estimated"}``); ``plant``, ``controller``
-    and ``fmus`` (instance -> FMU) an FMU file, a shipped FMU's name or an observer's
-    (``"ekf4"``, ``"sensorless"``); ``profiles`` a signal's table from a CSV file.
+    SSP package, or a :class:`~pmsm_cosim.engine.system.SystemSpec` (not changed: the
+    overrides apply to a copy). Overrides as on the command line, by one function
+    (:mod:`pmsm_cosim.app.overrides`): ``stop_time``, ``step_size``, ``output_interval`` [s],
+    ``algorithm``; ``set`` start values (``{"ctrl.angle_source": "estimated"}`` or
+    ``["ctrl.angle_source=estimated"]``); ``plant``, ``controller`` and ``fmus`` (instance ->
+    FMU) an FMU file, a shipped FMU's name or an observer's (``"ekf4"``, ``"sensorless"``);
+    ``profiles`` a signal's table from a CSV file (signal -> CSV); ``record`` the columns to
+    record instead of the system's (time first, then each a column of the system, e.g.
+    ``"omega_m"``, or a variable ``"plant.omega_m"``, the column named as written).
+
+    fmpy's names are taken too (``fmpy.simulate_fmu``): ``start_values`` is ``set`` (a dict
+    name -> value; with several FMUs in a system a name is ``"instance.var"``, e.g.
+    ``{"plant.m_v": 1500.0}``) and ``output`` is ``record`` (a list of variable names,
+    ``["plant.omega_m", "ctrl.omega_hat"]``); giving both names of one is an error.
 
     ``result``: a numpy structured array, one float64 field per recorded column, one row per
     output interval (the numbers of results.csv, bit for bit). ``metrics``: the drive's
@@ -114,7 +83,8 @@ def simulate(system="scenario1", *, stop_time: float | None = None, step_size: f
     :class:`~pmsm_cosim.engine.errors.CosimError` with a one-line message.
     """
     spec = prepare(system, stop_time=stop_time, step_size=step_size, output_interval=output_interval,
-                   algorithm=algorithm, set=set, plant=plant, controller=controller, fmus=fmus, profiles=profiles)
+                   algorithm=algorithm, set=set, start_values=start_values, plant=plant, controller=controller,
+                   fmus=fmus, profiles=profiles, record=record, output=output)
     ensure_fmus(spec, quiet=True)
     master = Master(spec)
     with tempfile.TemporaryDirectory(prefix="pmsm-cosim-") as tmp:

@@ -18,6 +18,7 @@ from pathlib import Path
 from pmsm_ev.params import ParameterError
 from pmsm_ev.scenarios import ProfileError
 from pmsm_ev_fmus import build as fmu_build
+from pmsm_ev_fmus.build import OBSERVER_FMUS
 
 from ..engine.errors import CosimError, one_line
 from ..engine.fmu import read_description, variable_unit
@@ -32,14 +33,12 @@ from .drive import (
     drive_metrics,
     ensure_fmus,
     export_ssp,
-    load_system,
+    fmu_dir_override,
     project_fmu_dir,
 )
+from .overrides import CONTROLLER_INSTANCE, PLANT_INSTANCE, apply_overrides, fmu_choices, resolve_fmu
 from .studies import load_sweep
 
-#: the instances --plant and --controller replace the FMU of
-PLANT_INSTANCE = "plant"
-CONTROLLER_INSTANCE = "ctrl"
 EXIT_USER_ERROR = 2
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
@@ -78,30 +77,11 @@ def _count(text: str) -> int:
 # --- commands --------------------------------------------------------------------------
 
 def _load_with_overrides(a):
-    """The system of ``a.system`` with the command line's FMU, time-grid and value overrides."""
-    spec = load_system(a.system)
-    if a.plant:
-        spec.set_fmu(PLANT_INSTANCE, a.plant, "--plant")
-    if a.controller:
-        spec.set_fmu(CONTROLLER_INSTANCE, a.controller, "--controller")
-    for assignment in a.fmu or ():
-        inst, sep, path = assignment.partition("=")
-        if not sep or not path:
-            raise CosimError(f"--fmu {assignment!r}: expected INSTANCE=FMU")
-        spec.set_fmu(inst.strip(), path.strip())
-    if a.stop_time is not None:
-        spec.stop_time = a.stop_time
-    if a.step is not None:
-        spec.step_size = a.step
-    if a.output_interval is not None:
-        spec.output_interval = a.output_interval
-    if a.algorithm is not None:
-        spec.algorithm = a.algorithm
-    for assignment in a.set or ():
-        spec.set_start(assignment)
-    for assignment in a.profile or ():
-        spec.set_signal_csv(assignment)
-    return spec
+    """The system of ``a.system`` with the command line's overrides (the Python API's too:
+    :func:`pmsm_cosim.app.overrides.apply_overrides`)."""
+    return apply_overrides(a.system, plant=a.plant, controller=a.controller, fmus=a.fmu, stop_time=a.stop_time,
+                           step_size=a.step, output_interval=a.output_interval, algorithm=a.algorithm, set=a.set,
+                           profiles=a.profile, record=a.record, cli=True)
 
 
 def cmd_run(a) -> int:
@@ -171,7 +151,7 @@ def cmd_sweep(a) -> int:
 
 
 def cmd_build(a) -> int:
-    kwargs = {"force": a.force, "out_dir": project_fmu_dir()}
+    kwargs = {"force": a.force, "out_dir": project_fmu_dir()}  # --out/--fmu-dir DIR, else the default
     if a.names:
         kwargs["names"] = a.names
     try:
@@ -190,7 +170,14 @@ def cmd_bench(a) -> int:
 
 
 def cmd_info(a) -> int:
-    md = read_description(Path(a.fmu))
+    fmu = Path(a.fmu)
+    if a.fmu in fmu_choices():  # a shipped FMU by its name or its observer's: built first if needed
+        fmu = resolve_fmu(a.fmu, f"info {a.fmu}")
+        try:
+            fmu_build.build_all(out_dir=fmu.parent, names=[fmu.stem])
+        except Exception as exc:
+            raise CosimError(f"building {fmu.name} failed: {type(exc).__name__}: {exc}") from None
+    md = read_description(fmu)
     cs = md.coSimulation
     print(f"{md.modelName} (FMI {md.fmiVersion}, co-simulation, model identifier {cs.modelIdentifier})")
     if md.description:
@@ -276,10 +263,13 @@ class _Parser(argparse.ArgumentParser):
 
 def _system_options(p: argparse.ArgumentParser) -> None:
     """The options that change a system before it is run or exported."""
-    p.add_argument("--plant", metavar="FMU", help=f"FMU of the instance '{PLANT_INSTANCE}'")
+    p.add_argument("--plant", metavar="FMU", help=f"FMU of the instance '{PLANT_INSTANCE}': an .fmu file or a "
+                                                  f"shipped FMU's name (PmsmEvPlant)")
     p.add_argument("--controller", metavar="FMU",
-                   help=f"FMU of the instance '{CONTROLLER_INSTANCE}' (e.g. fmus/FocEkf4.fmu swaps the observer)")
-    p.add_argument("--fmu", action="append", metavar="INSTANCE=FMU", help="FMU of any instance (repeatable)")
+                   help=f"FMU of the instance '{CONTROLLER_INSTANCE}': an observer ({', '.join(OBSERVER_FMUS)}: "
+                        f"e.g. ekf4 swaps the observer), a shipped FMU's name or an .fmu file")
+    p.add_argument("--fmu", action="append", metavar="INSTANCE=FMU",
+                   help="FMU of any instance, as --controller (repeatable)")
     p.add_argument("--stop-time", type=_positive, metavar="S", help="stop time [s] (default: the system file's)")
     p.add_argument("--step", type=_positive, metavar="S", help="base communication step [s]")
     p.add_argument("--algorithm", choices=ALGORITHMS, help="coupling (default: the system file's, gauss-seidel)")
@@ -289,6 +279,16 @@ def _system_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", action="append", metavar="SIGNAL=CSV",
                    help="take a scenario signal from a (time, value) CSV file in the signal's unit, "
                         "e.g. delta=route.csv (repeatable)")
+    p.add_argument("--record", action="extend", nargs="+", metavar="COLUMN",
+                   help="record only these columns (and time): the system's (omega_m) or a variable "
+                        "(plant.omega_m, the column named as written)")
+    _fmu_dir_option(p)
+
+
+def _fmu_dir_option(p: argparse.ArgumentParser, *names: str) -> None:
+    p.add_argument(*(names or ("--fmu-dir",)), dest="fmu_dir", metavar="DIR",
+                   help="the folder of the project's FMUs, built there if needed (default: $PMSM_COSIM_FMU_DIR, "
+                        "else the user's cache, e.g. ~/.cache/pmsm-ev-cosim/fmus/<content key>/)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -341,12 +341,16 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--stop-time", type=_positive, metavar="S", help="stop time of every run [s] (overrides the file)")
     w.add_argument("--dry-run", action="store_true", help="check the sweep against the FMUs and list its runs")
     w.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no per-run lines")
+    _fmu_dir_option(w)
     w.set_defaults(func=cmd_sweep)
 
-    b = sub.add_parser("build", help="build the project's FMUs into fmus/",
-                       description="Build the project's FMUs (pmsm_ev_fmus.build.build_all); "
-                                   "only those whose sources changed unless --force.")
+    b = sub.add_parser("build", help="build the project's FMUs (into the user's cache, or --out DIR)",
+                       description="Build the project's FMUs (pmsm_ev_fmus.build.build_all) into DIR, else "
+                                   "$PMSM_COSIM_FMU_DIR, else the user's cache (a folder per content of the "
+                                   "sources, ~/.cache/pmsm-ev-cosim/fmus/<key>/ on Linux), where runs find them; "
+                                   "only those whose sources changed unless --force. Prints each FMU's path.")
     b.add_argument("--force", action="store_true", help="rebuild even when up to date")
+    _fmu_dir_option(b, "--out", "--fmu-dir")
     b.add_argument("names", nargs="*", metavar="NAME", help="build only these FMUs (default: all)")
     b.set_defaults(func=cmd_build)
 
@@ -357,12 +361,15 @@ def build_parser() -> argparse.ArgumentParser:
                                     "that compute nothing, (c) the monolithic reference, (d) libcosim "
                                     "with the same FMUs; then the peak memory of 100 s and 350 s runs.")
     bench.add_arguments(bn)
+    _fmu_dir_option(bn)
     bn.set_defaults(func=cmd_bench)
 
     i = sub.add_parser("info", help="list an FMU's variables",
                        description="Print an FMU's model information and its variables with causality, "
                                    "variability, type, unit, start value and description.")
-    i.add_argument("fmu", metavar="FMU", help="the .fmu file")
+    i.add_argument("fmu", metavar="FMU", help="the .fmu file, or a shipped FMU's name (PmsmEvPlant, FocEkf4) or "
+                                             "an observer's (ekf4)")
+    _fmu_dir_option(i)
     i.add_argument("--causality", choices=("input", "output", "parameter", "calculatedParameter", "local"),
                    help="only variables of this causality")
     i.set_defaults(func=cmd_info)
@@ -414,6 +421,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="with --robustness: 3 x 3 grids and a few Monte-Carlo samples (a quick check)")
     rp.add_argument("--no-run", action="store_true",
                     help="with --robustness: write the page from the runs in RUNS as they are")
+    _fmu_dir_option(rp)
     rp.set_defaults(func=cmd_report)
     return ap
 
@@ -421,7 +429,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        with fmu_dir_override(getattr(args, "fmu_dir", None)):
+            return args.func(args)
     except (CosimError, ParameterError, ProfileError) as exc:
         return _err(str(exc))
     except OSError as exc:

@@ -12,8 +12,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
+from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
 
@@ -54,12 +56,31 @@ def packaged_scenario(name: str) -> Path:
 
 
 def project_fmu_dir() -> Path:
-    """Where the project's FMUs are built: ``$PMSM_COSIM_FMU_DIR`` if set, else the FMU
-    build's default (``pmsm_ev_fmus.build.default_out_dir()``, ``fmus/`` in a checkout)."""
-    env = os.environ.get("PMSM_COSIM_FMU_DIR")
-    if env:
-        return Path(env).expanduser().resolve()
+    """Where the project's FMUs are built and found (what ``{fmus}`` stands for): the FMU
+    build's default, ``pmsm_ev_fmus.build.default_out_dir()``: ``$PMSM_COSIM_FMU_DIR`` if set
+    (``--fmu-dir`` on the command line sets it), else the user's cache,
+    ``~/.cache/pmsm-ev-cosim/fmus/<content key>/`` on Linux."""
     return Path(fmu_build.default_out_dir()).resolve()
+
+
+@contextlib.contextmanager
+def fmu_dir_override(path) -> Iterator[None]:
+    """The project's FMUs in ``path`` (if not None) while the block runs: it sets
+    ``$PMSM_COSIM_FMU_DIR``, so that the processes a command starts (the report's runs,
+    the bench's, a local Dask cluster's workers) use the same folder; restored after."""
+    if path is None:
+        yield
+        return
+    name = fmu_build.ENV_FMU_DIR
+    saved = os.environ.get(name)
+    os.environ[name] = str(Path(path).expanduser().resolve())
+    try:
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = saved
 
 
 def load_system(name_or_path) -> SystemSpec:
@@ -103,16 +124,19 @@ def _note(message: str, quiet: bool = False) -> None:
 
 
 def ensure_fmus(spec: SystemSpec, quiet: bool = False) -> None:
-    """Build (or bring up to date) the project's FMUs a system uses, before loading it."""
+    """Build (or bring up to date) the project's FMUs a system uses (those in
+    :func:`project_fmu_dir`), before loading it."""
     fmu_dir = project_fmu_dir()
     needed = [c for c in spec.components if c.fmu.parent == fmu_dir]
+    names = sorted({c.fmu.stem for c in needed if c.fmu.name == f"{c.fmu.stem}.fmu" and c.fmu.stem in fmu_build.FMUS})
     if not needed:
         return
     missing = [c for c in needed if not c.fmu.is_file()]
     if missing:
         _note(f"building FMUs into {fmu_dir} ...", quiet)
     try:
-        fmu_build.build_all(out_dir=fmu_dir)
+        if names:
+            fmu_build.build_all(out_dir=fmu_dir, names=names)
     except Exception as exc:
         raise CosimError(f"building the FMUs failed: {type(exc).__name__}: {exc}") from None
     for c in needed:

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ...engine.errors import CosimError
-from ..drive import project_fmu_dir
 from . import sensorless
 
 #: start of the window of the "after" figures [s]: past the 10 s ramp and its settling
@@ -81,7 +80,7 @@ class Config:
     def run_args(self, stop_time: float | None, flying_csv: Path) -> list[str]:
         """Arguments of ``pmsm-cosim run`` (without ``--out``)."""
         s = self.setup
-        args = [self.scenario, "--controller", str(project_fmu_dir() / f"{OBSERVER_FMUS[s.observer]}.fmu")]
+        args = [self.scenario, "--controller", s.observer]  # its FMU in the project's folder, wherever that is
         sets = []
         if s.observer not in ("sensored", "sensorless"):  # these have no angle_source
             sets.append(f"ctrl.angle_source={s.angle_source}")
