@@ -243,7 +243,7 @@ def test_a_physics_package_folder_is_bundled_whole(fmus, tmp_path, monkeypatch):
     (physics / "transforms.py").unlink()
     monkeypatch.setattr(fmu_build, "physics_dir", lambda: physics)
     files = fmu_build._physics_files("pmsm_ev_plant.py")
-    assert {Path("transforms/__init__.py"), Path("transforms/_origin.py"), Path("kernels.py"),
+    assert {Path("transforms/__init__.py"), Path("transforms/_origin.py"), Path("kernels/__init__.py"),
             Path("__init__.py")} <= set(files) and Path("transforms.py") not in files
     digest = fmu_build.source_hash("PmsmEvPlant")
     (physics / "transforms" / "_origin.py").write_text("from .. import __version__\n\nORIGIN = 'x' + __version__\n")
