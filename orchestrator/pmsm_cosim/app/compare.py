@@ -1,11 +1,13 @@
 """``pmsm-cosim compare``: overlay finished runs and tabulate their figures of merit.
 
 Reads only the result contract (``pmsm_ev.results``): each run directory's
-``results.csv`` and, when present, ``metrics.json``. Whole-run figures come from
-metrics.json (``pmsm_ev.results.compute_metrics`` as the master wrote them; recomputed
-from results.csv when metrics.json lacks them); figures "after t_from" are
-``compute_metrics`` of the rows with ``time >= t_from``, so that runs started from
-standstill (a 10 s speed ramp) and flying starts compare on the same footing.
+``results.csv`` and, when present, ``metrics.json``; it computes no figure itself, it
+tabulates those of ``pmsm_ev.results``. Whole-run figures come from metrics.json
+(``compute_metrics`` as the master wrote them; recomputed from results.csv when
+metrics.json lacks them) and so do the steps' (``step_figures``); figures "after t_from"
+are ``after_figures`` of the rows (``compute_metrics`` of the rows with ``time >= t_from``),
+so that runs started from standstill (a 10 s speed ramp) and flying starts compare on the
+same footing.
 
 Writes ``OUT/metrics.md`` and ``OUT/metrics.csv`` (one row per run, the columns of
 :data:`COLUMNS`) and ``OUT/compare_*.png`` (speed, angle error, torque estimate).

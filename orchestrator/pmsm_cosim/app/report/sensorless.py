@@ -5,8 +5,10 @@ start-up from eight initial rotor angles over [-pi, pi).
 
 The configurations are :class:`pmsm_cosim.app.report.Config` of the shared report machinery
 (one ``pmsm-cosim run`` each, reused while settings and FMU builds are unchanged); the
-figures of merit are ``pmsm_ev.results.sensorless_metrics`` and ``compare.summarize`` of
-each run; every sentence is filled from them.
+figures of merit are ``pmsm_ev.results``' of each run (``sensorless_metrics``,
+``figures_where`` of its windows, the angle error with the row-timing term removed with the
+run's own step and pole pairs, ``run_timing``) and ``compare.summarize``'s; every sentence
+is filled from them.
 """
 
 from __future__ import annotations
