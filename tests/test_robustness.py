@@ -1,7 +1,8 @@
-"""Robustness maps (orchestrator/pmsm_cosim/app/report/robustness.py,
-orchestrator/pmsm_cosim/app/sweeps/robust_*.toml): the
-sweep engine's signal factor, the figures of merit of a run, the failure-rate interval, and a
-small version of every map (3 x 3, short runs) on a 2-worker local cluster, page included."""
+"""Robustness maps (orchestrator/pmsm_cosim/app/report/robustness/,
+orchestrator/pmsm_cosim/app/sweeps/robust_*.toml): the sweep engine's signal factor, the figures
+of merit of a run and the stability rule, the failure-rate interval, a small version of every map
+(3 x 3, 6 s runs: past the sensorless unit's start-up) on a 2-worker local cluster, page included,
+and the page's claims on synthetic summaries (a changed input changes the claim)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pmsm_cosim.app.report import robustness as rr
 from pmsm_cosim.app.report.robustness import document as rdoc
 from pmsm_cosim.app.report.robustness.metrics import DeadRun
 from pmsm_cosim.app.studies import PACKAGED_SWEEPS, load_sweep
+from pmsm_cosim.engine.recording import read_results
 from pmsm_cosim.sweeps import prepare_runs
 from pmsm_ev.params import MotorParams
 
@@ -82,33 +84,61 @@ def test_wilson_interval():
     assert lo == 0.0 and hi == pytest.approx(0.0188, abs=2e-4)
 
 
+STOP = 6.0  #: [s] the small maps' runs: past the 2.3 s alignment, the I-f start and the handover
+T_FROM_SMALL = STOP / 2  #: the window generate() takes for runs this short
+
+
+def followed_the_start(r: dict) -> bool:
+    """The sensorless unit's start-up happened within the run: the rotor turned with the reference
+    (within 2 rad/s of the 70 rad/s it reached at the end), in the closed loop (mode 2) at the end."""
+    return bool(r["omega_ref"][-1] > 60.0 and abs(r["omega_m"][-1] - r["omega_ref"][-1]) < 2.0
+                and r["mode"][-1] == 2.0)
+
+
 def test_small_maps_on_a_two_worker_cluster(tmp_path):
-    """Every map 3 x 3 with 1.2 s runs (the sensorless unit is still aligning; the EKF5 flying
-    starts hold 200 rad/s), the Monte-Carlo run with a few samples and the dead-time runs, on a
-    LocalCluster of 2 workers; then the page with its figures."""
+    """Every map 3 x 3 with 6 s runs (the sensorless unit aligns until 2.3 s, starts in I-f on the
+    reference ramped from 2.5 s and hands over to the EKF at about 4.3 s; the EKF5 flying starts hold
+    200 rad/s), the Monte-Carlo run with a few samples and the dead-time runs, on a LocalCluster of 2
+    workers; then the page with its figures. The figures are after 3 s: the sensorless runs are judged
+    on the ramp they follow, so a unit that did not start would be far from stable."""
     pytest.importorskip("distributed")
     project_fmus()
     runs = tmp_path / "runs"
-    timing = rr.run_sweeps(runs, workers=2, small=True, stop_time=1.2, log=lambda msg: None)
+    timing = rr.run_sweeps(runs, workers=2, small=True, stop_time=STOP, log=lambda msg: None)
     n_maps = len(rr.MAPS) * len(rr.CONTROLLERS)
     assert timing["runs"] == n_maps * 9 + 2 * rr.SMALL_SAMPLES + 4
-    page = rr.generate(out=tmp_path / "docs", runs_dir=runs, small=True, stop_time=1.2, run=False,
+    page = rr.generate(out=tmp_path / "docs", runs_dir=runs, small=True, stop_time=STOP, run=False,
                        log=lambda msg: None)
-    grids, mc, dead = rr.collect(runs, t_from=0.6)
+    c = rr.collect(runs, t_from=T_FROM_SMALL)
     for m in rr.MAPS:
         for key, _ in rr.CONTROLLERS:
-            g = grids[m.key][key]
+            g = c.grids[m.key][key]
             assert g["speed"].shape == (3, 3) and (g["status"] == "completed").all()
             assert g["x"][1] == pytest.approx(0.0)  # the nominal value in the middle
     # the paper's EKF5 on the measured angle, nominal motor, level road: holds 200 rad/s
-    g = grids["lq_load"]["ekf5paper"]
-    assert g["stable"][0, 1] and g["speed"][0, 1] < 2.0  # 1 % of 200 rad/s, 0.6 s after the flying start
-    # the sensorless unit is aligning at standstill (reference 0 until 2.5 s): the rotor swings on
-    # the alignment vector by well under 1 rad/s, and does not turn
-    assert np.nanmax(grids["rs_psi"]["sensorless"]["speed"]) < 1.0
-    assert [len(rows) for rows in mc.values()] == [rr.SMALL_SAMPLES] * 2 and len(dead) == 4
+    g = c.grids["lq_load"]["ekf5paper"]
+    assert g["stable"][0, 1] and g["speed"][0, 1] < 2.0  # 1 % of 200 rad/s, 3 s after the flying start
+    # the sensorless unit started: with the nominal motor, and on every cell of the L_q x load map, it
+    # follows the ramp from 3 s on (stable: speed RMS error < 5 rad/s, no turn slipped) ...
+    for key in ("sensorless", "sensorless_adapt"):
+        assert c.grids["rs_psi"][key]["stable"][1, 1] and c.grids["lq_load"][key]["stable"].all()
+        assert np.nanmax(c.grids["lq_load"][key]["omega_ref"]) == pytest.approx(40.0, abs=0.5)  # mean of 10..70 rad/s
+    # ... and its nominal run reached the reference in the closed loop; the same run with a rotor that
+    # never turned fails both checks
+    rows = {row["run"]: row for row in rr.sweep_results(runs / "robust_rs_psi_sensorless", T_FROM_SMALL)}
+    (nominal,) = [k for k, row in rows.items() if float(row["plant.R_s"]) == pytest.approx(MotorParams().R_s)
+                  and float(row["plant.psi"]) == pytest.approx(MotorParams().psi)]
+    r = read_results(runs / "robust_rs_psi_sensorless" / "runs" / nominal)
+    assert followed_the_start(r) and rows[nominal]["stable"]
+    stuck = {**r, "omega_m": np.zeros_like(r["omega_m"])}
+    assert not followed_the_start(stuck) and not rr.run_metrics(stuck, 1e-4, 4, T_FROM_SMALL)["stable"]
+    assert [len(rows) for rows in c.mc.values()] == [rr.SMALL_SAMPLES] * 2 and len(c.dead) == 4
+    assert c.routes["robust_rs_psi_sensorless"]["ramp_from"] == pytest.approx(2.5)
+    assert c.routes["robust_rs_psi_ekf5ab"]["step_at"] == pytest.approx(5.0)
     text = page.read_text(encoding="utf-8")
     assert "Small version" in text and "failure rate" in text and "95 % interval" in text
+    assert f"speed RMS error after {T_FROM_SMALL:g} s is below" in text
+    assert "sensorless unit, from standstill: 6 s, reference 0 → 70 rad/s over 2.5-6 s" in text
     for name in ("map_rs_psi.png", "map_lq_load.png", "monte_carlo.png", "monte_carlo_adapt.png",
                  "dead_time_hill.png"):
         assert (tmp_path / "docs" / "robustness" / name).stat().st_size > 5000

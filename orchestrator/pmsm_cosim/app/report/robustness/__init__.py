@@ -82,9 +82,9 @@ def generate(out: Path | str = "docs", runs_dir: Path | str = "runs/robustness",
     figs = {}
     for m in MAPS:
         if c.grids.get(m.key):
-            figs[m.key] = map_figure(m, c.grids[m.key], fig_dir / f"map_{m.key}.png")
+            figs[m.key] = map_figure(m, c.grids[m.key], fig_dir / f"map_{m.key}.png", t_from)
     for k, (label, rows) in enumerate(c.mc.items()):
-        figs[f"mc{k}"] = monte_carlo_figure(rows, fig_dir / f"monte_carlo{'_adapt' if k else ''}.png", label)
+        figs[f"mc{k}"] = monte_carlo_figure(rows, fig_dir / f"monte_carlo{'_adapt' if k else ''}.png", label, t_from)
     if c.dead:
         figs["dead"] = dead_time_figure(c.dead, fig_dir / "dead_time_hill.png")
     page = out / "robustness.md"

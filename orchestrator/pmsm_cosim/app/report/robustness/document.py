@@ -16,6 +16,10 @@ from pmsm_ev.params import EkfParams, MotorParams
 
 from .figures import dead_time_label
 from .metrics import (
+    DEAD_CLIMB,
+    DEAD_LEAD_AT,
+    DEAD_ROLL_FROM,
+    DEAD_WINDOW,
     DIVERGED_LIMIT,
     DOMINANT,
     ROLL_BACK_LIMIT,
@@ -73,8 +77,8 @@ def _intro(c: Collected, command: str, small: bool) -> list[str]:
             "`ctrl.psi`, `ctrl.L_q`, ...): a plant value that differs from the controller's is the model "
             "mismatch the observer meets on a real motor (a hot winding, a hot magnet, saturation). "
             "`pmsm-cosim run ... --set plant.R_s=0.0121` expresses the same for one run. "
-            f"A run is **stable** if it completed, its speed RMS error after {T_FROM:g} s is below "
-            f"{SPEED_LIMIT:g} rad/s and its angle estimate slipped no electrical turn after {T_FROM:g} s; it "
+            f"A run is **stable** if it completed, its speed RMS error after {c.t_from:g} s is below "
+            f"{SPEED_LIMIT:g} rad/s and its angle estimate slipped no electrical turn after {c.t_from:g} s; it "
             f"**diverged** if it did not complete, slipped a turn while the control used the estimate, or its "
             f"speed RMS error is above {DIVERGED_LIMIT:g} rad/s (`robustness/metrics.py`). The runs of the "
             f"{MAPS[0].title} map (those of the other map differ in the load): "
@@ -112,7 +116,7 @@ def _map_tables(c: Collected, figs: dict) -> list[str]:
     return L
 
 
-def rs_psi_text(gs: dict) -> list[str]:
+def rs_psi_text(gs: dict, t_from: float = T_FROM) -> list[str]:
     """Where and why the R_s x psi map breaks: the claims its figures bear out."""
     f = rs_psi_findings(gs)
     if not f:
@@ -122,7 +126,7 @@ def rs_psi_text(gs: dict) -> list[str]:
     for key, p in f["per"].items():
         psi = ", ".join(f"ψ {y:+.0f} %: {b:+.2f}" for y, b in p["psi_bias"])
         angle = f" (angle RMS error ≤ {p['angle_max_nominal_psi']:.3f} rad)" if key != "ekf5paper" else ""
-        lines.append(f"- {label[key]}: steady speed error ω_m − ω_ref after {T_FROM:g} s at the nominal R_s: {psi} "
+        lines.append(f"- {label[key]}: steady speed error ω_m − ω_ref after {t_from:g} s at the nominal R_s: {psi} "
                      f"rad/s; over the whole R_s range at the nominal ψ at most {p['rs_max']:.2f} rad/s{angle}; "
                      f"{p['diverged']} of {p['cells']} cells diverged.")
     L = ["## Where and why the drive breaks", ""]
@@ -161,9 +165,13 @@ def rs_psi_text(gs: dict) -> list[str]:
     L += [head + " " + " ".join(body), ""] + lines + [""]
     a = f.get("adapt")
     if a is not None:
-        verb = ("widens the stable region" if a["with"] > a["without"] else
-                "does not widen the stable region" if a["with"] == a["without"] else "narrows the stable region")
-        L += [f"**The magnet-flux adaptation {verb} from {a['without']} to {a['with']} of {a['cells']} cells** "
+        if a["with"] > a["without"]:
+            change = f"widens the stable region from {a['without']} to {a['with']} of {a['cells']} cells"
+        elif a["with"] == a["without"]:
+            change = f"does not widen the stable region ({a['with']} of {a['cells']} cells stable without and with it)"
+        else:
+            change = f"narrows the stable region from {a['without']} to {a['with']} of {a['cells']} cells"
+        L += [f"**The magnet-flux adaptation {change}** "
               "(`ctrl.psi_adapt`, `EkfParams.psi_adapt`, `adapt_psi` in the kernels): the estimated angle must turn "
               "at the rotor's speed on average, so the mean of the EKF's angle corrections, N (ω − ω̂) dt per step, "
               "measures the speed error a wrong ψ causes; the EKF's ψ is moved until it vanishes (largest "
@@ -215,12 +223,14 @@ def _monte_carlo(c: Collected, figs: dict) -> list[str]:
     design = next(iter(c.mc_design.values()), None)
     what = ""
     if design is not None:
-        nominal = {"plant.R_s": _M.R_s, "plant.psi": _M.psi, "plant.L_q": _M.L_q, "plant.L_d": _M.L_d}
-        ranges = [f"{k.split('.', 1)[1]} {100 * (a / nominal[k] - 1):+.0f} … {100 * (b / nominal[k] - 1):+.0f} %"
+        nominal = {"plant.R_s": ("R_s", _M.R_s), "plant.psi": ("ψ", _M.psi), "plant.L_q": ("L_q", _M.L_q),
+                   "plant.L_d": ("L_d", _M.L_d)}
+        ranges = [f"{nominal[k][0]} {100 * (a / nominal[k][1] - 1):+.0f} … {100 * (b / nominal[k][1] - 1):+.0f} %"
                   for k, (law, (a, b)) in design.random.items() if k in nominal and law == "uniform"]
         noise = design.fixed.get("plant.sensor_noise")
         route = c.routes.get(design.name)
-        what = (f"{design.samples} samples of `{design.name}.toml`: " + ", ".join(ranges)
+        n_run = len(next(iter(c.mc.values())))
+        what = (f"{n_run} samples (of the file's {design.samples}) of `{design.name}.toml`: " + ", ".join(ranges)
                 + " (uniform, all at once)" + (f" with σ = {noise:g} A noise on each phase current" if noise else "")
                 + (f"; {route_text(route)}" if route else "") + ". ")
     L = ["## Monte-Carlo: every mismatch at once", "",
@@ -240,7 +250,7 @@ def _monte_carlo(c: Collected, figs: dict) -> list[str]:
             L += [f"![Monte-Carlo, {label}](robustness/{figs[f'mc{k}'].name})", ""]
         bad = sorted((r for r in rows if not r["stable"]), key=lambda r: -np.nan_to_num(r["speed_rms_after"], nan=1e9))
         if bad:
-            L += [f"{label}, failed samples (mismatch of R_s, ψ, L_q, L_d: speed RMS error after {T_FROM:g} s, "
+            L += [f"{label}, failed samples (mismatch of R_s, ψ, L_q, L_d: speed RMS error after {c.t_from:g} s, "
                   "steady error ω_m − ω_ref), worst first:", ""]
             for r in bad[:8]:
                 L.append(f"- {_pct(r, 'plant.R_s', _M.R_s)}, {_pct(r, 'plant.psi', _M.psi)}, "
@@ -265,8 +275,9 @@ def dead_time_text(dead: list, figs: dict) -> list[str]:
               f"inverter's dead time of {raw.dead_time * 1e6:g} µs at {1 / raw.dt:g} Hz takes "
               f"{raw.figures['v_error']:.2g} V from each phase in the sign of its current (`plant.dead_time`); "
               "`ctrl.dead_time_comp` adds the value it is given back from the measured currents.", ""]
-    L += ["| inverter | completed | speed RMS error, whole run [rad/s] | largest speed error 30-70 s [rad/s] | "
-          "roll-back after 20 s [m] | angle RMS error 30-70 s [rad] | turns slipped |",
+    win = f"{DEAD_WINDOW[0]:g}-{DEAD_WINDOW[1]:g} s"
+    L += [f"| inverter | completed | speed RMS error, whole run [rad/s] | largest speed error {win} [rad/s] | "
+          f"roll-back after {DEAD_ROLL_FROM:g} s [m] | angle RMS error {win} [rad] | turns slipped |",
           "|---|---|---|---|---|---|---|"]
     for d in dead:
         x = d.figures
@@ -277,17 +288,23 @@ def dead_time_text(dead: list, figs: dict) -> list[str]:
         return L
     x = raw.figures
     text = (f"Without compensation the observer is fed the commanded voltage, while the motor gets about 4/π × "
-            f"{x['v_error']:.2g} = {f['fundamental']:.1f} V less, against the current: on the slope at full speed "
-            f"({x['climb_voltage'] or math.nan:.0f} V, 25-30 s) that is {_g(f['share_pct'], '.1f')} % of the "
-            f"voltage, and the speed runs {_g(x['climb_bias'], '+.1f')} rad/s off. The back-EMF falls to the "
-            f"error at {f['omega_at_error']:.0f} rad/s; at 38 s, on the way down to the stop, the speed estimate "
-            f"runs {_g(x['lead'], '+.1f')} rad/s ahead of the rotor")
-    if not f["raw_held"]:
+            f"{x['v_error']:.2g} = {f['fundamental']:.1f} V less, against the current")
+    if x["climb_voltage"] is not None:
+        text += (f": on the slope at full speed ({x['climb_voltage']:.0f} V, {DEAD_CLIMB[0]:g}-{DEAD_CLIMB[1]:g} s) "
+                 f"that is {_g(f['share_pct'], '.1f')} % of the voltage, and the speed runs "
+                 f"{_g(x['climb_bias'], '+.1f')} rad/s off")
+    text += f". The back-EMF falls to the error at {f['omega_at_error']:.0f} rad/s"
+    if x["lead"] is not None:
+        text += (f"; at {DEAD_LEAD_AT:g} s, on the way down to the stop, the speed estimate runs "
+                 f"{x['lead']:+.1f} rad/s ahead of the rotor")
+    if f["raw_held"] is False:
         slipped = f"; the estimate slips {x['slips']} electrical turns" if x["slips"] else ""
         text += (f"{slipped}, and the car rolls back {x['roll_back']:.2g} m (more than {100 * ROLL_BACK_LIMIT:g} cm: "
                  "not held).")
-    else:
+    elif f["raw_held"]:
         text += f"; the car is held all the same (roll-back {x['roll_back']:.2g} m)."
+    else:
+        text += "."
     if "comp_matches" in f:
         a, b = f["compensated"].figures, f["ideal"].figures
         text += (f" With the compensation the run {'equals' if f['comp_matches'] else 'differs from'} the ideal "
@@ -317,7 +334,7 @@ def render(c: Collected, figs: dict, timing: dict | None, command: str, small: b
     """The page."""
     L = _intro(c, command, small)
     L += _map_tables(c, figs)
-    L += rs_psi_text(c.grids.get("rs_psi", {}))
+    L += rs_psi_text(c.grids.get("rs_psi", {}), c.t_from)
     L += lq_load_text(c.grids.get("lq_load", {}))
     L += _monte_carlo(c, figs)
     L += dead_time_text(c.dead, figs)

@@ -42,9 +42,9 @@ def _outline(ax, stable: np.ndarray) -> None:
                     ax.plot(*seg, color="k", lw=2.2)
 
 
-def map_figure(m: Map, grids: dict, path: Path) -> Path:
+def map_figure(m: Map, grids: dict, path: Path, t_from: float = T_FROM) -> Path:
     """Heat maps (one column per controller) of the speed RMS error and the angle RMS error after
-    T_FROM; cells annotated, runs that did not complete crossed, the stable region outlined."""
+    ``t_from``; cells annotated, runs that did not complete crossed, the stable region outlined."""
     from matplotlib.colors import LogNorm  # noqa: PLC0415 - matplotlib: heavy, only when drawing
 
     plt = _plt()
@@ -75,10 +75,10 @@ def map_figure(m: Map, grids: dict, path: Path) -> Path:
             ax.set_xlabel(m.x_label, fontsize=8)
             ax.set_ylabel(m.y_label, fontsize=8)
             name = "speed RMS error" if metric == "speed" else "angle RMS error"
-            ax.set_title(f"{dict(CONTROLLERS)[key]}\n{name} after {T_FROM:g} s [{unit}]", fontsize=8)
+            ax.set_title(f"{dict(CONTROLLERS)[key]}\n{name} after {t_from:g} s [{unit}]", fontsize=8)
             fig.colorbar(im, ax=ax, shrink=0.8)
     fig.suptitle(f"{m.title}: black outline = stable (speed RMS error < {SPEED_LIMIT:g} rad/s); ✗ = diverged "
-                 f"(failed, slipping after {T_FROM:g} s or > {DIVERGED_LIMIT:g} rad/s); n↻ = electrical turns slipped\n"
+                 f"(failed, slipping after {t_from:g} s or > {DIVERGED_LIMIT:g} rad/s); n↻ = electrical turns slipped\n"
                  "(paper mode: the control runs on the measured angle; θ̂, the integral of ω̂, may slip harmlessly)",
                  fontsize=9)
     fig.tight_layout()
@@ -87,7 +87,7 @@ def map_figure(m: Map, grids: dict, path: Path) -> Path:
     return path
 
 
-def monte_carlo_figure(rows: list[dict], path: Path, label: str = "sensorless unit") -> Path:
+def monte_carlo_figure(rows: list[dict], path: Path, label: str = "sensorless unit", t_from: float = T_FROM) -> Path:
     plt = _plt()
     fig, axes = plt.subplots(1, 3, figsize=(13.0, 4.0))
     ok = [r for r in rows if r["stable"]]
@@ -114,7 +114,7 @@ def monte_carlo_figure(rows: list[dict], path: Path, label: str = "sensorless un
         axes[2].hist(np.clip(finite, bins[0], None), bins=bins, color="tab:blue")
         axes[2].set_xscale("log")
     axes[2].axvline(SPEED_LIMIT, color="r", ls="--", lw=1, label=f"limit {SPEED_LIMIT:g} rad/s")
-    axes[2].set_xlabel(f"speed RMS error after {T_FROM:g} s [rad/s]")
+    axes[2].set_xlabel(f"speed RMS error after {t_from:g} s [rad/s]")
     axes[2].set_ylabel("runs")
     axes[2].legend(fontsize=7)
     fig.suptitle(f"Monte-Carlo, {label}: {len(rows)} samples of every mismatch at once, σ = 1 A noise",

@@ -202,7 +202,7 @@ def dead_run(row: dict, run_dir: Path) -> DeadRun:
     run.figures = {
         "speed_rms": figures_where(r, np.ones(len(t), bool))["speed_rms_error"],
         "speed_error_max": win["speed_error_max"], "angle_rms": win["angle_rms"],
-        "roll_back": figures_where(r, t > DEAD_ROLL_FROM)["roll_back"] or 0.0,
+        "roll_back": figures_where(r, t > DEAD_ROLL_FROM)["roll_back"],
         "slips": tracking_figures(r, T_FROM, dt, n)["slips"],
         "v_error": v_dc * run.dead_time / dt,
         "climb_bias": figures_where(r, climb)["speed_bias"],
@@ -218,13 +218,14 @@ def dead_run(row: dict, run_dir: Path) -> DeadRun:
 class Collected:
     """The runs of a robustness report, summarised: ``grids`` {map key: {controller: grid}},
     ``mc`` {label: rows}, ``dead`` [DeadRun], ``routes`` {sweep name: ``route_of`` its first run},
-    ``mc_design`` {label: the Monte-Carlo sweep's spec}."""
+    ``mc_design`` {label: the Monte-Carlo sweep's spec}; ``t_from``: the start of the figures' window [s]."""
 
     grids: dict
     mc: dict
     dead: list
     routes: dict
     mc_design: dict
+    t_from: float = T_FROM
 
 
 def collect(runs_dir: Path, t_from: float = T_FROM) -> Collected:
@@ -254,7 +255,7 @@ def collect(runs_dir: Path, t_from: float = T_FROM) -> Collected:
         for row in read_summary(dead_dir / "summary.csv"):
             if row["status"] == "completed":
                 dead.append(dead_run(row, _run_dir(dead_dir, row)))
-    return Collected(grids, mc, dead, routes, design)
+    return Collected(grids, mc, dead, routes, design, t_from)
 
 
 def failure_rates(rows: list[dict]) -> dict:
@@ -359,8 +360,9 @@ def dead_time_findings(dead: list) -> dict:
     and ``over`` (compensation of an ideal inverter), and what the page concludes from them: the
     fundamental of the voltage error (4/pi v_err) and its share of the voltage on the climb, the
     speed at which the back-EMF falls to the error, whether the uncompensated car was held
-    (``ROLL_BACK_LIMIT``), whether the compensated run matches the ideal one (speed RMS error within
-    5 %, roll-back within 1 cm) and whether over-compensation breaks the run."""
+    (``ROLL_BACK_LIMIT``; None for a run too short to tell), whether the compensated run matches
+    the ideal one (speed RMS error within 5 %, roll-back within 1 cm) and whether
+    over-compensation breaks the run (each left out where the runs are too short to tell)."""
     by = {(d.dead_time > 0, d.compensation > 0): d for d in dead}
     raw, ideal, comp, over = by.get((True, False)), by.get((False, False)), by.get((True, True)), by.get((False, True))
     out: dict = {"raw": raw, "ideal": ideal, "compensated": comp, "over": over}
@@ -370,12 +372,13 @@ def dead_time_findings(dead: list) -> dict:
         out["fundamental"] = 4.0 / math.pi * v
         out["share_pct"] = 100.0 * out["fundamental"] / f["climb_voltage"] if f["climb_voltage"] else None
         out["omega_at_error"] = v / (raw.pole_pairs * _M.psi)
-        out["raw_held"] = f["roll_back"] <= ROLL_BACK_LIMIT
-    if ideal is not None and comp is not None:
+        out["raw_held"] = None if f["roll_back"] is None else f["roll_back"] <= ROLL_BACK_LIMIT
+    if ideal is not None and comp is not None and None not in (comp.figures["roll_back"], ideal.figures["roll_back"]):
         a, b = comp.figures, ideal.figures
         out["comp_matches"] = bool(abs(a["speed_rms"] - b["speed_rms"]) <= 0.05 * b["speed_rms"]
                                    and abs(a["roll_back"] - b["roll_back"]) <= 0.01)
-    if ideal is not None and over is not None:
+    if ideal is not None and over is not None and None not in (over.figures["roll_back"], over.figures[
+            "speed_error_max"], ideal.figures["speed_error_max"]):
         a, b = over.figures, ideal.figures
         out["over_breaks"] = bool(a["roll_back"] > ROLL_BACK_LIMIT or a["slips"] > 0
                                   or a["speed_error_max"] > DOMINANT * b["speed_error_max"])
