@@ -18,6 +18,7 @@ from pmsm_cosim.app.compare import COLUMNS, format_value
 from pmsm_cosim.app.drive import PACKAGED_SCENARIOS, load_system
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.params import MotorParams, VehicleParams
+from pmsm_ev.results import row_timing_corrected_angle_error, run_timing
 
 T_STEP = 0.3  # [s] elevation step of the test runs
 T_FROM = 1.0  # [s] start of the "after" window
@@ -26,13 +27,13 @@ STOP = 2.5  # [s] the segment after the step is >= 2 s long: one plateau
 
 @pytest.fixture(scope="module")
 def two_runs(tmp_path_factory):
-    """EKF5 (paper mode) and EKF4 on scenario 2 at 200 rad/s, 0 -> 10 deg at 0.3 s."""
+    """EKF5 (paper mode), EKF4 and the sensored drive on scenario 2 at 200 rad/s, 0 -> 10 deg at 0.3 s."""
     fmus = project_fmus()
     base = tmp_path_factory.mktemp("cmp")
     (base / "delta.csv").write_text(f"time,deg\n0,0\n{T_STEP},10\n")
     (base / "wref.csv").write_text("time,w\n0,200\n")
     runs = {}
-    for label, fmu in (("ekf5", "FocEkf5"), ("ekf4", "FocEkf4")):
+    for label, fmu in (("ekf5", "FocEkf5"), ("ekf4", "FocEkf4"), ("sensored", "FocSensored")):
         out = base / label
         assert main(["run", "scenario2", "--controller", str(fmus[fmu]),
                      "--stop-time", str(STOP), "--out", str(out), "--quiet", "--no-figures",
@@ -103,6 +104,29 @@ def test_compare_table_equals_the_runs_metrics(two_runs, capsys):
     for name in ("compare_speed.png", "compare_angle_error.png", "compare_torque.png"):
         data = (out / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) < 150_000
+
+
+def test_row_timing_term_is_removed_with_the_runs_step_and_pole_pairs(two_runs):
+    """The sensored drive's theta_hat is the measured angle at the previous step, so its recorded
+    error is the row-timing term alone, -N omega dt (-0.08 rad at 200 rad/s): removed with the run's
+    own step and pole pairs (``run_timing`` of its metrics.json) what is left is the angle the rotor
+    turns differently from N omega dt within a step, < 1e-4 rad; with a wrong step it stays."""
+    _, runs = two_runs
+    m = json.loads((runs["sensored"] / "metrics.json").read_text())
+    r = read_results(runs["sensored"])
+    assert run_timing(m) == (1e-4, 4.0)
+    raw = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
+    w = r["time"] >= T_FROM
+    assert np.mean(raw[w]) == pytest.approx(-4 * 200.0 * 1e-4, rel=0.01)
+    assert np.max(np.abs(row_timing_corrected_angle_error(r, *run_timing(m))[w])) < 1e-4
+    assert np.mean(row_timing_corrected_angle_error(r, 2e-4, 4)[w]) == pytest.approx(0.08, rel=0.01)
+    # the run's own settings win: a controller stepping every 2 communication steps, a plant with N = 5
+    m2 = {**m, "settings": {**m["settings"], "components": [
+        {**c, "step_multiple": 2} if c["name"] == "ctrl" else {**c, "start": {**c["start"], "N": 5}}
+        for c in m["settings"]["components"]]}}
+    assert run_timing(m2) == (2e-4, 5.0)
+    with pytest.raises(ValueError, match="no step size"):
+        run_timing({"speed_rms_error": 1.0})
 
 
 def one_line_error(capsys) -> str:

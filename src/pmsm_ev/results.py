@@ -293,6 +293,52 @@ def tracking_figures(r: dict[str, np.ndarray], t_from: float, dt: float, pole_pa
             "t_end": float(t[-1]) if len(t) else 0.0}
 
 
+def plateau_split(r: dict[str, np.ndarray], t_from: float, settle: float) -> dict:
+    """Angle drift and speed ripple on level (0 deg) and on inclined plateaus: the change of the
+    unwrapped angle error over the segments of constant elevation (after ``t_from``), summed per
+    kind (``level_drift``, ``inclined_drift`` [rad]), and the largest peak-to-peak omega_m within a
+    segment from ``settle`` s after its step (``level_ptp``, ``inclined_ptp`` [rad/s]); None where
+    the run has no such segment."""
+    t, d, w = r["time"], r["delta_deg"], r["omega_m"]
+    err = angle_error_unwrapped(r)
+    bounds = [0] + [i for i in range(1, len(d)) if d[i] != d[i - 1]] + [len(d)]
+    out = {"level_drift": 0.0, "inclined_drift": 0.0, "level_ptp": None, "inclined_ptp": None}
+    seen = {"level": False, "inclined": False}
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        kind = "level" if d[a] == 0 else "inclined"
+        m = (t >= max(t[a], t_from)) & (t <= t[b - 1])
+        if np.count_nonzero(m) >= 2:
+            seen[kind] = True
+            out[f"{kind}_drift"] += float(err[m][-1] - err[m][0])
+        m2 = (t >= max(t[a] + (settle if a > 0 else 0.0), t_from)) & (t <= t[b - 1])
+        if np.count_nonzero(m2) >= 2:
+            ptp = float(np.ptp(w[m2]))
+            key = f"{kind}_ptp"
+            out[key] = ptp if out[key] is None else max(out[key], ptp)
+    for kind, ok in seen.items():
+        if not ok:
+            out[f"{kind}_drift"] = None
+    return out
+
+
+def angle_recovery(r: dict[str, np.ndarray], band: float, hold: float) -> dict:
+    """The wrapped angle error theta_hat - theta_e (as recorded) at the start, at 1 s and at the end
+    [rad], and the first time it is below ``band`` [rad] and stays there for ``hold`` [s]
+    (``t_recovered``; None: never)."""
+    t = r["time"]
+    err = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
+    ok = np.abs(err) < band
+    t_rec = None
+    for i in np.nonzero(ok)[0]:
+        window = (t >= t[i]) & (t <= t[i] + hold)
+        if t[i] + hold <= t[-1] and np.all(ok[window]):
+            t_rec = float(t[i])
+            break
+    at1 = np.nonzero(t >= 1.0)[0]
+    return {"start": float(err[0]), "at_1s": float(err[at1[0]]) if len(at1) else None,
+            "end": float(err[-1]), "t_recovered": t_rec}
+
+
 #: the scalar figures of merit of a run (:func:`summary_metrics`), in this order
 SUMMARY_METRICS = (
     "speed_rms_error", "omega_hat_rms_error", "theta_error_rms", "theta_error_max",
