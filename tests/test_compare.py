@@ -117,9 +117,10 @@ def test_row_timing_term_is_removed_with_the_runs_step_and_pole_pairs(two_runs):
     assert run_timing(m) == (1e-4, 4.0)
     raw = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
     w = r["time"] >= T_FROM
-    assert np.mean(raw[w]) == pytest.approx(-4 * 200.0 * 1e-4, rel=0.01)
+    lag = 4 * r["omega_m"][w] * 1e-4  # N omega dt, 0.077 rad at the 193 rad/s after the step
+    assert np.mean(raw[w]) == pytest.approx(-np.mean(lag), rel=1e-3) and np.mean(lag) > 0.075
     assert np.max(np.abs(row_timing_corrected_angle_error(r, *run_timing(m))[w])) < 1e-4
-    assert np.mean(row_timing_corrected_angle_error(r, 2e-4, 4)[w]) == pytest.approx(0.08, rel=0.01)
+    assert np.mean(row_timing_corrected_angle_error(r, 2e-4, 4)[w]) == pytest.approx(np.mean(lag), rel=1e-3)
     # the run's own settings win: a controller stepping every 2 communication steps, a plant with N = 5
     m2 = {**m, "settings": {**m["settings"], "components": [
         {**c, "step_multiple": 2} if c["name"] == "ctrl" else {**c, "start": {**c["start"], "N": 5}}
