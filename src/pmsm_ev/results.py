@@ -445,8 +445,10 @@ def _longest(mask: np.ndarray, dt_row: float) -> float:
     return float(np.max(ends - starts) * dt_row)
 
 
-def synchronism_metrics(r: dict[str, np.ndarray], t_disturbance: float = 0.0, pole_pairs: int = 4) -> dict:
-    """Did the drive keep the car (rows with ``SENSORLESS_COLUMNS``)? After the alignment:
+def synchronism_metrics(r: dict[str, np.ndarray], t_disturbance: float = 0.0,
+                        pole_pairs: float = MotorParams().N) -> dict:
+    """Did the drive keep the car (rows with ``SENSORLESS_COLUMNS``)? ``pole_pairs``: the plant's (the
+    project's motor unless given; ``compute_metrics`` has no other). After the alignment:
 
     * ``roll_back_m``: the largest travel against the driver's direction (``wrong_way_travel``);
     * ``wrong_way_speed``: the largest speed against it [rad/s] (>= 0);
