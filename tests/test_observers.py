@@ -1,6 +1,7 @@
 """Observers (eqs 21-27, A1-A33) and the controller (eqs 14-20)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -298,6 +299,11 @@ def test_kernel_model_and_jacobian_equal_the_papers(cls):
     np.testing.assert_allclose(ekf.f(x, u0, u1), paper_f(cls, x, u0, u1), rtol=1e-13, atol=1e-12)
     np.testing.assert_allclose(ekf.jacobian_f(x, u0, u1), paper_jacobian_f(cls, x, u0, u1), rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(ekf.jacobian_h(x), paper_jacobian_h(cls, x), rtol=1e-14)
+    # the comparison sees a wrong model: the oracle on another inductance (and, with a load state,
+    # another inertia) disagrees with the kernel
+    other = replace(M, L_q=1.01 * M.L_q, J_m=2.0 * M.J_m)
+    assert not np.allclose(ekf.f(x, u0, u1), paper_f(cls, x, u0, u1, m=other), rtol=1e-9, atol=0.0)
+    assert not np.allclose(ekf.jacobian_f(x, u0, u1), paper_jacobian_f(cls, x, u0, u1, m=other), rtol=1e-6)
 
 
 class DenseEkf:
