@@ -171,7 +171,7 @@ def test_rs_psi_claims_follow_the_grids():
     biased = _grid(RS, PSI, _psi_bias([8.0, 6.0, 0.0, -4.0, -8.0]))
     text = "\n".join(rdoc.rs_psi_text({"sensorless": biased, "ekf5ab": biased}))
     assert "**ψ mismatch biases the speed, R_s mismatch hardly matters at speed**" in text
-    assert "has the sign of −Δψ, and none of them diverged" in text
+    assert "has the sign of −Δψ, and none of them diverged, as a wrong ψ acts" in text
     assert "A hot magnet (ψ −10 %) alone takes the sensorless unit out of the 2.5 % speed tolerance" in text
     assert "back-EMF N ω ψ (72 V) is 83 times the resistive drop R_s i_q (0.87 V" in text  # 4 x 200 x 0.08975
     assert "+100 % R_s is a 1.2 % voltage error" in text
@@ -179,7 +179,7 @@ def test_rs_psi_claims_follow_the_grids():
     both = _grid(RS, PSI, _psi_bias([8.0, 3.0, 0.0, 4.0, -8.0], rs_effect=4.0), omega=100.0)
     text = "\n".join(rdoc.rs_psi_text({"sensorless": both}))
     assert "**ψ and R_s mismatch both bias the speed**" in text and "hardly matters" not in text
-    assert "does not have the sign of −Δψ in every cell" in text
+    assert "does not have the sign of −Δψ in every cell" in text and "A wrong ψ alone does not explain it" in text
     assert "keeps the sensorless unit within the 5.0 % speed tolerance" in text
     assert "back-EMF N ω ψ (36 V)" in text
     diverging = _grid(RS, PSI, _psi_bias([8.0, 6.0, 0.0, -4.0, -8.0]),
@@ -205,10 +205,12 @@ def test_lq_load_claims_follow_the_grids():
     assert f"Δθ ≈ ΔL_q i_q / ψ ({0.4 * MotorParams().L_q * 234.0 / MotorParams().psi:.2f} rad for −40 % at the 234 A" \
         .replace("−", "-") in text.replace("−", "-")
     assert "Unloaded it is harmless" in text and "rather than stability (no cell diverged)" in text
-    flat = _grid(lq, load, np.array([[9.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3]), angle=0.1,
+    assert "measured 0.30 rad RMS, of that size" in text
+    flat = _grid(lq, load, np.array([[9.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3]), angle=0.1, i_q=20.0,
                  diverged=[[False] * 3, [False] * 3, [True, False, False]])
     text = "\n".join(rdoc.lq_load_text({"sensorless": flat}))
     assert "does not grow 3 times with the load here" in text and "grows with the load**" not in text
+    assert "measured 0.10 rad RMS, not of that size" in text
     assert "Even unloaded some cells are not stable" in text and "1 cells diverged" in text
 
 

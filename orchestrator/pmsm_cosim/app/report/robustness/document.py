@@ -150,13 +150,17 @@ def rs_psi_text(gs: dict, t_from: float = T_FROM) -> list[str]:
                     f"{f['rs_share']:.1f} % voltage error.")
     signs = [p["sign_minus_dpsi"] for k, p in f["per"].items() if k != "ekf5paper"]
     no_div = all(f["per"][k]["diverged_nominal_rs"] == 0 for k in used)
-    body.append("A wrong ψ is a back-EMF the model can match only with a wrong speed: the EKF settles where its "
-                "innovation is balanced between ω̂ (the model's back-EMF ω̂ ψ̂), a rotated θ̂ and T̂_L, and the "
-                "speed loop, which holds ω̂ at the reference, drives the rotor off by the rest. "
-                + ("In every cell of the nominal R_s the steady speed error has the sign of −Δψ"
-                   if signs and all(signs) else "The steady speed error does not have the sign of −Δψ in every "
-                                                "cell of the nominal R_s")
-                + (", and none of them diverged." if no_div else "; some of them diverged."))
+    if signs and all(signs):
+        body.append("In every cell of the nominal R_s the steady speed error has the sign of −Δψ"
+                    + (", and none of them diverged" if no_div else "; some of them diverged")
+                    + ", as a wrong ψ acts: it is a back-EMF the model can match only with a wrong speed, so the "
+                      "EKF settles where its innovation is balanced between ω̂ (the model's back-EMF ω̂ ψ̂), a "
+                      "rotated θ̂ and T̂_L, and the speed loop, which holds ω̂ at the reference, drives the rotor "
+                      "off by the rest.")
+    else:
+        body.append("The steady speed error does not have the sign of −Δψ in every cell of the nominal R_s"
+                    + (" (none of them diverged)." if no_div else "; some of them diverged.")
+                    + " A wrong ψ alone does not explain it.")
     hot = f.get("hot_magnet")
     if hot is not None and "tolerance_pct" in f:
         body.append(f"A hot magnet (ψ −10 %) alone {'keeps' if hot['stable'] else 'takes'} the sensorless unit "
@@ -205,7 +209,9 @@ def lq_load_text(gl: dict) -> list[str]:
                   "q-current dynamics (eq 11): a wrong L_q is a d-axis voltage error proportional to the load "
                   "current, ω ΔL_q i_q, which the EKF takes as a rotated back-EMF, an angle error "
                   f"Δθ ≈ ΔL_q i_q / ψ ({f['predicted']:.2f} rad for {f['lq_mismatch']:+.0f} % at the "
-                  f"{f['i_q']:.0f} A of {f['load']:g}°; measured {f['angle_loaded']:.2f} rad RMS). ")
+                  f"{f['i_q']:.0f} A of {f['load']:g}°; measured {f['angle_loaded']:.2f} rad RMS, "
+                  + ("of that size" if f["explained"] else "not of that size: the formula does not account for it")
+                  + "). ")
     sl = f["per"].get("sensorless")
     if sl is not None:
         if sl["unloaded_stable"]:

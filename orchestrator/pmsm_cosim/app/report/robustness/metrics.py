@@ -333,7 +333,8 @@ def lq_load_findings(gl: dict) -> dict:
     """The L_q x load maps: for the sensorless unit the angle RMS error at the largest L_q mismatch
     unloaded and at the largest load (does it grow with the load, ``DOMINANT`` times?), the load
     current at the largest load and nominal L_q, the angle error eq 10 predicts there,
-    delta L_q i_q / psi; per controller whether every unloaded cell is stable and the cells diverged."""
+    delta L_q i_q / psi, and whether the measured one is within a factor 2 of it; per controller
+    whether every unloaded cell is stable and the cells diverged."""
     out: dict = {"per": {}}
     for key, _ in CONTROLLERS:
         g = gl.get(key)
@@ -349,9 +350,10 @@ def lq_load_findings(gl: dict) -> dict:
         if i0 is not None and j_nom is not None and i_max != i0:
             a0, a1 = float(g["angle"][i0, j_min]), float(g["angle"][i_max, j_min])
             i_q = abs(float(g["i_q"][i_max, j_nom]))
+            predicted = abs(g["x"][j_min]) / 100.0 * _M.L_q * i_q / _M.psi
             out.update(lq_mismatch=g["x"][j_min], load=g["y"][i_max], angle_unloaded=a0, angle_loaded=a1,
                        grows=bool(math.isfinite(a0) and math.isfinite(a1) and a1 > DOMINANT * a0), i_q=i_q,
-                       predicted=abs(g["x"][j_min]) / 100.0 * _M.L_q * i_q / _M.psi)
+                       predicted=predicted, explained=bool(predicted / 2 <= a1 <= 2 * predicted))
     return out if out["per"] else {}
 
 
