@@ -18,7 +18,7 @@ from pmsm_cosim.app.compare import COLUMNS, format_value
 from pmsm_cosim.app.drive import PACKAGED_SCENARIOS, load_system
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.params import MotorParams, VehicleParams
-from pmsm_ev.results import row_timing_corrected_angle_error, run_timing
+from pmsm_ev.results import figures_where, row_timing_corrected_angle_error, run_timing
 
 T_STEP = 0.3  # [s] elevation step of the test runs
 T_FROM = 1.0  # [s] start of the "after" window
@@ -205,3 +205,21 @@ def test_angle_error_variant_starts_the_rotor_at_half_a_radian(tmp_path):
                  "--out", str(out), "--quiet", "--no-figures"]) == 0
     r = read_results(out)
     assert r["theta_e"][0] == 0.5 and r["theta_hat"][0] == 0.0
+
+
+def test_figures_where_on_a_known_window():
+    """``figures_where``: speed, angle (row timing removed) and position figures of the selected rows."""
+    t = np.arange(0.0, 10.0, 0.01)
+    w = 100.0 + np.where(t >= 5.0, 2.0, -1.0)  # 1 rad/s under the reference, then 2 over
+    theta = (4 * w * t + math.pi) % (2 * math.pi) - math.pi
+    x = np.where(t < 7.0, t, 7.0 - 0.5 * (t - 7.0))  # rolls back 1.5 m in the last 3 s
+    r = {"time": t, "omega_ref": np.full_like(t, 100.0), "omega_m": w, "theta_e": theta,
+         "theta_hat": theta - 4 * w * 1e-4 + 0.01, "x_vehicle": x}
+    f = figures_where(r, t >= 5.0, 1e-4, 4)
+    assert f["speed_rms_error"] == pytest.approx(2.0) and f["speed_bias"] == pytest.approx(2.0)
+    assert f["speed_error_max"] == pytest.approx(2.0) and f["speed_max"] == pytest.approx(102.0)
+    assert f["angle_rms"] == pytest.approx(0.01) and f["angle_max"] == pytest.approx(0.01)
+    assert f["roll_back"] == pytest.approx(1.495, abs=1e-9) and f["travel"] == pytest.approx(2.0)
+    assert figures_where(r, t < 5.0)["speed_bias"] == pytest.approx(-1.0)
+    assert figures_where(r, t < 5.0)["angle_rms"] is None  # no step, no pole pairs: no angle figures
+    assert set(figures_where(r, t > 99.0).values()) == {None}
