@@ -4,8 +4,9 @@ slaves around ``pmsm_ev``, and their build (``build_all``, ``main``; see
 
 FMUs: ``PmsmEvPlant`` (vehicle + PMSM) and one controller-plus-observer FMU per observer,
 all with one interface: ``FocEkf5`` (the paper's EKF), ``FocEkf4``, ``FocEkf5AB``,
-``FocSensored``; ``RouteProfile``, the scenario signals (road elevation and speed
-reference) from a route table in its resources.
+``FocSensored`` and ``FocSensorless`` (truly sensorless from standstill: alignment, I-f start,
+FOC on the stationary-frame EKF5); ``RouteProfile``, the scenario signals (road elevation and
+speed reference) from a route table in its resources.
 """
 
 from .build import (

@@ -1,5 +1,5 @@
-"""The controller-plus-observer slave shared by FocEkf5, FocEkf4, FocEkf5AB and
-FocSensored: ``pmsm_ev.control_unit.ControlUnit`` as an FMI 2.0 co-simulation unit.
+"""The controller-plus-observer slave shared by FocEkf5, FocEkf4, FocEkf5AB, FocSensored and
+FocSensorless: ``pmsm_ev.control_unit.ControlUnit`` as an FMI 2.0 co-simulation unit.
 
 No equations here: a control period is ``ControlUnit.step(i_alpha, i_beta, omega_ref,
 theta_meas, omega_meas)``, then the unit's outputs are copied into the output variables.

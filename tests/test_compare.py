@@ -18,6 +18,7 @@ from pmsm_cosim.app.compare import COLUMNS, format_value
 from pmsm_cosim.app.drive import PACKAGED_SCENARIOS, load_system
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.params import MotorParams, VehicleParams
+from pmsm_ev.results import figures_where, row_timing_corrected_angle_error, run_timing
 
 T_STEP = 0.3  # [s] elevation step of the test runs
 T_FROM = 1.0  # [s] start of the "after" window
@@ -26,13 +27,13 @@ STOP = 2.5  # [s] the segment after the step is >= 2 s long: one plateau
 
 @pytest.fixture(scope="module")
 def two_runs(tmp_path_factory):
-    """EKF5 (paper mode) and EKF4 on scenario 2 at 200 rad/s, 0 -> 10 deg at 0.3 s."""
+    """EKF5 (paper mode), EKF4 and the sensored drive on scenario 2 at 200 rad/s, 0 -> 10 deg at 0.3 s."""
     fmus = project_fmus()
     base = tmp_path_factory.mktemp("cmp")
     (base / "delta.csv").write_text(f"time,deg\n0,0\n{T_STEP},10\n")
     (base / "wref.csv").write_text("time,w\n0,200\n")
     runs = {}
-    for label, fmu in (("ekf5", "FocEkf5"), ("ekf4", "FocEkf4")):
+    for label, fmu in (("ekf5", "FocEkf5"), ("ekf4", "FocEkf4"), ("sensored", "FocSensored")):
         out = base / label
         assert main(["run", "scenario2", "--controller", str(fmus[fmu]),
                      "--stop-time", str(STOP), "--out", str(out), "--quiet", "--no-figures",
@@ -103,6 +104,30 @@ def test_compare_table_equals_the_runs_metrics(two_runs, capsys):
     for name in ("compare_speed.png", "compare_angle_error.png", "compare_torque.png"):
         data = (out / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) < 150_000
+
+
+def test_row_timing_term_is_removed_with_the_runs_step_and_pole_pairs(two_runs):
+    """The sensored drive's theta_hat is the measured angle at the previous step, so its recorded
+    error is the row-timing term alone, -N omega dt (-0.08 rad at 200 rad/s): removed with the run's
+    own step and pole pairs (``run_timing`` of its metrics.json) what is left is the angle the rotor
+    turns differently from N omega dt within a step, < 1e-4 rad; with a wrong step it stays."""
+    _, runs = two_runs
+    m = json.loads((runs["sensored"] / "metrics.json").read_text())
+    r = read_results(runs["sensored"])
+    assert run_timing(m) == (1e-4, 4.0)
+    raw = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
+    w = r["time"] >= T_FROM
+    lag = 4 * r["omega_m"][w] * 1e-4  # N omega dt, 0.077 rad at the 193 rad/s after the step
+    assert np.mean(raw[w]) == pytest.approx(-np.mean(lag), rel=1e-3) and np.mean(lag) > 0.075
+    assert np.max(np.abs(row_timing_corrected_angle_error(r, *run_timing(m))[w])) < 1e-4
+    assert np.mean(row_timing_corrected_angle_error(r, 2e-4, 4)[w]) == pytest.approx(np.mean(lag), rel=1e-3)
+    # the run's own settings win: a controller stepping every 2 communication steps, a plant with N = 5
+    m2 = {**m, "settings": {**m["settings"], "components": [
+        {**c, "step_multiple": 2} if c["name"] == "ctrl" else {**c, "start": {**c["start"], "N": 5}}
+        for c in m["settings"]["components"]]}}
+    assert run_timing(m2) == (2e-4, 5.0)
+    with pytest.raises(ValueError, match="no step size"):
+        run_timing({"speed_rms_error": 1.0})
 
 
 def one_line_error(capsys) -> str:
@@ -180,3 +205,21 @@ def test_angle_error_variant_starts_the_rotor_at_half_a_radian(tmp_path):
                  "--out", str(out), "--quiet", "--no-figures"]) == 0
     r = read_results(out)
     assert r["theta_e"][0] == 0.5 and r["theta_hat"][0] == 0.0
+
+
+def test_figures_where_on_a_known_window():
+    """``figures_where``: speed, angle (row timing removed) and position figures of the selected rows."""
+    t = np.arange(0.0, 10.0, 0.01)
+    w = 100.0 + np.where(t >= 5.0, 2.0, -1.0)  # 1 rad/s under the reference, then 2 over
+    theta = (4 * w * t + math.pi) % (2 * math.pi) - math.pi
+    x = np.where(t < 7.0, t, 7.0 - 0.5 * (t - 7.0))  # rolls back 1.5 m in the last 3 s
+    r = {"time": t, "omega_ref": np.full_like(t, 100.0), "omega_m": w, "theta_e": theta,
+         "theta_hat": theta - 4 * w * 1e-4 + 0.01, "x_vehicle": x}
+    f = figures_where(r, t >= 5.0, 1e-4, 4)
+    assert f["speed_rms_error"] == pytest.approx(2.0) and f["speed_bias"] == pytest.approx(2.0)
+    assert f["speed_error_max"] == pytest.approx(2.0) and f["speed_max"] == pytest.approx(102.0)
+    assert f["angle_rms"] == pytest.approx(0.01) and f["angle_max"] == pytest.approx(0.01)
+    assert f["roll_back"] == pytest.approx(1.495, abs=1e-9) and f["travel"] == pytest.approx(2.0)
+    assert figures_where(r, t < 5.0)["speed_bias"] == pytest.approx(-1.0)
+    assert figures_where(r, t < 5.0)["angle_rms"] is None  # no step, no pole pairs: no angle figures
+    assert set(figures_where(r, t > 99.0).values()) == {None}

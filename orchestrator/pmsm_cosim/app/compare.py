@@ -1,11 +1,13 @@
 """``pmsm-cosim compare``: overlay finished runs and tabulate their figures of merit.
 
 Reads only the result contract (``pmsm_ev.results``): each run directory's
-``results.csv`` and, when present, ``metrics.json``. Whole-run figures come from
-metrics.json (``pmsm_ev.results.compute_metrics`` as the master wrote them; recomputed
-from results.csv when metrics.json lacks them); figures "after t_from" are
-``compute_metrics`` of the rows with ``time >= t_from``, so that runs started from
-standstill (a 10 s speed ramp) and flying starts compare on the same footing.
+``results.csv`` and, when present, ``metrics.json``; it computes no figure itself, it
+tabulates those of ``pmsm_ev.results``. Whole-run figures come from metrics.json
+(``compute_metrics`` as the master wrote them; recomputed from results.csv when
+metrics.json lacks them) and so do the steps' (``step_figures``); figures "after t_from"
+are ``after_figures`` of the rows (``compute_metrics`` of the rows with ``time >= t_from``),
+so that runs started from standstill (a 10 s speed ramp) and flying starts compare on the
+same footing.
 
 Writes ``OUT/metrics.md`` and ``OUT/metrics.csv`` (one row per run, the columns of
 :data:`COLUMNS`) and ``OUT/compare_*.png`` (speed, angle error, torque estimate).
@@ -21,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev.results import CONTRACT_COLUMNS, angle_error_unwrapped, compute_metrics, eq31_load_torque
+from pmsm_ev.results import CONTRACT_COLUMNS, after_figures, angle_error_unwrapped, compute_metrics, step_figures
 
 from ..engine.errors import CosimError, one_line
 from ..engine.recording import read_results
@@ -100,50 +102,21 @@ def load_run(path, label: str | None = None) -> Run:
     return Run(label or path.name, path, metrics, r)
 
 
-def _none_if_nan(x):
-    return None if x is None or (isinstance(x, float) and math.isnan(x)) else x
-
-
 def summarize(run: Run, t_from: float = T_FROM_DEFAULT) -> dict:
-    """One table row: whole-run figures from the run's metrics, windowed ones from the rows."""
+    """One table row: the run's bookkeeping, the whole-run speed error from its metrics, the step
+    figures of its metrics (``pmsm_ev.results.step_figures``) and the figures of its rows after
+    ``t_from`` (``pmsm_ev.results.after_figures``)."""
     m, r = run.metrics, run.r
-    t = r["time"]
-    steps = m.get("steps") or []
-    devs = [s["max_speed_deviation"] for s in steps]
-    settle = [s["settling_time"] for s in steps]
+    speed = m.get("speed_rms_error")
     row = {
         "label": run.label,
         "scenario": run.scenario,
         "status": str(m.get("status", "unknown")),
-        "stop_time": float(m.get("stop_time", t[-1])),
-        "speed_rms_error": _none_if_nan(m.get("speed_rms_error")),
-        "step_dev_min": min(devs) if devs else None,
-        "step_dev_max": max(devs) if devs else None,
-        # a step that never settled within its segment counts as infinitely long
-        "settling_max": (math.inf if any(s is None for s in settle) else max(settle)) if settle else None,
+        "stop_time": float(m.get("stop_time", r["time"][-1])),
+        "speed_rms_error": None if isinstance(speed, float) and math.isnan(speed) else speed,
     }
-    w = t >= t_from
-    if np.count_nonzero(w) >= 2:
-        mw = compute_metrics({k: v[w] for k, v in r.items()})
-        err = angle_error_unwrapped(r)[w]
-        row.update({
-            "speed_rms_after": mw["speed_rms_error"],
-            "omega_hat_rms_after": mw["omega_hat_rms_error"],
-            "theta_rms_after": mw["theta_error_rms"],
-            "theta_max_after": mw["theta_error_max"],
-            "theta_drift": float(err[-1] - err[0]),
-            # eq 31: what a load estimate built on J_m alone should show (None without one)
-            "T_L_eq31_rms_after": (float(np.sqrt(np.mean((r["T_L_hat"] - eq31_load_torque(r))[w] ** 2)))
-                                   if np.any(r["T_L_hat"]) else None),
-        })
-    else:
-        row.update({k: None for k in ("speed_rms_after", "omega_hat_rms_after", "theta_rms_after",
-                                      "theta_max_after", "theta_drift", "T_L_eq31_rms_after")})
-    plateaus = m.get("plateaus") or []
-    if plateaus and any(p["T_L_hat_mean"] != 0.0 for p in plateaus):
-        row["T_L_err_max"] = max(abs(p["T_L_hat_mean"] - p["T_L_mech_mean"]) for p in plateaus)
-    else:  # no plateau long enough, or an observer without a load-torque estimate
-        row["T_L_err_max"] = None
+    row.update(step_figures(m))
+    row.update(after_figures(r, t_from))
     return row
 
 

@@ -6,8 +6,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
-
 from pmsm_ev.controller import controller_gains
 from pmsm_ev.params import (
     DT_DEFAULT,
@@ -18,7 +16,7 @@ from pmsm_ev.params import (
     VehicleParams,
     equivalent_inertia,
 )
-from pmsm_ev.results import angle_error_unwrapped
+from pmsm_ev.results import angle_recovery, plateau_split, run_timing
 
 from ..compare import COLUMNS, Run, format_value, load_run, markdown_table, plot_overlay, summarize
 from . import sensorless, synchronism
@@ -115,30 +113,9 @@ SETTLE = 10.0
 
 
 def load_split(run: Run, t_from: float) -> dict:
-    """Angle drift and speed ripple on level (0°) and on inclined plateaus: the change of
-    the unwrapped angle error over the segments (after ``t_from``), summed, and the
-    largest peak-to-peak ω_m within a segment from ``SETTLE`` s after its step."""
-    r = run.r
-    t, d, w = r["time"], r["delta_deg"], r["omega_m"]
-    err = angle_error_unwrapped(r)
-    bounds = [0] + [i for i in range(1, len(d)) if d[i] != d[i - 1]] + [len(d)]
-    out = {"level_drift": 0.0, "inclined_drift": 0.0, "level_ptp": None, "inclined_ptp": None}
-    seen = {"level": False, "inclined": False}
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        kind = "level" if d[a] == 0 else "inclined"
-        m = (t >= max(t[a], t_from)) & (t <= t[b - 1])
-        if np.count_nonzero(m) >= 2:
-            seen[kind] = True
-            out[f"{kind}_drift"] += float(err[m][-1] - err[m][0])
-        m2 = (t >= max(t[a] + (SETTLE if a > 0 else 0.0), t_from)) & (t <= t[b - 1])
-        if np.count_nonzero(m2) >= 2:
-            ptp = float(np.ptp(w[m2]))
-            key = f"{kind}_ptp"
-            out[key] = ptp if out[key] is None else max(out[key], ptp)
-    for kind, ok in seen.items():
-        if not ok:
-            out[f"{kind}_drift"] = None
-    return out
+    """Angle drift and speed ripple on level (0°) and on inclined plateaus of a run
+    (``pmsm_ev.results.plateau_split``, the peak-to-peak from ``SETTLE`` s after each step)."""
+    return plateau_split(run.r, t_from, SETTLE)
 
 
 def _split_table(data: Data, ids) -> str:
@@ -209,21 +186,9 @@ RECOVERED_HOLD = 10.0
 
 
 def recovery(run: Run) -> dict:
-    """Angle error (wrapped) at the start, at 1 s, at the end, and the first time it is below
-    ``RECOVERED`` and stays there for ``RECOVERED_HOLD`` (None: never)."""
-    r = run.r
-    t = r["time"]
-    err = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
-    ok = np.abs(err) < RECOVERED
-    t_rec = None
-    for i in np.nonzero(ok)[0]:
-        window = (t >= t[i]) & (t <= t[i] + RECOVERED_HOLD)
-        if t[i] + RECOVERED_HOLD <= t[-1] and np.all(ok[window]):
-            t_rec = float(t[i])
-            break
-    at1 = np.nonzero(t >= 1.0)[0]
-    return {"start": float(err[0]), "at_1s": float(err[at1[0]]) if len(at1) else None,
-            "end": float(err[-1]), "t_recovered": t_rec}
+    """The angle error's recovery from a wrong start (``pmsm_ev.results.angle_recovery`` with the
+    band ``RECOVERED`` held for ``RECOVERED_HOLD``)."""
+    return angle_recovery(run.r, RECOVERED, RECOVERED_HOLD)
 
 
 def _param_lines(t_from: float) -> list[str]:
@@ -395,7 +360,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
         if not row or row.get("theta_drift") is None:
             return "-"
         span = float(run.r["time"][-1]) - T_FROM
-        return f"{row['theta_drift'] / (MotorParams().N * span):.4f}" if span > 0 else "-"
+        return f"{row['theta_drift'] / (run_timing(run.metrics)[1] * span):.4f}" if span > 0 else "-"
 
     def turns(cid):
         x = d.row(cid).get("theta_drift")

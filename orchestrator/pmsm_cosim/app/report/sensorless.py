@@ -5,8 +5,10 @@ start-up from eight initial rotor angles over [-pi, pi).
 
 The configurations are :class:`pmsm_cosim.app.report.Config` of the shared report machinery
 (one ``pmsm-cosim run`` each, reused while settings and FMU builds are unchanged); the
-figures of merit are ``pmsm_ev.results.sensorless_metrics`` and ``compare.summarize`` of
-each run; every sentence is filled from them.
+figures of merit are ``pmsm_ev.results``' of each run (``sensorless_metrics``,
+``figures_where`` of its windows, the angle error with the row-timing term removed with the
+run's own step and pole pairs, ``run_timing``) and ``compare.summarize``'s; every sentence
+is filled from them.
 """
 
 from __future__ import annotations
@@ -16,8 +18,16 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev.params import DT_DEFAULT, MotorParams, StartupParams
-from pmsm_ev.results import STARTUP_BAND, STARTUP_FROM, roll_back, row_timing_corrected_angle_error, sensorless_metrics
+from pmsm_ev.params import StartupParams
+from pmsm_ev.results import (
+    STARTUP_BAND,
+    STARTUP_FROM,
+    figures_where,
+    handovers,
+    row_timing_corrected_angle_error,
+    run_timing,
+    sensorless_metrics,
+)
 from pmsm_ev.scenarios import SENSORLESS_START_DELAY
 
 #: the runs: (short name, shipped scenario, title)
@@ -58,10 +68,6 @@ def config_specs():
     return specs
 
 
-def _corrected_error(r) -> np.ndarray:
-    return row_timing_corrected_angle_error(r, DT_DEFAULT, MotorParams().N)
-
-
 def _finish(plt, fig, axes, path: Path, mode_axis=None) -> Path:
     """Grid, mode ticks, layout; save and close."""
     if mode_axis is not None:
@@ -94,7 +100,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
             t = r["time"][sel]
             label = f"θ(0) = {ANGLES[k]:+.2f}"
             axes[0].plot(t, r["omega_m"][sel], lw=0.9, label=label)
-            axes[1].plot(t, _corrected_error(r)[sel], lw=0.9)
+            axes[1].plot(t, _corrected_error(run)[sel], lw=0.9)
             axes[2].plot(t, r["mode"][sel], lw=0.9)
         r0 = runs[0][1].r
         sel = r0["time"] <= 15.0
@@ -154,29 +160,31 @@ def _num(x, fmt=".2f") -> str:
     return format(x, fmt)
 
 
+def _corrected_error(run) -> np.ndarray:
+    """The run's angle error with the row-timing term removed, with the run's own step and pole pairs."""
+    return row_timing_corrected_angle_error(run.r, *run_timing(run.metrics))
+
+
 def _figures_of(data, cid: str) -> dict | None:
-    """The figures of one run: summarize's row plus the sensorless metrics."""
+    """The figures of one run (``pmsm_ev.results``): summarize's row plus the sensorless metrics and
+    the angle error (row timing removed, with the run's step and pole pairs) in the closed loop."""
     run, row = data.runs.get(cid), data.rows.get(cid)
     if run is None or row is None:
         return None
     r = run.r
     t = r["time"]
+    dt, pole_pairs = run_timing(run.metrics)
     out = dict(row)
     out.update(sensorless_metrics(r, T_FROM))
     # the angle error in closed loop (standing in I-f, at no back-EMF, it is not observable)
-    after = (t >= T_FROM) & (r["mode"] == 2.0)
-    err = _corrected_error(r)
-    out["angle_max_after"] = float(np.max(np.abs(err[after]))) if np.any(after) else None
-    out["angle_rms_after"] = float(np.sqrt(np.mean(err[after] ** 2))) if np.any(after) else None
+    closed = figures_where(r, (t >= T_FROM) & (r["mode"] == 2.0), dt, pole_pairs)
+    out["angle_max_after"], out["angle_rms_after"] = closed["angle_max"], closed["angle_rms"]
     drift = row.get("theta_drift")
     out["turns"] = None if drift is None else abs(drift) / (2 * math.pi)
-    closed = [c[0] for c in out["mode_changes"] if c[2] == 2.0]
-    out["t_up"] = closed[0] if closed else None
-    if out["t_up"] is not None:
-        m = t >= out["t_up"] + 0.5
-        out["angle_max_after_handover"] = float(np.max(np.abs(err[m]))) if np.any(m) else None
-    else:
-        out["angle_max_after_handover"] = None
+    ups = handovers(out["mode_changes"])["closed"]
+    out["t_up"] = ups[0] if ups else None
+    out["angle_max_after_handover"] = (None if out["t_up"] is None else
+                                       figures_where(r, t >= out["t_up"] + 0.5, dt, pole_pairs)["angle_max"])
     return out
 
 
@@ -184,19 +192,15 @@ def _hill_figures(data, cid: str) -> dict | None:
     f = _figures_of(data, cid)
     if f is None:
         return None
+    t = data.runs[cid].r["time"]
     r = data.runs[cid].r
-    t, x, w = r["time"], r["x_vehicle"], r["omega_m"]
-    stop = (t >= 30.0) & (t <= 50.0)
-    restart = (t >= 50.0) & (t <= 65.0)
-    stand = (t >= 41.0) & (t <= 50.0)
-    f["roll_back_stop"] = roll_back(x[stop]) if np.any(stop) else None
-    f["roll_back_restart"] = roll_back(x[restart]) if np.any(restart) else None
-    f["stand_travel"] = float(np.ptp(x[stand])) if np.any(stand) else None
-    f["stand_speed_max"] = float(np.max(np.abs(w[stand]))) if np.any(stand) else None
-    downs = [c[0] for c in f["mode_changes"] if c[1] == 2.0 and c[2] == 1.0]
-    ups = [c[0] for c in f["mode_changes"] if c[1] == 1.0 and c[2] == 2.0]
-    f["t_down"] = downs[0] if downs else None
-    f["t_restart_up"] = next((u for u in ups if u > 45.0), None)
+    stand = figures_where(r, (t >= 41.0) & (t <= 50.0))
+    f["roll_back_stop"] = figures_where(r, (t >= 30.0) & (t <= 50.0))["roll_back"]
+    f["roll_back_restart"] = figures_where(r, (t >= 50.0) & (t <= 65.0))["roll_back"]
+    f["stand_travel"], f["stand_speed_max"] = stand["travel"], stand["speed_max"]
+    h = handovers(f["mode_changes"])
+    f["t_down"] = h["down"][0] if h["down"] else None
+    f["t_restart_up"] = next((u for u in h["up"] if u > 45.0), None)
     return f
 
 
@@ -245,9 +249,10 @@ def _start_table(data) -> list[str]:
             if f is None:
                 continue
             r = data.runs[f"sl-start{k}-{cond}-sensorless"].r
+            end = figures_where(r, np.arange(len(r["time"])) == len(r["time"]) - 1)["speed_error_max"]
             lines.append(f"| {theta:+.3f} | {desc} | {_num(f['t_up'])} | {_num(f['startup_speed_error_max'])} | "
                          f"{_num(100 * f['roll_back_start'])} | {_num(f['angle_max_after_handover'], '.4f')} | "
-                         f"{abs(r['omega_m'][-1] - r['omega_ref'][-1]):.2f} |")
+                         f"{end:.2f} |")
     return lines
 
 
@@ -326,6 +331,10 @@ def _targets(data) -> tuple[list[str], list[str]]:
 def render(data, fig_names) -> list[str]:
     """The section's lines."""
     s = StartupParams()
+    # the row-timing term of the angle error, N omega dt at 200 rad/s, with the step and pole pairs of the runs
+    timings = {run_timing(run.metrics) for cid, run in data.runs.items() if cid.startswith("sl-")}
+    lag = (" (every observer's rows trail the rotor by one period: "
+           + " / ".join(f"{n * 200.0 * dt:.2g}" for dt, n in sorted(timings)) + " rad at 200 rad/s)") if timings else ""
     L = ["## Sensorless from standstill\n"]
     L.append(
         f"The sensorless unit (`FocSensorless.fmu`, observer `sensorless`; docs/sensorless.md) never reads the "
@@ -340,8 +349,7 @@ def render(data, fig_names) -> list[str]:
         f"`scenario1-sensorless`, `scenario2-sensorless` and `hill-start` hold ω_ref = 0 for "
         f"{SENSORLESS_START_DELAY:g} s (the alignment) and then ramp as the paper's scenarios do. Each row is "
         f"against the sensored drive (`FocSensored.fmu`) on the same run. Angle errors here have the "
-        f"row-timing term −N ω dt removed (every observer's rows trail the rotor by one period: 0.08 rad at "
-        f"200 rad/s).\n")
+        f"row-timing term −N ω dt removed{lag}.\n")
     L += _table(data)
     L.append("")
     L.append(f"Start-up from eight initial rotor angles (scenario 1, {ANGLE_STOP:g} s: the start, then the "

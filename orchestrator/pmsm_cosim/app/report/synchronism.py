@@ -17,7 +17,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
-from pmsm_ev.params import SENSORLESS_EKF, DriveParams, MotorParams, PlantParams
+from pmsm_ev.params import SENSORLESS_EKF, DriveParams, PlantParams
 from pmsm_ev.results import synchronism_metrics
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase
 
@@ -43,7 +43,7 @@ def run_one(case: SyncCase, controller: str, k: int, out_dir: Path) -> dict:
     route = case.route()
     m = run_reference(out_dir, case.name, case.stop_time, controller, params=params, elevation=route["delta"],
                       omega_ref=route["omega_ref"], startup_columns=True)
-    sync = synchronism_metrics(read_results(out_dir), case.t_disturbance, MotorParams().N)
+    sync = synchronism_metrics(read_results(out_dir), case.t_disturbance, params.motor.N)
     sync.update({"case": case.name, "controller": controller, "k": k, "theta0": SYNC_ANGLES[k],
                  "status": m["status"]})
     path = Path(out_dir) / "metrics.json"
