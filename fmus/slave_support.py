@@ -44,7 +44,7 @@ are refused at import, see ``WRAPPER_CHECKED``):
   afterwards: a write into freed heap memory whenever the library is still loaded when the
   process exits (dlclose does not unload it once another library has bound to its unique
   symbols), which aborts the process in a later free() ("corrupted double-linked list")
-  in about 1 of 3 runs with numba's compiled kernels. ``release_at_exit`` resets that
+  in 4 of 10 short runs with numba's compiled kernels. ``release_at_exit`` resets that
   pointer through the library's own ``finalizePythonInterpreter`` from a Python ``atexit``
   handler, which runs before the C++ destructors (docs/errors.md, "Crash at exit").
 """
