@@ -4,6 +4,7 @@
     nox                       # pytest -q on each of Python 3.10, 3.11, 3.12, 3.13 found
     nox -s tests-3.13         # one of them
     nox -- tests/test_ssp.py  # arguments after -- go to pytest
+    nox -s floors             # the oldest versions pyproject.toml allows, on Python 3.10
 
 Each session installs the package as a new user would (``pip install -e .`` and the test
 extras, in a fresh virtual environment under ``.nox/``) and runs the tests. An
@@ -13,6 +14,12 @@ left out, saying so; the tests that need it are then skipped by name. The sessio
 the FMUs in the user's cache (one folder per content of the sources and pythonfmu
 version, built by the first session that needs them), so an FMU built under one Python
 runs in the hosts of the others.
+
+``floors`` installs every dependency and test extra at exactly its lower bound (``>=X`` in
+pyproject.toml becomes ``==X``, markers kept) on the oldest Python claimed, then the package
+without dependencies, and runs the tests: each floor is a version the suite passes on.
+Its pythonfmu may differ from the other sessions', so its FMUs go to a folder of their own
+in the cache (the content key includes pythonfmu's version).
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ from pathlib import Path
 
 import nox
 import tomllib
+from packaging.requirements import Requirement
 
 ROOT = Path(__file__).resolve().parent
 PYTHONS = ["3.10", "3.11", "3.12", "3.13"]
@@ -54,9 +62,27 @@ def _pyenv_bins() -> list[str]:
 os.environ["PATH"] = os.pathsep.join(_pyenv_bins() + [os.environ.get("PATH", "")])
 
 
+def _project() -> dict:
+    return tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+
+
 def _test_extras() -> list[str]:
-    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
-    return project["optional-dependencies"]["test"]
+    return _project()["optional-dependencies"]["test"]
+
+
+def floor_pins() -> list[str]:
+    """Every dependency and test extra pinned to its lower bound: ``name==X[; marker]``.
+
+    A requirement without a ``>=`` bound (or with another kind of bound) is refused: a floor
+    that is not stated cannot be tested."""
+    pins = []
+    for text in _project()["dependencies"] + _test_extras():
+        req = Requirement(text)
+        lower = [spec.version for spec in req.specifier if spec.operator == ">="]
+        if len(lower) != 1:
+            raise ValueError(f"pyproject.toml: {text!r} has no single '>=' lower bound to test")
+        pins.append(f"{req.name}=={lower[0]}" + (f"; {req.marker}" if req.marker else ""))
+    return pins
 
 
 @nox.session(python=PYTHONS)
@@ -71,4 +97,22 @@ def tests(session: nox.Session) -> None:
             session.warn(f"{requirement}: not installable on Python {session.python} here; "
                          f"the tests that need it are skipped")
     session.run("python", "-c", "import sys; print('Python', sys.version)")
+    session.run("pytest", *(session.posargs or ["-q", "-rs"]))
+
+
+@nox.session(python=PYTHONS[0])
+def floors(session: nox.Session) -> None:
+    """The suite with every dependency at its lower bound, on the oldest Python claimed."""
+    pins = floor_pins()
+    session.install(*(p for p in pins if not p.startswith(OPTIONAL)))
+    for pin in (p for p in pins if p.startswith(OPTIONAL)):
+        try:
+            session.install(pin, silent=True)
+        except nox.command.CommandFailed:
+            session.warn(f"{pin}: not installable on Python {session.python} here; "
+                         f"the tests that need it are skipped")
+    session.install("--no-deps", "-e", ".")
+    session.run("python", "-m", "pip", "check")
+    session.run("python", "-c", "import sys; print('Python', sys.version)")
+    session.run("python", "-m", "pip", "freeze")
     session.run("pytest", *(session.posargs or ["-q", "-rs"]))

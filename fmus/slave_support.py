@@ -32,17 +32,35 @@ the exception: the exception's text is the reason (the wrapper forwards log mess
 only when the master enables logging). A failing call logs nothing of its own: the
 wrapper flushes the log queue while the exception is still set, and Python 3.13 refuses
 a host's Python logger callback (fmpy's) in that state (``SystemError``, the reason
-lost). The same wrapper releases the Python instance, its class and its log queue when
-the exception occurs and once more in ``fmi2FreeInstance``; ``_fail`` takes one extra
-reference to each, so a master that frees a failed instance does not crash the process.
+lost).
+
+Lifetime in the wrapper (pythonfmu 0.6.5 to 0.7.0, read in its C++ source; older versions
+are refused at import, see ``WRAPPER_CHECKED``):
+
+* it releases the Python instance, its class and its log queue when an exception occurs
+  and once more in ``fmi2FreeInstance``; ``_fail`` takes one extra reference to each, so a
+  master that frees a failed instance does not crash the process (one that leaves it, as
+  FMI 2.0 asks after fmi2Fatal, leaks that one instance);
+* its library keeps a ``std::shared_ptr`` to an interpreter guard that a C++ static
+  destructor releases at ``exit()`` and that the library's ELF destructor resets once more
+  afterwards: a write into freed heap memory whenever the library is still loaded when the
+  process exits (dlclose does not unload it once another library has bound to its unique
+  symbols), which aborts the process in a later free() ("corrupted double-linked list")
+  in 4 of 10 short runs with numba's compiled kernels. ``release_at_exit`` resets that
+  pointer through the library's own ``finalizePythonInterpreter`` from a Python ``atexit``
+  handler, which runs before the C++ destructors (docs/errors.md, "Crash at exit").
 """
 
 from __future__ import annotations
 
+import atexit
 import ctypes
 import dataclasses
 import functools
 import json
+import os
+import re
+import sys
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement
 
@@ -57,6 +75,7 @@ from pythonfmu import (
     Real,
     String,
 )
+from pythonfmu import __version__ as PYTHONFMU_VERSION
 
 from pmsm_ev_fmus.metadata import DISPLAY_UNITS, PARAMETERS, UNITS
 
@@ -68,6 +87,49 @@ START_TIME, STOP_TIME, STEP_SIZE = 0.0, 350.0, 1.0e-4
 _KINDS = {"float": Real, "int": Integer, "bool": Boolean, "str": String}
 #: parameter defaults of a packaged copy of an FMU (resources/), see ``packaged_starts``
 START_VALUES_FILE = "start_values.json"
+
+
+#: the pythonfmu versions whose C++ wrapper the lifetime code below was checked against;
+#: ``_fail`` and ``release_at_exit`` rely on its behaviour (see the module doc)
+WRAPPER_CHECKED = ("0.6.5", "0.7.0")
+
+
+def _version(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in re.findall(r"\d+", text)[:3])
+
+
+if _version(PYTHONFMU_VERSION) < _version(WRAPPER_CHECKED[0]):
+    raise ImportError(f"pythonfmu {PYTHONFMU_VERSION}: the project's FMUs need pythonfmu >= {WRAPPER_CHECKED[0]}")
+
+#: the wrapper libraries (paths) of this process whose interpreter guard is reset at exit
+_WRAPPER_LIBRARIES: set[str] = set()
+
+
+def release_at_exit(resources) -> None:
+    """Have the wrapper library of the FMU unpacked around ``resources`` reset its
+    interpreter guard when this Python exits (module doc: the wrapper's exit-time write
+    into freed memory). Only in a Python program on Linux: where the wrapper started the
+    interpreter itself (``sys.orig_argv`` empty) the guard's reset finalizes it, so it is
+    left to the wrapper."""
+    if not resources or not sys.platform.startswith("linux") or not getattr(sys, "orig_argv", None):
+        return
+    for library in sorted((Path(resources).parent / "binaries" / "linux64").glob("*.so")):
+        if not _WRAPPER_LIBRARIES:
+            atexit.register(_release_wrapper_libraries)
+        _WRAPPER_LIBRARIES.add(str(library))
+
+
+def _release_wrapper_libraries() -> None:
+    for path in sorted(_WRAPPER_LIBRARIES):
+        try:  # only a library still loaded: one unloaded by dlclose ran its destructors in order
+            library = ctypes.CDLL(path, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+        except OSError:
+            continue
+        reset = getattr(library, "finalizePythonInterpreter", None)
+        if reset is not None:
+            reset.restype = None
+            reset()
+    _WRAPPER_LIBRARIES.clear()
 
 
 class FmuUsageError(RuntimeError):
@@ -149,6 +211,7 @@ class DriveSlave(Fmi2Slave):
         self._stale = True  # parameters changed since the physics was built
         self._built_with = None  # parameter values the physics was built with
         self._packaged_starts = packaged_starts(self.resources)
+        release_at_exit(self.resources)
 
     # -- declaring variables ---------------------------------------------------------
     def _declare(self, var, value, unit=None, display_unit=None):
@@ -270,8 +333,9 @@ class DriveSlave(Fmi2Slave):
     # -- FMI calls -------------------------------------------------------------------
     def _fail(self, where: str, exc: Exception) -> None:
         """An FMI call fails with ``exc`` (re-raised by the caller; the wrapper logs its repr):
-        keep the objects the C wrapper releases twice alive. Nothing is logged here (see the
-        module doc: the wrapper would pass it to the host with the exception still set)."""
+        keep the objects the C wrapper releases twice alive (pythonfmu 0.6.5 to 0.7.0, see
+        ``WRAPPER_CHECKED``). Nothing is logged here (see the module doc: the wrapper would
+        pass it to the host with the exception still set)."""
         for obj in (self, self.log_queue, type(self)):
             ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
 

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import copy
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -184,3 +187,49 @@ def test_record_on_the_command_line(fmus, tmp_path):
     result, _ = pmsm_cosim.simulate("scenario1", stop_time=0.02, output=["omega_m", "ctrl.omega_hat"])
     assert list(columns) == list(result.dtype.names) == ["time", "omega_m", "ctrl.omega_hat"]
     assert all(np.array_equal(columns[n], result[n]) for n in columns)
+
+
+# --- leaving the process -----------------------------------------------------------------------
+# A process that ran simulate exits normally, with its own exit code: no abort in the native
+# teardown (pythonfmu's wrapper library, see docs/errors.md "Crash at exit"). Fresh processes,
+# with glibc's checking allocator where the machine has it (it makes a heap write after free
+# abort at once instead of now and then).
+EXIT_CHILD = """
+import sys
+import pmsm_cosim
+overrides = {"plant.psi": 1e8} if sys.argv[1] == "failing" else None
+result, metrics = pmsm_cosim.simulate("scenario1", stop_time=0.05, set=overrides)
+compiled = sorted(m for m in sys.modules if m.startswith("pmsm_ev_kernels_"))
+print(metrics["status"], "|", len(result), "|", len(compiled), flush=True)
+"""
+MALLOC_DEBUG = Path("/lib/x86_64-linux-gnu/libc_malloc_debug.so.0")
+GLIBC_TROUBLE = ("corrupted", "double free", "free()", "malloc", "munmap_chunk", "Fatal Python error")
+
+
+def exit_of_a_fresh_process(kind: str, tmp_path: Path) -> tuple[int, str, str]:
+    env = dict(os.environ, PMSM_EV_JIT="1")
+    if MALLOC_DEBUG.is_file():
+        env.update(LD_PRELOAD=str(MALLOC_DEBUG), MALLOC_CHECK_="3")
+    r = subprocess.run([sys.executable, "-c", EXIT_CHILD, kind], capture_output=True, text=True, env=env,
+                       cwd=tmp_path, timeout=600)
+    return r.returncode, r.stdout.strip(), r.stderr
+
+
+@pytest.mark.parametrize("repeat", range(4))
+def test_a_process_that_simulated_with_compiled_kernels_exits_with_code_0(fmus, tmp_path, repeat):
+    code, out, err = exit_of_a_fresh_process("completed", tmp_path)
+    assert code == 0, f"exit code {code}: {err[-2000:]}"
+    assert not [t for t in GLIBC_TROUBLE if t in err], err[-2000:]
+    status, rows, compiled = out.splitlines()[-1].split(" | ")
+    assert (status, int(rows), int(compiled)) == ("completed", 6, 1)  # 0..0.05 s every 10 ms, numba's kernels
+
+
+@pytest.mark.parametrize("repeat", range(2))
+def test_a_process_whose_fmu_failed_mid_run_exits_with_code_0(fmus, tmp_path, repeat):
+    code, out, err = exit_of_a_fresh_process("failing", tmp_path)
+    assert code == 0, f"exit code {code}: {err[-2000:]}"
+    assert not [t for t in GLIBC_TROUBLE if t in err], err[-2000:]
+    status, rows, compiled = out.splitlines()[-1].split(" | ")
+    assert status.startswith("failed: plant: fmi2DoStep failed at t = 0.0002 s: SimulationError: plant state is "
+                             "not finite at t = 0.0003"), status
+    assert (int(rows), int(compiled)) == (1, 1)

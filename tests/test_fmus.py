@@ -915,9 +915,6 @@ for i in range(40):
         assert i % 2
     fmu.freeInstance()
 print("survived", flush=True)
-# leave before the native teardown (pythonfmu binaries + numba's LLVM), which can abort in
-# free() after the interpreter is gone: see pmsm_cosim.app.cli.entry_point
-import os; os._exit(0)
 """
 
 
@@ -952,7 +949,6 @@ physics = sorted(m for m in sys.modules if m.startswith("pmsm_ev"))
 files = sorted({sys.modules[m].__file__ for m in physics})
 print(json.dumps({"i_d": float(r["i_d"][-1]), "v_q": float(q["v_q"][-1]), "modules": physics, "files": files}),
       flush=True)
-import os; os._exit(0)  # before the native teardown, see pmsm_cosim.app.cli.entry_point
 """
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -441,24 +440,8 @@ def main(argv=None) -> int:
 
 
 def entry_point() -> None:
-    """The ``pmsm-cosim`` command: ``main``, then leave the process without the native
-    teardown.
-
-    Everything a command writes is closed by the time ``main`` returns. What would follow
-    is the interpreter's finalization and the C/C++ static destructors of the libraries in
-    the process: pythonfmu's FMU binaries (which embed this same interpreter) and, when the
-    kernels are compiled, numba's LLVM. Measured here, that teardown aborts the process in
-    free() ("corrupted double-linked list", after the interpreter is gone, so no Python
-    frame is involved) in about 1 of 10 completed and half of the interrupted runs with
-    compiled kernels, and never with PMSM_EV_JIT=0. Leaving with os._exit after flushing
-    the standard streams keeps the exit code the command chose.
-    """
-    code = main()
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    finally:
-        os._exit(code if isinstance(code, int) else 1)
+    """The ``pmsm-cosim`` command: ``main``, its return value the exit code."""
+    sys.exit(main())
 
 
 if __name__ == "__main__":

@@ -287,10 +287,12 @@ class FmuInstance:
         except Exception as exc:
             raise self._refused("fmi2Instantiate", exc) from None
         self.handle = self.fmu.component
-        f = self.fmu._functions
-        self.get_real, self.set_real = f["fmi2GetReal"], f["fmi2SetReal"]
-        self.get_integer, self.get_boolean = f["fmi2GetInteger"], f["fmi2GetBoolean"]
-        self.do_step = f["fmi2DoStep"]
+        # fmpy's own ctypes functions (argtypes set by fmpy), through the public ``dll``: a
+        # ctypes library returns the same cached function object for a name every time
+        dll = self.fmu.dll
+        self.get_real, self.set_real = dll.fmi2GetReal, dll.fmi2SetReal
+        self.get_integer, self.get_boolean = dll.fmi2GetInteger, dll.fmi2GetBoolean
+        self.do_step = dll.fmi2DoStep
         self.lean = LeanCalls(self.fmu, (self.md.generationTool or "").startswith(PYTHONFMU_TOOL))
         try:
             self.fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
