@@ -85,17 +85,22 @@ def floor_pins() -> list[str]:
     return pins
 
 
-@nox.session(python=PYTHONS)
-def tests(session: nox.Session) -> None:
-    extras = _test_extras()
-    required = [r for r in extras if not r.startswith(OPTIONAL)]
-    session.install("-e", ".", *required)
-    for requirement in (r for r in extras if r.startswith(OPTIONAL)):
+def _install_optional(session: nox.Session, requirements: list[str]) -> None:
+    """Install each of ``requirements`` if the interpreter has a wheel for it, else warn."""
+    for requirement in requirements:
         try:
             session.install(requirement, silent=True)
         except nox.command.CommandFailed:
             session.warn(f"{requirement}: not installable on Python {session.python} here; "
                          f"the tests that need it are skipped")
+
+
+@nox.session(python=PYTHONS)
+def tests(session: nox.Session) -> None:
+    extras = _test_extras()
+    required = [r for r in extras if not r.startswith(OPTIONAL)]
+    session.install("-e", ".", *required)
+    _install_optional(session, [r for r in extras if r.startswith(OPTIONAL)])
     session.run("python", "-c", "import sys; print('Python', sys.version)")
     session.run("pytest", *(session.posargs or ["-q", "-rs"]))
 
@@ -105,12 +110,7 @@ def floors(session: nox.Session) -> None:
     """The suite with every dependency at its lower bound, on the oldest Python claimed."""
     pins = floor_pins()
     session.install(*(p for p in pins if not p.startswith(OPTIONAL)))
-    for pin in (p for p in pins if p.startswith(OPTIONAL)):
-        try:
-            session.install(pin, silent=True)
-        except nox.command.CommandFailed:
-            session.warn(f"{pin}: not installable on Python {session.python} here; "
-                         f"the tests that need it are skipped")
+    _install_optional(session, [p for p in pins if p.startswith(OPTIONAL)])
     session.install("--no-deps", "-e", ".")
     session.run("python", "-m", "pip", "check")
     session.run("python", "-c", "import sys; print('Python', sys.version)")
