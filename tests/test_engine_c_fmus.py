@@ -21,6 +21,11 @@ from pmsm_cosim.engine.ssp_export import export_ssp
 from pmsm_cosim.engine.system import load_system_file
 
 H = 0.01
+
+
+def _version(text: str) -> tuple[int, ...]:
+    return tuple(int(p) for p in text.split(".")[:3] if p.isdigit())
+
 TYPED = ("counter.count -> consumer.k", "counter.level -> consumer.lvl", "counter.odd -> consumer.flag",
          "counter.label -> consumer.text")
 COUNTER_COLUMNS = {"count": "counter.count", "level": "counter.level", "odd": "counter.odd",
@@ -130,6 +135,11 @@ def test_the_same_outputs_as_fmpy(tmp_path, c_fmus):
     # the time the FMU reached, t_n + h: fmpy steps by (n + 1) h - n h, this master by h
     assert list(r["counter_time"][1:]) == [n * H + H for n in range(20)]
     assert np.allclose(counter["time_out"], r["counter_time"], rtol=1e-15, atol=0)
+    if _version(fmpy.__version__) < (0, 3, 23):
+        # fmpy 0.3.20-0.3.22 give a discrete input at t_n the table's value of t_(n-1) (seen at
+        # the floor: the consumer's k_seen one step behind); from 0.3.23 on, the value at t_n
+        pytest.skip(f"fmpy {fmpy.__version__} feeds a discrete input one step late; the consumer's "
+                    f"comparison needs fmpy >= 0.3.23 (the counter's passed)")
     inputs = np.array(list(zip(counter["time"], counter["count"], counter["level"], counter["odd"])),
                       dtype=[("time", float), ("k", np.int32), ("lvl", np.int32), ("flag", np.bool_)])
     consumer = fmpy.simulate_fmu(str(c_fmus["Consumer"]), stop_time=0.2, step_size=H, output_interval=H,
