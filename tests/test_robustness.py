@@ -197,6 +197,18 @@ def test_adaptation_claim_follows_the_stable_cells():
     assert "narrows the stable region from 15 to 6 of 15 cells" in text and "widens" not in text
 
 
+def test_adaptation_bias_leaves_out_a_diverged_cell():
+    """A diverged cell has no steady bias: the largest bias left is over the cells that diverged in
+    neither, and the text counts the diverged ones."""
+    corner = [[True, False, False]] + [[False] * 3] * 4
+    runaway = [[206.0, 0.3, 0.2], [0.3, 0.1, 0.0], [0.0] * 3, [-0.3, -0.1, 0.0], [-0.5, -0.4, -0.3]]
+    without = _grid(RS, PSI, _psi_bias([8.0, 6.0, 0.0, -4.0, -8.0]), diverged=corner)
+    text = "\n".join(rdoc.rs_psi_text({"sensorless": without,
+                                       "sensorless_adapt": _grid(RS, PSI, runaway, diverged=corner)}))
+    assert "left: 0.50 rad/s against 8.00 without, over the cells that diverged in neither; diverged: 1 with, " \
+           "1 without" in text
+
+
 def test_lq_load_claims_follow_the_grids():
     lq, load = [-40.0, 0.0, 40.0], [0.0, 11.0, 22.0]
     grows = _grid(lq, load, np.zeros((3, 3)), angle=np.array([[0.01] * 3, [0.1] * 3, [0.3] * 3]), i_q=234.0)

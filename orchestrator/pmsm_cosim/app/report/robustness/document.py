@@ -179,7 +179,10 @@ def rs_psi_text(gs: dict, t_from: float = T_FROM) -> list[str]:
               "(`ctrl.psi_adapt`, `EkfParams.psi_adapt`, `adapt_psi` in the kernels): the estimated angle must turn "
               "at the rotor's speed on average, so the mean of the EKF's angle corrections, N (ω − ω̂) dt per step, "
               "measures the speed error a wrong ψ causes; the EKF's ψ is moved until it vanishes (largest "
-              f"|ω_m − ω_ref| left: {a['bias_with']:.2f} rad/s against {a['bias_without']:.2f} without). It needs "
+              f"|ω_m − ω_ref| left: {a['bias_with']:.2f} rad/s against {a['bias_without']:.2f} without"
+              + (f", over the cells that diverged in neither; diverged: {a['diverged_with']} with, "
+                 f"{a['diverged_without']} without" if a["diverged_with"] or a["diverged_without"] else "")
+              + "). It needs "
               f"speed (it runs above {EkfParams().psi_adapt_speed:g} rad/s) and identifies ψ, not R_s.", ""]
     return L
 

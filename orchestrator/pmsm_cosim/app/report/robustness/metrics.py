@@ -323,9 +323,12 @@ def rs_psi_findings(gs: dict) -> dict:
         facts["tolerance_pct"] = 100.0 * SPEED_LIMIT / facts["omega"]
     if "sensorless" in gs and "sensorless_adapt" in gs:
         a, b = gs["sensorless"], gs["sensorless_adapt"]
+        held = ~np.asarray(a["diverged"], bool) & ~np.asarray(b["diverged"], bool)  # a diverged cell has no bias
         facts["adapt"] = {"without": int(a["stable"].sum()), "with": int(b["stable"].sum()),
-                          "cells": int(b["stable"].size), "bias_without": float(np.nanmax(np.abs(a["bias"]))),
-                          "bias_with": float(np.nanmax(np.abs(b["bias"])))}
+                          "cells": int(b["stable"].size),
+                          "bias_without": float(np.nanmax(np.abs(a["bias"][held]))) if held.any() else math.nan,
+                          "bias_with": float(np.nanmax(np.abs(b["bias"][held]))) if held.any() else math.nan,
+                          "diverged_without": int(np.sum(a["diverged"])), "diverged_with": int(np.sum(b["diverged"]))}
     return facts
 
 
