@@ -205,7 +205,7 @@ def test_adaptation_bias_leaves_out_a_diverged_cell():
     without = _grid(RS, PSI, _psi_bias([8.0, 6.0, 0.0, -4.0, -8.0]), diverged=corner)
     text = "\n".join(rdoc.rs_psi_text({"sensorless": without,
                                        "sensorless_adapt": _grid(RS, PSI, runaway, diverged=corner)}))
-    assert "left: 0.50 rad/s against 8.00 without, over the cells that diverged in neither; diverged: 1 with, " \
+    assert "left: 0.50 rad/s against 8.10 without, over the cells that diverged in neither; diverged: 1 with, " \
            "1 without" in text
 
 
