@@ -72,6 +72,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "B_m": ("N.m.s/rad", "viscous friction coefficient of eq 8"),
     "T_m0": ("N.m", "constant (Coulomb) friction torque of eq 8"),
     "omega_eps": ("rad/s", "speed scale of the smooth sign of T_m0 (load_model 'physical')"),
+    "dq_convention": (None, "dq convention: 'paper' (eq 12 as printed, power v_d i_d + v_q i_q) or "
+                            "'amplitude_invariant' (amplitude-invariant dq quantities: torque and power x 3/2)"),
     # VehicleParams: Table II
     "c_r": (None, "rolling-resistance coefficient" + _T2),
     "g": ("m/s2", "gravitational acceleration" + _T2),
@@ -87,7 +89,9 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                          "drag along the relative air speed) or 'paper' (eqs 3-4 and 8 as printed)"),
     "v_eps": ("m/s", "speed scale of the smooth sign of rolling resistance (load_model 'physical')"),
     # PlantParams: numerics and initial state
-    "rk4_substeps": (None, "RK4 sub-steps per communication step"),
+    "rk4_substeps": (None, "RK4 sub-steps per communication step (at least; see substep_angle)"),
+    "substep_angle": ("rad", "largest electrical angle per RK4 sub-step: a step takes max(rk4_substeps, "
+                             "ceil(N |omega_m| h / substep_angle)) sub-steps; 0 = off"),
     "i_d0": ("A", "initial d-axis current"),
     "i_q0": ("A", "initial q-axis current"),
     "omega_m0": ("rad/s", "initial mechanical rotor speed"),

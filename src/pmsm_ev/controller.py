@@ -50,7 +50,8 @@ def controller_gains(p: ControllerParams, motor: MotorParams, startup: StartupPa
     * Decoupling filters (17-18): T_d = 1 / omega_c, so that i_dl, i_ql follow the
       references the way the closed-loop currents do.
     * Speed PI (14) on the closed current loop seen as ideal (omega_c >> omega_n) and the
-      torque of eq 12 with i_d = 0, T_e = k_t i_q, k_t = N psi (the paper's scaling, no 3/2),
+      torque of eq 12 with i_d = 0, T_e = k_t i_q, k_t = k_dq N psi (``MotorParams.k_dq``: 1 in the
+      paper's scaling, no 3/2),
       driving J = J_m + J_load (eq 9): J s^2 + k_t K_p s + k_t K_i = 0 is
       s^2 + 2 zeta omega_n s + omega_n^2 = 0 with K_p = 2 zeta omega_n J / k_t,
       K_i = omega_n^2 J / k_t.
@@ -66,7 +67,7 @@ def controller_gains(p: ControllerParams, motor: MotorParams, startup: StartupPa
     """
     wc, wn, zeta = p.omega_c, p.omega_n, p.zeta
     j = motor.J_m + p.J_load  # J_eq of eq 9 with the controller's J_m
-    k_t = motor.N * motor.psi  # torque constant of eq 12 with i_d = 0 [N m/A]
+    k_t = motor.k_dq * motor.N * motor.psi  # torque constant of eq 12 with i_d = 0 [N m/A] (x k_dq)
     return ControllerGains(
         kp_w=p.kp_w or 2 * zeta * wn * j / k_t,
         ki_w=p.ki_w or wn**2 * j / k_t,

@@ -121,8 +121,8 @@ class ExtendedKalmanFilter(_Observer):
                 (_k.C_C_WPSI, m.N * m.psi * dt / m.L_q),  # (A15), psi part
                 (_k.C_C_VD, dt / m.L_d),
                 (_k.C_C_VQ, dt / m.L_q),
-                (_k.C_C_TPSI, m.N * m.psi * dt / J_m),  # (A19), psi part
-                (_k.C_C_TDQ, m.N * (m.L_d - m.L_q) * dt / J_m),  # (A18)/i_q, (A19)/i_d
+                (_k.C_C_TPSI, m.k_dq * m.N * m.psi * dt / J_m),  # (A19), psi part (x k_dq)
+                (_k.C_C_TDQ, m.k_dq * m.N * (m.L_d - m.L_q) * dt / J_m),  # (A18)/i_q, (A19)/i_d
                 (_k.C_C_TL, -dt / J_m),  # (A22)
                 (_k.C_C_TH, m.N * dt)):  # (A25)
             c[slot] = float(value)

@@ -22,6 +22,8 @@ LOAD_MODELS = ("physical", "paper")
 DECOUPLING_MODES = ("physical", "paper")
 ANGLE_SOURCES = ("measured", "estimated")
 OBSERVERS = ("ekf5", "ekf4", "ekf5ab", "sensored", "sensorless")
+#: how the dq quantities scale to the phase quantities (``MotorParams.dq_convention``)
+DQ_CONVENTIONS = ("paper", "amplitude_invariant")
 
 
 class ParameterError(ValueError):
@@ -53,8 +55,25 @@ class MotorParams:
     #: speed scale of the smooth sign of T_m0 in the "physical" load model [rad/s]
     #: [chosen]: 0.1 rad/s (2.3 mm/s at the wheel), smooth enough for RK4 at 10 kHz.
     omega_eps: float = 0.1
+    #: the dq convention, stated once (docs/speed-range.md). The project's Clarke and Park transforms,
+    #: current sensors and voltage limit (u_max = v_dc / sqrt 3) are amplitude-invariant: a dq current
+    #: of 1 A is a phase current of 1 A peak. With those, the power into the winding is
+    #: 3/2 (v_d i_d + v_q i_q) and the torque 3/2 N (psi i_q + (L_d - L_q) i_d i_q); eq 12 as printed
+    #: has no 3/2. "paper" (default, the paper's scenarios): eq 12 as printed, and the power that
+    #: balances eqs 10-12 is then v_d i_d + v_q i_q (the model's own scaling, as if power-invariant);
+    #: "amplitude_invariant": torque and power both 3/2 of that (the physical correction). Either way
+    #: the energy balance closes; ``k_dq`` is the factor.
+    dq_convention: str = "paper"
+
+    @property
+    def k_dq(self) -> float:
+        """The factor of eq 12's torque and of v_d i_d + v_q i_q in the power [-]: 1 ("paper"),
+        3/2 ("amplitude_invariant"); see ``dq_convention``."""
+        return 1.5 if self.dq_convention == "amplitude_invariant" else 1.0
 
     def validate(self) -> None:
+        _require(self.dq_convention in DQ_CONVENTIONS,
+                 f"dq_convention must be one of {DQ_CONVENTIONS} (got {self.dq_convention!r})")
         _require(self.N >= 1 and float(self.N).is_integer(), f"N must be a whole number >= 1 (got {self.N})")
         _require(self.psi > 0, f"psi must be > 0 V s/rad (got {self.psi})")
         _require(self.L_d > 0, f"L_d must be > 0 H (got {self.L_d})")
@@ -137,6 +156,12 @@ class PlantParams:
     #: angle turns 0.08 rad per 1e-4 s step; one RK4 step has a local error ~1e-8 of
     #: that, so 1 is accurate; raise it for larger communication steps.
     rk4_substeps: int = 1
+    #: the largest electrical angle one RK4 sub-step may turn [rad] [chosen]: a step takes
+    #: max(rk4_substeps, ceil(N |omega_m| dt / substep_angle)) sub-steps, so the plant stays accurate
+    #: at top speed (1554 rad/s turns 0.62 rad per 1e-4 s period: 7 sub-steps; RK4's local error on
+    #: the rotation is ~(0.1)^5 / 120 = 8e-8 of a sub-step's). 0.1 rad keeps one sub-step up to
+    #: 250 rad/s at 10 kHz (the paper's scenarios run as before); 0 = off (always rk4_substeps).
+    substep_angle: float = 0.1
     i_d0: float = 0.0  #: initial d current [A]
     i_q0: float = 0.0  #: initial q current [A]
     omega_m0: float = 0.0  #: initial mechanical speed [rad/s] (start-up from standstill)
@@ -219,6 +244,8 @@ class PlantParams:
     def validate(self) -> None:
         _require(self.rk4_substeps >= 1 and float(self.rk4_substeps).is_integer(),
                  f"rk4_substeps must be a whole number >= 1 (got {self.rk4_substeps})")
+        _require(math.isfinite(self.substep_angle) and self.substep_angle >= 0,
+                 f"substep_angle must be >= 0 rad, 0 = off (got {self.substep_angle})")
         for name in ("i_d0", "i_q0", "omega_m0", "theta_e0", "sensor_offset_a", "sensor_offset_b"):
             _require(math.isfinite(getattr(self, name)), f"{name} must be finite")
         _require(math.isfinite(self.sensor_noise) and self.sensor_noise >= 0,

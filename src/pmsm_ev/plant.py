@@ -68,6 +68,7 @@ class Plant:
                   _k.P_A_F: v.A_f, _k.P_R_W: v.r_w, _k.P_ETA: v.eta, _k.P_N_G: v.n_g, _k.P_V_A: v.v_a,
                   _k.P_V_EPS: v.v_eps, _k.P_PAPER: 1.0 if v.load_model == "paper" else 0.0,
                   _k.P_SUBSTEPS: p.rk4_substeps, _k.P_DT_I0: p.dead_time_i0,
+                  _k.P_K_DQ: m.k_dq, _k.P_SUBSTEP_ANGLE: p.substep_angle,
                   _k.P_SAT: 1.0 if (p.sat_i_d > 0 or p.sat_i_q > 0) else 0.0,
                   _k.P_SAT_AD: 1.0 / p.sat_i_d if p.sat_i_d > 0 else 0.0,
                   _k.P_SAT_AQ: 1.0 / p.sat_i_q if p.sat_i_q > 0 else 0.0,

@@ -160,7 +160,10 @@ PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
     ("P_SAT", 1, "magnetic saturation: 1.0 = on (``saturated_flux``)"),
     ("P_SAT_AD", 1, "1/I_sat of the d axis [1/A]"),
     ("P_SAT_AQ", 1, "1/I_sat of the q axis [1/A]"),
-), size=27)
+    ("P_K_DQ", 1, "the dq convention's factor of eq 12's torque and of the power [-] (``MotorParams.k_dq``)"),
+    ("P_SUBSTEP_ANGLE", 1, "the largest electrical angle of one RK4 sub-step [rad] (0 = off; "
+                           "``PlantParams.substep_angle``)"),
+), size=29)
 
 #: the control unit's state vector (controller + observer)
 UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (

@@ -25,6 +25,7 @@ from .layout import (
     P_ETA,
     P_G,
     P_J_EQ,
+    P_K_DQ,
     P_L_D,
     P_L_Q,
     P_M_V,
@@ -39,6 +40,7 @@ from .layout import (
     P_SAT,
     P_SAT_AD,
     P_SAT_AQ,
+    P_SUBSTEP_ANGLE,
     P_SUBSTEPS,
     P_T_M0,
     P_V_A,
@@ -211,11 +213,12 @@ def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     if pp[P_SAT] != 0.0:  # saturated inductances
         did, diq = saturated_current_derivatives(i_d, i_q, omega_m, v_d, v_q, pp[P_R_S], pp[P_L_D], pp[P_L_Q],
                                                  pp[P_PSI], N, pp[P_SAT_AD], pp[P_SAT_AQ])
-        t_e = saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N, pp[P_SAT_AD], pp[P_SAT_AQ])
+        t_e = pp[P_K_DQ] * saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N, pp[P_SAT_AD],
+                                            pp[P_SAT_AQ])
     else:
         did, diq = current_derivatives(i_d, i_q, omega_m, v_d, v_q,
                                        pp[P_R_S], pp[P_L_D], pp[P_L_Q], pp[P_PSI], N)  # (10), (11)
-        t_e = electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12)
+        t_e = pp[P_K_DQ] * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12) x k_dq
     t_l = plant_load_torque(omega_m, delta, pp)  # (29)
     t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], pp[P_PAPER] != 0.0)  # (8)
     dw = (t_e - t_f - t_l) / pp[P_J_EQ]  # (9) = (28)
@@ -228,9 +231,10 @@ def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
     """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state: inverse Park, eq 12, eq 29, eqs 1, 6."""
     i_alpha, i_beta = inverse_park(i_d, i_q, theta_e)
     if pp[P_SAT] != 0.0:
-        t_e = saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N], pp[P_SAT_AD], pp[P_SAT_AQ])
+        t_e = pp[P_K_DQ] * saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N], pp[P_SAT_AD],
+                                            pp[P_SAT_AQ])
     else:
-        t_e = electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N])  # (12)
+        t_e = pp[P_K_DQ] * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N])  # (12) x k_dq
     t_l = plant_load_torque(omega_m, delta, pp)  # (29)
     v_v = pp[P_R_W] * omega_m / pp[P_N_G]  # (1), (6)
     return i_alpha, i_beta, t_e, t_l, v_v
@@ -239,11 +243,14 @@ def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
 @kernel(_sig(f"UniTuple({_F}, 10)", _F, _F, _F, _F, _F, _F, _F, _F, _V))
 def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp):
     """Advance the state by dt with the voltage and elevation held (RK4, ``P_SUBSTEPS``
-    sub-steps); return the new (i_d, i_q, omega_m, theta_e) and the outputs at the new
+    sub-steps, more where the rotor turns more than ``P_SUBSTEP_ANGLE`` electrical radians in one of
+    them at the speed the step starts with); return the new (i_d, i_q, omega_m, theta_e) and the outputs at the new
     state: (i_alpha, i_beta) (clean), T_e, T_L_mech at ``delta``, v_vehicle; and the
     distance the vehicle moved [m]: r_w / (n_g N) times the (unwrapped) RK4 angle step of
     eq 13, i.e. eqs 1, 6 integrated by the same RK4."""
     n = int(pp[P_SUBSTEPS])
+    if pp[P_SUBSTEP_ANGLE] > 0.0:  # at most that angle per sub-step: accurate at top speed
+        n = max(n, int(math.ceil(abs(pp[P_N] * omega_m) * dt / pp[P_SUBSTEP_ANGLE])))
     h = dt / n
     x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
     for _ in range(n):
