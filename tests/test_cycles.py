@@ -42,7 +42,7 @@ PUBLISHED = {
     "us06": (600.0, 8.01 * MI, 0.005 * MI, 80.3 * MPH, 0.05 * MPH),
 }
 #: name: (stops, restarts): the issue's counts (every standstill after driving, the end's included)
-#: and the EPA's (the stops between drives: US06 "four stops", HWFET none)
+#: and the published descriptions' (the stops between drives: US06 "four stops", HWFET none)
 STOPS = {"wltc3b": (8, 7), "udds": (17, 16), "hwfet": (1, 0), "us06": (5, 4)}
 #: WLTC class 3b phases: (duration [s], distance [km], top speed [km/h])
 WLTC3B = {"low": (589.0, 3.095, 56.5), "medium": (433.0, 4.756, 76.6), "high": (455.0, 7.162, 97.4),

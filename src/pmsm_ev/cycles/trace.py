@@ -15,8 +15,9 @@ Definitions (docs/cycles.md, "The cycles as data"):
   1100 s; ``Cycle.stop_periods``). With this, WLTC class 3b stops 8 times, UDDS 17, HWFET 1 and
   US06 5.
 * restart: a stop after which the car moves again (every stop but a final one): 7, 16, 0 and 4.
-  This is the count the US EPA quotes ("four stops" in US06, "no stops" in HWFET): the stops
-  between drives, without the end of the test.
+  This is the count the cycles' published descriptions quote, the stops between drives without
+  the end of the test: "four stops" for US06 (the SFTP's description), none for HWFET (Natural
+  Resources Canada's description of the highway test).
 """
 
 from __future__ import annotations
