@@ -61,7 +61,7 @@ def test_acceleration_figures_of_a_constant_acceleration():
     m_v = 900.0
     e_kin = 0.5 * m_v * v**2
     e_regen = np.where(t >= t_brake, 0.6 * (e_kin[np.searchsorted(t, t_brake)] - e_kin), 0.0)
-    f = acceleration_figures(_run(t, w_ref, w_m, E_kin=e_kin, E_regen=e_regen))
+    f = acceleration_figures(_run(t, w_ref, w_m, E_kinetic=e_kin, E_regen=e_regen))
     assert f["t_launch"] == pytest.approx(t_launch, abs=0.011)
     assert f["t_0_50"] == pytest.approx(50.0 / 3.6 / a, abs=0.011)
     assert f["t_0_100"] == pytest.approx(100.0 / 3.6 / a, abs=0.011)

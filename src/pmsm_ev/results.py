@@ -576,7 +576,7 @@ def acceleration_figures(r: dict[str, np.ndarray]) -> dict | None:
     launch (the first row with omega_ref > ``LAUNCH_REF``), ``t_0_50`` and ``t_0_100`` [s] to 50 and
     100 km/h (None if not reached), ``top_speed_kmh`` and when (``t_top``); the braking from the top speed:
     ``t_brake`` [s], the first row after the top speed whose reference is below its maximum (None if it
-    never falls), ``braking_time`` to below 1 km/h, and with the plant's energy columns ``E_kin`` and
+    never falls), ``braking_time`` to below 1 km/h, and with the plant's energy columns ``E_kinetic`` and
     ``E_regen`` recorded (J): ``kinetic_Wh`` at the braking's start, ``recovered_Wh`` (the DC-link energy
     regenerated from then on) and ``recovered_share`` of the kinetic energy."""
     t, v, w_ref = r["time"], r["v_vehicle"] * KMH, r["omega_ref"]
@@ -598,8 +598,8 @@ def acceleration_figures(r: dict[str, np.ndarray]) -> dict | None:
     out["t_brake"] = float(t[ib])
     stopped = np.nonzero((np.arange(len(t)) >= ib) & (np.abs(v) < 1.0))[0]
     out["braking_time"] = float(t[stopped[0]] - t[ib]) if len(stopped) else None
-    if "E_kin" in r and "E_regen" in r:
-        kinetic = float(r["E_kin"][ib])
+    if "E_kinetic" in r and "E_regen" in r:
+        kinetic = float(r["E_kinetic"][ib])
         recovered = float(r["E_regen"][-1] - r["E_regen"][ib])
         out.update(kinetic_Wh=kinetic / 3600.0, recovered_Wh=recovered / 3600.0,
                    recovered_share=recovered / kinetic if kinetic > 0 else None)
