@@ -229,6 +229,25 @@ def cmd_compare(a) -> int:
     return 0
 
 
+def cmd_envelope(a) -> int:
+    from . import envelope  # noqa: PLC0415 - matplotlib and the map's losses: only for this command
+
+    params = envelope.parameters(a.set)
+    summary = envelope.draw(params, Path(a.out), runs=a.run or (), omega_max=a.speed_max,
+                            efficiency=not a.no_efficiency)
+    sp = summary["speeds"]
+
+    def rad_s(x):
+        return "none" if x is None else f"{x:.0f} rad/s"
+
+    print(f"T_max {summary['limits']['T_max']:.1f} N m at I_max {summary['limits']['i_max']:g} A; base speed "
+          f"{rad_s(sp['base_speed'])}, MTPV from {rad_s(sp['mtpv_speed'])}, max speed {rad_s(sp['max_speed'])}")
+    for f in summary["figures"]:
+        print(f)
+    print(Path(a.out) / "envelope.json")
+    return 0
+
+
 def cmd_report(a) -> int:
     if a.list:
         for c in report.CONFIGS:
@@ -391,6 +410,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start of the window of the 'after' figures [s] (default: 20, past the start-up ramp)")
     c.add_argument("--no-figures", action="store_true", help="only the table")
     c.set_defaults(func=cmd_compare)
+
+    ev = sub.add_parser("envelope", help="draw the torque-speed envelope and the efficiency map",
+                        description="Draw where the drive can go: the torque-speed envelope of the reference "
+                                    "generator (MTPA, field weakening, MTPV; the current and voltage limits) with the "
+                                    "current plane, and the motor + inverter efficiency map from the plant's loss "
+                                    "model, into OUT/envelope.png, OUT/efficiency.png, OUT/envelope.json. Defaults: "
+                                    "the package's motor, field weakening on a 360 V DC link.")
+    ev.add_argument("--set", nargs="+", metavar="NAME=VALUE", default=[],
+                    help="any motor, controller, plant or vehicle parameter, e.g. L_d=0.3e-3 i_max=450 "
+                         "inverter_losses=true (a name of several groups changes each)")
+    ev.add_argument("--run", nargs="+", metavar="RUN_DIR", help="overlay the operating points of these runs")
+    ev.add_argument("--speed-max", type=_positive, metavar="RAD_S", help="the speed axis's end [rad/s]")
+    ev.add_argument("--no-efficiency", action="store_true", help="only the envelope (the map takes ~10 s)")
+    ev.add_argument("--out", metavar="DIR", default="runs/envelope", help="output directory (default: runs/envelope)")
+    ev.set_defaults(func=cmd_envelope)
 
     rp = sub.add_parser("report", help="run the observer comparison and write docs/results.md",
                         description="Co-simulate every configuration of the observer comparison (both paper "
