@@ -128,7 +128,6 @@ class ExtendedKalmanFilter(_Observer):
             c[slot] = float(value)
         # the current model's discretisation (``EkfParams.discretisation``): forward Euler, or Tustin's rule
         c[_k.C_EKF_BILINEAR] = 1.0 if discretisation == "bilinear" else 0.0
-        c[_k.C_EKF_HALF] = 0.5 * m.N * dt
         c[_k.C_R0], c[_k.C_R1] = (float(v) for v in r_diag)
         for i, q in enumerate(q_diag):
             c[_k.C_Q + i] = float(q)

@@ -127,7 +127,9 @@ def current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est):
     19-20 on the current predicted at the middle of the period the voltage is applied over,
     x = i + C_CC_PRED (i_ref - i) (the closed loop's first-order response); under the voltage limit
     only the PI part u is shortened, v = f + lam u with |v| = u_max (f, the operating point's own
-    voltage, keeps its dq angle; if |f| alone exceeds u_max, f is scaled to it), and the integrators
+    voltage, here on the measured current, keeps its dq angle; if |f| alone exceeds u_max, the whole vector
+    is scaled, as in ``current_step``, so that the PIs still turn it; within the rest the d PI
+    part comes first, the field-weakening current, and the q part gets what is left), and the integrators
     are updated with the realisable reference error (u_lim - I) / K_p, the error the limited
     voltage realises (Harnefors' anti-windup), not held. The filters of eqs 17-18 run on, unused."""
     dt = c[C_DT]
@@ -146,21 +148,26 @@ def current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est):
     u_max = c[C_U_MAX]
     v_d = f_d + u_d
     v_q = f_q + u_q
-    if v_d * v_d + v_q * v_q > u_max * u_max:
+    if v_d * v_d + v_q * v_q > u_max * u_max:  # priority: f, then the d PI part, then the q PI part
         s[S_SAT] = 1.0
+        # limited, the loop does not follow its design: f on the measured current
+        f_d = -w_e * c[C_L_Q] * i_q
+        f_q = w_e * (c[C_L_D] * i_d + c[C_PSI])
         f2 = f_d * f_d + f_q * f_q
-        if f2 >= u_max * u_max:  # the operating point's own voltage is beyond the limit: it, scaled
-            scale = u_max / math.sqrt(f2)
-            v_d = f_d * scale
-            v_q = f_q * scale
-            r_d = 0.0
+        if f2 >= u_max * u_max:  # the present current's own voltage is beyond the limit: the whole vector
+            scale = u_max / math.sqrt(v_d * v_d + v_q * v_q)  # scaled, so that the PIs still turn it
+            v_d *= scale
+            v_q *= scale
+            r_d = v_d - f_d  # the PI part it realises
+            r_q = v_q - f_q
+        elif (f_d + u_d) * (f_d + u_d) + f_q * f_q > u_max * u_max:  # the d part shortened, no q part
+            r_d = extension(f_d, f_q, u_d, 0.0, u_max) * u_d
             r_q = 0.0
-        else:  # |f + lam u| = u_max, 0 <= lam < 1
-            a = u_d * u_d + u_q * u_q
-            b = f_d * u_d + f_q * u_q
-            lam = (math.sqrt(b * b + a * (u_max * u_max - f2)) - b) / a
-            r_d = lam * u_d
-            r_q = lam * u_q
+            v_d = f_d + r_d
+            v_q = f_q
+        else:  # the d part whole, the q part shortened
+            r_d = u_d
+            r_q = extension(f_d + u_d, f_q, 0.0, u_q, u_max) * u_q
             v_d = f_d + r_d
             v_q = f_q + r_q
         s[S_INT_D] += c[C_KI_ID] * dt * (r_d - s[S_INT_D]) / kp_d  # the realisable reference
@@ -170,6 +177,14 @@ def current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est):
         s[S_INT_D] += c[C_KI_ID] * e_d * dt
         s[S_INT_Q] += c[C_KI_IQ] * e_q * dt
     return v_d, v_q
+
+
+@kernel()
+def extension(f_d, f_q, u_d, u_q, u_max):
+    """The lam in [0, 1] with |f + lam u| = u_max, for |f| < u_max < |f + u|."""
+    a = u_d * u_d + u_q * u_q
+    b = f_d * u_d + f_q * u_q
+    return (math.sqrt(b * b + a * (u_max * u_max - f_d * f_d - f_q * f_q)) - b) / a
 
 
 @kernel()

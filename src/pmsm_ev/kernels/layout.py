@@ -302,8 +302,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_CC_PRED", 1, "... the share of the current error the decoupling predicts the current to have made up at "
                      "the middle of the applied period: 1 - exp(-omega_c dt angle_advance) [-]"),
     ("C_EKF_BILINEAR", 1, "1.0: the observers' current model stepped by Tustin's rule (``EkfParams.discretisation``)"),
-    ("C_EKF_HALF", 1, "... N dt / 2: half the electrical angle per period over omega_m [s]"),
-), size=88)
+), size=87)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 UNIT_STATE_LAYOUT.export(globals())

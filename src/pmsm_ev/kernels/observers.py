@@ -30,7 +30,6 @@ from .layout import (
     C_C_WQ,
     C_DT,
     C_EKF_BILINEAR,
-    C_EKF_HALF,
     C_N,
     C_OBSERVER,
     C_PSI_ADAPT,
@@ -145,19 +144,6 @@ def bilinear_currents(c, i_d, i_q, w, u_d, u_q, c_wpsi):
 
 
 @kernel()
-def bilinear_input(v_d, v_q, a):
-    """The input voltage of Tustin's step for a vector held in the stationary frame over the period:
-    (1 + j a) v_e, v_e the vector in the frame at the period's end, given (v_d, v_q) in the frame at
-    mid-period (a = omega_e dt / 2). For R_s = 0, L_d = L_q the step is then exact: the exact map gives
-    the held vector e^(-j a) dt / L against Tustin's dt / (L (1 + j a)). Returns the input and v_e."""
-    ca = math.cos(a)
-    sa = math.sin(a)
-    e_d = ca * v_d + sa * v_q
-    e_q = -sa * v_d + ca * v_q
-    return e_d - a * e_q, e_q + a * e_d, e_d, e_q
-
-
-@kernel()
 def ekf5_time_update_bilinear(s, c, u_d, u_q, du_th_d, du_th_q, du_w_d, du_w_q):
     """The EKF5's time update with Tustin's step of A2-A3 (``bilinear_currents``) for the input
     voltage (u_d, u_q), whose derivatives by theta and omega_m are du_th, du_w; A4-A6 as printed."""
@@ -206,12 +192,10 @@ def adapt_psi(s, c):
 @kernel()
 def ekf5_predict(s, c, v_d, v_q):
     """The paper's EKF5 time update (eqs 23-24, A2-A32) with the dq voltage command of the period;
-    with ``C_EKF_BILINEAR`` Tustin's step, the command taken as the vector at mid-period."""
+    with ``C_EKF_BILINEAR`` Tustin's step (``bilinear_currents``), the command taken as the held
+    voltage (the vector at mid-period, with the angle advance of half a period)."""
     if c[C_EKF_BILINEAR] != 0.0:
-        a = c[C_EKF_HALF] * s[S_X + 2]
-        u_d, u_q, e_d, e_q = bilinear_input(v_d, v_q, a)
-        k = c[C_EKF_HALF] * a  # d u / d omega = C_EKF_HALF a v_e
-        ekf5_time_update_bilinear(s, c, u_d, u_q, 0.0, 0.0, k * e_d, k * e_q)
+        ekf5_time_update_bilinear(s, c, v_d, v_q, 0.0, 0.0, 0.0, 0.0)
         return
     ekf5_time_update(s, c, v_d, v_q, 0.0, 0.0, 0.0)
 
@@ -229,15 +213,10 @@ def ekf5ab_predict(s, c, v_alpha, v_beta):
         s[S_STARTED] = 1.0
         return
     c_mid = c[C_C_MID]
-    if c[C_EKF_BILINEAR] != 0.0:  # Tustin's step on the vector in the frame at the period's end
-        a = c_mid * s[S_X + 2]
-        e_d, e_q = park(v_alpha, v_beta, s[S_X + 3] + 2.0 * a)
-        u_d = e_d - a * e_q
-        u_q = e_q + a * e_d
-        # d u / d theta = (u_q, -u_d); d u / d omega = 2 c_mid (u_q, -u_d) + c_mid (-e_q, e_d)
-        ekf5_time_update_bilinear(s, c, u_d, u_q, u_q, -u_d, c_mid * (2.0 * u_q - e_q), c_mid * (e_d - 2.0 * u_d))
-        return
     v_d, v_q = park(v_alpha, v_beta, s[S_X + 3] + c_mid * s[S_X + 2])
+    if c[C_EKF_BILINEAR] != 0.0:  # Tustin's step; d v / d theta = (v_q, -v_d), d v / d omega = c_mid of that
+        ekf5_time_update_bilinear(s, c, v_d, v_q, v_q, -v_d, c_mid * v_q, -c_mid * v_d)
+        return
     ekf5_time_update(s, c, v_d, v_q, c[C_C_VD] * v_q, -c[C_C_VQ] * v_d, c_mid)
 
 
@@ -254,13 +233,7 @@ def ekf4_predict(s, c, v_d, v_q):
     c_wq, c_wd, c_wpsi, c_th = c[C_C_WQ], c[C_C_WD], c[C_C_WPSI], c[C_C_TH]
     f32 = c_th
     if c[C_EKF_BILINEAR] != 0.0:  # Tustin's step, the command taken as the vector at mid-period
-        a = c[C_EKF_HALF] * w
-        u_d, u_q, e_d, e_q = bilinear_input(v_d, v_q, a)
-        x0, x1, f00, f01, f02, f10, f11, f12, m00, m01, m10, m11 = bilinear_currents(c, i_d, i_q, w, u_d, u_q,
-                                                                                     c_wpsi)
-        k = c[C_EKF_HALF] * a  # d u / d omega = C_EKF_HALF a v_e
-        f02 += k * (m00 * c[C_C_VD] * e_d + m01 * c[C_C_VQ] * e_q)
-        f12 += k * (m10 * c[C_C_VD] * e_d + m11 * c[C_C_VQ] * e_q)
+        x0, x1, f00, f01, f02, f10, f11, f12, _, _, _, _ = bilinear_currents(c, i_d, i_q, w, v_d, v_q, c_wpsi)
         s[S_X] = x0
         s[S_X + 1] = x1
     else:
