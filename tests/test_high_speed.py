@@ -18,7 +18,15 @@ from pmsm_ev import accel
 from pmsm_ev import kernels as _k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.observers import Ekf5AlphaBeta
-from pmsm_ev.params import SENSORLESS_EKF, ControllerParams, EkfParams, MotorParams, PlantParams, VehicleParams
+from pmsm_ev.params import (
+    SENSORLESS_EKF,
+    ControllerParams,
+    EkfParams,
+    MotorParams,
+    ParameterError,
+    PlantParams,
+    VehicleParams,
+)
 from pmsm_ev.plant import Plant
 from pmsm_ev.transforms import inverse_park, park
 
@@ -279,3 +287,27 @@ def test_sensorless_unit_holds_the_angle_at_top_speed():
     assert mode == _k.MODE_EKF
     assert abs(mean) < BILINEAR_ANGLE and rms < BILINEAR_ANGLE
     assert abs(speed - omega) < 20.0
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: ControlUnit("sensored", controller=ControllerParams(current_control="fast")),
+     "current_control must be one of ('paper', 'high_speed') (got 'fast')"),
+    (lambda: ControlUnit("ekf5", controller=ControllerParams(current_control="high_speed", decoupling="paper")),
+     "current_control 'high_speed' needs decoupling 'physical' (eq 20 as printed does not cancel eq 11)"),
+    (lambda: ControlUnit("ekf5ab", ekf=EkfParams(discretisation="rk4")),
+     "discretisation must be one of ('euler', 'bilinear') (got 'rk4')"),
+])
+def test_a_bad_option_is_refused_in_one_line(make, message):
+    with pytest.raises(ParameterError) as info:
+        make()
+    assert str(info.value) == message
+
+
+def test_the_options_are_off_by_default():
+    unit = ControlUnit("ekf5ab")
+    assert ControllerParams().current_control == "paper" and EkfParams().discretisation == "euler"
+    assert unit._c[_k.C_CC_HS] == 0.0 and unit._c[_k.C_CC_PRED] == 0.0 and unit._c[_k.C_EKF_BILINEAR] == 0.0
+    hs = ControlUnit("ekf5ab", controller=ControllerParams(current_control="high_speed"),
+                     ekf=EkfParams(discretisation="bilinear"))
+    assert hs._c[_k.C_CC_PRED] == pytest.approx(1.0 - math.exp(-2000.0 * DT * 0.5), rel=1e-15)
+    assert hs._c[_k.C_EKF_BILINEAR] == 1.0
