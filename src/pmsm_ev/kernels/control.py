@@ -83,43 +83,6 @@ def speed_step(s, c, omega_ref, omega_est):
     return i_qref
 
 
-@kernel(_sig(f"UniTuple({_F}, 2)", _V, _V, _F, _F, _F, _F, _F))
-def current_step(s, c, i_dref, i_qref, i_d, i_q, omega_est):
-    """Current PIs (15-16), decoupling filters (17-18) and terms (19-20); the voltage
-    vector limited to u_max, the integrators held while it is limited. With ``C_CC_HS`` the
-    high-speed current control instead (``current_step_hs``)."""
-    if c[C_CC_HS] != 0.0:
-        return current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est)
-    dt = c[C_DT]
-    e_d = i_dref - i_d
-    e_q = i_qref - i_q
-    u_d = c[C_KP_ID] * e_d + s[S_INT_D]  # (15)
-    u_q = c[C_KP_IQ] * e_q + s[S_INT_Q]  # (16)
-    w_e = c[C_N] * omega_est
-    v_d = u_d - w_e * c[C_L_Q] * s[S_I_QL]  # (19)
-    if c[C_PAPER_SIGNS] != 0.0:
-        v_q = u_q - w_e * c[C_L_D] * s[S_I_DL] - w_e * c[C_PSI]  # (20) as printed
-    else:
-        v_q = u_q + w_e * c[C_L_D] * s[S_I_DL] + w_e * c[C_PSI]  # (20) corrected to cancel (11)
-    s[S_I_DL] += dt / c[C_T_D] * (i_dref - s[S_I_DL])  # (17)
-    s[S_I_QL] += dt / c[C_T_D] * (i_qref - s[S_I_QL])  # (18)
-    u_max = c[C_U_MAX]
-    mag = math.sqrt(v_d * v_d + v_q * v_q)
-    if mag > u_max:
-        s[S_SAT] = 1.0
-        if mag == math.inf:  # the squares overflowed (|v| > 1e154 V): the length of the
-            big = max(abs(v_d), abs(v_q))  # scaled vector; NaN if a component is infinite
-            mag = big * math.sqrt((v_d / big) * (v_d / big) + (v_q / big) * (v_q / big))
-        scale = u_max / mag
-        v_d *= scale
-        v_q *= scale
-    else:
-        s[S_SAT] = 0.0
-        s[S_INT_D] += c[C_KI_ID] * e_d * dt
-        s[S_INT_Q] += c[C_KI_IQ] * e_q * dt
-    return v_d, v_q
-
-
 @kernel()
 def current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est):
     """The high-speed current control (``ControllerParams.current_control = "high_speed"``,
@@ -185,6 +148,43 @@ def extension(f_d, f_q, u_d, u_q, u_max):
     a = u_d * u_d + u_q * u_q
     b = f_d * u_d + f_q * u_q
     return (math.sqrt(b * b + a * (u_max * u_max - f_d * f_d - f_q * f_q)) - b) / a
+
+
+@kernel(_sig(f"UniTuple({_F}, 2)", _V, _V, _F, _F, _F, _F, _F))
+def current_step(s, c, i_dref, i_qref, i_d, i_q, omega_est):
+    """Current PIs (15-16), decoupling filters (17-18) and terms (19-20); the voltage
+    vector limited to u_max, the integrators held while it is limited. With ``C_CC_HS`` the
+    high-speed current control instead (``current_step_hs``)."""
+    if c[C_CC_HS] != 0.0:
+        return current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est)
+    dt = c[C_DT]
+    e_d = i_dref - i_d
+    e_q = i_qref - i_q
+    u_d = c[C_KP_ID] * e_d + s[S_INT_D]  # (15)
+    u_q = c[C_KP_IQ] * e_q + s[S_INT_Q]  # (16)
+    w_e = c[C_N] * omega_est
+    v_d = u_d - w_e * c[C_L_Q] * s[S_I_QL]  # (19)
+    if c[C_PAPER_SIGNS] != 0.0:
+        v_q = u_q - w_e * c[C_L_D] * s[S_I_DL] - w_e * c[C_PSI]  # (20) as printed
+    else:
+        v_q = u_q + w_e * c[C_L_D] * s[S_I_DL] + w_e * c[C_PSI]  # (20) corrected to cancel (11)
+    s[S_I_DL] += dt / c[C_T_D] * (i_dref - s[S_I_DL])  # (17)
+    s[S_I_QL] += dt / c[C_T_D] * (i_qref - s[S_I_QL])  # (18)
+    u_max = c[C_U_MAX]
+    mag = math.sqrt(v_d * v_d + v_q * v_q)
+    if mag > u_max:
+        s[S_SAT] = 1.0
+        if mag == math.inf:  # the squares overflowed (|v| > 1e154 V): the length of the
+            big = max(abs(v_d), abs(v_q))  # scaled vector; NaN if a component is infinite
+            mag = big * math.sqrt((v_d / big) * (v_d / big) + (v_q / big) * (v_q / big))
+        scale = u_max / mag
+        v_d *= scale
+        v_q *= scale
+    else:
+        s[S_SAT] = 0.0
+        s[S_INT_D] += c[C_KI_ID] * e_d * dt
+        s[S_INT_Q] += c[C_KI_IQ] * e_q * dt
+    return v_d, v_q
 
 
 @kernel()
