@@ -118,6 +118,10 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                          "or 'paper' (eq 20 as printed)"),
     "angle_advance": (None, "advance of the inverse-Park angle, in control periods of omega_hat"),
     "zoh_compensation": (None, "lengthen the held voltage vector by a/sin(a), a = omega_e dt/2"),
+    "current_control": (None, "current control: 'paper' (eqs 15-20, decoupling on the filtered references, the "
+                              "whole vector scaled at u_max, integrators held) or 'high_speed' (decoupling on the "
+                              "current predicted at mid-period, back-EMF priority under the voltage limit with "
+                              "realisable-reference anti-windup, ZOH gain sin(a)/a; docs/high-speed.md)"),
     # EkfParams: diagonal covariances of eqs 24-27
     "q_i": ("A2", "EKF process noise of the currents, per step"),
     "q_omega": ("rad2/s2", "EKF process noise of the speed, per step (5-state EKFs)"),
@@ -165,6 +169,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                          "the drive's J_eq of eq 9 is 0.526 kg m^2)"),
     "psi_adapt": ("1/s", "magnet-flux adaptation gain of the stationary-frame EKF5 (ekf5ab, sensorless); 0 = off"),
     "psi_adapt_speed": ("rad/s", "the magnet-flux adaptation runs while |omega_hat| exceeds this"),
+    "discretisation": (None, "the EKFs' current model A2-A3: 'euler' (the paper's forward Euler) or 'bilinear' "
+                             "(Tustin's rule, exact input for a stationary held vector; docs/high-speed.md)"),
     # StartupParams: the sensorless unit's low-speed range
     "i_align": ("A", "alignment current at standstill"),
     "t_ramp": ("s", "alignment: ramp of the current to i_align on the +90 deg axis"),

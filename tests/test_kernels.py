@@ -152,7 +152,7 @@ def test_the_offsets_are_those_the_kernels_were_written_with():
             kernels.S_STARTED, kernels.S_MODE, kernels.S_STILL_OUT, kernels.UNIT_STATE) == (
         15, 20, 21, 46, 56, 66, 91, 92, 113, 114)
     assert (kernels.C_Q, kernels.C_C_MID, kernels.C_P0, kernels.C_T_RAMP, kernels.C_P0_ALIGNED,
-            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 84)
+            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 87)
 
 
 @pytest.mark.parametrize("rows,size,message", [

@@ -44,6 +44,22 @@ def test_jacobian_f_matches_finite_differences(cls):
 
 
 @pytest.mark.parametrize("cls", [Ekf5, Ekf4, Ekf5AlphaBeta])
+@pytest.mark.parametrize("omega", [190.0, 1500.0])
+def test_bilinear_jacobian_f_matches_finite_differences(cls, omega):
+    """EkfParams.discretisation = "bilinear" (Tustin's step of A2-A3): J_f is the derivative of that step,
+    at the paper's speed and at top speed (omega_e dt = 0.6 rad)."""
+    ekf = cls(M, DT, EkfParams(discretisation="bilinear"))
+    x = STATES[cls].copy()
+    x[2] = omega
+    v_d, v_q = -30.0, 70.0
+    analytic = ekf.jacobian_f(x, v_d, v_q)
+    numeric = fd_jacobian(lambda s: ekf.f(s, v_d, v_q), x)
+    # atol: the central difference of f's speed (~1500) carries ~1e-9 of rounding
+    np.testing.assert_allclose(analytic, numeric, rtol=1e-6, atol=1e-8)
+    assert not np.allclose(ekf.f(x, v_d, v_q), cls(M, DT).f(x, v_d, v_q))  # another step than Euler's
+
+
+@pytest.mark.parametrize("cls", [Ekf5, Ekf4, Ekf5AlphaBeta])
 def test_jacobian_h_matches_finite_differences(cls):
     ekf = cls(M, DT)
     x = STATES[cls]

@@ -143,6 +143,10 @@ class CurrentController(_Slots):
                             (_k.C_N, motor.N), (_k.C_L_D, motor.L_d), (_k.C_L_Q, motor.L_q),
                             (_k.C_PSI, motor.psi), (_k.C_PAPER_SIGNS, p.decoupling == "paper")):
             c[slot] = float(value)
+        # the high-speed current control (``ControllerParams.current_control``): the share of the error
+        # the first-order loop makes up by the middle of the applied period, angle_advance periods on
+        c[_k.C_CC_HS] = 1.0 if p.current_control == "high_speed" else 0.0
+        c[_k.C_CC_PRED] = 1.0 - math.exp(-p.omega_c * dt * p.angle_advance) if c[_k.C_CC_HS] else 0.0
         self.reset()
 
     @property

@@ -101,7 +101,7 @@ class ExtendedKalmanFilter(_Observer):
     """
 
     def __init__(self, motor: MotorParams, dt: float, q_diag, r_diag, p0_diag, x0=None,
-                 state=None, params=None, J: float | None = None):
+                 state=None, params=None, J: float | None = None, discretisation: str = "euler"):
         super().__init__(state, params)
         self.motor = motor
         self.dt = dt
@@ -126,6 +126,8 @@ class ExtendedKalmanFilter(_Observer):
                 (_k.C_C_TL, -dt / J_m),  # (A22)
                 (_k.C_C_TH, m.N * dt)):  # (A25)
             c[slot] = float(value)
+        # the current model's discretisation (``EkfParams.discretisation``): forward Euler, or Tustin's rule
+        c[_k.C_EKF_BILINEAR] = 1.0 if discretisation == "bilinear" else 0.0
         c[_k.C_R0], c[_k.C_R1] = (float(v) for v in r_diag)
         for i, q in enumerate(q_diag):
             c[_k.C_Q + i] = float(q)
@@ -219,7 +221,7 @@ class Ekf5(ExtendedKalmanFilter):
                          (e.q_i, e.q_i, e.q_omega, e.q_theta, e.q_TL), (e.r_i, e.r_i),
                          (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta, e.p0_TL),
                          x0 if x0 is not None else (0.0, 0.0, e.x0_omega, e.x0_theta, 0.0), state, params,
-                         e.inertia(motor))
+                         e.inertia(motor), e.discretisation)
 
     def h(self, x) -> np.ndarray:
         """Measurement model: z = [i_d, i_q]."""
@@ -319,7 +321,7 @@ class Ekf4(ExtendedKalmanFilter):
                          (e.q_i, e.q_i, e.q_omega_ekf4, e.q_theta), (e.r_i, e.r_i),
                          (e.p0_i, e.p0_i, e.p0_omega, e.p0_theta),
                          x0 if x0 is not None else (0.0, 0.0, e.x0_omega, e.x0_theta), state, params,
-                         e.inertia(motor))
+                         e.inertia(motor), e.discretisation)
 
     h = Ekf5.h
     jacobian_h = Ekf5.jacobian_h

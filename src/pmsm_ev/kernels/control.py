@@ -17,6 +17,8 @@ from .jit import kernel
 from .jit import sig as _sig
 from .layout import (
     C_ADVANCE,
+    C_CC_HS,
+    C_CC_PRED,
     C_DELAYED,
     C_DT,
     C_DTC_I0,
@@ -81,10 +83,80 @@ def speed_step(s, c, omega_ref, omega_est):
     return i_qref
 
 
+@kernel()
+def current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est):
+    """The high-speed current control (``ControllerParams.current_control = "high_speed"``,
+    docs/high-speed.md): the PIs (15-16) on the errors; the decoupling and back-EMF terms of eqs
+    19-20 on the current predicted at the middle of the period the voltage is applied over,
+    x = i + C_CC_PRED (i_ref - i) (the closed loop's first-order response); under the voltage limit
+    only the PI part u is shortened, v = f + lam u with |v| = u_max (f, the operating point's own
+    voltage, here on the measured current, keeps its dq angle; if |f| alone exceeds u_max, the whole vector
+    is scaled, as in ``current_step``, so that the PIs still turn it; within the rest the d PI
+    part comes first, the field-weakening current, and the q part gets what is left), and the integrators
+    are updated with the realisable reference error (u_lim - I) / K_p, the error the limited
+    voltage realises (Harnefors' anti-windup), not held. The filters of eqs 17-18 run on, unused."""
+    dt = c[C_DT]
+    e_d = i_dref - i_d
+    e_q = i_qref - i_q
+    kp_d = c[C_KP_ID]
+    kp_q = c[C_KP_IQ]
+    u_d = kp_d * e_d + s[S_INT_D]  # (15)
+    u_q = kp_q * e_q + s[S_INT_Q]  # (16)
+    w_e = c[C_N] * omega_est
+    k = c[C_CC_PRED]
+    f_d = -w_e * c[C_L_Q] * (i_q + k * e_q)  # (19) on the predicted current
+    f_q = w_e * (c[C_L_D] * (i_d + k * e_d) + c[C_PSI])  # (20), the signs that cancel (11)
+    s[S_I_DL] += dt / c[C_T_D] * (i_dref - s[S_I_DL])  # (17)
+    s[S_I_QL] += dt / c[C_T_D] * (i_qref - s[S_I_QL])  # (18)
+    u_max = c[C_U_MAX]
+    v_d = f_d + u_d
+    v_q = f_q + u_q
+    if v_d * v_d + v_q * v_q > u_max * u_max:  # priority: f, then the d PI part, then the q PI part
+        s[S_SAT] = 1.0
+        # limited, the loop does not follow its design: f on the measured current
+        f_d = -w_e * c[C_L_Q] * i_q
+        f_q = w_e * (c[C_L_D] * i_d + c[C_PSI])
+        f2 = f_d * f_d + f_q * f_q
+        if f2 >= u_max * u_max:  # the present current's own voltage is beyond the limit: the whole vector
+            scale = u_max / math.sqrt(v_d * v_d + v_q * v_q)  # scaled, so that the PIs still turn it
+            v_d *= scale
+            v_q *= scale
+            r_d = v_d - f_d  # the PI part it realises
+            r_q = v_q - f_q
+        elif (f_d + u_d) * (f_d + u_d) + f_q * f_q > u_max * u_max:  # the d part shortened, no q part
+            r_d = extension(f_d, f_q, u_d, 0.0, u_max) * u_d
+            r_q = 0.0
+            v_d = f_d + r_d
+            v_q = f_q
+        else:  # the d part whole, the q part shortened
+            r_d = u_d
+            r_q = extension(f_d + u_d, f_q, 0.0, u_q, u_max) * u_q
+            v_d = f_d + r_d
+            v_q = f_q + r_q
+        s[S_INT_D] += c[C_KI_ID] * dt * (r_d - s[S_INT_D]) / kp_d  # the realisable reference
+        s[S_INT_Q] += c[C_KI_IQ] * dt * (r_q - s[S_INT_Q]) / kp_q
+    else:
+        s[S_SAT] = 0.0
+        s[S_INT_D] += c[C_KI_ID] * e_d * dt
+        s[S_INT_Q] += c[C_KI_IQ] * e_q * dt
+    return v_d, v_q
+
+
+@kernel()
+def extension(f_d, f_q, u_d, u_q, u_max):
+    """The lam in [0, 1] with |f + lam u| = u_max, for |f| < u_max < |f + u|."""
+    a = u_d * u_d + u_q * u_q
+    b = f_d * u_d + f_q * u_q
+    return (math.sqrt(b * b + a * (u_max * u_max - f_d * f_d - f_q * f_q)) - b) / a
+
+
 @kernel(_sig(f"UniTuple({_F}, 2)", _V, _V, _F, _F, _F, _F, _F))
 def current_step(s, c, i_dref, i_qref, i_d, i_q, omega_est):
     """Current PIs (15-16), decoupling filters (17-18) and terms (19-20); the voltage
-    vector limited to u_max, the integrators held while it is limited."""
+    vector limited to u_max, the integrators held while it is limited. With ``C_CC_HS`` the
+    high-speed current control instead (``current_step_hs``)."""
+    if c[C_CC_HS] != 0.0:
+        return current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est)
     dt = c[C_DT]
     e_d = i_dref - i_d
     e_q = i_qref - i_q
@@ -114,6 +186,19 @@ def current_step(s, c, i_dref, i_qref, i_d, i_q, omega_est):
         s[S_INT_Q] += c[C_KI_IQ] * e_q * dt
     return v_d, v_q
 
+
+@kernel()
+def modulate(c, v_d, v_q, theta, omega, zoh):
+    """The vector to hold over the period: the inverse Park of (v_d, v_q) at the control angle
+    ``theta`` advanced by ``C_ADVANCE`` omega (``angle_advance`` periods), times the ZOH gain: with the
+    high-speed current control sin(a)/a, else with ``zoh`` and ``C_ZOH`` a/sin(a) (a = omega_e dt / 2,
+    ``zoh_compensation``), else 1."""
+    half_arc = c[C_HALF_PERIOD_N] * omega  # a = omega_e dt / 2
+    if c[C_CC_HS] != 0.0:
+        gain = math.sin(half_arc) / half_arc if abs(half_arc) > 1e-6 else 1.0
+    else:
+        gain = half_arc / math.sin(half_arc) if zoh and c[C_ZOH] != 0.0 and abs(half_arc) > 1e-6 else 1.0
+    return inverse_park(gain * v_d, gain * v_q, theta + c[C_ADVANCE] * omega)
 
 
 @kernel()
@@ -186,9 +271,7 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     omega_hat = s[S_X + 2]
     i_qref = speed_step(s, c, omega_ref, omega_hat)  # (14)
     v_d, v_q = current_step(s, c, c[C_I_D_REF], i_qref, i_d, i_q, omega_hat)  # (15)-(20)
-    half_arc = c[C_HALF_PERIOD_N] * omega_hat  # a = omega_e dt / 2
-    gain = half_arc / math.sin(half_arc) if c[C_ZOH] != 0.0 and abs(half_arc) > 1e-6 else 1.0
-    v_alpha, v_beta = inverse_park(gain * v_d, gain * v_q, theta_ctrl + c[C_ADVANCE] * omega_hat)
+    v_alpha, v_beta = modulate(c, v_d, v_q, theta_ctrl, omega_hat, True)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4])

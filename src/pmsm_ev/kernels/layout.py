@@ -297,7 +297,12 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_ALIGN_SLIP", 1, "|omega_hat| that ends the alignment: the rotor runs away under its vector [rad/s]"),
     ("C_ALIGN_SLIP_TIME", 1, "... for this long [s]"),
     ("C_STILL", 1, "below this |omega_hat| and |omega_if| in I-f the car stands: its angle is held [rad/s]"),
-), size=84)
+    # high-speed current control and discretisation
+    ("C_CC_HS", 1, "1.0: the high-speed current control (``ControllerParams.current_control``)"),
+    ("C_CC_PRED", 1, "... the share of the current error the decoupling predicts the current to have made up at "
+                     "the middle of the applied period: 1 - exp(-omega_c dt angle_advance) [-]"),
+    ("C_EKF_BILINEAR", 1, "1.0: the observers' current model stepped by Tustin's rule (``EkfParams.discretisation``)"),
+), size=87)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 UNIT_STATE_LAYOUT.export(globals())

@@ -29,6 +29,7 @@ from .layout import (
     C_C_WPSI,
     C_C_WQ,
     C_DT,
+    C_EKF_BILINEAR,
     C_N,
     C_OBSERVER,
     C_PSI_ADAPT,
@@ -107,6 +108,95 @@ def ekf5_time_update(s, c, v_d, v_q, f03, f13, c_mid):
 
 
 @kernel()
+def propagate5(s, c, f00, f01, f02, f03, f10, f11, f12, f13, f20, f21, f24, f32):
+    """P^f = J_f P J_f^T + Q (24) for the EKF5's J_f (rows as in ``ekf5_time_update``, which has the
+    same loop written inline: the paper's per-step path stays as it was)."""
+    for j in range(5):  # A = J_f P, column by column
+        p0 = s[S_P + j]
+        p1 = s[S_P + 5 + j]
+        p2 = s[S_P + 10 + j]
+        p3 = s[S_P + 15 + j]
+        p4 = s[S_P + 20 + j]
+        s[S_A + j] = f00 * p0 + f01 * p1 + f02 * p2 + f03 * p3
+        s[S_A + 5 + j] = f10 * p0 + f11 * p1 + f12 * p2 + f13 * p3
+        s[S_A + 10 + j] = f20 * p0 + f21 * p1 + p2 + f24 * p4
+        s[S_A + 15 + j] = f32 * p2 + p3
+        s[S_A + 20 + j] = p4
+    for i in range(5):  # P^f = A J_f^T + Q: column k of A J_f^T is A (row k of J_f)
+        a0 = s[S_A + 5 * i]
+        a1 = s[S_A + 5 * i + 1]
+        a2 = s[S_A + 5 * i + 2]
+        a3 = s[S_A + 5 * i + 3]
+        a4 = s[S_A + 5 * i + 4]
+        r = S_P + 5 * i
+        s[r] = f00 * a0 + f01 * a1 + f02 * a2 + f03 * a3
+        s[r + 1] = f10 * a0 + f11 * a1 + f12 * a2 + f13 * a3
+        s[r + 2] = f20 * a0 + f21 * a1 + a2 + f24 * a4
+        s[r + 3] = f32 * a2 + a3
+        s[r + 4] = a4
+        s[r + i] += c[C_Q + i]
+    s[S_THETA_PRIOR] = s[S_X + 3]
+
+
+@kernel()
+def bilinear_currents(c, i_d, i_q, w, u_d, u_q, c_wpsi):
+    """Tustin's step of the current model (A2-A3 as the trapezoidal rule, ``EkfParams.discretisation``
+    "bilinear"): with di/dt = A i + b (eqs 10-11, A's entries the constants of A8-A15 over dt),
+    (I - A dt/2) i' = (I + A dt/2) i + b dt, b dt = (dt/L_d u_d, dt/L_q u_q - N psi dt/L_q w).
+    Returns i_d', i_q', the Jacobian entries d i'/d(i_d, i_q, omega_m) at the voltage held
+    (g00, g01, g02, g10, g11, g12) and (I - A dt/2)^-1 (m00, m01, m10, m11), which maps a
+    derivative of b dt onto one of i'."""
+    r_d = 1.0 - c[C_A_RD]  # R_s dt / L_d
+    r_q = 1.0 - c[C_A_RQ]
+    a01 = c[C_C_WQ] * w
+    a10 = -c[C_C_WD] * w
+    det = (1.0 + 0.5 * r_d) * (1.0 + 0.5 * r_q) - 0.25 * a01 * a10
+    m00 = (1.0 + 0.5 * r_q) / det
+    m01 = 0.5 * a01 / det
+    m10 = 0.5 * a10 / det
+    m11 = (1.0 + 0.5 * r_d) / det
+    rhs0 = (1.0 - 0.5 * r_d) * i_d + 0.5 * a01 * i_q + c[C_C_VD] * u_d
+    rhs1 = 0.5 * a10 * i_d + (1.0 - 0.5 * r_q) * i_q + c[C_C_VQ] * u_q - c_wpsi * w
+    x0 = m00 * rhs0 + m01 * rhs1
+    x1 = m10 * rhs0 + m11 * rhs1
+    g00 = m00 * (1.0 - 0.5 * r_d) + m01 * 0.5 * a10  # (I - A dt/2)^-1 (I + A dt/2)
+    g01 = m00 * 0.5 * a01 + m01 * (1.0 - 0.5 * r_q)
+    g10 = m10 * (1.0 - 0.5 * r_d) + m11 * 0.5 * a10
+    g11 = m10 * 0.5 * a01 + m11 * (1.0 - 0.5 * r_q)
+    h0 = 0.5 * c[C_C_WQ] * (i_q + x1)  # d/d omega of (I + A dt/2) i + b dt - (I - A dt/2) i'
+    h1 = -0.5 * c[C_C_WD] * (i_d + x0) - c_wpsi
+    return (x0, x1, g00, g01, m00 * h0 + m01 * h1, g10, g11, m10 * h0 + m11 * h1, m00, m01, m10, m11)
+
+
+@kernel()
+def ekf5_time_update_bilinear(s, c, u_d, u_q, du_th_d, du_th_q, du_w_d, du_w_q):
+    """The EKF5's time update with Tustin's step of A2-A3 (``bilinear_currents``) for the input
+    voltage (u_d, u_q), whose derivatives by theta and omega_m are du_th, du_w; A4-A6 as printed."""
+    i_d = s[S_X]
+    i_q = s[S_X + 1]
+    w = s[S_X + 2]
+    th = s[S_X + 3]
+    t_l = s[S_X + 4]
+    c_wpsi, c_tpsi, c_tdq, c_th = c[C_C_WPSI], c[C_C_TPSI], c[C_C_TDQ], c[C_C_TH]
+    if c[C_PSI_ADAPT] != 0.0:
+        c_wpsi = c_wpsi * s[S_PSI_RATIO]
+        c_tpsi = c_tpsi * s[S_PSI_RATIO]
+    x0, x1, f00, f01, f02, f10, f11, f12, m00, m01, m10, m11 = bilinear_currents(c, i_d, i_q, w, u_d, u_q, c_wpsi)
+    vd = c[C_C_VD]
+    vq = c[C_C_VQ]
+    f03 = m00 * vd * du_th_d + m01 * vq * du_th_q
+    f13 = m10 * vd * du_th_d + m11 * vq * du_th_q
+    f02 += m00 * vd * du_w_d + m01 * vq * du_w_q
+    f12 += m10 * vd * du_w_d + m11 * vq * du_w_q
+    f20, f21, f24 = c_tdq * i_q, c_tpsi + c_tdq * i_d, c[C_C_TL]  # (A18, A19, A22)
+    s[S_X] = x0
+    s[S_X + 1] = x1
+    s[S_X + 2] = w + c_tpsi * i_q + c_tdq * i_d * i_q + c[C_C_TL] * t_l  # (A4)
+    s[S_X + 3] = th + c_th * w  # (A5); T_L: (A6)
+    propagate5(s, c, f00, f01, f02, f03, f10, f11, f12, f13, f20, f21, f24, c_th)
+
+
+@kernel()
 def adapt_psi(s, c):
     """Adapt the stationary-frame EKF5's magnet flux (after its measurement update; on while
     |omega_hat| > ``C_PSI_ADAPT_W``). The estimated angle tracks the rotor, so over time it turns
@@ -126,7 +216,12 @@ def adapt_psi(s, c):
 
 @kernel()
 def ekf5_predict(s, c, v_d, v_q):
-    """The paper's EKF5 time update (eqs 23-24, A2-A32) with the dq voltage command of the period."""
+    """The paper's EKF5 time update (eqs 23-24, A2-A32) with the dq voltage command of the period;
+    with ``C_EKF_BILINEAR`` Tustin's step (``bilinear_currents``), the command taken as the held
+    voltage (the vector at mid-period, with the angle advance of half a period)."""
+    if c[C_EKF_BILINEAR] != 0.0:
+        ekf5_time_update_bilinear(s, c, v_d, v_q, 0.0, 0.0, 0.0, 0.0)
+        return
     ekf5_time_update(s, c, v_d, v_q, 0.0, 0.0, 0.0)
 
 
@@ -144,6 +239,9 @@ def ekf5ab_predict(s, c, v_alpha, v_beta):
         return
     c_mid = c[C_C_MID]
     v_d, v_q = park(v_alpha, v_beta, s[S_X + 3] + c_mid * s[S_X + 2])
+    if c[C_EKF_BILINEAR] != 0.0:  # Tustin's step; d v / d theta = (v_q, -v_d), d v / d omega = c_mid of that
+        ekf5_time_update_bilinear(s, c, v_d, v_q, v_q, -v_d, c_mid * v_q, -c_mid * v_d)
+        return
     ekf5_time_update(s, c, v_d, v_q, c[C_C_VD] * v_q, -c[C_C_VQ] * v_d, c_mid)
 
 
@@ -158,11 +256,16 @@ def ekf4_predict(s, c, v_d, v_q):
     w = s[S_X + 2]
     th = s[S_X + 3]
     c_wq, c_wd, c_wpsi, c_th = c[C_C_WQ], c[C_C_WD], c[C_C_WPSI], c[C_C_TH]
-    f00, f01, f02 = c[C_A_RD], c_wq * w, c_wq * i_q
-    f10, f11, f12 = -c_wd * w, c[C_A_RQ], -c_wd * i_d - c_wpsi
     f32 = c_th
-    s[S_X] = c[C_A_RD] * i_d + c_wq * w * i_q + c[C_C_VD] * v_d  # (A2)
-    s[S_X + 1] = c[C_A_RQ] * i_q - c_wd * w * i_d - c_wpsi * w + c[C_C_VQ] * v_q  # (A3)
+    if c[C_EKF_BILINEAR] != 0.0:  # Tustin's step, the command taken as the vector at mid-period
+        x0, x1, f00, f01, f02, f10, f11, f12, _, _, _, _ = bilinear_currents(c, i_d, i_q, w, v_d, v_q, c_wpsi)
+        s[S_X] = x0
+        s[S_X + 1] = x1
+    else:
+        f00, f01, f02 = c[C_A_RD], c_wq * w, c_wq * i_q
+        f10, f11, f12 = -c_wd * w, c[C_A_RQ], -c_wd * i_d - c_wpsi
+        s[S_X] = c[C_A_RD] * i_d + c_wq * w * i_q + c[C_C_VD] * v_d  # (A2)
+        s[S_X + 1] = c[C_A_RQ] * i_q - c_wd * w * i_d - c_wpsi * w + c[C_C_VQ] * v_q  # (A3)
     s[S_X + 3] = th + c_th * w  # (A5)
     for j in range(4):
         p0 = s[S_P + j]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from .control import current_step, speed_step, store_command
+from .control import current_step, modulate, speed_step, store_command
 from .jit import F as _F
 from .jit import V as _V
 from .jit import kernel
@@ -22,12 +22,15 @@ from .layout import (
     C_ALIGN_DAMP,
     C_ALIGN_SLIP,
     C_ALIGN_SLIP_TIME,
+    C_CC_HS,
+    C_CC_PRED,
     C_DELAYED,
     C_DT,
     C_E_GUARD,
     C_E_MAX,
     C_FAULT_TIME,
     C_GUARD,
+    C_HALF_PERIOD_N,
     C_I_ALIGN,
     C_I_D_REF,
     C_I_IF,
@@ -100,7 +103,7 @@ from .layout import (
     S_X,
 )
 from .observers import adapt_psi, ekf5ab_correct, ekf5ab_predict
-from .transforms import inverse_park, park, wrap_angle
+from .transforms import park, wrap_angle
 
 # -- the sensorless unit: alignment, I-f, handover to and from the stationary-frame EKF5 --------
 _HALF_PI = 0.5 * math.pi
@@ -112,11 +115,23 @@ def seat_current_pis(s, c, theta, turn, i_dref, i_qref, i_d, i_q, omega_est):
     frame at ``theta`` (with these references, currents and speed) first returns the voltage
     held now, turned on by ``turn`` [rad] (the angle a rotor-synchronous vector turns in a
     period): a change of frame without a voltage jump. The filters start at the references,
-    so that only the integrators carry the change (bumpless transfer)."""
+    so that only the integrators carry the change (bumpless transfer). With the high-speed current
+    control (``current_step_hs``) the same for its decoupling on the predicted current and its ZOH
+    gain."""
     v_d, v_q = park(s[S_V_ALPHA], s[S_V_BETA], theta - turn)
     s[S_I_DL] = i_dref
     s[S_I_QL] = i_qref
     w_e = c[C_N] * omega_est
+    if c[C_CC_HS] != 0.0:
+        half_arc = c[C_HALF_PERIOD_N] * omega_est
+        if abs(half_arc) > 1e-6:  # the command before the ZOH gain sin(a)/a (``modulate``)
+            v_d *= half_arc / math.sin(half_arc)
+            v_q *= half_arc / math.sin(half_arc)
+        k = c[C_CC_PRED]
+        s[S_INT_D] = v_d + w_e * c[C_L_Q] * (i_q + k * (i_qref - i_q)) - c[C_KP_ID] * (i_dref - i_d)
+        s[S_INT_Q] = (v_q - w_e * (c[C_L_D] * (i_d + k * (i_dref - i_d)) + c[C_PSI])
+                      - c[C_KP_IQ] * (i_qref - i_q))
+        return
     s[S_INT_D] = v_d + w_e * c[C_L_Q] * i_qref - c[C_KP_ID] * (i_dref - i_d)  # (15), (19)
     back_emf = w_e * c[C_L_D] * i_dref + w_e * c[C_PSI]
     if c[C_PAPER_SIGNS] != 0.0:
@@ -457,7 +472,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_THETA_CTRL] = theta_ctrl
     s[S_OMEGA_CTRL] = omega_ctrl
     fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
-    v_alpha, v_beta = inverse_park(v_d, v_q, theta_ctrl + c[C_ADVANCE] * omega_ctrl)
+    v_alpha, v_beta = modulate(c, v_d, v_q, theta_ctrl, omega_ctrl, False)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta_ctrl, omega_ctrl)
