@@ -295,3 +295,40 @@ def test_closed_loop_acceleration_and_regenerative_braking():
     assert -p_regen <= 30e3 * 1.02 and brake_ok
     assert {k.REGION_LIMIT, k.REGION_CURRENT_FW} <= regions
     assert abs(plant.omega_m) < 5.0
+
+
+def test_sensorless_unit_runs_the_generator_in_its_ekf_mode():
+    """The sensorless unit from standstill, reference 'fw', v_dc = 360 V, P_regen_max = 30 kW: alignment, I-f,
+    the handover to FOC seated on the generator's references, a ramp to 500 rad/s (field weakening at full
+    torque would start at 367 rad/s; here at 500 rad/s with little torque), then a brake: the regen limit and
+    the friction brake act, the handover back down to I-f, no fault. Printed: the speed error in FOC, the
+    regions, the largest regenerative power."""
+    dt = 1e-4
+    plant = Plant(plant=PlantParams(v_dc=360.0))
+    unit = ControlUnit("sensorless", controller=ControllerParams(reference="fw", v_dc=360.0, P_regen_max=30e3),
+                       dt=dt)
+    i_a, i_b = plant.i_alpha, plant.i_beta
+    modes, regions = set(), set()
+    worst = p_regen = brake = 0.0
+    for n in range(int(12.0 / dt)):
+        t = n * dt
+        ref = min(max(t - 2.3, 0.0) * 100.0, 500.0) if t < 9.0 else 0.0
+        out = unit.step(i_a, i_b, ref)
+        plant.step(out[0], out[1], 0.0, dt)
+        i_a, i_b = plant.i_alpha, plant.i_beta
+        modes.add(out[12])
+        regions.add(unit.ref_region)
+        if 5.0 < t < 7.0:  # (the speed PI, omega_n = 2 rad/s, has caught up with the ramp after the handover)
+            worst = max(worst, abs(ref - plant.omega_m))
+        if t > 9.0 and plant.omega_m > 100.0:
+            p_regen = min(p_regen, plant.T_e * plant.omega_m)
+            brake = max(brake, unit.T_brake)
+        assert out[13] == 0.0  # no fault
+    print(f"\nsensorless, 'fw': ramp error in FOC at most {worst:.2f} rad/s; regions {sorted(regions)}; "
+          f"regenerative power at most {-p_regen / 1e3:.2f} kW; friction brake up to {brake:.0f} N m at the wheels; "
+          f"modes {sorted(modes)}, speed at 12 s {plant.omega_m:.1f} rad/s")
+    assert modes == {0.0, 1.0, 2.0} and out[12] == 1.0  # handed over up, and back down at the end
+    assert worst < 5.0
+    assert k.REGION_FW in regions and k.REGION_MTPA in regions
+    assert -p_regen <= 30e3 * 1.02 and brake > 100.0
+    assert abs(plant.omega_m) < 25.0
