@@ -77,7 +77,7 @@ from .layout import (
 )
 from .observers import adapt_psi, observer_correct, observer_predict
 from .plant import dead_time_error
-from .references import envelope, friction_brake, reference_point, regen_limit
+from .references import envelope, friction_brake, references_within, regen_limit
 from .transforms import inverse_park, park
 
 
@@ -107,9 +107,17 @@ def generate_references(s, c, t_dem, omega_est):
     (``regen_limit``), the rest of it the friction brake's (``friction_brake``); returns
     (i_dref, i_qref) and keeps them, the torque given, the brake's demand, the region and the torque
     available in the state (``S_I_DREF`` .. ``S_T_AVAIL``)."""
+    t_env, lam, d_top, region_top = envelope(omega_est, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_N],
+                                             c[C_I_MAX], c[C_U_FW])
+    return references_of(s, c, t_dem, omega_est, t_env, lam, d_top, region_top)
+
+
+@kernel()
+def references_of(s, c, t_dem, omega_est, t_env, lam, d_top, region_top):
+    """``generate_references`` on the limits ``envelope`` gives at ``omega_est``."""
     t_motor = regen_limit(t_dem, omega_est, c[C_P_REGEN])
-    i_dref, i_qref, t_given, t_avail, region = reference_point(
-        t_motor, omega_est, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_N], c[C_I_MAX], c[C_T_MAX], c[C_U_FW])
+    i_dref, i_qref, t_given, t_avail, region = references_within(
+        t_motor, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_I_MAX], c[C_T_MAX], t_env, lam, d_top, region_top)
     s[S_I_DREF] = i_dref
     s[S_T_REF] = t_given
     s[S_T_BRAKE] = friction_brake(t_dem, t_given, omega_est, c[C_BRAKE_GAIN])
@@ -126,10 +134,11 @@ def torque_speed_step(s, c, omega_ref, omega_est):
     speed (``envelope``, within T_max: no windup where field weakening gives less than asked); the
     generator turns T into (i_dref, i_qref) (``generate_references``)."""
     k_t = c[C_K_T]
-    t_env = envelope(omega_est, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_N], c[C_I_MAX], c[C_U_FW])[0]
+    t_env, lam, d_top, region_top = envelope(omega_est, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_N],
+                                             c[C_I_MAX], c[C_U_FW])
     t_cap = min(t_env, c[C_T_MAX])
     u = speed_pi(s, c, omega_ref, omega_est, t_cap / k_t)  # (14)
-    return generate_references(s, c, k_t * u, omega_est)
+    return references_of(s, c, k_t * u, omega_est, t_env, lam, d_top, region_top)
 
 
 @kernel(_sig(f"UniTuple({_F}, 2)", _V, _V, _F, _F, _F, _F, _F))

@@ -208,6 +208,12 @@ def reference_point(t_dem, omega, k, psi, l_d, l_q, n, i_max, t_max, u_fw):
     limit (<= 0: what ``i_max`` gives on MTPA); ``u_fw`` [V] the voltage for field weakening (<= 0: no
     voltage limit, MTPA only)."""
     t_env, lam, d_top, region_top = envelope(omega, k, psi, l_d, l_q, n, i_max, u_fw)
+    return references_within(t_dem, k, psi, l_d, l_q, i_max, t_max, t_env, lam, d_top, region_top)
+
+
+@kernel()
+def references_within(t_dem, k, psi, l_d, l_q, i_max, t_max, t_env, lam, d_top, region_top):
+    """``reference_point`` on the limits ``envelope`` gives at the speed (t_env, lam, d_top, region_top)."""
     t_cap = t_env
     if t_max > 0.0 and t_max < t_cap:
         t_cap = t_max
