@@ -362,3 +362,16 @@ def test_compiled_and_plain_python_give_the_same_bits_in_field_weakening():
           f"T_brake up to {max(row[-3] for row in jit):.0f} N m")
     assert k.REGION_CURRENT_FW in regions
     assert max(row[-3] for row in jit) > 0.0
+
+
+def test_the_paper_speed_step_is_speed_pi_at_i_q_max():
+    """``speed_step`` (the paper's path, written out) and ``speed_pi`` at +-i_q_max: the same output and
+    integral, bit for bit, inside, at and beyond the clamp, both signs."""
+    rng = np.random.default_rng(7)
+    a, b = ControlUnit("sensored"), ControlUnit("sensored")
+    for _ in range(2000):
+        omega_ref, omega = rng.uniform(-300, 300, 2)
+        out_a = k.speed_step(a._s, a._c, omega_ref, omega)
+        out_b = k.speed_pi(b._s, b._c, omega_ref, omega, b._c[k.C_I_Q_MAX])
+        assert out_a == out_b and a._s[k.S_W_INT] == b._s[k.S_W_INT]
+    assert a._s[k.S_W_INT] != 0.0

@@ -96,8 +96,17 @@ def speed_pi(s, c, omega_ref, omega_est, limit):
 
 @kernel(_sig(_F, _V, _V, _F, _F))
 def speed_step(s, c, omega_ref, omega_est):
-    """Speed PI, eq 14, i_qref limited to +-i_q_max, with conditional integration."""
-    return speed_pi(s, c, omega_ref, omega_est, c[C_I_Q_MAX])
+    """Speed PI, eq 14, i_qref limited to +-i_q_max, with conditional integration: ``speed_pi`` at
+    ``C_I_Q_MAX``, written out as it was so that the paper's per-step path makes no extra call
+    (tests/test_references.py checks that the two agree bit for bit)."""
+    i_q_max = c[C_I_Q_MAX]
+    e = omega_ref - omega_est
+    unsat = c[C_KP_W] * e + s[S_W_INT]  # (14)
+    i_qref = min(max(unsat, -i_q_max), i_q_max)
+    # anti-windup: integrate unless the output is clamped and e pushes further out
+    if i_qref == unsat or (unsat > i_q_max) != (e > 0):
+        s[S_W_INT] += c[C_KI_W] * e * c[C_DT]
+    return i_qref
 
 
 @kernel()
