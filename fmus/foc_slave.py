@@ -58,11 +58,21 @@ DESCRIPTION = (
 )
 
 
+#: what the controller's parameters that share a name with the plant's mean here
+_CONTROLLER_NOTES = {
+    "v_dc": "the controller's: its current PIs and field weakening limit the voltage to v_dc/sqrt(3); 0 = not "
+            "given (u_max)",
+    "n_g": "the controller's: converts the friction-brake demand T_brake to the wheels",
+    "eta": "the controller's: converts the friction-brake demand T_brake to the wheels",
+}
+
+
 class FocSlave(DriveSlave):
     """FMU slave around ``ControlUnit`` with the observer given by the subclass."""
 
     def __init__(self, observer: str, observer_text: str, parameter_notes=None, **kwargs):
         super().__init__(**kwargs)
+        self.parameter_notes.update(_CONTROLLER_NOTES)
         self.parameter_notes.update(parameter_notes or {})
         self.description = DESCRIPTION.format(observer=observer_text)
         self.version = __version__
@@ -112,6 +122,20 @@ class FocSlave(DriveSlave):
         self.add_output("omega_ctrl", "rad/s", "mechanical speed of the control frame: the I-f speed in I-f, else "
                                                "the speed the controller uses (omega_hat)" + hold, discrete=True,
                         display_unit="rpm")
+        # the reference generator's (docs/speed-range.md): properties reading the unit, no work per step
+        self.add_output("i_dref", "A", "d-current reference: the reference generator's (reference 'mtpa', 'fw'), "
+                                       "else i_d_ref; in alignment and I-f the current vector's magnitude" + hold,
+                        discrete=True)
+        self.add_output("T_ref", "N.m", "the motor's torque reference after the limits (current, torque, voltage, "
+                                        "regenerative power): the reference generator's, else k_t i_qref, "
+                                        "k_t = k_dq N psi (0 in alignment and I-f)" + hold, discrete=True)
+        self.add_output("T_brake", "N.m", "friction-brake demand at the wheels, >= 0, opposing the motion: the "
+                                          "braking shaft torque the motor does not give (P_regen_max, the envelope) "
+                                          "x n_g eta (0 with reference 'paper')" + hold, discrete=True)
+        self.add_output("ref_region", None, "the reference generator's region: 0 MTPA, 1 field weakening, 2 MTPV, "
+                                            "3 the current and voltage limits met, 4 the torque or current limit on "
+                                            "MTPA, 5 no torque within the limits (0 with reference 'paper')" + hold,
+                        discrete=True)
         self._sensorless = observer == "sensorless"
         if self._sensorless:
             self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams)
@@ -123,6 +147,23 @@ class FocSlave(DriveSlave):
         self._dt = None  # sample period, fixed by the parameter or the first do_step
         self._t0 = 0.0  # start time (fmi2SetupExperiment): the instants are t0 + k dt
         self._k_next = None  # index of the next sample instant to run, set by the first do_step
+
+    # -- the reference generator's outputs: read from the unit when asked (the FMU state and the start
+    # values set them; the unit's state holds them, so the values set are not kept) --------------------
+    def _unit_output(name: str, doc: str) -> property:
+        def get(self) -> float:
+            return getattr(self._unit, name) if self._unit is not None else 0.0
+
+        def set_(self, value) -> None:
+            pass
+
+        return property(get, set_, doc=doc)
+
+    i_dref = _unit_output("i_dref", "``ControlUnit.i_dref``")
+    T_ref = _unit_output("T_ref", "``ControlUnit.T_ref``")
+    T_brake = _unit_output("T_brake", "``ControlUnit.T_brake``")
+    ref_region = _unit_output("ref_region", "``ControlUnit.ref_region``")
+    del _unit_output
 
     # -- physics hooks ---------------------------------------------------------------
     def build(self) -> None:

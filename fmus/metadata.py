@@ -25,6 +25,7 @@ UNITS: dict[str, dict[str, float]] = {
     "rad2/s2": {"rad": 2, "s": -2},
     "s": {"s": 1},
     "N.m": {"kg": 1, "m": 2, "s": -2},
+    "W": {"kg": 1, "m": 2, "s": -3},
     "N2.m2": {"kg": 2, "m": 4, "s": -4},
     "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
     "m/s": {"m": 1, "s": -1},
@@ -114,6 +115,15 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "i_d_ref": ("A", "d-current reference"),
     "i_q_max": ("A", "q-current reference limit"),
     "u_max": ("V", "voltage-vector magnitude limit"),
+    "reference": (None, "current references: 'paper' (i_d = i_d_ref, i_q from the speed PI), 'mtpa' (the speed PI "
+                        "commands a torque, MTPA within i_max and T_max) or 'fw' (MTPA, field weakening and MTPV "
+                        "under the voltage limit v_dc/sqrt(3) x fw_margin; needs v_dc)"),
+    "i_max": ("A", "current-magnitude limit of the references 'mtpa' and 'fw'"),
+    "T_max": ("N.m", "torque limit of the references 'mtpa' and 'fw' (0 = what i_max gives on MTPA)"),
+    "fw_margin": (None, "share of the voltage limit that field weakening plans with (the rest: R_s drop, "
+                        "current-loop transients, the rotation during a period)"),
+    "P_regen_max": ("W", "regenerative power limit of the references 'mtpa' and 'fw' (0 = no limit): a braking "
+                         "demand beyond it goes to the friction brake (T_brake)"),
     "decoupling": (None, "decoupling signs: 'physical' (cancels the back-EMF and cross-coupling of eq 11) "
                          "or 'paper' (eq 20 as printed)"),
     "angle_advance": (None, "advance of the inverse-Park angle, in control periods of omega_hat"),
@@ -141,7 +151,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "sensor_gain_b": (None, "gain of the phase-b current sensor (1 = exact)"),
     "adc_bits": (None, "ADC resolution in bits (0 = no quantisation)"),
     "adc_range": ("A", "ADC full scale: the converter spans -adc_range..+adc_range"),
-    "v_dc": ("V", "DC-link voltage; the voltage vector is limited to v_dc/sqrt(3) (0 = ideal inverter)"),
+    "v_dc": ("V", "DC-link voltage; the voltage vector is limited to v_dc/sqrt(3) (0 = not given: the plant's "
+                  "inverter ideal, the controller's limit u_max)"),
     "switching_period": ("s", "switching (PWM) period T_s of the inverter, independent of the communication "
                               "step: the dead time's voltage error and the inverter delay use it"),
     "inverter_delay": (None, "actuation delay in switching periods, 0 or 1 (rounded to whole communication "

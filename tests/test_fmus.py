@@ -59,7 +59,8 @@ PLANT_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e",
                  "x_vehicle")
 CTRL_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
 CTRL_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d_hat", "i_q_hat", "omega_hat", "theta_hat", "T_L_hat",
-                "i_d", "i_q", "i_qref", "mode", "fault", "theta_ctrl", "omega_ctrl")
+                "i_d", "i_q", "i_qref", "mode", "fault", "theta_ctrl", "omega_ctrl", "i_dref", "T_ref", "T_brake",
+                "ref_region")
 DT = 1e-4
 DELTA_22 = math.radians(22.0)
 
@@ -133,7 +134,7 @@ def unit_outputs(u: ControlUnit, theta_meas: float = 0.0):
     """The controller FMU's outputs (CTRL_OUTPUTS) of the unit after a step given ``theta_meas``."""
     theta_ctrl = u.theta_ctrl if u.sensorless or u.angle_source == "estimated" else theta_meas
     return [u.v_alpha, u.v_beta, u.v_d, u.v_q, *u.estimates, u.i_d, u.i_q, u.i_qref, u.mode, u.fault, theta_ctrl,
-            u.omega_ctrl]
+            u.omega_ctrl, u.i_dref, u.T_ref, u.T_brake, u.ref_region]
 
 
 def omega_ramp(t):
@@ -401,8 +402,8 @@ def test_model_description_is_complete(fmus, name):
     outputs = PLANT_OUTPUTS if name == "PmsmEvPlant" else CTRL_OUTPUTS
     assert [v.name for v in md.modelVariables if v.causality == "input"] == list(inputs)
     assert [v.name for v in md.modelVariables if v.causality == "output"] == list(outputs)
-    for n in inputs + outputs:  # all with units, but the mode and the fault (numbers, 0 / 1 / 2)
-        assert by_name[n].type == "Real" and (by_name[n].unit in units if n not in ("mode", "fault")
+    for n in inputs + outputs:  # all with units, but the mode, the fault and the region (codes 0 / 1 / 2 ...)
+        assert by_name[n].type == "Real" and (by_name[n].unit in units if n not in ("mode", "fault", "ref_region")
                                               else by_name[n].unit is None)
     assert by_name["omega_m" if name == "PmsmEvPlant" else "omega_hat"].unit == "rad/s"
     # no direct feedthrough: every output's dependency list is empty
@@ -525,18 +526,23 @@ def test_outputs_before_the_first_step(unzipped):
     p.fmu.exitInitializationMode()
     assert p.get(["omega_m", "i_alpha"]) == [60.0, Plant(plant=PlantParams(**{**start, "omega_m0": 60.0})).i_alpha]
     c = Instance(unzipped, "FocEkf5", start={"u_max": 100.0})
-    assert c.get(CTRL_OUTPUTS) == [0.0] * 12 + [2.0, 0.0, 0.0, 0.0]  # mode 2: closed loop; no fault
+    assert c.get(CTRL_OUTPUTS) == [0.0] * 12 + [2.0, 0.0, 0.0, 0.0] + [0.0] * 4  # mode 2: closed loop; no fault
 
 
 # -- the FMUs in co-simulation -------------------------------------------------------------
-@pytest.mark.parametrize("name,angle_source", [(n, "measured") for n in CONTROLLERS]
-                         + [("FocEkf5", "estimated"), ("FocEkf5AB", "estimated")])
-def test_cosimulation_is_bit_identical_to_the_classes(unzipped, name, angle_source):
+#: the reference generator on (docs/speed-range.md): MTPA, field weakening, a regen limit
+FW_START = {"reference": "fw", "v_dc": 360.0, "P_regen_max": 20e3}
+
+
+@pytest.mark.parametrize("name,angle_source,extra", [(n, "measured", {}) for n in CONTROLLERS]
+                         + [("FocEkf5", "estimated", {}), ("FocEkf5AB", "estimated", {})]
+                         + [(n, "measured", FW_START) for n in ("FocSensored", "FocEkf5AB")])
+def test_cosimulation_is_bit_identical_to_the_classes(unzipped, name, angle_source, extra):
     """Gauss-Seidel, controller first: the FMUs give exactly the numbers of Plant and
     ControlUnit called in the same order (the monolithic reference's loop)."""
     p = Instance(unzipped, "PmsmEvPlant", instance_name="plant")
-    c = Instance(unzipped, name, instance_name="ctrl", start={"angle_source": angle_source})
-    plant, unit = Plant(), ControlUnit(OBSERVER[name], angle_source, dt=DT)
+    c = Instance(unzipped, name, instance_name="ctrl", start={"angle_source": angle_source, **extra})
+    plant, unit = Plant(), ControlUnit(OBSERVER[name], angle_source, dt=DT, controller=ControllerParams(**extra))
     p_out, c_out = p.refs(PLANT_OUTPUTS), c.refs(CTRL_OUTPUTS)
     c_in, p_in = c.refs(CTRL_INPUTS), p.refs(PLANT_INPUTS)
     for k in range(1500):

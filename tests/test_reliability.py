@@ -214,6 +214,20 @@ def test_plant_effect_values_are_refused_before_the_run(fmus, tmp_path, capsys, 
     assert message in line
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--set", "ctrl.reference=fw"], "ctrl (FocEkf5.fmu): fmi2ExitInitializationMode (start values) refused: "
+                                     "reference 'fw' (field weakening) needs the DC-link voltage: set v_dc > 0 V"),
+    (["--set", "ctrl.i_max=0"], "i_max must be > 0 A (got 0.0)"),
+    (["--set", "ctrl.T_max=200"], "T_max = 200 N m is above the 153.1 N m that i_max = 400 A gives on MTPA"),
+    (["--set", "ctrl.P_regen_max=-30000"], "P_regen_max must be >= 0 W, a power the motor may take back, 0 = no "
+                                           "limit (got -30000.0)"),
+    (["--set", "ctrl.v_dc=360", "--set", "ctrl.u_max=150"], "u_max = 150 V and v_dc = 360 V are both given"),
+])
+def test_speed_range_values_are_refused_before_the_run(fmus, tmp_path, capsys, args, message):
+    line = refused(["run", "scenario2", "--stop-time", 0.01, *args], capsys, tmp_path / "out")
+    assert message in line
+
+
 @pytest.mark.parametrize("change, message", [
     ({"step": 0}, "experiment.step_size must be a finite number > 0 (got 0.0)"),
     ({"step": -1e-3}, "experiment.step_size must be a finite number > 0 (got -0.001)"),

@@ -9,7 +9,10 @@ Per control period, at t_k, with the plant's measured currents at t_k:
    whose EKF is fed dq currents in the true frame) or the observer's predicted angle
    ("estimated", truly sensorless); Park of the measured currents at that angle;
 3. observer measurement update (eqs 25-27);
-4. speed PI on omega_hat (14), current PIs + decoupling on omega_hat (15-20);
+4. speed PI on omega_hat (14), current PIs + decoupling on omega_hat (15-20); with
+   ``ControllerParams.reference`` "mtpa" or "fw" the speed PI commands a torque that the
+   reference generator (``pmsm_ev.kernels.references``: MTPA, field weakening, MTPV, the
+   current, torque and regenerative limits) turns into (i_dref, i_qref), docs/speed-range.md;
 5. inverse Park at the control angle (measured, or the updated estimate), advanced by
    ``angle_advance`` periods of omega_hat, to v_alpha, v_beta held until t_{k+1}; with
    ``zoh_compensation`` the held vector is lengthened by a/sin(a), a = omega_e dt/2, so
@@ -73,6 +76,8 @@ _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_
                   _k.S_STILL_OUT)
 #: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
+#: the reference generator's outputs, zeroed by ``reset``
+_REFERENCE_STATE = (_k.S_I_DREF, _k.S_T_REF, _k.S_T_BRAKE, _k.S_REGION, _k.S_T_AVAIL)
 
 
 def _slot(index: int, doc: str) -> property:
@@ -154,6 +159,18 @@ class ControlUnit:
         # the I-f sizing: the EKF model's inertia and the sine of the design load angle
         c[_k.C_J_IF] = float(self.observer.J) if self.sensorless else 0.0
         c[_k.C_SIN_E] = math.sin(st.if_load_angle)
+        # the reference generator (docs/speed-range.md): off ("paper") by default
+        pr, m = self.params, self.motor
+        pr.validate_limits(m)
+        self.reference = _k.REFERENCE_CODES[pr.reference]
+        c[_k.C_REF_MODE] = self.reference
+        c[_k.C_I_MAX] = float(pr.i_max)
+        c[_k.C_T_MAX] = float(pr.T_max or pr.torque_at_current_limit(m))
+        c[_k.C_U_FW] = pr.fw_margin * pr.u_limit if pr.reference == "fw" else 0.0
+        c[_k.C_K_T] = m.k_dq * m.N * m.psi
+        c[_k.C_K_DQN] = m.k_dq * m.N
+        c[_k.C_P_REGEN] = float(pr.P_regen_max)
+        c[_k.C_BRAKE_GAIN] = pr.n_g * pr.eta
         self.reset()
 
     def reset(self) -> None:
@@ -166,7 +183,7 @@ class ControlUnit:
         self.v_alpha = self.v_beta = 0.0
         self.i_d = self.i_q = 0.0
         self.i_qref = 0.0
-        for slot in _STARTUP_STATE + _DTC_STATE:
+        for slot in _STARTUP_STATE + _DTC_STATE + _REFERENCE_STATE:
             self._s[slot] = 0.0
         self._s[_k.S_PSI_RATIO] = 1.0
 
@@ -207,6 +224,46 @@ class ControlUnit:
         """The control frame's mechanical speed of the last period [rad/s]: the I-f speed in I-f,
         else the speed the controller uses (omega_hat; the measured speed for the sensored drive)."""
         return float(self._s[_k.S_OMEGA_CTRL]) if self.sensorless else float(self._s[_k.S_X + 2])
+
+    # the reference generator's outputs (docs/speed-range.md); in the paper's mode computed here from the
+    # paper's references (no work on its per-step path)
+    def _foc(self) -> bool:
+        return not self.sensorless or self._s[_k.S_MODE] == _k.MODE_EKF
+
+    @property
+    def i_dref(self) -> float:
+        """The d-current reference of the last period [A]: the generator's (``reference`` "mtpa", "fw"), else
+        ``i_d_ref``; the sensorless unit in alignment and I-f: the vector's magnitude (on its d axis)."""
+        if not self._foc():
+            return float(self._s[_k.S_I_MAG])
+        return float(self._s[_k.S_I_DREF]) if self.reference else float(self._c[_k.C_I_D_REF])
+
+    @property
+    def T_ref(self) -> float:
+        """The motor's torque reference of the last period, after the limits [N m]: the generator's torque
+        given, else k_t i_qref (k_t = k_dq N psi); 0 in alignment and I-f."""
+        if not self._foc():
+            return 0.0
+        return float(self._s[_k.S_T_REF]) if self.reference else float(self._c[_k.C_K_T] * self._s[_k.S_I_QREF])
+
+    @property
+    def T_brake(self) -> float:
+        """The friction brake's demand at the wheels of the last period [N m, >= 0]: the braking shaft torque
+        the motor does not give (the regen limit, the envelope) x n_g eta; 0 in the paper's mode."""
+        return float(self._s[_k.S_T_BRAKE]) if self.reference and self._foc() else 0.0
+
+    @property
+    def ref_region(self) -> float:
+        """The reference generator's region of the last period (``pmsm_ev.kernels.references`` REGION_*: 0 MTPA,
+        1 field weakening, 2 MTPV, 3 current and voltage limits, 4 torque or current limit on MTPA, 5 no
+        torque within the limits); 0 in the paper's mode and in alignment and I-f."""
+        return float(self._s[_k.S_REGION]) if self.reference and self._foc() else 0.0
+
+    @property
+    def T_avail(self) -> float:
+        """The torque available at the speed of the last period, either sign [N m] (the speed PI's clamp of
+        the generator's modes; 0 in the paper's mode)."""
+        return float(self._s[_k.S_T_AVAIL]) if self.reference and self._foc() else 0.0
 
     @property
     def mode(self) -> float:

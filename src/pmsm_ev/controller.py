@@ -123,7 +123,8 @@ class SpeedController(_Slots):
 
 class CurrentController(_Slots):
     """Current PIs (15-16), decoupling filters (17-18) and decoupling terms (19-20),
-    with the voltage vector limited to u_max (integrators held while it is limited).
+    with the voltage vector limited to u_max, or v_dc / sqrt(3) when ``v_dc`` is given
+    (``ControllerParams.u_limit``; integrators held while it is limited).
     """
 
     int_d = _slot(_k.S_INT_D, "integral term of (15) [V]")
@@ -139,7 +140,7 @@ class CurrentController(_Slots):
         c = self._c
         c[_k.C_DT] = float(dt)
         for slot, value in ((_k.C_KP_ID, g.kp_id), (_k.C_KI_ID, g.ki_id), (_k.C_KP_IQ, g.kp_iq),
-                            (_k.C_KI_IQ, g.ki_iq), (_k.C_T_D, g.T_d), (_k.C_U_MAX, p.u_max),
+                            (_k.C_KI_IQ, g.ki_iq), (_k.C_T_D, g.T_d), (_k.C_U_MAX, p.u_limit),
                             (_k.C_N, motor.N), (_k.C_L_D, motor.L_d), (_k.C_L_Q, motor.L_q),
                             (_k.C_PSI, motor.psi), (_k.C_PAPER_SIGNS, p.decoupling == "paper")):
             c[slot] = float(value)

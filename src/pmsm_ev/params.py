@@ -16,12 +16,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields, replace
 
+from .kernels import REFERENCE_CODES
+from .kernels import dq_torque as kernel_dq_torque
+from .kernels import mtpa_limit_current as kernel_mtpa_limit_current
 from .kernels import winding_resistance as kernel_winding_resistance
 
 LOAD_MODELS = ("physical", "paper")
 DECOUPLING_MODES = ("physical", "paper")
 ANGLE_SOURCES = ("measured", "estimated")
 OBSERVERS = ("ekf5", "ekf4", "ekf5ab", "sensored", "sensorless")
+#: the current references of the controllers (``ControllerParams.reference``)
+REFERENCES = tuple(REFERENCE_CODES)
 #: how the dq quantities scale to the phase quantities (``MotorParams.dq_convention``)
 DQ_CONVENTIONS = ("paper", "amplitude_invariant")
 #: the current control (``ControllerParams.current_control``) and the observers' discretisation
@@ -296,6 +301,10 @@ class PlantParams:
 DT_DEFAULT = 1.0e-4
 
 
+#: the default voltage limit of the current PIs [V] (``ControllerParams.u_max``)
+_U_MAX_DEFAULT = 360.0 / math.sqrt(3.0)
+
+
 @dataclass(frozen=True)
 class ControllerParams:
     """FOC design and limits (eqs 14-20).
@@ -341,7 +350,7 @@ class ControllerParams:
     i_q_max: float = 400.0
     #: voltage-vector limit [V] [chosen]: linear-modulation limit V_dc/sqrt(3) of a 360 V
     #: DC link (208 V), twice the ~100 V the 25 deg plateau needs at 200 rad/s.
-    u_max: float = 360.0 / math.sqrt(3.0)
+    u_max: float = _U_MAX_DEFAULT
     #: "physical" (default): v_q = u_q + N w (L_d i_dl + psi), the sign that cancels
     #: eq 11's back-EMF and cross-coupling. "paper": eq 20 as printed (minus signs).
     decoupling: str = "physical"
@@ -384,6 +393,60 @@ class ControllerParams:
     #: plant's inverter_delay = 1: the middle of the applied period). Needs decoupling "physical".
     current_control: str = "paper"
 
+    # -- the whole speed range (docs/speed-range.md; all off by default: the paper's drive) ------------
+    #: the current references [chosen: "paper"]. "paper": i_d = ``i_d_ref``, i_q from the speed PI limited
+    #: to +-``i_q_max`` (the paper's drive, eqs 14-20). "mtpa": the speed PI (eq 14, the same gains) commands
+    #: the torque k_t x its output (k_t = k_dq N psi), turned into (i_d, i_q) on MTPA for this salient motor
+    #: within ``i_max`` and ``T_max``, no voltage limit. "fw": MTPA, field weakening and MTPV under the
+    #: voltage limit v_dc / sqrt(3) with the margin ``fw_margin`` (needs ``v_dc``)
+    #: (``pmsm_ev.kernels.references``).
+    reference: str = "paper"
+    #: current-magnitude limit of the modes "mtpa" and "fw" [A] [chosen]: 400 A, ``i_q_max``'s figure: an
+    #: inverter rated 400 A peak per phase (the dq currents are amplitude-invariant: |i_dq| is the phase
+    #: current's peak), 153.1 N m on MTPA with Table I's motor (144 N m at i_d = 0)
+    i_max: float = 400.0
+    #: torque limit of the modes "mtpa" and "fw" [N m]; 0 = what ``i_max`` gives on MTPA. Above that it is
+    #: refused (the current limit gives no more)
+    T_max: float = 0.0
+    #: the share of the voltage limit that field weakening plans with [-] [chosen]: 0.9 leaves 10 % (21 V of
+    #: 208 V) to the current PIs: the R_s drop (400 A x 8.7 mOhm = 3.5 V, 1.7 %, not in the flux circle),
+    #: the transients of the current loops (a 10 A step error is 5.8 V through K_p = L_q omega_c) and what
+    #: the rotation during a period takes at the top speed's 990 Hz electrical (omega_e dt = 0.62 rad: the
+    #: held vector's mean is 1 - sin(a)/a = 1.6 % shorter, a = omega_e dt / 2, without ZOH compensation)
+    fw_margin: float = 0.9
+    #: DC-link voltage [V]; 0 = not given: the current PIs keep ``u_max``. > 0: the voltage limit of the
+    #: current PIs and of field weakening is v_dc / sqrt(3) (linear modulation; the plant's ``v_dc``), and
+    #: ``u_max`` must then stay at its default (one of the two)
+    v_dc: float = 0.0
+    #: regenerative power limit [W], >= 0; 0 = no limit (the paper's drive). A braking torque demand (opposing
+    #: the motion) goes to the motor up to P_regen_max / |omega| and the envelope; the rest is the friction
+    #: brake's (``T_brake``). A battery's charge limit, e.g. 30 kW
+    P_regen_max: float = 0.0
+    #: gear ratio the friction-brake demand is converted through, motor speed / wheel speed [-] [T2]:
+    #: ``VehicleParams.n_g``
+    n_g: float = VehicleParams().n_g
+    #: gear efficiency of that conversion [-] [T2]: ``VehicleParams.eta``; T_brake = the shaft torque
+    #: left x n_g x eta (a wheel torque T_b acts on the shaft as T_b / (eta n_g), eq 29)
+    eta: float = VehicleParams().eta
+
+    @property
+    def u_limit(self) -> float:
+        """The voltage limit of the current PIs and of field weakening [V]: v_dc / sqrt(3) if ``v_dc`` is
+        given, else ``u_max``."""
+        return self.v_dc / math.sqrt(3.0) if self.v_dc > 0 else self.u_max
+
+    def torque_at_current_limit(self, motor: "MotorParams") -> float:
+        """The torque ``i_max`` gives on MTPA [N m] (k_dq x eq 12 of the controller's ``motor``)."""
+        i_d, i_q = kernel_mtpa_limit_current(float(self.i_max), motor.psi, motor.L_d, motor.L_q)
+        return kernel_dq_torque(motor.k_dq * motor.N, i_d, i_q, motor.psi, motor.L_d, motor.L_q)
+
+    def validate_limits(self, motor: "MotorParams") -> None:
+        """The checks that need the controller's motor model: ``T_max`` within what ``i_max`` gives."""
+        t_i = self.torque_at_current_limit(motor)
+        _require(self.T_max <= t_i * (1.0 + 1e-12),
+                 f"T_max = {self.T_max:g} N m is above the {t_i:.1f} N m that i_max = {self.i_max:g} A gives on "
+                 f"MTPA: lower T_max or raise i_max")
+
     def validate(self) -> None:
         for name in ("omega_c", "omega_n", "zeta", "J_load", "kp_w", "ki_w", "kp_id", "ki_id", "kp_iq", "ki_iq",
                      "T_d", "i_q_max", "u_max"):
@@ -411,6 +474,23 @@ class ControllerParams:
                  f"current_control must be one of {CURRENT_CONTROLS} (got {self.current_control!r})")
         _require(self.current_control == "paper" or self.decoupling == "physical",
                  "current_control 'high_speed' needs decoupling 'physical' (eq 20 as printed does not cancel eq 11)")
+        _require(self.reference in REFERENCES, f"reference must be one of {REFERENCES} (got {self.reference!r})")
+        for name in ("i_max", "T_max", "fw_margin", "v_dc", "P_regen_max", "n_g", "eta"):
+            value = getattr(self, name)
+            _require(math.isfinite(value), f"{name} must be finite (got {value})")
+        _require(self.i_max > 0, f"i_max must be > 0 A (got {self.i_max})")
+        _require(self.T_max >= 0, f"T_max must be >= 0 N m, 0 = what i_max gives on MTPA (got {self.T_max})")
+        _require(0 < self.fw_margin <= 1, f"fw_margin must be in (0, 1] (got {self.fw_margin})")
+        _require(self.v_dc >= 0, f"v_dc must be >= 0 V, 0 = not given (got {self.v_dc})")
+        _require(self.P_regen_max >= 0, f"P_regen_max must be >= 0 W, a power the motor may take back, 0 = no "
+                                        f"limit (got {self.P_regen_max})")
+        _require(self.n_g > 0, f"n_g must be > 0 (got {self.n_g})")
+        _require(0 < self.eta <= 1, f"eta must be in (0, 1] (got {self.eta})")
+        _require(self.reference != "fw" or self.v_dc > 0,
+                 "reference 'fw' (field weakening) needs the DC-link voltage: set v_dc > 0 V")
+        _require(self.v_dc == 0 or self.u_max == _U_MAX_DEFAULT,
+                 f"u_max = {self.u_max:g} V and v_dc = {self.v_dc:g} V are both given: set one of the two "
+                 f"(v_dc > 0 sets the voltage limit v_dc/sqrt(3))")
 
 
 @dataclass(frozen=True)
@@ -677,6 +757,7 @@ class DriveParams:
     def validate(self) -> "DriveParams":
         for group in (self.motor, self.vehicle, self.plant, self.controller, self.ekf, self.scenario, self.startup):
             group.validate()
+        self.controller.validate_limits(self.motor)
         _require(math.isfinite(self.dt) and self.dt > 0, f"dt must be > 0 s (got {self.dt})")
         return self
 

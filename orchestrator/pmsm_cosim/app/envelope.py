@@ -185,9 +185,8 @@ def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency
         ax.plot(r["omega_m"], r["T_e"], ".", ms=1.5, color=f"C{5 + i}", alpha=0.5, label=f"run {d.name}")
     ax.set_xlabel("ω_m [rad/s]")
     ax.set_ylabel("torque [N m]")
-    ax.set_title(f"torque-speed envelope: I_max {lim.i_max:g} A, T_max {lim.T_max:.1f} N m, "
-                 f"u {lim.u_fw:.0f} V" if lim.u_fw else f"torque-speed envelope: I_max {lim.i_max:g} A, no voltage limit",
-                 fontsize=9)
+    voltage = f"u {lim.u_fw:.0f} V" if lim.u_fw else "no voltage limit"
+    ax.set_title(f"torque-speed envelope: I_max {lim.i_max:g} A, T_max {lim.T_max:.1f} N m, {voltage}", fontsize=9)
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=6, loc="lower left", markerscale=3)
 

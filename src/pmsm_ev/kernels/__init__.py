@@ -10,6 +10,9 @@ each function's docstring citing its equations:
   inverter's dead time, saturation and temperature;
 * ``control``: the controller (eqs 14-20), the dead-time compensation and the control unit's step;
 * ``observers``: the EKFs (eqs 23-27, A2-A33) and the magnet flux adaptation;
+* ``references``: the reference generator (torque, speed and voltage to the current references: MTPA,
+  field weakening, MTPV, the current and torque limits), the regenerative-braking limit and the friction
+  brake's share;
 * ``startup``: the sensorless unit's step (alignment, I-f, handover, synchronism);
 * ``jit``: the ``kernel`` decorator (numba or plain Python).
 
@@ -38,5 +41,6 @@ from .jit import CACHE, JIT  # noqa: F401 - how this copy was loaded (pmsm_ev.ac
 from .layout import *  # noqa: F403
 from .observers import *  # noqa: F403
 from .plant import *  # noqa: F403
+from .references import *  # noqa: F403
 from .startup import *  # noqa: F403
 from .transforms import *  # noqa: F403

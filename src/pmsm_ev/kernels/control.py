@@ -17,6 +17,7 @@ from .jit import kernel
 from .jit import sig as _sig
 from .layout import (
     C_ADVANCE,
+    C_BRAKE_GAIN,
     C_CC_HS,
     C_CC_PRED,
     C_DELAYED,
@@ -26,7 +27,10 @@ from .layout import (
     C_ESTIMATED,
     C_HALF_PERIOD_N,
     C_I_D_REF,
+    C_I_MAX,
     C_I_Q_MAX,
+    C_K_DQN,
+    C_K_T,
     C_KI_ID,
     C_KI_IQ,
     C_KI_W,
@@ -37,21 +41,30 @@ from .layout import (
     C_L_Q,
     C_N,
     C_OBSERVER,
+    C_P_REGEN,
     C_PAPER_SIGNS,
     C_PSI,
     C_PSI_ADAPT,
+    C_REF_MODE,
     C_T_D,
+    C_T_MAX,
+    C_U_FW,
     C_U_MAX,
     C_ZOH,
     OBS_EKF5AB,
     S_I_D,
     S_I_DL,
+    S_I_DREF,
     S_I_Q,
     S_I_QL,
     S_I_QREF,
     S_INT_D,
     S_INT_Q,
+    S_REGION,
     S_SAT,
+    S_T_AVAIL,
+    S_T_BRAKE,
+    S_T_REF,
     S_THETA_PRIOR,
     S_U_PREV_0,
     S_U_PREV_1,
@@ -66,13 +79,28 @@ from .layout import (
 )
 from .observers import adapt_psi, observer_correct, observer_predict
 from .plant import dead_time_error
+from .references import envelope, friction_brake, references_within, regen_limit
 from .transforms import inverse_park, park
 
 
 # -- controller, eqs 14-20 -----------------------------------------------------------------------
+@kernel()
+def speed_pi(s, c, omega_ref, omega_est, limit):
+    """Speed PI, eq 14, its output [A] limited to +-``limit``, with conditional integration."""
+    e = omega_ref - omega_est
+    unsat = c[C_KP_W] * e + s[S_W_INT]  # (14)
+    out = min(max(unsat, -limit), limit)
+    # anti-windup: integrate unless the output is clamped and e pushes further out
+    if out == unsat or (unsat > limit) != (e > 0):
+        s[S_W_INT] += c[C_KI_W] * e * c[C_DT]
+    return out
+
+
 @kernel(_sig(_F, _V, _V, _F, _F))
 def speed_step(s, c, omega_ref, omega_est):
-    """Speed PI, eq 14, i_qref limited to +-i_q_max, with conditional integration."""
+    """Speed PI, eq 14, i_qref limited to +-i_q_max, with conditional integration: ``speed_pi`` at
+    ``C_I_Q_MAX``, written out as it was so that the paper's per-step path makes no extra call
+    (tests/test_references.py checks that the two agree bit for bit)."""
     i_q_max = c[C_I_Q_MAX]
     e = omega_ref - omega_est
     unsat = c[C_KP_W] * e + s[S_W_INT]  # (14)
@@ -148,6 +176,46 @@ def extension(f_d, f_q, u_d, u_q, u_max):
     a = u_d * u_d + u_q * u_q
     b = f_d * u_d + f_q * u_q
     return (math.sqrt(b * b + a * (u_max * u_max - f_d * f_d - f_q * f_q)) - b) / a
+
+@kernel()
+def generate_references(s, c, t_dem, omega_est):
+    """The reference generator on a torque demand ``t_dem`` [N m] at the speed ``omega_est``
+    (``pmsm_ev.kernels.references``): a braking demand limited to the regenerative power
+    (``regen_limit``), the rest of it the friction brake's (``friction_brake``); returns
+    (i_dref, i_qref) and keeps them, the torque given, the brake's demand, the region and the torque
+    available in the state (``S_I_DREF`` .. ``S_T_AVAIL``)."""
+    t_env, lam, d_top, region_top = envelope(omega_est, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_N],
+                                             c[C_I_MAX], c[C_U_FW])
+    return references_of(s, c, t_dem, omega_est, t_env, lam, d_top, region_top)
+
+
+@kernel()
+def references_of(s, c, t_dem, omega_est, t_env, lam, d_top, region_top):
+    """``generate_references`` on the limits ``envelope`` gives at ``omega_est``."""
+    t_motor = regen_limit(t_dem, omega_est, c[C_P_REGEN])
+    i_dref, i_qref, t_given, t_avail, region = references_within(
+        t_motor, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_I_MAX], c[C_T_MAX], t_env, lam, d_top, region_top)
+    s[S_I_DREF] = i_dref
+    s[S_T_REF] = t_given
+    s[S_T_BRAKE] = friction_brake(t_dem, t_given, omega_est, c[C_BRAKE_GAIN])
+    s[S_REGION] = region
+    s[S_T_AVAIL] = t_avail
+    return i_dref, i_qref
+
+
+@kernel()
+def torque_speed_step(s, c, omega_ref, omega_est):
+    """The speed loop of the reference generator's modes (``C_REF_MODE`` != 0): the speed PI (eq 14,
+    the same gains) commands the torque T = k_t x its output (k_t = k_dq N psi, ``C_K_T``: the loop gain
+    of the paper's mode), its clamp and conditional integration at the torque available at the present
+    speed (``envelope``, within T_max: no windup where field weakening gives less than asked); the
+    generator turns T into (i_dref, i_qref) (``generate_references``)."""
+    k_t = c[C_K_T]
+    t_env, lam, d_top, region_top = envelope(omega_est, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_N],
+                                             c[C_I_MAX], c[C_U_FW])
+    t_cap = min(t_env, c[C_T_MAX])
+    u = speed_pi(s, c, omega_ref, omega_est, t_cap / k_t)  # (14)
+    return references_of(s, c, k_t * u, omega_est, t_env, lam, d_top, region_top)
 
 
 @kernel(_sig(f"UniTuple({_F}, 2)", _V, _V, _F, _F, _F, _F, _F))
@@ -269,8 +337,12 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     else:
         theta_ctrl = theta_meas
     omega_hat = s[S_X + 2]
-    i_qref = speed_step(s, c, omega_ref, omega_hat)  # (14)
-    v_d, v_q = current_step(s, c, c[C_I_D_REF], i_qref, i_d, i_q, omega_hat)  # (15)-(20)
+    if c[C_REF_MODE] != 0.0:  # the reference generator: MTPA, field weakening, limits, regen
+        i_dref, i_qref = torque_speed_step(s, c, omega_ref, omega_hat)
+    else:  # the paper's: i_d = i_d_ref, i_q from the speed PI
+        i_dref = c[C_I_D_REF]
+        i_qref = speed_step(s, c, omega_ref, omega_hat)  # (14)
+    v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_hat)  # (15)-(20)
     v_alpha, v_beta = modulate(c, v_d, v_q, theta_ctrl, omega_hat, True)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,

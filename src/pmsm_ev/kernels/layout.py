@@ -216,7 +216,13 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_ANCHOR_TL", 1, "the EKF's load when the stand began [N m]"),
     ("S_STILL_OUT", 1, "how long |omega_hat| has been above C_STILL while standing [s] (the stand ends at "
                        "C_SLIP_TIME / 2)"),
-), size=114)
+    # reference generator
+    ("S_I_DREF", 1, "the d-current reference of the reference generator [A] (``C_REF_MODE`` != 0)"),
+    ("S_T_REF", 1, "the motor's torque reference after the limits [N m] (``C_REF_MODE`` != 0)"),
+    ("S_T_BRAKE", 1, "the friction brake's demand at the wheels [N m, >= 0] (``C_REF_MODE`` != 0)"),
+    ("S_REGION", 1, "the reference generator's region (``kernels.references`` REGION_*)"),
+    ("S_T_AVAIL", 1, "the torque available at the present speed, either sign [N m]: the speed PI's clamp"),
+), size=119)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -302,7 +308,16 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_CC_PRED", 1, "... the share of the current error the decoupling predicts the current to have made up at "
                      "the middle of the applied period: 1 - exp(-omega_c dt angle_advance) [-]"),
     ("C_EKF_BILINEAR", 1, "1.0: the observers' current model stepped by Tustin's rule (``EkfParams.discretisation``)"),
-), size=87)
+    # reference generator (``pmsm_ev.params.ControllerParams.reference``, ``kernels.references``)
+    ("C_REF_MODE", 1, "the references: REF_PAPER (i_d_ref, i_q from the speed PI), REF_MTPA, REF_FW"),
+    ("C_I_MAX", 1, "the current-magnitude limit [A]"),
+    ("C_T_MAX", 1, "the torque limit [N m] (resolved: MTPA at C_I_MAX when not given)"),
+    ("C_U_FW", 1, "the voltage for field weakening [V]: fw_margin x the voltage limit (0: no voltage limit)"),
+    ("C_K_T", 1, "the torque constant k_dq N psi [N m/A]: the speed PI's output x C_K_T is the torque demand"),
+    ("C_K_DQN", 1, "k_dq N: eq 12's torque factor [-]"),
+    ("C_P_REGEN", 1, "the regenerative power limit [W] (0: none)"),
+    ("C_BRAKE_GAIN", 1, "n_g eta: a shaft torque's friction-brake torque at the wheels [-]"),
+), size=95)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 UNIT_STATE_LAYOUT.export(globals())
@@ -320,3 +335,7 @@ FAULT_NONE, FAULT_RECOVERING, FAULT_LATCHED = 0.0, 1.0, 2.0
 #: observers (``C_OBSERVER``)
 OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
 OBSERVER_CODES = {"ekf5": OBS_EKF5, "ekf4": OBS_EKF4, "ekf5ab": OBS_EKF5AB, "sensored": OBS_SENSORED}
+
+#: the reference generator's modes (``C_REF_MODE``, ``ControllerParams.reference``)
+REF_PAPER, REF_MTPA, REF_FW = 0.0, 1.0, 2.0
+REFERENCE_CODES = {"paper": REF_PAPER, "mtpa": REF_MTPA, "fw": REF_FW}

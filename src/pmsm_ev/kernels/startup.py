@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from .control import current_step, modulate, speed_step, store_command
+from .control import current_step, generate_references, modulate, speed_step, store_command, torque_speed_step
 from .jit import F as _F
 from .jit import V as _V
 from .jit import kernel
@@ -41,6 +41,8 @@ from .layout import (
     C_IF_DAMP,
     C_IF_MARGIN,
     C_J_IF,
+    C_K_DQN,
+    C_K_T,
     C_KP_ID,
     C_KP_IQ,
     C_KP_W,
@@ -52,6 +54,7 @@ from .layout import (
     C_PSI,
     C_PSI_ADAPT,
     C_RECOVER_TIME,
+    C_REF_MODE,
     C_SIN_E,
     C_SLIP_FILTER,
     C_SLIP_TIME,
@@ -161,19 +164,28 @@ def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
     """Hand the drive to FOC on the EKF (mode EKF), seated on the present state: the speed PI's
     integral so that (14) returns the q current that gives the present torque once i_d is at its
     reference (eq 12: the I-f vector's d current adds a reluctance torque N (L_d - L_q) i_d i_q that
-    FOC's i_d = 0 takes away), or with ``on_load`` the current of the load the EKF sees,
+    FOC's i_d = 0 takes away; with the reference generator, ``C_REF_MODE`` != 0: the present torque
+    over k_t, the generator's references for it), or with ``on_load`` the current of the load the EKF sees,
     T_L_hat / (N psi), after a loss of synchronism, when the present current says nothing of the
     load; the current PIs on the voltage held, turned by one period of the I-f vector's rotation
     (``seat_current_pis``)."""
     theta = s[S_X + 3]
     i_d, i_q = park(i_alpha, i_beta, theta)
-    if on_load:
+    if c[C_REF_MODE] != 0.0:  # the reference generator's modes: (14) returns the present torque / k_t,
+        # which the generator turns into its references (the current PIs seated on them)
+        t_seat = s[S_X + 4] if on_load else c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
+        s[S_W_INT] = t_seat / c[C_K_T] - c[C_KP_W] * (omega_ref - omega_hat)
+        i_dref, i_seat = generate_references(s, c, t_seat, omega_hat)
+    elif on_load:
+        i_dref = c[C_I_D_REF]
         i_seat = s[S_X + 4] / (c[C_N] * c[C_PSI])
+        s[S_W_INT] = i_seat - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_seat now
     else:  # N i_q (psi + (L_d - L_q) i_d) = N i_seat (psi + (L_d - L_q) i_dref)
+        i_dref = c[C_I_D_REF]
         i_seat = i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d) / (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * c[C_I_D_REF])
-    s[S_W_INT] = i_seat - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_seat now
+        s[S_W_INT] = i_seat - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_seat now
     seat_current_pis(s, c, theta + c[C_ADVANCE] * omega_hat, c[C_N] * s[S_OMEGA_IF] * c[C_DT],
-                     c[C_I_D_REF], i_seat, i_d, i_q, omega_hat)
+                     i_dref, i_seat, i_d, i_q, omega_hat)
     s[S_AGREE] = 0.0
 
 
@@ -449,8 +461,12 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         theta_ctrl = s[S_X + 3]
         omega_ctrl = omega_hat
         i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
-        i_qref = speed_step(s, c, omega_ref, omega_hat)  # (14)
-        v_d, v_q = current_step(s, c, c[C_I_D_REF], i_qref, i_d, i_q, omega_hat)  # (15)-(20)
+        if c[C_REF_MODE] != 0.0:  # the reference generator: MTPA, field weakening, limits, regen
+            i_dref, i_qref = torque_speed_step(s, c, omega_ref, omega_hat)
+        else:
+            i_dref = c[C_I_D_REF]
+            i_qref = speed_step(s, c, omega_ref, omega_hat)  # (14)
+        v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_hat)  # (15)-(20)
     else:
         theta_ctrl = s[S_PHI]
         omega_ctrl = s[S_OMEGA_IF]
