@@ -405,22 +405,15 @@ def stored_energies(i_d, i_q, omega_m, pp):
 
 
 @kernel()
-def _accumulate(ee, w, r):
-    """Add the powers of one RK4 stage, ``plant_rates``' r[4:], times the weight w [s] to the energies."""
-    p_dc = r[4]
-    ee[E_DC] += w * p_dc
-    ee[E_DC_ABS] += w * abs(p_dc)
-    if p_dc < 0.0:
-        ee[E_REGEN] -= w * p_dc
-    ee[E_COPPER] += w * r[5]
-    ee[E_FRICTION] += w * r[6]
-    ee[E_SHAFT] += w * r[7]
-    ee[E_GEAR] += w * r[8]
-    ee[E_AERO] += w * r[9]
-    ee[E_ROLL] += w * r[10]
-    ee[E_GRADE] += w * r[11]
-    ee[E_BRAKE] += w * r[12]
-    ee[E_INVERTER] += w * r[13]
+def _stage_sum(ra, rb, rc, rd, i):
+    """RK4's weighted sum of power i of the four stages, a + 2 b + 2 c + d (times h/6 by the caller)."""
+    return ra[i] + 2.0 * rb[i] + 2.0 * rc[i] + rd[i]
+
+
+@kernel()
+def _regen(p):
+    """The power returned to the DC link, max(-p, 0) [W]."""
+    return -p if p < 0.0 else 0.0
 
 
 @kernel(_sig(f"UniTuple({_F}, 10)", _F, _F, _F, _F, _F, _F, _F, _F, _V, _V))
@@ -441,9 +434,7 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     if pp[P_SUBSTEP_ANGLE] > 0.0:  # at most that angle per sub-step: accurate at top speed
         n = max(n, int(math.ceil(abs(pp[P_N] * omega_m) * dt / pp[P_SUBSTEP_ANGLE])))
     h = dt / n
-    w1 = h / 6.0
-    w2 = h / 3.0
-    e_dc0 = ee[E_DC]
+    s_dc = s_abs = s_reg = s_cu = s_fr = s_sh = s_gear = s_aero = s_roll = s_grade = s_brake = s_inv = 0.0
     x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
     for _ in range(n):
         ra = plant_rates(x0, x1, x2, x3, v_alpha, v_beta, delta, pp)
@@ -457,15 +448,37 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
         rd = plant_rates(x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3,
                          v_alpha, v_beta, delta, pp)
         d0, d1, d2, d3 = rd[0], rd[1], rd[2], rd[3]
-        _accumulate(ee, w1, ra)
-        _accumulate(ee, w2, rb)
-        _accumulate(ee, w2, rc)
-        _accumulate(ee, w1, rd)
+        # the energies: the same RK4 weights on the stages' powers
+        s_dc += _stage_sum(ra, rb, rc, rd, 4)
+        s_abs += abs(ra[4]) + 2.0 * abs(rb[4]) + 2.0 * abs(rc[4]) + abs(rd[4])
+        s_reg += _regen(ra[4]) + 2.0 * _regen(rb[4]) + 2.0 * _regen(rc[4]) + _regen(rd[4])
+        s_cu += _stage_sum(ra, rb, rc, rd, 5)
+        s_fr += _stage_sum(ra, rb, rc, rd, 6)
+        s_sh += _stage_sum(ra, rb, rc, rd, 7)
+        s_gear += _stage_sum(ra, rb, rc, rd, 8)
+        s_aero += _stage_sum(ra, rb, rc, rd, 9)
+        s_roll += _stage_sum(ra, rb, rc, rd, 10)
+        s_grade += _stage_sum(ra, rb, rc, rd, 11)
+        s_brake += _stage_sum(ra, rb, rc, rd, 12)
+        s_inv += _stage_sum(ra, rb, rc, rd, 13)
         x0 += h / 6.0 * (a0 + 2.0 * b0 + 2.0 * c0 + d0)
         x1 += h / 6.0 * (a1 + 2.0 * b1 + 2.0 * c1 + d1)
         x2 += h / 6.0 * (a2 + 2.0 * b2 + 2.0 * c2 + d2)
         x3 += h / 6.0 * (a3 + 2.0 * b3 + 2.0 * c3 + d3)
-    ee[E_P_DC] = (ee[E_DC] - e_dc0) / dt
+    w = h / 6.0
+    ee[E_DC] += w * s_dc
+    ee[E_DC_ABS] += w * s_abs
+    ee[E_REGEN] += w * s_reg
+    ee[E_COPPER] += w * s_cu
+    ee[E_FRICTION] += w * s_fr
+    ee[E_SHAFT] += w * s_sh
+    ee[E_GEAR] += w * s_gear
+    ee[E_AERO] += w * s_aero
+    ee[E_ROLL] += w * s_roll
+    ee[E_GRADE] += w * s_grade
+    ee[E_BRAKE] += w * s_brake
+    ee[E_INVERTER] += w * s_inv
+    ee[E_P_DC] = w * s_dc / dt
     dx = pp[P_R_W] / (pp[P_N_G] * pp[P_N]) * (x3 - theta_e)
     x3 = wrap_angle(x3)
     i_alpha, i_beta, t_e, t_l, v_v = plant_outputs(x0, x1, x2, x3, delta, pp)
