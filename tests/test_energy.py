@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import math
 
+import fmpy
 import numpy as np
 import pytest
+from fmpy.fmi2 import FMU2Slave
 
+import pmsm_ev_fmus
 from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.losses import steady_state
@@ -282,3 +285,39 @@ def test_the_energy_metrics_are_in_wh_and_per_km():
     base["time"] = r["time"]
     assert "energy" not in compute_metrics(base)
     assert compute_metrics({**base, **r})["energy"] == em
+
+
+# -- the plant FMU ---------------------------------------------------------------------------------------
+def test_the_plant_fmu_takes_the_brake_and_gives_the_energies(tmp_path):
+    """T_brake is an input of PmsmEvPlant.fmu (0 when unset) and the energies are its outputs, equal to
+    the Plant class's step by step."""
+    path = pmsm_ev_fmus.build_all(tmp_path / "fmus", names=["PmsmEvPlant"])["PmsmEvPlant"]
+    md = fmpy.read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    assert {v.name: v.unit for v in md.modelVariables}["E_dc"] == "J"
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=fmpy.extract(str(path), str(tmp_path / "x")),
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="plant")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.setReal([vr["omega_m0"]], [120.0])
+    fmu.exitInitializationMode()
+    ref = Plant(plant=PlantParams(omega_m0=120.0))
+    names = ("E_dc", "E_brake", "E_gear", "E_rolling", "E_kinetic", "W_magnetic", "P_dc", "omega_m")
+    t = 0.0
+    for j in range(300):
+        brake = 300.0 if j >= 100 else (-50.0 if j >= 50 else 0.0)  # none, a negative demand (none), braking
+        v_alpha, v_beta = 5.0 * math.cos(0.1 * j), 40.0 * math.sin(0.1 * j)
+        if j >= 50:
+            fmu.setReal([vr["T_brake"]], [brake])
+        fmu.setReal([vr["v_alpha"], vr["v_beta"]], [v_alpha, v_beta])
+        fmu.doStep(currentCommunicationPoint=t, communicationStepSize=DT)
+        t += DT
+        ref.step(v_alpha, v_beta, 0.0, DT, brake)
+    e = ref.energies()
+    expected = [e["E_dc"], e["E_brake"], e["E_gear"], e["E_rolling"], e["E_kinetic"], e["W_magnetic"], ref.P_dc,
+                ref.omega_m]
+    assert fmu.getReal([vr[n] for n in names]) == expected
+    assert e["E_brake"] > 0.0
+    fmu.terminate()
+    fmu.freeInstance()
