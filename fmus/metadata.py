@@ -159,6 +159,9 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                       "inv_v_ref, inv_i_ref"),
     "inv_v_ref": ("V", "inverter: DC voltage at which inv_e_sw is given"),
     "inv_i_ref": ("A", "inverter: current at which inv_e_sw is given"),
+    "iron_c_h": (None, "iron losses, hysteresis coefficient c_h [W/(rad/s Wb^2)] of P_fe = (c_h |omega_e| + c_e "
+                       "omega_e^2) (psi_d^2 + psi_q^2), a drag on the shaft (0 = off)"),
+    "iron_c_e": (None, "iron losses, eddy-current coefficient c_e [W/((rad/s)^2 Wb^2)] (0 = off)"),
     "sat_i_q": ("A", "q-axis saturation current: psi_q = L_q i_q / (1 + |i_q| / sat_i_q) (0 = off, linear)"),
     "sat_i_d": ("A", "d-axis saturation current: psi_d = psi + L_d i_d / (1 + |i_d| / sat_i_d) (0 = off)"),
     "T_winding": ("degC", "winding temperature: R_s(T) = R_s (1 + alpha_R (T - 20 degC))"),

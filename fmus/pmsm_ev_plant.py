@@ -48,6 +48,7 @@ _ENERGY_OUTPUTS = {
     "E_grade": "work against the gradient force since the start, v f_g (eq 2): the potential energy gained",
     "E_brake": "energy taken by the friction brake since the start",
     "E_inverter": "inverter conduction and switching losses since the start (inverter_losses)",
+    "E_iron": "iron losses since the start (iron_c_h, iron_c_e), a drag on the shaft",
 }
 
 

@@ -74,10 +74,10 @@ CASES = {
                                              {}),
     # the dead time's soft sign (2 A) is crossed within one 1e-4 s step: 4 RK4 sub-steps resolve it
     # (``test_the_balance_measures_the_integration_error``)
-    "dead time, thermal, saturation, inverter losses": (
+    "dead time, thermal, saturation, inverter and iron losses": (
         {}, {"gear_model": "power_flow"},
         {"v_dc": 360.0, "dead_time": 2e-6, "thermal_R": 1.0, "thermal_C": 20.0, "sat_i_q": 900.0,
-         "sat_i_d": 2000.0, "inverter_losses": True, "rk4_substeps": 4}),
+         "sat_i_d": 2000.0, "inverter_losses": True, "iron_c_h": 9.9, "iron_c_e": 3.9e-3, "rk4_substeps": 4}),
 }
 
 
@@ -92,7 +92,8 @@ def test_the_energy_balance_closes_over_a_drive(case):
     rel = e["residual"] / e["E_dc_abs"]
     print(f"\n{case}: E_dc = {e['E_dc']:.1f} J, throughput {e['E_dc_abs']:.1f} J, regen {e['E_regen']:.1f} J, "
           f"brake {e['E_brake']:.1f} J, copper {e['E_copper']:.1f} J, gear {e['E_gear']:.1f} J, "
-          f"inverter {e['E_inverter']:.1f} J, grade {e['E_grade']:.1f} J, kinetic {e['dE_kinetic']:.1f} J; "
+          f"inverter {e['E_inverter']:.1f} J, iron {e['E_iron']:.1f} J, grade {e['E_grade']:.1f} J, "
+          f"kinetic {e['dE_kinetic']:.1f} J; "
           f"residual {e['residual']:.3e} J = {rel:.2e} of the throughput")
     assert e["E_regen"] > 0.05 * e["E_dc_abs"] and e["E_brake"] > 100.0 and e["E_grade"] > 100.0
     assert 0.0 < e["dE_kinetic"] and 5.0 < p.omega_m < 40.0  # braked from 150 rad/s towards 20 rad/s
@@ -163,14 +164,14 @@ def test_each_power_of_the_plant_is_its_formula():
     assert (r[9], r[10], r[11], r[12]) == pytest.approx((v_v * f_a, v_v * f_f, v_v * f_g, v_v * f_b), rel=1e-13)
     # the paper's gear: (1/eta - 1) of the wheel forces' power, the brake's too
     assert r[8] == pytest.approx((1 / v.eta - 1) * v_v * (f_a + f_f + f_g + f_b), rel=1e-12)
-    assert r[13] == 0.0  # no inverter losses by default
+    assert r[13] == 0.0 and r[14] == 0.0  # no inverter, no iron losses by default
 
 
 def test_steady_state_losses_and_efficiency_are_the_analytic_ones():
-    """Copper, friction and inverter losses (conduction + switching) at an operating point, against
-    their closed forms; P_dc = losses + shaft power; the efficiency motoring and generating."""
+    """Copper, friction, iron and inverter losses (conduction + switching) at an operating point,
+    against their closed forms; P_dc = losses + shaft power; the efficiency motoring and generating."""
     m = MotorParams(dq_convention="amplitude_invariant")
-    pl = PlantParams(v_dc=360.0, inverter_losses=True)
+    pl = PlantParams(v_dc=360.0, inverter_losses=True, iron_c_h=9.9, iron_c_e=3.9e-3)
     i_d, i_q, w = -40.0, 150.0, 300.0
     s = steady_state(m, pl, VehicleParams(), i_d, i_q, w)
     amp = math.hypot(i_d, i_q)
@@ -181,17 +182,21 @@ def test_steady_state_losses_and_efficiency_are_the_analytic_ones():
     assert s["P_copper"] == pytest.approx(1.5 * m.R_s * amp**2, rel=1e-12)
     assert s["P_friction"] == pytest.approx(w * t_f, rel=1e-12)
     assert s["P_inverter"] == pytest.approx(p_inv, rel=1e-5)
+    w_e, psi2 = m.N * w, (m.psi + m.L_d * i_d) ** 2 + (m.L_q * i_q) ** 2
+    assert s["P_iron"] == pytest.approx((pl.iron_c_h * w_e + pl.iron_c_e * w_e**2) * psi2, rel=1e-12)
     assert s["T_e"] == pytest.approx(t_e, rel=1e-12)
     assert s["P_dc"] == pytest.approx(s["P_copper"] + s["P_inverter"] + w * t_e, rel=1e-12)
-    assert s["mode"] == "motoring" and s["efficiency"] == pytest.approx(w * (t_e - t_f) / s["P_dc"], rel=1e-12)
+    assert s["P_shaft"] == pytest.approx(w * (t_e - t_f) - s["P_iron"], rel=1e-12)
+    assert s["mode"] == "motoring" and s["efficiency"] == pytest.approx(s["P_shaft"] / s["P_dc"], rel=1e-12)
     g = steady_state(m, pl, VehicleParams(), i_d, -i_q, w)
     assert g["mode"] == "generating" and 0.8 < g["efficiency"] < s["efficiency"] < 1.0
     assert g["efficiency"] == pytest.approx(g["P_dc"] / g["P_shaft"], rel=1e-12)
     print(f"\nsteady state at i_d = {i_d} A, i_q = +-{i_q} A, {w} rad/s: motoring {s['efficiency']:.4f} "
-          f"(copper {s['P_copper']:.0f} W, inverter {s['P_inverter']:.0f} W, friction {s['P_friction']:.0f} W), "
+          f"(copper {s['P_copper']:.0f} W, inverter {s['P_inverter']:.0f} W, iron {s['P_iron']:.0f} W, "
+          f"friction {s['P_friction']:.0f} W), "
           f"generating {g['efficiency']:.4f}")
     off = steady_state(m, PlantParams(), VehicleParams(), i_d, i_q, w)
-    assert off["P_inverter"] == 0.0 and off["efficiency"] > s["efficiency"]
+    assert off["P_inverter"] == 0.0 and off["P_iron"] == 0.0 and off["efficiency"] > s["efficiency"]
     with pytest.raises(ParameterError, match="inverter_losses needs the DC-link voltage"):
         PlantParams(inverter_losses=True).validate()
 

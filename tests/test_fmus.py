@@ -57,7 +57,7 @@ OBSERVER = {fmu: observer for observer, fmu in pmsm_ev_fmus.OBSERVER_FMUS.items(
 PLANT_INPUTS = ("v_alpha", "v_beta", "delta", "T_brake")
 PLANT_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle",
                  "x_vehicle", "E_dc", "E_dc_abs", "E_regen", "E_copper", "E_friction", "E_shaft", "E_gear", "E_aero",
-                 "E_rolling", "E_grade", "E_brake", "E_inverter", "W_magnetic", "E_kinetic", "P_dc")
+                 "E_rolling", "E_grade", "E_brake", "E_inverter", "E_iron", "W_magnetic", "E_kinetic", "P_dc")
 CTRL_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
 CTRL_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d_hat", "i_q_hat", "omega_hat", "theta_hat", "T_L_hat",
                 "i_d", "i_q", "i_qref", "mode", "fault", "theta_ctrl", "omega_ctrl")

@@ -8,7 +8,7 @@ v_d = R_s i_d - omega_e psi_q(i_q), v_q = R_s i_q + omega_e psi_d(i_d), and the 
 sinusoids of amplitude |i|. The powers are the kernel's at that state, the inverter's averaged over
 an electrical period (``PERIOD_SAMPLES`` angles; its losses depend on the phase currents'
 instantaneous values). The inverter's dead time is left out: it distorts the voltage, it is not a
-loss (docs/energy-model.md). Iron losses are not modelled.
+loss (docs/energy-model.md).
 """
 
 from __future__ import annotations
@@ -33,8 +33,9 @@ def steady_state(motor: MotorParams | None = None, plant: PlantParams | None = N
 
     ``v_d``, ``v_q`` [V], ``T_e`` [N m] (eq 12 times k_dq), ``P_dc`` (terminal power plus the
     inverter's losses), ``P_copper``, ``P_inverter`` (0 unless ``PlantParams.inverter_losses``),
-    ``P_friction`` (omega T_f, eq 8), ``P_shaft`` (omega (T_e - T_f): the shaft's power after the
-    motor's friction, what the gear gets), ``P_loss`` (their sum of losses) and ``efficiency``:
+    ``P_friction`` (omega T_f, eq 8), ``P_iron`` (0 unless ``PlantParams.iron_c_h``, ``iron_c_e``),
+    ``P_shaft`` (omega (T_e - T_f - T_fe): the shaft's power after the motor's friction and iron
+    losses, what the gear gets), ``P_loss`` (the sum of the losses) and ``efficiency``:
     P_shaft / P_dc motoring, P_dc / P_shaft generating (both < 0), 0 where no power comes out
     (e.g. the losses exceed a small generated power), NaN at no power at all; ``mode``
     ("motoring", "generating" or "idle"). ``vehicle`` only matters for the friction's soft sign."""
@@ -66,8 +67,8 @@ def steady_state(motor: MotorParams | None = None, plant: PlantParams | None = N
     r = k.plant_rates(i_d, i_q, omega_m, 0.0, v_d, v_q, 0.0, pp)
     p_term = r[4] - r[13]
     p_dc = p_term + p_inv
-    p_cu, p_fric, p_em = r[5], r[6], r[7]
-    p_shaft = p_em - p_fric
+    p_cu, p_fric, p_em, p_iron = r[5], r[6], r[7], r[14]
+    p_shaft = p_em - p_fric - p_iron
     if p_shaft > 0.0:
         mode, eff = "motoring", (p_shaft / p_dc if p_dc > 0.0 else 0.0)
     elif p_shaft < 0.0:
@@ -76,7 +77,7 @@ def steady_state(motor: MotorParams | None = None, plant: PlantParams | None = N
         mode, eff = "idle", math.nan
     return {"v_d": v_d, "v_q": v_q, "T_e": _torque(k, i_d, i_q, pp),
             "P_dc": p_dc, "P_copper": p_cu, "P_inverter": p_inv, "P_friction": p_fric, "P_shaft": p_shaft,
-            "P_loss": p_cu + p_inv + p_fric, "efficiency": eff, "mode": mode}
+            "P_iron": p_iron, "P_loss": p_cu + p_inv + p_iron + p_fric, "efficiency": eff, "mode": mode}
 
 
 def _torque(k, i_d, i_q, pp) -> float:

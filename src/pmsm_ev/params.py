@@ -236,6 +236,17 @@ class PlantParams:
     inv_v_ref: float = 300.0  #: DC voltage at which inv_e_sw is given [V] (the data sheet's test condition)
     inv_i_ref: float = 400.0  #: current at which inv_e_sw is given [A] (the module's rated current)
 
+    # -- iron losses (off by default: the paper's motor has none) ------------------------------
+    #: hysteresis coefficient c_h of the iron losses P_fe = (c_h |omega_e| + c_e omega_e^2) psi_s^2,
+    #: psi_s^2 = psi_d^2 + psi_q^2 (Steinmetz's loss separation, ``pmsm_ev.kernels.iron_torque``), taken
+    #: from the shaft as a drag [W / (rad/s Wb^2)]; 0 = off. Typical size [chosen]: the no-load losses
+    #: of a ~50 kW EV motor at 6000 rpm are ~1 % of its power; 400 W at 628 rad/s (N = 4, psi = Table I's
+    #: 0.08975 Wb), half of it hysteresis: 200 W / (2513 rad/s x 0.08975^2 Wb^2) = 9.9
+    iron_c_h: float = 0.0
+    #: eddy-current coefficient c_e [W / ((rad/s)^2 Wb^2)]; 0 = off. Typical [chosen]: the other half of
+    #: the 400 W above, 200 W / (2513^2 x 0.08975^2) = 3.9e-3
+    iron_c_e: float = 0.0
+
     # -- magnetic saturation (off by default: Table I's constant inductances) ------------
     #: saturation current of the q axis [A]; 0 = off (linear). Flux psi_q = L_q i_q / (1 +
     #: |i_q| / sat_i_q) (Froehlich-Kennelly curve, ``pmsm_ev.kernels.saturated_flux``): the
@@ -308,6 +319,9 @@ class PlantParams:
         for name in ("inv_v_ref", "inv_i_ref"):
             value = getattr(self, name)
             _require(math.isfinite(value) and value > 0, f"{name} must be > 0 (got {value})")
+        for name in ("iron_c_h", "iron_c_e"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0, 0 = off (got {value})")
         _require(not self.inverter_losses or self.v_dc > 0,
                  "inverter_losses needs the DC-link voltage (the switching losses scale with it): set v_dc > 0 V")
         for name in ("sat_i_q", "sat_i_d"):

@@ -53,10 +53,10 @@ from .transforms import clarke, wrap_angle
 ENERGY_SLOTS = {"E_dc": _k.E_DC, "E_dc_abs": _k.E_DC_ABS, "E_regen": _k.E_REGEN, "E_copper": _k.E_COPPER,
                 "E_friction": _k.E_FRICTION, "E_shaft": _k.E_SHAFT, "E_gear": _k.E_GEAR, "E_aero": _k.E_AERO,
                 "E_rolling": _k.E_ROLL, "E_grade": _k.E_GRADE, "E_brake": _k.E_BRAKE,
-                "E_inverter": _k.E_INVERTER}
+                "E_inverter": _k.E_INVERTER, "E_iron": _k.E_IRON}
 #: the terms whose sum is E_dc (the energy balance, docs/energy-model.md)
-BALANCE_TERMS = ("E_copper", "E_inverter", "E_friction", "E_gear", "E_aero", "E_rolling", "E_grade", "E_brake",
-                 "dE_kinetic", "dW_magnetic")
+BALANCE_TERMS = ("E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling", "E_grade",
+                 "E_brake", "dE_kinetic", "dW_magnetic")
 
 
 def inverter_loss_voltage(p: PlantParams) -> float:
@@ -99,7 +99,8 @@ class Plant:
                   _k.P_GEAR_PF: 1.0 if v.gear_model == "power_flow" else 0.0, _k.P_J_M: m.J_m,
                   _k.P_M_R: v.m_v * v.r_w**2 / v.n_g**2,
                   _k.P_INV: 1.0 if p.inverter_losses else 0.0, _k.P_INV_V: inverter_loss_voltage(p),
-                  _k.P_INV_R: p.inv_r_on, _k.P_INV_K: m.k_dq / 1.5,
+                  _k.P_INV_R: p.inv_r_on, _k.P_INV_K: m.k_dq / 1.5, _k.P_FE_H: p.iron_c_h,
+                  _k.P_FE_E: p.iron_c_e,
                   _k.P_SAT: 1.0 if (p.sat_i_d > 0 or p.sat_i_q > 0) else 0.0,
                   _k.P_SAT_AD: 1.0 / p.sat_i_d if p.sat_i_d > 0 else 0.0,
                   _k.P_SAT_AQ: 1.0 / p.sat_i_q if p.sat_i_q > 0 else 0.0,

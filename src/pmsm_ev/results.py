@@ -31,7 +31,7 @@ SENSORLESS_COLUMNS = ("x_vehicle", "mode", "fault", "theta_ctrl", "omega_ctrl")
 #: the plant's energy outputs [J] (``pmsm_ev.plant.Plant.energies``, the plant FMU's outputs of the same
 #: names) and the position [m]: a run that records them all gets the energy block of its metrics
 #: (``energy_metrics``); no shipped scenario records them yet
-ENERGY_COLUMNS = ("E_dc", "E_regen", "E_copper", "E_inverter", "E_friction", "E_gear", "E_aero", "E_rolling",
+ENERGY_COLUMNS = ("E_dc", "E_regen", "E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling",
                   "E_grade", "E_brake", "E_kinetic", "W_magnetic", "x_vehicle")
 #: the least distance [m] for a figure per kilometre: 10 m, a car's length or two (below it, a run
 #: that stands, aligns or creeps would divide by almost nothing)
@@ -131,7 +131,7 @@ def energy_metrics(r: dict[str, np.ndarray]) -> dict:
     """The energy figures of a run that recorded ``ENERGY_COLUMNS`` [Wh], from its first to its
     last row (the plant's energies are integrals since its start, the stored ones its state's):
     ``dc`` (the DC link's net energy), ``drawn`` (what it delivered, dc + regen) and ``regen`` (what
-    went back), the ``losses`` by kind (copper, inverter, friction, gear; ``total``), the ``road``
+    went back), the ``losses`` by kind (copper, inverter, iron, friction, gear; ``total``), the ``road``
     work by force (aero, rolling, grade: the grade's is the potential energy gained), ``brake`` (the
     friction brake's), the changes of the ``kinetic`` and ``magnetic`` energies, ``residual`` (dc
     minus all the others, the balance: each term is integrated on its own), ``distance_m`` (the
@@ -143,8 +143,8 @@ def energy_metrics(r: dict[str, np.ndarray]) -> dict:
     def wh(name: str) -> float:
         return float(r[name][-1] - r[name][0]) * _WH
 
-    losses = {"copper": wh("E_copper"), "inverter": wh("E_inverter"), "friction": wh("E_friction"),
-              "gear": wh("E_gear")}
+    losses = {"copper": wh("E_copper"), "inverter": wh("E_inverter"), "iron": wh("E_iron"),
+              "friction": wh("E_friction"), "gear": wh("E_gear")}
     losses["total"] = sum(losses.values())
     road = {"aero": wh("E_aero"), "rolling": wh("E_rolling"), "grade": wh("E_grade")}
     dc, regen, brake = wh("E_dc"), wh("E_regen"), wh("E_brake")

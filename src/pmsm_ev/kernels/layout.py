@@ -176,7 +176,9 @@ PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
                    "(``pmsm_ev.kernels.inverter_loss``)"),
     ("P_INV_R", 1, "inverter: per-phase on-state resistance [Ohm]"),
     ("P_INV_K", 1, "inverter: the factor from the phase losses to the model's power, k_dq / (3/2) [-]"),
-), size=37)
+    ("P_FE_H", 1, "iron losses, hysteresis: c_h [W / (rad/s Wb^2)] (0 = off; ``PlantParams.iron_c_h``)"),
+    ("P_FE_E", 1, "iron losses, eddy currents: c_e [W / ((rad/s)^2 Wb^2)] (0 = off; ``PlantParams.iron_c_e``)"),
+), size=39)
 
 #: the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``; ``plant_step`` adds each step's
 #: RK4-integrated energies): joules since the start, in the dq convention's power scaling (``P_K_DQ``)
@@ -195,7 +197,8 @@ PLANT_ENERGY_LAYOUT = Layout("plant energy vector", "E_", (
     ("E_BRAKE", 1, "friction-brake energy [J]"),
     ("E_INVERTER", 1, "inverter conduction and switching losses [J]"),
     ("E_P_DC", 1, "mean DC-link power over the last step [W]"),
-), size=13)
+    ("E_IRON", 1, "iron losses, the drag omega_m T_fe on the shaft [J]"),
+), size=14)
 
 #: the control unit's state vector (controller + observer)
 UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (

@@ -28,6 +28,7 @@ from .layout import (
     E_GEAR,
     E_GRADE,
     E_INVERTER,
+    E_IRON,
     E_P_DC,
     E_REGEN,
     E_ROLL,
@@ -39,6 +40,8 @@ from .layout import (
     P_DT_I0,
     P_DT_V,
     P_ETA,
+    P_FE_E,
+    P_FE_H,
     P_G,
     P_GEAR_PF,
     P_INV,
@@ -196,6 +199,17 @@ def inverter_loss(i_alpha, i_beta, v_loss, r_on):
 
 
 @kernel()
+def iron_torque(omega_m, psi_d, psi_q, N, c_h, c_e, omega_eps):
+    """The iron losses as a drag on the shaft [N m]: P_fe = (c_h |omega_e| + c_e omega_e^2) psi_s^2
+    (Steinmetz's separation into hysteresis, ~ f B^2, and eddy-current losses, ~ f^2 B^2, with the
+    stator's flux linkage psi_s^2 = psi_d^2 + psi_q^2 standing for B^2: field weakening lowers
+    them), taken from the shaft, T_fe = P_fe / omega_m = N psi_s^2 (c_h tanh(omega_m / omega_eps) +
+    c_e N omega_m); the soft sign of the friction's (eq 8) at standstill."""
+    psi2 = psi_d * psi_d + psi_q * psi_q
+    return N * psi2 * (c_h * math.tanh(omega_m / omega_eps) + c_e * N * omega_m)
+
+
+@kernel()
 def field_energy(i, L0, a):
     """The field energy [J] of one axis, W = integral of i dpsi = i psi(i) - W'(i), stored by the
     current i on the Froehlich-Kennelly curve psi(i) = L0 i / (1 + a |i|) (``saturated_flux``): the
@@ -277,11 +291,11 @@ def brake_torque(omega_m, pp):
 
 
 @kernel()
-def shaft_load(omega_m, delta, t_e, pp):
+def shaft_load(i_d, i_q, omega_m, delta, t_e, pp):
     """T_L_mech, the load the vehicle puts on the shaft [N m]: eq 29 (r_w / (eta n_g) times the road
     forces) plus the brake over eta (the paper's gear); with the power_flow gear, the road forces and
     the brake at the shaft, r_w F / n_g, over e of the direction the power flows (``power_flow_gear``,
-    which needs T_e)."""
+    which needs T_e and the shaft's drag, hence the currents of the iron losses)."""
     if pp[P_GEAR_PF] == 0.0:
         t_l = plant_load_torque(omega_m, delta, pp)  # (29)
         if pp[P_T_BRAKE] != 0.0:
@@ -294,6 +308,10 @@ def shaft_load(omega_m, delta, t_e, pp):
               + aero_force(v_v, pp[P_RHO_A], pp[P_C_D], pp[P_A_F], pp[P_V_A], paper))
     y = pp[P_R_W] / pp[P_N_G] * forces + brake_torque(omega_m, pp)
     x = t_e - friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)
+    if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
+        f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
+        f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
+        x = x - iron_torque(omega_m, pp[P_PSI] + f_d, f_q, pp[P_N], pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
     _, _, e = power_flow_gear(x, y, pp[P_J_M], pp[P_M_R], pp[P_ETA], omega_m)
     return y / e
 
@@ -306,13 +324,14 @@ def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     ``power_flow_gear``) and eq 13; the dead time's error added to the voltage first.
 
     Returns (di_d/dt, di_q/dt, domega_m/dt, dtheta_e/dt, p_dc, p_cu, p_fric, p_shaft, p_gear, p_aero,
-    p_roll, p_grade, p_brake, p_inv): the DC-link power p_dc = k_dq (v_d i_d + v_q i_q) + p_inv at
+    p_roll, p_grade, p_brake, p_inv, p_iron): the DC-link power p_dc = k_dq (v_d i_d + v_q i_q) + p_inv at
     the voltage the winding sees (after the dead time's error: a distortion of the voltage, which the
     winding's power includes, not a loss of its own), the copper losses k_dq R_s (i_d^2 + i_q^2), the
     friction omega T_f, the shaft's omega T_e, the gear's losses, the wheel's v f_a, v f_f, v f_g,
-    the brake's omega_w T_brake tanh(v / v_eps) and the inverter's losses (``inverter_loss``, times
-    k_dq / (3/2)). With eqs 10-12 they balance: p_dc = p_cu + p_inv + d/dt W_mag + p_shaft, p_shaft =
-    p_fric + p_gear + p_aero + p_roll + p_grade + p_brake + d/dt E_kin (``stored_energies``)."""
+    the brake's omega_w T_brake tanh(v / v_eps), the inverter's losses (``inverter_loss``, times
+    k_dq / (3/2)) and the iron losses (``iron_torque``, a drag on the shaft beside the friction). With
+    eqs 10-12 they balance: p_dc = p_cu + p_inv + d/dt W_mag + p_shaft, p_shaft = p_fric + p_iron +
+    p_gear + p_aero + p_roll + p_grade + p_brake + d/dt E_kin (``stored_energies``)."""
     c = math.cos(theta_e)
     s = math.sin(theta_e)
     if pp[P_DT_V] != 0.0:  # the inverter's dead time: the applied voltage loses its error
@@ -333,6 +352,14 @@ def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
         t_e = k * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12) x k_dq
     paper = pp[P_PAPER] != 0.0
     t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)  # (8)
+    t_drag = t_f  # the shaft's drag: friction, and the iron losses when on
+    p_iron = 0.0
+    if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
+        f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
+        f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
+        t_fe = iron_torque(omega_m, pp[P_PSI] + f_d, f_q, N, pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+        t_drag = t_f + t_fe
+        p_iron = omega_m * t_fe
     # the road forces at the wheel (eqs 2-4) and the brake
     r_w, n_g, eta = pp[P_R_W], pp[P_N_G], pp[P_ETA]
     v_v = r_w * omega_m / n_g  # (1), (6)
@@ -348,10 +375,10 @@ def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
         t_l = r_w / (eta * n_g) * forces  # (29)
         if y_b != 0.0:
             t_l = t_l + y_b / eta
-        dw = (t_e - t_f - t_l) / pp[P_J_EQ]  # (9) = (28)
+        dw = (t_e - t_drag - t_l) / pp[P_J_EQ]  # (9) = (28)
         p_gear = omega_m * (t_l - y)
     else:  # eta in the direction the power flows
-        dw, t_gear, e = power_flow_gear(t_e - t_f, y, pp[P_J_M], pp[P_M_R], eta, omega_m)
+        dw, t_gear, e = power_flow_gear(t_e - t_drag, y, pp[P_J_M], pp[P_M_R], eta, omega_m)
         p_gear = omega_m * t_gear * (1.0 - e)
     dth = N * omega_m  # (13)
     p_term = k * (v_d * i_d + v_q * i_q)
@@ -359,7 +386,7 @@ def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     if pp[P_INV] != 0.0:  # drawn from the DC link only: the winding's voltage is the same
         p_inv = pp[P_INV_K] * inverter_loss(c * i_d - s * i_q, s * i_d + c * i_q, pp[P_INV_V], pp[P_INV_R])
     return (did, diq, dw, dth, p_term + p_inv, k * pp[P_R_S] * (i_d * i_d + i_q * i_q), omega_m * t_f,
-            omega_m * t_e, p_gear, v_v * f_a, v_v * f_f, v_v * f_g, omega_m * y_b, p_inv)
+            omega_m * t_e, p_gear, v_v * f_a, v_v * f_f, v_v * f_g, omega_m * y_b, p_inv, p_iron)
 
 
 @kernel()
@@ -382,7 +409,7 @@ def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
     if pp[P_GEAR_PF] == 0.0 and pp[P_T_BRAKE] == 0.0:
         t_l = plant_load_torque(omega_m, delta, pp)  # (29)
     else:
-        t_l = shaft_load(omega_m, delta, t_e, pp)
+        t_l = shaft_load(i_d, i_q, omega_m, delta, t_e, pp)
     v_v = pp[P_R_W] * omega_m / pp[P_N_G]  # (1), (6)
     return i_alpha, i_beta, t_e, t_l, v_v
 
@@ -434,7 +461,7 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     if pp[P_SUBSTEP_ANGLE] > 0.0:  # at most that angle per sub-step: accurate at top speed
         n = max(n, int(math.ceil(abs(pp[P_N] * omega_m) * dt / pp[P_SUBSTEP_ANGLE])))
     h = dt / n
-    s_dc = s_abs = s_reg = s_cu = s_fr = s_sh = s_gear = s_aero = s_roll = s_grade = s_brake = s_inv = 0.0
+    s_dc = s_abs = s_reg = s_cu = s_fr = s_sh = s_gear = s_aero = s_roll = s_grade = s_brake = s_inv = s_fe = 0.0
     x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
     for _ in range(n):
         ra = plant_rates(x0, x1, x2, x3, v_alpha, v_beta, delta, pp)
@@ -461,6 +488,7 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
         s_grade += _stage_sum(ra, rb, rc, rd, 11)
         s_brake += _stage_sum(ra, rb, rc, rd, 12)
         s_inv += _stage_sum(ra, rb, rc, rd, 13)
+        s_fe += _stage_sum(ra, rb, rc, rd, 14)
         x0 += h / 6.0 * (a0 + 2.0 * b0 + 2.0 * c0 + d0)
         x1 += h / 6.0 * (a1 + 2.0 * b1 + 2.0 * c1 + d1)
         x2 += h / 6.0 * (a2 + 2.0 * b2 + 2.0 * c2 + d2)
@@ -478,6 +506,7 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     ee[E_GRADE] += w * s_grade
     ee[E_BRAKE] += w * s_brake
     ee[E_INVERTER] += w * s_inv
+    ee[E_IRON] += w * s_fe
     ee[E_P_DC] = w * s_dc / dt
     dx = pp[P_R_W] / (pp[P_N_G] * pp[P_N]) * (x3 - theta_e)
     x3 = wrap_angle(x3)
