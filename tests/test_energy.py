@@ -14,7 +14,14 @@ import pmsm_ev_fmus
 from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.losses import steady_state
-from pmsm_ev.params import ControllerParams, MotorParams, ParameterError, PlantParams, VehicleParams
+from pmsm_ev.params import (
+    ControllerParams,
+    MotorParams,
+    ParameterError,
+    PlantParams,
+    VehicleParams,
+    winding_resistance,
+)
 from pmsm_ev.plant import BALANCE_TERMS, Plant
 from pmsm_ev.results import ENERGY_COLUMNS, ENERGY_MIN_DISTANCE, compute_metrics, energy_metrics
 
@@ -326,3 +333,15 @@ def test_the_plant_fmu_takes_the_brake_and_gives_the_energies(tmp_path):
     assert e["E_brake"] > 0.0
     fmu.terminate()
     fmu.freeInstance()
+
+
+def test_the_thermal_model_heats_with_the_copper_losses_of_the_dq_convention():
+    """Amplitude-invariant currents: the winding heats with k_dq = 3/2 times R_s (i_d^2 + i_q^2), the
+    copper losses the energy accounting counts (standstill, a constant d-axis voltage)."""
+    R_th, C_th, T_amb = 0.5, 2.0, 25.0
+    p = PlantParams(thermal_R=R_th, thermal_C=C_th, T_ambient=T_amb, T_winding=T_amb)
+    plant = Plant(MotorParams(dq_convention="amplitude_invariant"), plant=p)
+    for _ in range(int(12.0 / DT)):
+        plant.step(0.5, 0.0, 0.0, DT)
+    r_hot = winding_resistance(plant.motor.R_s, plant.T_winding, p.alpha_R)
+    assert plant.T_winding - T_amb == pytest.approx(1.5 * r_hot * plant.i_d**2 * R_th, rel=1e-4)

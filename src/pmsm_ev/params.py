@@ -268,8 +268,9 @@ class PlantParams:
     #: Typical: 20 .. 100 degC (-10 % psi for NdFeB).
     T_magnet: float = TEMPERATURE_REF
     #: thermal resistance winding -> coolant [K/W]; 0 = off (T_winding stays at its start value).
-    #: On: C_th dT/dt = P_cu - (T - T_ambient) / R_th, P_cu = R_s(T) (i_d^2 + i_q^2) in the model's
-    #: power scaling (p = v_d i_d + v_q i_q, as eq 12 without 3/2), R_s following T each step.
+    #: On: C_th dT/dt = P_cu - (T - T_ambient) / R_th, P_cu = k_dq R_s(T) (i_d^2 + i_q^2) in the dq
+    #: convention's power scaling (``MotorParams.k_dq``: 1 for "paper", as eq 12 without 3/2), R_s
+    #: following T each step.
     #: Typical: 0.02-0.1 K/W for a liquid-cooled EV motor's winding (100 K at 1-5 kW of copper loss).
     thermal_R: float = 0.0
     #: heat capacity of the winding [J/K] [chosen]: ~5 kg of copper and insulation, 2000 J/K;

@@ -208,7 +208,7 @@ class Plant:
         if self._thermal:  # the copper losses heat the winding; R_s follows for the next step
             self.T_winding, self._pp[_k.P_R_S] = self._kernels.winding_thermal_step(
                 self.T_winding, self.i_d, self.i_q, self.motor.R_s, p.alpha_R, TEMPERATURE_REF, p.T_ambient,
-                p.thermal_R, p.thermal_C, dt)
+                p.thermal_R, p.thermal_C, dt, self.motor.k_dq)
         self.i_alpha_true, self.i_beta_true = self.i_alpha, self.i_beta
         self.samples += 1
         if self._sensors:

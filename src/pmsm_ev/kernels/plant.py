@@ -163,11 +163,12 @@ def winding_resistance(R_s20, T, alpha_R, T_ref):
 
 
 @kernel()
-def winding_thermal_step(T, i_d, i_q, R_s20, alpha_R, T_ref, T_amb, R_th, C_th, dt):
-    """The winding heated over dt by its copper losses R_s(T) (i_d^2 + i_q^2) (``thermal_step``; the
-    model's power scaling, p = v_d i_d + v_q i_q); returns the new temperature [degC] and R_s there."""
+def winding_thermal_step(T, i_d, i_q, R_s20, alpha_R, T_ref, T_amb, R_th, C_th, dt, k_dq):
+    """The winding heated over dt by its copper losses k_dq R_s(T) (i_d^2 + i_q^2) (``thermal_step``; in
+    the dq convention's power scaling, the energy accounting's: k_dq = 1 for "paper", 3/2 for
+    "amplitude_invariant"); returns the new temperature [degC] and R_s there."""
     r_s = winding_resistance(R_s20, T, alpha_R, T_ref)
-    T_new = thermal_step(T, r_s * (i_d * i_d + i_q * i_q), T_amb, R_th, C_th, dt)
+    T_new = thermal_step(T, k_dq * r_s * (i_d * i_d + i_q * i_q), T_amb, R_th, C_th, dt)
     return T_new, winding_resistance(R_s20, T_new, alpha_R, T_ref)
 
 
