@@ -49,6 +49,7 @@ UNITS: dict[str, dict[str, float]] = {
     "1/s": {"s": -1},
     "K/W": {"K": 1, "kg": -1, "m": -2, "s": 3},
     "J/K": {"kg": 1, "m": 2, "s": -2, "K": -1},
+    "J": {"kg": 1, "m": 2, "s": -2},
 }
 
 #: unit name -> [(display unit, factor)], display value = factor * value
@@ -56,6 +57,8 @@ DISPLAY_UNITS: dict[str, list[tuple[str, float]]] = {
     "rad": [("deg", 180.0 / math.pi)],
     "rad/s": [("rpm", 30.0 / math.pi)],
     "m/s": [("km/h", 3.6)],
+    "J": [("Wh", 1.0 / 3600.0)],
+    "W": [("kW", 1.0e-3)],
 }
 
 _T1 = " (Table I)"
@@ -89,6 +92,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "load_model": (None, "road-load model: 'physical' (rolling resistance and friction oppose motion, "
                          "drag along the relative air speed) or 'paper' (eqs 3-4 and 8 as printed)"),
     "v_eps": ("m/s", "speed scale of the smooth sign of rolling resistance (load_model 'physical')"),
+    "gear_model": (None, "gear efficiency: 'paper' (eq 9 as printed: the reflected mass and every wheel force "
+                         "divided by eta) or 'power_flow' (eta in the direction the power flows through the gear)"),
     # PlantParams: numerics and initial state
     "rk4_substeps": (None, "RK4 sub-steps per communication step (at least; see substep_angle)"),
     "substep_angle": ("rad", "largest electrical angle per RK4 sub-step: a step takes max(rk4_substeps, "
@@ -160,6 +165,17 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "dead_time": ("s", "inverter dead time per leg (0 = off); per-phase voltage error v_dc dead_time / "
                        "switching_period in the sign of the phase current; needs v_dc > 0"),
     "dead_time_i0": ("A", "current scale of the dead-time error's soft sign tanh(i / dead_time_i0)"),
+    "inverter_losses": (None, "inverter conduction and switching losses on, drawn from the DC link: per phase "
+                              "(inv_v0 + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref)) |i| + inv_r_on i^2 (needs v_dc)"),
+    "inv_v0": ("V", "inverter: threshold voltage of the IGBT and the diode (straight-line on-state model)"),
+    "inv_r_on": ("Ohm", "inverter: on-state slope resistance of the IGBT and the diode"),
+    "inv_e_sw": ("J", "inverter: switching energy of one leg per switching period (E_on + E_off + E_rec) at "
+                      "inv_v_ref, inv_i_ref"),
+    "inv_v_ref": ("V", "inverter: DC voltage at which inv_e_sw is given"),
+    "inv_i_ref": ("A", "inverter: current at which inv_e_sw is given"),
+    "iron_c_h": (None, "iron losses, hysteresis coefficient c_h [W/(rad/s Wb^2)] of P_fe = (c_h |omega_e| + c_e "
+                       "omega_e^2) (psi_d^2 + psi_q^2), a drag on the shaft (0 = off)"),
+    "iron_c_e": (None, "iron losses, eddy-current coefficient c_e [W/((rad/s)^2 Wb^2)] (0 = off)"),
     "sat_i_q": ("A", "q-axis saturation current: psi_q = L_q i_q / (1 + |i_q| / sat_i_q) (0 = off, linear)"),
     "sat_i_d": ("A", "d-axis saturation current: psi_d = psi + L_d i_d / (1 + |i_d| / sat_i_d) (0 = off)"),
     "T_winding": ("degC", "winding temperature: R_s(T) = R_s (1 + alpha_R (T - 20 degC))"),

@@ -9,7 +9,7 @@ import math
 
 from pmsm_ev import __version__
 from pmsm_ev.params import MotorParams, PlantParams, VehicleParams
-from pmsm_ev.plant import Plant
+from pmsm_ev.plant import ENERGY_SLOTS, Plant
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, SimulationError
 
 _MOTOR = ("N", "psi", "L_d", "L_q")  # the motor parameters of eq 12
@@ -23,10 +23,54 @@ DESCRIPTION = (
     "inputs v_alpha, v_beta (inverter voltage, stationary frame) and delta (road elevation) held; "
     "the outputs are the state at t+h, so no output depends directly on the inputs at the same "
     "communication point. Any step size, fixed or variable. Truth signals (i_d, i_q, omega_m, "
-    "theta_e, T_e, T_L_mech, v_vehicle, x_vehicle) are outputs for recording and for a sensored controller. "
+    "theta_e, T_e, T_L_mech, v_vehicle, x_vehicle) are outputs for recording and for a sensored controller; "
+    "so are the energies since the start (J: DC link, losses by kind, the wheel's work by road force, the "
+    "friction brake, the stored magnetic and kinetic energies) and the DC-link power. The input T_brake "
+    "(friction brake at the wheels, N m, >= 0) is 0 when unconnected. "
     "A Python FMU (pythonfmu): it needs a Python 3 interpreter with numpy; the project code it "
     "runs is bundled in resources/. A state whose speed or currents are not finite fails the step."
 )
+
+
+#: the energy outputs read from the plant's energy vector: name -> description
+_ENERGY_OUTPUTS = {
+    "E_dc": "DC-link energy since the start: terminal power k_dq (v_d i_d + v_q i_q) at the winding's voltage "
+            "(after the inverter's limit and dead time) plus the inverter's losses (negative: net regeneration)",
+    "E_dc_abs": "the DC link's energy throughput since the start, the integral of |P_dc|",
+    "E_regen": "energy returned to the DC link since the start, the integral of max(-P_dc, 0)",
+    "E_copper": "copper losses since the start, k_dq R_s (i_d^2 + i_q^2)",
+    "E_friction": "motor friction losses since the start, omega_m T_f (eq 8)",
+    "E_shaft": "electromagnetic work at the shaft since the start, omega_m T_e",
+    "E_gear": "gear losses since the start (gear_model 'paper': (1/eta - 1) times the wheel forces' power, "
+              "signed)",
+    "E_aero": "work against the aerodynamic drag since the start, v f_a (eq 4)",
+    "E_rolling": "work against the rolling resistance since the start, v f_f (eq 3)",
+    "E_grade": "work against the gradient force since the start, v f_g (eq 2): the potential energy gained",
+    "E_brake": "energy taken by the friction brake since the start",
+    "E_inverter": "inverter conduction and switching losses since the start (inverter_losses)",
+    "E_iron": "iron losses since the start (iron_c_h, iron_c_e), a drag on the shaft",
+}
+
+
+class _Energy:
+    """An output read from the plant when the master asks for it (no per-step copy): ``get`` of the
+    plant; writes (the slave's declaration, a restored FMU state) are ignored, the plant has it."""
+
+    def __init__(self, get):
+        self.get = get
+
+    def __get__(self, slave, owner=None):
+        if slave is None:
+            return self
+        plant = slave.__dict__.get("_plant")
+        return 0.0 if plant is None else self.get(plant)
+
+    def __set__(self, slave, value):
+        pass
+
+
+def _energy_slot(slot):
+    return _Energy(lambda plant: float(plant.energy[slot]))
 
 
 class PmsmEvPlant(DriveSlave):
@@ -40,6 +84,8 @@ class PmsmEvPlant(DriveSlave):
         self.add_input("v_alpha", "V", f"stator voltage, alpha axis (stationary frame), {held}")
         self.add_input("v_beta", "V", f"stator voltage, beta axis (stationary frame), {held}")
         self.add_input("delta", "rad", f"road elevation angle, uphill positive, {held}", display_unit="deg")
+        self.add_input("T_brake", "N.m", f"friction-brake torque at the wheels, >= 0 (a negative value is taken as "
+                                         f"0), opposing the motion, {held}; 0 (unconnected): released")
 
         at_start = "; before the first step: from the initial-state parameters"
         state = ("i_d0", "i_q0", "theta_e0")
@@ -66,6 +112,19 @@ class PmsmEvPlant(DriveSlave):
         self.add_output("x_vehicle", "m", "distance travelled since the start, forward positive "
                                           "(vehicle position; 0 before the first step)",
                         start=None, start_dependencies=())
+        for name, text in _ENERGY_OUTPUTS.items():
+            self.add_output(name, "J", text + " (0 before the first step)", start=None, start_dependencies=(),
+                            display_unit="Wh")
+        self.add_output("W_magnetic", "J", "magnetic field energy of the winding, k_dq (L_d i_d^2 + L_q i_q^2) / 2 "
+                                           "(saturation: its Froehlich-Kennelly closed form)" + at_start,
+                        start=None, start_dependencies=("i_d0", "i_q0", "L_d", "L_q", "sat_i_d", "sat_i_q",
+                                                        "dq_convention"), display_unit="Wh")
+        self.add_output("E_kinetic", "J", "kinetic energy: 1/2 J_eq omega_m^2 (gear_model 'paper', eq 9's inertia) or "
+                                          "1/2 J_m omega_m^2 + 1/2 m_v v^2 ('power_flow')" + at_start,
+                        start=None, start_dependencies=("omega_m0", "J_m", "m_v", "r_w", "n_g", "eta", "gear_model"),
+                        display_unit="Wh")
+        self.add_output("P_dc", "W", "mean DC-link power over the last step (0 before the first step)",
+                        start=None, start_dependencies=(), display_unit="kW")
 
         self.add_parameters(MotorParams, VehicleParams, PlantParams)
         self._plant = None
@@ -111,7 +170,8 @@ class PmsmEvPlant(DriveSlave):
             if not step_size > 0.0:
                 raise FmuUsageError(f"communication step size must be > 0 s (got {step_size!r})")
             (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta, self.T_e,
-             self.T_L_mech, self.v_vehicle) = self._plant.step(self.v_alpha, self.v_beta, self.delta, step_size)
+             self.T_L_mech, self.v_vehicle) = self._plant.step(self.v_alpha, self.v_beta, self.delta, step_size,
+                                                               self.T_brake)
             self.x_vehicle = self._plant.x_vehicle
             if not math.isfinite(self.omega_m + self.i_d + self.i_q):
                 raise SimulationError(f"plant state is not finite at t = {current_time + step_size!r} s "
@@ -120,3 +180,10 @@ class PmsmEvPlant(DriveSlave):
             self._fail("fmi2DoStep", exc)
             raise
         return True
+
+
+for _name, _slot in ENERGY_SLOTS.items():
+    setattr(PmsmEvPlant, _name, _energy_slot(_slot))
+PmsmEvPlant.W_magnetic = _Energy(lambda plant: plant.stored[0])
+PmsmEvPlant.E_kinetic = _Energy(lambda plant: plant.stored[1])
+PmsmEvPlant.P_dc = _Energy(lambda plant: plant.P_dc)

@@ -54,9 +54,10 @@ from pmsm_ev_fmus.metadata import PARAMETERS, UNITS
 
 CONTROLLERS = ("FocEkf5", "FocEkf4", "FocEkf5AB", "FocSensored", "FocSensorless")
 OBSERVER = {fmu: observer for observer, fmu in pmsm_ev_fmus.OBSERVER_FMUS.items()}
-PLANT_INPUTS = ("v_alpha", "v_beta", "delta")
+PLANT_INPUTS = ("v_alpha", "v_beta", "delta", "T_brake")
 PLANT_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle",
-                 "x_vehicle")
+                 "x_vehicle", "E_dc", "E_dc_abs", "E_regen", "E_copper", "E_friction", "E_shaft", "E_gear", "E_aero",
+                 "E_rolling", "E_grade", "E_brake", "E_inverter", "E_iron", "W_magnetic", "E_kinetic", "P_dc")
 CTRL_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
 CTRL_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d_hat", "i_q_hat", "omega_hat", "theta_hat", "T_L_hat",
                 "i_d", "i_q", "i_qref", "mode", "fault", "theta_ctrl", "omega_ctrl", "i_dref", "T_ref", "T_brake",
@@ -127,7 +128,9 @@ class Instance:
 
 
 def plant_outputs(p: Plant):
-    return [p.i_alpha, p.i_beta, p.i_d, p.i_q, p.omega_m, p.theta_e, p.T_e, p.T_L_mech, p.v_vehicle, p.x_vehicle]
+    e = p.energies()
+    return [p.i_alpha, p.i_beta, p.i_d, p.i_q, p.omega_m, p.theta_e, p.T_e, p.T_L_mech, p.v_vehicle, p.x_vehicle,
+            *(e[name] for name in PLANT_OUTPUTS[10:-3]), e["W_magnetic"], e["E_kinetic"], p.P_dc]
 
 
 def unit_outputs(u: ControlUnit, theta_meas: float = 0.0):

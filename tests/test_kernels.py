@@ -130,10 +130,10 @@ def test_vectors_follow_the_mode():
 
 # -- the vectors' layouts ---------------------------------------------------------------------------
 LAYOUTS = [(layout.PLANT_PARAMS_LAYOUT, kernels.PLANT_PARAMS), (layout.UNIT_STATE_LAYOUT, kernels.UNIT_STATE),
-           (layout.UNIT_PARAMS_LAYOUT, kernels.UNIT_PARAMS)]
+           (layout.UNIT_PARAMS_LAYOUT, kernels.UNIT_PARAMS), (layout.PLANT_ENERGY_LAYOUT, kernels.PLANT_ENERGY)]
 
 
-@pytest.mark.parametrize("table,size", LAYOUTS, ids=["plant params", "unit state", "unit params"])
+@pytest.mark.parametrize("table,size", LAYOUTS, ids=["plant params", "unit state", "unit params", "plant energy"])
 def test_each_slot_is_a_module_constant_and_no_two_overlap(table, size):
     assert len(table) == size
     taken = [None] * size
@@ -147,7 +147,9 @@ def test_each_slot_is_a_module_constant_and_no_two_overlap(table, size):
 
 
 def test_the_offsets_are_those_the_kernels_were_written_with():
-    assert (kernels.P_SUBSTEPS, kernels.P_DT_V, kernels.P_SAT_AQ, kernels.PLANT_PARAMS) == (21, 22, 26, 29)
+    assert (kernels.P_SUBSTEPS, kernels.P_DT_V, kernels.P_SAT_AQ, kernels.P_T_BRAKE, kernels.PLANT_PARAMS) == (
+        21, 22, 26, 29, 39)
+    assert (kernels.E_DC, kernels.E_P_DC, kernels.E_IRON, kernels.PLANT_ENERGY) == (0, 12, 13, 14)
     assert (kernels.S_X, kernels.S_THETA_PRIOR, kernels.S_P, kernels.S_PHT, kernels.S_K, kernels.S_A,
             kernels.S_STARTED, kernels.S_MODE, kernels.S_STILL_OUT, kernels.UNIT_STATE) == (
         15, 20, 21, 46, 56, 66, 91, 92, 113, 119)

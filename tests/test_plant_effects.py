@@ -256,7 +256,7 @@ def test_saturated_torque_keeps_the_energy_balance():
     for j in range(n):
         t = j * h
         v, p0 = powers(x, t)
-        out = k.plant_step(x[0], x[1], x[2], x[3], v[0], v[1], 0.0, h, pp)
+        out = k.plant_step(x[0], x[1], x[2], x[3], v[0], v[1], 0.0, h, pp, [0.0] * k.PLANT_ENERGY)
         x0 = x
         # unwrapped angle for the voltage's phase: keep theta continuous
         x = [out[0], out[1], out[2], x[3] + (out[3] - x[3] + math.pi) % (2 * math.pi) - math.pi]

@@ -27,6 +27,8 @@ ANGLE_SOURCES = ("measured", "estimated")
 OBSERVERS = ("ekf5", "ekf4", "ekf5ab", "sensored", "sensorless")
 #: the current references of the controllers (``ControllerParams.reference``)
 REFERENCES = tuple(REFERENCE_CODES)
+#: how the gear's efficiency acts (``VehicleParams.gear_model``)
+GEAR_MODELS = ("paper", "power_flow")
 #: how the dq quantities scale to the phase quantities (``MotorParams.dq_convention``)
 DQ_CONVENTIONS = ("paper", "amplitude_invariant")
 #: the current control (``ControllerParams.current_control``) and the observers' discretisation
@@ -116,6 +118,16 @@ class VehicleParams:
     #: speed scale of the smooth sign of rolling resistance [m/s] [chosen]: 1 cm/s,
     #: far below any driving speed, yet smooth enough for RK4 at 10 kHz.
     v_eps: float = 0.01
+    #: how the gear's efficiency eta acts (docs/energy-model.md). "paper" (default): eq 9 as printed,
+    #: which the paper obtains by substituting eqs 1-7 into eq 8 (its reference [1], Kamalakkannan's
+    #: vehicle model): the reflected mass and every wheel force divided by eta whatever the direction
+    #: of the power, so the model also "loses" 1 - eta when the power flows back from the wheels
+    #: (braking, downhill): it returns more than the vehicle had (the car's kinetic energy is
+    #: 1/2 J_eq omega^2, 1/eta of 1/2 m_v v^2, and a wheel force that pushes the car is amplified by
+    #: 1/eta at the shaft). "power_flow": the physical correction, eta in the direction the power
+    #: flows through the gear (motoring: the wheels get eta of the shaft's power; regeneration: the
+    #: shaft gets eta of the wheels'), ``pmsm_ev.kernels.power_flow_gear``.
+    gear_model: str = "paper"
 
     def validate(self) -> None:
         _require(self.c_r >= 0, f"c_r must be >= 0 (got {self.c_r})")
@@ -129,6 +141,7 @@ class VehicleParams:
         _require(self.m_v > 0, f"m_v must be > 0 kg (got {self.m_v})")
         _require(self.load_model in LOAD_MODELS, f"load_model must be one of {LOAD_MODELS} (got {self.load_model!r})")
         _require(self.v_eps > 0, f"v_eps must be > 0 m/s (got {self.v_eps})")
+        _require(self.gear_model in GEAR_MODELS, f"gear_model must be one of {GEAR_MODELS} (got {self.gear_model!r})")
 
     @property
     def reflected_inertia(self) -> float:
@@ -212,6 +225,36 @@ class PlantParams:
     #: current charges the switches' output capacitance within the dead time, i0 ~ C_oss v_dc / t_d
     #: = 10 nF x 360 V / 2 us = 1.8 A for a module of this size: 2 A.
     dead_time_i0: float = 2.0
+    #: the inverter's conduction and switching losses (``pmsm_ev.kernels.inverter_loss``), drawn from
+    #: the DC link only (the winding's voltage is unchanged); off by default (the paper's inverter is
+    #: ideal). Each phase loses (inv_v0 + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref)) |i_x| +
+    #: inv_r_on i_x^2, f_sw = 1 / switching_period; needs v_dc > 0. The defaults are those of a
+    #: 650 V / 400 A IGBT six-pack for EV inverters (Infineon HybridPACK 1, FS400R07A1E3, data sheet
+    #: V3.4 2018: V_CEsat = 1.45 V typ. at 400 A, 25 degC); docs/energy-model.md
+    inverter_losses: bool = False
+    #: threshold voltage of the IGBT and the diode [V] (V_CE0 = V_F0, the straight-line model of the
+    #: output characteristic) [chosen]: 0.8 V, a trench-field-stop IGBT3's and its diode's knee
+    inv_v0: float = 0.8
+    #: on-state slope resistance of the IGBT and the diode [Ohm] [chosen]: (1.45 V - 0.8 V) / 400 A =
+    #: 1.6 mOhm, from the data sheet's V_CEsat at the rated current
+    inv_r_on: float = 1.6e-3
+    #: switching energy per switching period, E_on + E_off + E_rec of one leg [J] at inv_v_ref and
+    #: inv_i_ref [chosen]: 20 mJ, the order of 650 V / 400 A IGBT3 modules' data-sheet values at
+    #: 300 V, 400 A, 150 degC (check the module you model); scaled linearly with current and voltage
+    inv_e_sw: float = 0.02
+    inv_v_ref: float = 300.0  #: DC voltage at which inv_e_sw is given [V] (the data sheet's test condition)
+    inv_i_ref: float = 400.0  #: current at which inv_e_sw is given [A] (the module's rated current)
+
+    # -- iron losses (off by default: the paper's motor has none) ------------------------------
+    #: hysteresis coefficient c_h of the iron losses P_fe = (c_h |omega_e| + c_e omega_e^2) psi_s^2,
+    #: psi_s^2 = psi_d^2 + psi_q^2 (Steinmetz's loss separation, ``pmsm_ev.kernels.iron_torque``), taken
+    #: from the shaft as a drag [W / (rad/s Wb^2)]; 0 = off. Typical size [chosen]: the no-load losses
+    #: of a ~50 kW EV motor at 6000 rpm are ~1 % of its power; 400 W at 628 rad/s (N = 4, psi = Table I's
+    #: 0.08975 Wb), half of it hysteresis: 200 W / (2513 rad/s x 0.08975^2 Wb^2) = 9.9
+    iron_c_h: float = 0.0
+    #: eddy-current coefficient c_e [W / ((rad/s)^2 Wb^2)]; 0 = off. Typical [chosen]: the other half of
+    #: the 400 W above, 200 W / (2513^2 x 0.08975^2) = 3.9e-3
+    iron_c_e: float = 0.0
 
     # -- magnetic saturation (off by default: Table I's constant inductances) ------------
     #: saturation current of the q axis [A]; 0 = off (linear). Flux psi_q = L_q i_q / (1 +
@@ -234,8 +277,9 @@ class PlantParams:
     #: Typical: 20 .. 100 degC (-10 % psi for NdFeB).
     T_magnet: float = TEMPERATURE_REF
     #: thermal resistance winding -> coolant [K/W]; 0 = off (T_winding stays at its start value).
-    #: On: C_th dT/dt = P_cu - (T - T_ambient) / R_th, P_cu = R_s(T) (i_d^2 + i_q^2) in the model's
-    #: power scaling (p = v_d i_d + v_q i_q, as eq 12 without 3/2), R_s following T each step.
+    #: On: C_th dT/dt = P_cu - (T - T_ambient) / R_th, P_cu = k_dq R_s(T) (i_d^2 + i_q^2) in the dq
+    #: convention's power scaling (``MotorParams.k_dq``: 1 for "paper", as eq 12 without 3/2), R_s
+    #: following T each step.
     #: Typical: 0.02-0.1 K/W for a liquid-cooled EV motor's winding (100 K at 1-5 kW of copper loss).
     thermal_R: float = 0.0
     #: heat capacity of the winding [J/K] [chosen]: ~5 kg of copper and insulation, 2000 J/K;
@@ -279,6 +323,17 @@ class PlantParams:
                  f"dead_time = {self.dead_time} s needs the DC-link voltage: set v_dc > 0 V")
         _require(math.isfinite(self.dead_time_i0) and self.dead_time_i0 > 0,
                  f"dead_time_i0 must be > 0 A (got {self.dead_time_i0})")
+        for name in ("inv_v0", "inv_r_on", "inv_e_sw"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0 (got {value})")
+        for name in ("inv_v_ref", "inv_i_ref"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, f"{name} must be > 0 (got {value})")
+        for name in ("iron_c_h", "iron_c_e"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0, 0 = off (got {value})")
+        _require(not self.inverter_losses or self.v_dc > 0,
+                 "inverter_losses needs the DC-link voltage (the switching losses scale with it): set v_dc > 0 V")
         for name in ("sat_i_q", "sat_i_d"):
             value = getattr(self, name)
             _require(math.isfinite(value) and value >= 0, f"{name} must be >= 0 A, 0 = off (got {value})")

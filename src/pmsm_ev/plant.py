@@ -17,6 +17,14 @@ step, sets the dead time's voltage error and the delay: a plant stepped at a fra
 control period sees the same inverter. The controllers keep their own nominal parameters, so
 each is a model mismatch for the observers.
 
+The friction brake (input ``T_brake`` of ``step``, N m at the wheels), the gear model
+(``VehicleParams.gear_model``: 'paper', eq 9 as printed, or 'power_flow') and the inverter's
+conduction and switching losses (``PlantParams.inverter_losses``, off by default) are in the
+kernels too, and so is the energy accounting: ``energy`` holds the DC-link energy, the losses by
+kind, the wheel's work by road force and the brake's energy since the start, integrated with the
+RK4 stages of the state; ``stored`` the magnetic and kinetic energies of the state; ``energies``
+all of them by name (docs/energy-model.md).
+
 The RK4 step, the model (eqs 8-13, 29) and the outputs are ``pmsm_ev.kernels.plant_step``
 (compiled with numba when available, see ``pmsm_ev.accel``); this class holds the state
 and the parameters and adds the optional sensors and inverter.
@@ -39,6 +47,25 @@ from .params import (
     winding_resistance,
 )
 from .transforms import clarke, wrap_angle
+
+#: the energies of ``Plant.energy`` by name (the plant FMU's outputs of the same names) [J]; E_dc_abs is the
+#: throughput (the integral of |P_dc|), E_regen what went back into the DC link, E_shaft omega T_e
+ENERGY_SLOTS = {"E_dc": _k.E_DC, "E_dc_abs": _k.E_DC_ABS, "E_regen": _k.E_REGEN, "E_copper": _k.E_COPPER,
+                "E_friction": _k.E_FRICTION, "E_shaft": _k.E_SHAFT, "E_gear": _k.E_GEAR, "E_aero": _k.E_AERO,
+                "E_rolling": _k.E_ROLL, "E_grade": _k.E_GRADE, "E_brake": _k.E_BRAKE,
+                "E_inverter": _k.E_INVERTER, "E_iron": _k.E_IRON}
+#: the terms whose sum is E_dc (the energy balance, docs/energy-model.md)
+BALANCE_TERMS = ("E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling", "E_grade",
+                 "E_brake", "dE_kinetic", "dW_magnetic")
+
+
+def inverter_loss_voltage(p: PlantParams) -> float:
+    """The inverter's per-phase loss voltage [V] (``pmsm_ev.kernels.inverter_loss``): the threshold
+    ``inv_v0`` plus the switching losses per ampere, f_sw E_sw v_dc / (V_ref I_ref); 0 when
+    ``inverter_losses`` is off."""
+    if not p.inverter_losses:
+        return 0.0
+    return p.inv_v0 + p.inv_e_sw * p.v_dc / (p.switching_period * p.inv_v_ref * p.inv_i_ref)
 
 
 class Plant:
@@ -69,6 +96,11 @@ class Plant:
                   _k.P_V_EPS: v.v_eps, _k.P_PAPER: 1.0 if v.load_model == "paper" else 0.0,
                   _k.P_SUBSTEPS: p.rk4_substeps, _k.P_DT_I0: p.dead_time_i0,
                   _k.P_K_DQ: m.k_dq, _k.P_SUBSTEP_ANGLE: p.substep_angle,
+                  _k.P_GEAR_PF: 1.0 if v.gear_model == "power_flow" else 0.0, _k.P_J_M: m.J_m,
+                  _k.P_M_R: v.m_v * v.r_w**2 / v.n_g**2,
+                  _k.P_INV: 1.0 if p.inverter_losses else 0.0, _k.P_INV_V: inverter_loss_voltage(p),
+                  _k.P_INV_R: p.inv_r_on, _k.P_INV_K: m.k_dq / 1.5, _k.P_FE_H: p.iron_c_h,
+                  _k.P_FE_E: p.iron_c_e,
                   _k.P_SAT: 1.0 if (p.sat_i_d > 0 or p.sat_i_q > 0) else 0.0,
                   _k.P_SAT_AD: 1.0 / p.sat_i_d if p.sat_i_d > 0 else 0.0,
                   _k.P_SAT_AQ: 1.0 / p.sat_i_q if p.sat_i_q > 0 else 0.0,
@@ -80,6 +112,8 @@ class Plant:
         self._pp = accel.vector(_k.PLANT_PARAMS)
         for slot, value in values.items():
             self._pp[slot] = float(value)
+        #: the energies since the start [J] (``pmsm_ev.kernels.PLANT_ENERGY_LAYOUT``, ``energies`` by name)
+        self.energy = accel.vector(_k.PLANT_ENERGY)
         self.reset()
 
     def reset(self) -> None:
@@ -97,21 +131,29 @@ class Plant:
         self.clock = 0.0  # time since the start [s]: the sum of the steps (the inverter delay's clock)
         self._pending = []  # voltages received, (time, v_alpha, v_beta), not yet superseded (inverter delay)
         self.v_alpha_applied = self.v_beta_applied = 0.0
+        self.T_brake = 0.0  # the friction-brake torque of the last step [N m at the wheels], >= 0
+        self._pp[_k.P_T_BRAKE] = 0.0
+        for i in range(_k.PLANT_ENERGY):
+            self.energy[i] = 0.0
         self._update_outputs()
+        #: the stored energies at the start (W_mag, E_kin) [J]
+        self.stored0 = self.stored
 
     # -- state as named fields, for save/restore by wrappers ---------------------
     #: the fields of ``get_state`` (None: a number; 0: a list of any length)
     STATE_FIELDS = {"i_d": None, "i_q": None, "omega_m": None, "theta_e": None, "delta": None,
-                    "samples": None, "clock": None, "pending": 0, "x_vehicle": None, "T_winding": None}
+                    "samples": None, "clock": None, "pending": 0, "x_vehicle": None, "T_winding": None,
+                    "energy": _k.PLANT_ENERGY, "stored0": 2}
 
     def get_state(self) -> dict:
         """The plant's state as {name: value} (JSON-serialisable): the dq state, the elevation, the
         sensor samples taken, the inverter's clock and pending voltages, the distance, the winding's
-        temperature."""
+        temperature, the energies and the stored energies at the start."""
         return {"i_d": self.i_d, "i_q": self.i_q, "omega_m": self.omega_m, "theta_e": self.theta_e,
                 "delta": self.delta, "samples": self.samples, "clock": self.clock,
                 "pending": [list(entry) for entry in self._pending], "x_vehicle": self.x_vehicle,
-                "T_winding": self.T_winding}
+                "T_winding": self.T_winding, "energy": [float(e) for e in self.energy],
+                "stored0": list(self.stored0)}
 
     def set_state(self, state) -> None:
         """Restore a ``get_state`` dict; ``LayoutError`` if its fields are not these."""
@@ -124,6 +166,9 @@ class Plant:
         self.clock = float(state["clock"])
         self._pending = pending
         self.T_winding = float(state["T_winding"])
+        for i, value in enumerate(state["energy"]):
+            self.energy[i] = float(value)
+        self.stored0 = tuple(float(x) for x in state["stored0"])
         if self._thermal:
             self._pp[_k.P_R_S] = winding_resistance(self.motor.R_s, self.T_winding, self.params.alpha_R)
         self.samples = int(state["samples"]) - 1  # _update_outputs takes the present sample again
@@ -133,12 +178,17 @@ class Plant:
         """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage."""
         return _k.plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, self._pp)
 
-    def step(self, v_alpha: float, v_beta: float, delta: float, dt: float) -> tuple:
-        """Advance by dt with the voltage and elevation held (RK4, ``rk4_substeps``).
+    def step(self, v_alpha: float, v_beta: float, delta: float, dt: float, T_brake: float = 0.0) -> tuple:
+        """Advance by dt with the voltage, the elevation and the friction-brake torque ``T_brake``
+        [N m at the wheels] held (RK4, ``rk4_substeps``); a negative (or NaN) ``T_brake`` is taken
+        as 0: a brake only opposes the motion.
 
         Returns (i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle)
         after the step, also set as attributes (i_alpha, i_beta as measured)."""
         self.delta = delta
+        if T_brake != self.T_brake:
+            self.T_brake = T_brake if T_brake > 0.0 else 0.0
+            self._pp[_k.P_T_BRAKE] = self.T_brake
         p = self.params
         if self.delay:
             v_alpha, v_beta = self._delayed(v_alpha, v_beta, dt)
@@ -150,7 +200,7 @@ class Plant:
                 v_beta *= self._u_lim / mag
         self.v_alpha_applied, self.v_beta_applied = v_alpha, v_beta
         out = self._kernels.plant_step(self.i_d, self.i_q, self.omega_m, self.theta_e,
-                                       v_alpha, v_beta, delta, dt, self._pp)
+                                       v_alpha, v_beta, delta, dt, self._pp, self.energy)
         (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta,
          self.T_e, self.T_L_mech, self.v_vehicle, dx) = out
         out = out[:9]
@@ -158,12 +208,35 @@ class Plant:
         if self._thermal:  # the copper losses heat the winding; R_s follows for the next step
             self.T_winding, self._pp[_k.P_R_S] = self._kernels.winding_thermal_step(
                 self.T_winding, self.i_d, self.i_q, self.motor.R_s, p.alpha_R, TEMPERATURE_REF, p.T_ambient,
-                p.thermal_R, p.thermal_C, dt)
+                p.thermal_R, p.thermal_C, dt, self.motor.k_dq)
         self.i_alpha_true, self.i_beta_true = self.i_alpha, self.i_beta
         self.samples += 1
         if self._sensors:
             self.i_alpha, self.i_beta = self._measure(self.i_alpha, self.i_beta, self.samples - 1)
             out = out[:4] + (self.i_alpha, self.i_beta) + out[6:]
+        return out
+
+    # -- energies ------------------------------------------------------------------
+    @property
+    def stored(self) -> tuple[float, float]:
+        """(W_mag, E_kin) [J] of the present state (``pmsm_ev.kernels.stored_energies``)."""
+        return self._kernels.stored_energies(self.i_d, self.i_q, self.omega_m, self._pp)
+
+    @property
+    def P_dc(self) -> float:
+        """The mean DC-link power over the last step [W] (0 before the first)."""
+        return float(self.energy[_k.E_P_DC])
+
+    def energies(self) -> dict[str, float]:
+        """The energies since the start [J], by name: ``ENERGY_NAMES`` from ``energy``, the stored
+        energies ``E_kinetic``, ``W_magnetic`` now and their changes since the start
+        (``dE_kinetic``, ``dW_magnetic``), and ``residual``: the balance E_dc - (losses + wheel
+        work + brake + changes of the stored energies), each term integrated on its own."""
+        out = {name: float(self.energy[slot]) for name, slot in ENERGY_SLOTS.items()}
+        w_mag, e_kin = self.stored
+        out.update(W_magnetic=w_mag, E_kinetic=e_kin, dW_magnetic=w_mag - self.stored0[0],
+                   dE_kinetic=e_kin - self.stored0[1])
+        out["residual"] = out["E_dc"] - sum(out[name] for name in BALANCE_TERMS)
         return out
 
     def _delayed(self, v_alpha: float, v_beta: float, dt: float) -> tuple[float, float]:

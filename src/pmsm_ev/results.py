@@ -28,6 +28,14 @@ ALL_COLUMNS = CONTRACT_COLUMNS + EXTRA_COLUMNS
 #: (0 alignment, 1 I-f, 2 closed loop on the observer; ``pmsm_ev.control_unit.MODES``), the fault
 #: (``pmsm_ev.kernels`` FAULT_*) and the control frame's angle [rad] and speed [rad/s] (synchronism)
 SENSORLESS_COLUMNS = ("x_vehicle", "mode", "fault", "theta_ctrl", "omega_ctrl")
+#: the plant's energy outputs [J] (``pmsm_ev.plant.Plant.energies``, the plant FMU's outputs of the same
+#: names) and the position [m]: a run that records them all gets the energy block of its metrics
+#: (``energy_metrics``); no shipped scenario records them yet
+ENERGY_COLUMNS = ("E_dc", "E_regen", "E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling",
+                  "E_grade", "E_brake", "E_kinetic", "W_magnetic", "x_vehicle")
+#: the least distance [m] for a figure per kilometre: 10 m, a car's length or two (below it, a run
+#: that stands, aligns or creeps would divide by almost nothing)
+ENERGY_MIN_DISTANCE = 10.0
 
 #: speed band for settling times [rad/s]
 SETTLING_BAND = 1.0
@@ -118,7 +126,47 @@ def compute_metrics(r: dict[str, np.ndarray]) -> dict:
         accel = acceleration_figures(r)
         if accel is not None:
             m["acceleration"] = accel
+    if all(c in r for c in ENERGY_COLUMNS):
+        m["energy"] = energy_metrics(r)
     return m
+
+
+_WH = 1.0 / 3600.0  #: J -> Wh
+
+
+def energy_metrics(r: dict[str, np.ndarray]) -> dict:
+    """The energy figures of a run that recorded ``ENERGY_COLUMNS`` [Wh], from its first to its
+    last row (the plant's energies are integrals since its start, the stored ones its state's):
+    ``dc`` (the DC link's net energy), ``drawn`` (what it delivered, dc + regen) and ``regen`` (what
+    went back), the ``losses`` by kind (copper, inverter, iron, friction, gear; ``total``), the ``road``
+    work by force (aero, rolling, grade: the grade's is the potential energy gained), ``brake`` (the
+    friction brake's), the changes of the ``kinetic`` and ``magnetic`` energies, ``residual`` (dc
+    minus all the others, the balance: each term is integrated on its own), ``distance_m`` (the
+    path travelled, the sum of |dx| over the rows) and, where it is at least ``ENERGY_MIN_DISTANCE``,
+    ``dc_per_km`` and ``drawn_per_km`` [Wh/km] (None otherwise)."""
+    if len(r["time"]) == 0:
+        return {"rows": 0}
+
+    def wh(name: str) -> float:
+        return float(r[name][-1] - r[name][0]) * _WH
+
+    losses = {"copper": wh("E_copper"), "inverter": wh("E_inverter"), "iron": wh("E_iron"),
+              "friction": wh("E_friction"), "gear": wh("E_gear")}
+    losses["total"] = sum(losses.values())
+    road = {"aero": wh("E_aero"), "rolling": wh("E_rolling"), "grade": wh("E_grade")}
+    dc, regen, brake = wh("E_dc"), wh("E_regen"), wh("E_brake")
+    kinetic, magnetic = wh("E_kinetic"), wh("W_magnetic")
+    distance = float(np.sum(np.abs(np.diff(r["x_vehicle"])))) if len(r["x_vehicle"]) > 1 else 0.0
+    per_km = distance >= ENERGY_MIN_DISTANCE
+    return {
+        "dc_Wh": dc, "drawn_Wh": dc + regen, "regen_Wh": regen,
+        "losses_Wh": losses, "road_Wh": road, "brake_Wh": brake,
+        "kinetic_change_Wh": kinetic, "magnetic_change_Wh": magnetic,
+        "residual_Wh": dc - losses["total"] - sum(road.values()) - brake - kinetic - magnetic,
+        "distance_m": distance,
+        "dc_Wh_per_km": dc / (distance / 1000.0) if per_km else None,
+        "drawn_Wh_per_km": (dc + regen) / (distance / 1000.0) if per_km else None,
+    }
 
 
 #: a start-up target: |omega_m - omega_ref| within this band [rad/s] ...

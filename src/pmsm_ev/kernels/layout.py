@@ -8,9 +8,10 @@ total the declared size. Each slot's offset is then a module-level int named aft
 index the vectors as fast as with literal numbers. A slot longer than 1 holds consecutive
 entries from its offset (``S_P + n * i + j``).
 
-Three vectors:
+Four vectors:
 
 * ``PLANT_PARAMS_LAYOUT`` (``P_*``): the plant's parameters (``pmsm_ev.plant.Plant``);
+* ``PLANT_ENERGY_LAYOUT`` (``E_*``): the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``);
 * ``UNIT_STATE_LAYOUT`` (``S_*``): the control unit's state, shared by its controllers and its
   observer (``pmsm_ev.control_unit.ControlUnit``); the slots marked ``saved=False`` are scratch
   space, written before they are read in every step, and are not part of a saved state;
@@ -163,7 +164,41 @@ PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
     ("P_K_DQ", 1, "the dq convention's factor of eq 12's torque and of the power [-] (``MotorParams.k_dq``)"),
     ("P_SUBSTEP_ANGLE", 1, "the largest electrical angle of one RK4 sub-step [rad] (0 = off; "
                            "``PlantParams.substep_angle``)"),
-), size=29)
+    # the friction brake, the gear model and the inverter's losses (``pmsm_ev.kernels.plant_rates``)
+    ("P_T_BRAKE", 1, "friction-brake torque at the wheels [N m], >= 0 (the plant's input ``T_brake``, set "
+                     "before each step; 0 = released)"),
+    ("P_GEAR_PF", 1, "1.0: the gear model 'power_flow' (eta in the direction the power flows); 0.0: 'paper' "
+                     "(eq 9: the reflected mass and every wheel force divided by eta)"),
+    ("P_J_M", 1, "rotor inertia [kg m^2] (the power_flow gear)"),
+    ("P_M_R", 1, "vehicle mass reflected to the shaft without eta, m_v r_w^2 / n_g^2 [kg m^2]"),
+    ("P_INV", 1, "1.0: the inverter's conduction and switching losses on (``PlantParams.inverter_losses``)"),
+    ("P_INV_V", 1, "inverter: per-phase loss voltage, threshold + switching equivalent [V] "
+                   "(``pmsm_ev.kernels.inverter_loss``)"),
+    ("P_INV_R", 1, "inverter: per-phase on-state resistance [Ohm]"),
+    ("P_INV_K", 1, "inverter: the factor from the phase losses to the model's power, k_dq / (3/2) [-]"),
+    ("P_FE_H", 1, "iron losses, hysteresis: c_h [W / (rad/s Wb^2)] (0 = off; ``PlantParams.iron_c_h``)"),
+    ("P_FE_E", 1, "iron losses, eddy currents: c_e [W / ((rad/s)^2 Wb^2)] (0 = off; ``PlantParams.iron_c_e``)"),
+), size=39)
+
+#: the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``; ``plant_step`` adds each step's
+#: RK4-integrated energies): joules since the start, in the dq convention's power scaling (``P_K_DQ``)
+PLANT_ENERGY_LAYOUT = Layout("plant energy vector", "E_", (
+    ("E_DC", 1, "DC-link energy: terminal power k_dq (v_d i_d + v_q i_q) at the winding's voltage, plus the "
+                "inverter's losses [J] (negative while regenerating)"),
+    ("E_DC_ABS", 1, "the DC link's energy throughput, the integral of |P_dc| [J]"),
+    ("E_REGEN", 1, "energy returned to the DC link, the integral of max(-P_dc, 0) [J]"),
+    ("E_COPPER", 1, "copper losses k_dq R_s (i_d^2 + i_q^2) [J]"),
+    ("E_FRICTION", 1, "motor friction omega_m T_f (eq 8) [J]"),
+    ("E_SHAFT", 1, "electromagnetic work at the shaft omega_m T_e [J]"),
+    ("E_GEAR", 1, "gear losses [J] (the paper's gear: (1/eta - 1) times the wheel forces' power, signed)"),
+    ("E_AERO", 1, "work against the aerodynamic drag v f_a (eq 4) [J]"),
+    ("E_ROLL", 1, "work against the rolling resistance v f_f (eq 3) [J]"),
+    ("E_GRADE", 1, "work against the gradient force v f_g (eq 2): the potential energy gained [J]"),
+    ("E_BRAKE", 1, "friction-brake energy [J]"),
+    ("E_INVERTER", 1, "inverter conduction and switching losses [J]"),
+    ("E_P_DC", 1, "mean DC-link power over the last step [W]"),
+    ("E_IRON", 1, "iron losses, the drag omega_m T_fe on the shaft [J]"),
+), size=14)
 
 #: the control unit's state vector (controller + observer)
 UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
@@ -320,9 +355,11 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
 ), size=95)
 
 PLANT_PARAMS_LAYOUT.export(globals())
+PLANT_ENERGY_LAYOUT.export(globals())
 UNIT_STATE_LAYOUT.export(globals())
 UNIT_PARAMS_LAYOUT.export(globals())
 PLANT_PARAMS = PLANT_PARAMS_LAYOUT.size  #: length of the plant's parameter vector
+PLANT_ENERGY = PLANT_ENERGY_LAYOUT.size  #: length of the plant's energy vector
 UNIT_STATE = UNIT_STATE_LAYOUT.size  #: length of the control unit's state vector
 UNIT_PARAMS = UNIT_PARAMS_LAYOUT.size  #: length of the control unit's parameter vector
 

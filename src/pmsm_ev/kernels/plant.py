@@ -2,7 +2,10 @@
 vehicle's motion (eqs 1, 6, 9 = 28) and the RK4 step over them (``plant_step``), and the
 departures of a real motor and inverter from eqs 10-12, each off by default: the inverter's
 dead time (``dead_time_error``), magnetic saturation (flux-form eqs 10-12, ``saturated_*``) and
-the winding's temperature (``winding_resistance``, ``thermal_step``).
+the winding's temperature (``winding_resistance``, ``thermal_step``); the friction brake, the gear
+model ``power_flow`` (``power_flow_gear``), the inverter's losses (``inverter_loss``) and the energy
+accounting (``plant_rates``' powers, integrated by ``plant_step`` with the RK4 weights of the state;
+``stored_energies``), docs/energy-model.md.
 
 The parameter vector ``pp`` is laid out by ``pmsm_ev.kernels.layout.PLANT_PARAMS_LAYOUT`` (``P_*``).
 """
@@ -16,6 +19,20 @@ from .jit import V as _V
 from .jit import kernel
 from .jit import sig as _sig
 from .layout import (
+    E_AERO,
+    E_BRAKE,
+    E_COPPER,
+    E_DC,
+    E_DC_ABS,
+    E_FRICTION,
+    E_GEAR,
+    E_GRADE,
+    E_INVERTER,
+    E_IRON,
+    E_P_DC,
+    E_REGEN,
+    E_ROLL,
+    E_SHAFT,
     P_A_F,
     P_B_M,
     P_C_D,
@@ -23,11 +40,20 @@ from .layout import (
     P_DT_I0,
     P_DT_V,
     P_ETA,
+    P_FE_E,
+    P_FE_H,
     P_G,
+    P_GEAR_PF,
+    P_INV,
+    P_INV_K,
+    P_INV_R,
+    P_INV_V,
     P_J_EQ,
+    P_J_M,
     P_K_DQ,
     P_L_D,
     P_L_Q,
+    P_M_R,
     P_M_V,
     P_N,
     P_N_G,
@@ -42,6 +68,7 @@ from .layout import (
     P_SAT_AQ,
     P_SUBSTEP_ANGLE,
     P_SUBSTEPS,
+    P_T_BRAKE,
     P_T_M0,
     P_V_A,
     P_V_EPS,
@@ -136,11 +163,12 @@ def winding_resistance(R_s20, T, alpha_R, T_ref):
 
 
 @kernel()
-def winding_thermal_step(T, i_d, i_q, R_s20, alpha_R, T_ref, T_amb, R_th, C_th, dt):
-    """The winding heated over dt by its copper losses R_s(T) (i_d^2 + i_q^2) (``thermal_step``; the
-    model's power scaling, p = v_d i_d + v_q i_q); returns the new temperature [degC] and R_s there."""
+def winding_thermal_step(T, i_d, i_q, R_s20, alpha_R, T_ref, T_amb, R_th, C_th, dt, k_dq):
+    """The winding heated over dt by its copper losses k_dq R_s(T) (i_d^2 + i_q^2) (``thermal_step``; in
+    the dq convention's power scaling, the energy accounting's: k_dq = 1 for "paper", 3/2 for
+    "amplitude_invariant"); returns the new temperature [degC] and R_s there."""
     r_s = winding_resistance(R_s20, T, alpha_R, T_ref)
-    T_new = thermal_step(T, r_s * (i_d * i_d + i_q * i_q), T_amb, R_th, C_th, dt)
+    T_new = thermal_step(T, k_dq * r_s * (i_d * i_d + i_q * i_q), T_amb, R_th, C_th, dt)
     return T_new, winding_resistance(R_s20, T_new, alpha_R, T_ref)
 
 
@@ -151,6 +179,47 @@ def thermal_step(T, P, T_amb, R_th, C_th, dt):
     time constant R_th C_th)."""
     T_inf = T_amb + P * R_th
     return T_inf + (T - T_inf) * math.exp(-dt / (R_th * C_th))
+
+
+@kernel()
+def inverter_loss(i_alpha, i_beta, v_loss, r_on):
+    """Conduction and switching losses of a two-level three-phase inverter [W] for the current vector
+    (i_alpha, i_beta) (amplitude-invariant Clarke: the phase currents are i_a = i_alpha, i_b, i_c):
+    each phase x loses v_loss |i_x| + r_on i_x^2. Conduction: the threshold-and-slope model of the
+    data sheets, V_CE = V_CE0 + r_CE i (IGBT), V_F = V_F0 + r_F i (diode), with V_CE0 = V_F0 and
+    r_CE = r_F, so that a phase current loses the same through the IGBT or the diode of its leg and
+    the loss does not depend on the duty cycle (the modulation). Switching: E_sw (v_dc / V_ref)
+    (|i_x| / I_ref) per switching period, linear in current and voltage (Graovac and Puerschel,
+    "IGBT Power Losses Calculation Using the Data-Sheet Parameters", Infineon application note,
+    2009; the SEMIKRON application manual, ch. 3.10), a voltage f_sw E_sw v_dc / (V_ref I_ref) per
+    ampere: ``v_loss`` is V_CE0 plus that."""
+    i_b = -0.5 * i_alpha + _SQRT3_2 * i_beta
+    i_c = -0.5 * i_alpha - _SQRT3_2 * i_beta
+    return (v_loss * (abs(i_alpha) + abs(i_b) + abs(i_c))
+            + r_on * (i_alpha * i_alpha + i_b * i_b + i_c * i_c))
+
+
+@kernel()
+def iron_torque(omega_m, psi_d, psi_q, N, c_h, c_e, omega_eps):
+    """The iron losses as a drag on the shaft [N m]: P_fe = (c_h |omega_e| + c_e omega_e^2) psi_s^2
+    (Steinmetz's separation into hysteresis, ~ f B^2, and eddy-current losses, ~ f^2 B^2, with the
+    stator's flux linkage psi_s^2 = psi_d^2 + psi_q^2 standing for B^2: field weakening lowers
+    them), taken from the shaft, T_fe = P_fe / omega_m = N psi_s^2 (c_h tanh(omega_m / omega_eps) +
+    c_e N omega_m); the soft sign of the friction's (eq 8) at standstill."""
+    psi2 = psi_d * psi_d + psi_q * psi_q
+    return N * psi2 * (c_h * math.tanh(omega_m / omega_eps) + c_e * N * omega_m)
+
+
+@kernel()
+def field_energy(i, L0, a):
+    """The field energy [J] of one axis, W = integral of i dpsi = i psi(i) - W'(i), stored by the
+    current i on the Froehlich-Kennelly curve psi(i) = L0 i / (1 + a |i|) (``saturated_flux``): the
+    co-energy W' = L0 / a^2 (a |i| - ln(1 + a |i|)); a = 0: L0 i^2 / 2 (in the model's power
+    scaling; times k_dq in the dq convention's)."""
+    if a == 0.0:
+        return 0.5 * L0 * i * i
+    u = a * abs(i)
+    return L0 * i * i / (1.0 + u) - L0 / (a * a) * (u - math.log1p(u))
 
 
 # -- road load, eqs 2-4 and 29 ---------------------------------------------------------------
@@ -188,6 +257,23 @@ def load_torque(omega_m, delta, m_v, g, c_r, rho_a, c_d, A_f, r_w, eta, n_g, v_a
     return r_w / (eta * n_g) * forces
 
 
+# -- the gear --------------------------------------------------------------------------------
+@kernel()
+def power_flow_gear(x, y, j_m, m_r, eta, omega_m):
+    """The gear with its efficiency in the direction the power flows (``VehicleParams.gear_model``
+    'power_flow'): the rotor J_m driven by x = T_e - T_f, the vehicle m_r = m_v r_w^2 / n_g^2 at the
+    shaft loaded by y = r_w F / n_g (F: the wheel forces, without eta), the gear's input torque
+    T_gear: J_m domega/dt = x - T_gear, m_r domega/dt = e T_gear - y, e = eta while the power flows
+    to the wheels (omega T_gear > 0) and 1/eta while it flows back. Hence
+    domega/dt = (x - y/e) / (J_m + m_r/e), T_gear = (x m_r + J_m y) / (e J_m + m_r), whose sign does
+    not depend on e: the direction is sign(omega (x m_r + J_m y)), and domega/dt is continuous
+    (= -y/m_r) where T_gear = 0. Returns (domega/dt [rad/s^2], T_gear [N m], e [-]); the gear loses
+    omega T_gear (1 - e) >= 0."""
+    num = x * m_r + j_m * y
+    e = eta if omega_m * num >= 0.0 else 1.0 / eta
+    return (x - y / e) / (j_m + m_r / e), num / (e * j_m + m_r), e
+
+
 # -- the plant ---------------------------------------------------------------------------------
 #: the most RK4 sub-steps ``substep_angle`` adds to a step [-]: 64 x 0.1 rad keeps the angle per sub-step
 #: within 0.1 rad up to 16000 rad/s at 10 kHz (10x the top speed); beyond, a state running away
@@ -202,10 +288,56 @@ def plant_load_torque(omega_m, delta, pp):
 
 
 @kernel()
-def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
-    """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage: eqs 10-11 (or their flux form
-    with saturation) at the true angle, eq 12, the friction (eq 8), the road load (eq 29), the motion
-    (eq 9 = 28) and eq 13; the dead time's error added to the voltage first."""
+def brake_torque(omega_m, pp):
+    """The friction brake at the shaft without the gear's eta, T_brake tanh(v / v_eps) / n_g [N m]: the
+    brake torque at the wheels (``P_T_BRAKE`` >= 0) opposing the motion with the smooth sign of the
+    rolling resistance of load_model 'physical', reflected by the gear ratio (eq 7 without eta)."""
+    v_v = pp[P_R_W] * omega_m / pp[P_N_G]
+    return pp[P_T_BRAKE] * math.tanh(v_v / pp[P_V_EPS]) / pp[P_N_G]
+
+
+@kernel()
+def shaft_load(i_d, i_q, omega_m, delta, t_e, pp):
+    """T_L_mech, the load the vehicle puts on the shaft [N m]: eq 29 (r_w / (eta n_g) times the road
+    forces) plus the brake over eta (the paper's gear); with the power_flow gear, the road forces and
+    the brake at the shaft, r_w F / n_g, over e of the direction the power flows (``power_flow_gear``,
+    which needs T_e and the shaft's drag, hence the currents of the iron losses)."""
+    if pp[P_GEAR_PF] == 0.0:
+        t_l = plant_load_torque(omega_m, delta, pp)  # (29)
+        if pp[P_T_BRAKE] != 0.0:
+            t_l = t_l + brake_torque(omega_m, pp) / pp[P_ETA]
+        return t_l
+    v_v = pp[P_R_W] * omega_m / pp[P_N_G]
+    paper = pp[P_PAPER] != 0.0
+    forces = (gradient_force(delta, pp[P_M_V], pp[P_G])
+              + rolling_force(v_v, delta, pp[P_C_R], pp[P_M_V], pp[P_G], pp[P_V_EPS], paper)
+              + aero_force(v_v, pp[P_RHO_A], pp[P_C_D], pp[P_A_F], pp[P_V_A], paper))
+    y = pp[P_R_W] / pp[P_N_G] * forces + brake_torque(omega_m, pp)
+    x = t_e - friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)
+    if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
+        f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
+        f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
+        x = x - iron_torque(omega_m, pp[P_PSI] + f_d, f_q, pp[P_N], pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+    _, _, e = power_flow_gear(x, y, pp[P_J_M], pp[P_M_R], pp[P_ETA], omega_m)
+    return y / e
+
+
+@kernel()
+def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
+    """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage and the powers [W] at that
+    state: eqs 10-11 (or their flux form with saturation) at the true angle, eq 12 (times k_dq), the
+    friction (eq 8), the road forces (eqs 2-4), the friction brake, the gear (eq 9 = 28, or
+    ``power_flow_gear``) and eq 13; the dead time's error added to the voltage first.
+
+    Returns (di_d/dt, di_q/dt, domega_m/dt, dtheta_e/dt, p_dc, p_cu, p_fric, p_shaft, p_gear, p_aero,
+    p_roll, p_grade, p_brake, p_inv, p_iron): the DC-link power p_dc = k_dq (v_d i_d + v_q i_q) + p_inv at
+    the voltage the winding sees (after the dead time's error: a distortion of the voltage, which the
+    winding's power includes, not a loss of its own), the copper losses k_dq R_s (i_d^2 + i_q^2), the
+    friction omega T_f, the shaft's omega T_e, the gear's losses, the wheel's v f_a, v f_f, v f_g,
+    the brake's omega_w T_brake tanh(v / v_eps), the inverter's losses (``inverter_loss``, times
+    k_dq / (3/2)) and the iron losses (``iron_torque``, a drag on the shaft beside the friction). With
+    eqs 10-12 they balance: p_dc = p_cu + p_inv + d/dt W_mag + p_shaft, p_shaft = p_fric + p_iron +
+    p_gear + p_aero + p_roll + p_grade + p_brake + d/dt E_kin (``stored_energies``)."""
     c = math.cos(theta_e)
     s = math.sin(theta_e)
     if pp[P_DT_V] != 0.0:  # the inverter's dead time: the applied voltage loses its error
@@ -215,63 +347,175 @@ def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     v_d = c * v_alpha + s * v_beta  # Park at the true angle
     v_q = -s * v_alpha + c * v_beta
     N = pp[P_N]
+    k = pp[P_K_DQ]
     if pp[P_SAT] != 0.0:  # saturated inductances
         did, diq = saturated_current_derivatives(i_d, i_q, omega_m, v_d, v_q, pp[P_R_S], pp[P_L_D], pp[P_L_Q],
                                                  pp[P_PSI], N, pp[P_SAT_AD], pp[P_SAT_AQ])
-        t_e = pp[P_K_DQ] * saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N, pp[P_SAT_AD],
-                                            pp[P_SAT_AQ])
+        t_e = k * saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N, pp[P_SAT_AD], pp[P_SAT_AQ])
     else:
         did, diq = current_derivatives(i_d, i_q, omega_m, v_d, v_q,
                                        pp[P_R_S], pp[P_L_D], pp[P_L_Q], pp[P_PSI], N)  # (10), (11)
-        t_e = pp[P_K_DQ] * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12) x k_dq
-    t_l = plant_load_torque(omega_m, delta, pp)  # (29)
-    t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], pp[P_PAPER] != 0.0)  # (8)
-    dw = (t_e - t_f - t_l) / pp[P_J_EQ]  # (9) = (28)
+        t_e = k * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12) x k_dq
+    paper = pp[P_PAPER] != 0.0
+    t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)  # (8)
+    t_drag = t_f  # the shaft's drag: friction, and the iron losses when on
+    p_iron = 0.0
+    if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
+        f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
+        f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
+        t_fe = iron_torque(omega_m, pp[P_PSI] + f_d, f_q, N, pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+        t_drag = t_f + t_fe
+        p_iron = omega_m * t_fe
+    # the road forces at the wheel (eqs 2-4) and the brake
+    r_w, n_g, eta = pp[P_R_W], pp[P_N_G], pp[P_ETA]
+    v_v = r_w * omega_m / n_g  # (1), (6)
+    f_g = gradient_force(delta, pp[P_M_V], pp[P_G])  # (2)
+    f_f = rolling_force(v_v, delta, pp[P_C_R], pp[P_M_V], pp[P_G], pp[P_V_EPS], paper)  # (3)
+    f_a = aero_force(v_v, pp[P_RHO_A], pp[P_C_D], pp[P_A_F], pp[P_V_A], paper)  # (4)
+    forces = f_g + f_f + f_a
+    y_b = 0.0
+    if pp[P_T_BRAKE] != 0.0:
+        y_b = brake_torque(omega_m, pp)
+    y = r_w / n_g * forces + y_b  # the wheel forces at the shaft, without eta
+    if pp[P_GEAR_PF] == 0.0:  # the paper's gear, eq 9 = 28
+        t_l = r_w / (eta * n_g) * forces  # (29)
+        if y_b != 0.0:
+            t_l = t_l + y_b / eta
+        dw = (t_e - t_drag - t_l) / pp[P_J_EQ]  # (9) = (28)
+        p_gear = omega_m * (t_l - y)
+    else:  # eta in the direction the power flows
+        dw, t_gear, e = power_flow_gear(t_e - t_drag, y, pp[P_J_M], pp[P_M_R], eta, omega_m)
+        p_gear = omega_m * t_gear * (1.0 - e)
     dth = N * omega_m  # (13)
-    return did, diq, dw, dth
+    p_term = k * (v_d * i_d + v_q * i_q)
+    p_inv = 0.0
+    if pp[P_INV] != 0.0:  # drawn from the DC link only: the winding's voltage is the same
+        p_inv = pp[P_INV_K] * inverter_loss(c * i_d - s * i_q, s * i_d + c * i_q, pp[P_INV_V], pp[P_INV_R])
+    return (did, diq, dw, dth, p_term + p_inv, k * pp[P_R_S] * (i_d * i_d + i_q * i_q), omega_m * t_f,
+            omega_m * t_e, p_gear, v_v * f_a, v_v * f_f, v_v * f_g, omega_m * y_b, p_inv, p_iron)
+
+
+@kernel()
+def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
+    """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage (``plant_rates``' first four)."""
+    r = plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp)
+    return r[0], r[1], r[2], r[3]
 
 
 @kernel(_sig(f"UniTuple({_F}, 5)", _F, _F, _F, _F, _F, _V))
 def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
-    """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state: inverse Park, eq 12, eq 29, eqs 1, 6."""
+    """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state: inverse Park, eq 12, eq 29 (or
+    ``shaft_load`` with the brake or the power_flow gear), eqs 1, 6."""
     i_alpha, i_beta = inverse_park(i_d, i_q, theta_e)
     if pp[P_SAT] != 0.0:
         t_e = pp[P_K_DQ] * saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N], pp[P_SAT_AD],
                                             pp[P_SAT_AQ])
     else:
         t_e = pp[P_K_DQ] * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N])  # (12) x k_dq
-    t_l = plant_load_torque(omega_m, delta, pp)  # (29)
+    if pp[P_GEAR_PF] == 0.0 and pp[P_T_BRAKE] == 0.0:
+        t_l = plant_load_torque(omega_m, delta, pp)  # (29)
+    else:
+        t_l = shaft_load(i_d, i_q, omega_m, delta, t_e, pp)
     v_v = pp[P_R_W] * omega_m / pp[P_N_G]  # (1), (6)
     return i_alpha, i_beta, t_e, t_l, v_v
 
 
-@kernel(_sig(f"UniTuple({_F}, 10)", _F, _F, _F, _F, _F, _F, _F, _F, _V))
-def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp):
+@kernel(_sig(f"UniTuple({_F}, 2)", _F, _F, _F, _V))
+def stored_energies(i_d, i_q, omega_m, pp):
+    """(W_mag, E_kin) [J] of a plant state: the field energy k_dq (L_d i_d^2 + L_q i_q^2) / 2 (with
+    saturation, ``field_energy`` of each axis; the magnet's own flux is constant and stores nothing
+    that changes) and the kinetic energy, 1/2 J_eq omega^2 with the paper's gear (eq 9's inertia, the
+    vehicle's mass over eta) or 1/2 J_m omega^2 + 1/2 m_v v^2 with the power_flow gear."""
+    if pp[P_SAT] != 0.0:
+        w = field_energy(i_d, pp[P_L_D], pp[P_SAT_AD]) + field_energy(i_q, pp[P_L_Q], pp[P_SAT_AQ])
+    else:
+        w = 0.5 * (pp[P_L_D] * i_d * i_d + pp[P_L_Q] * i_q * i_q)
+    if pp[P_GEAR_PF] == 0.0:
+        e_kin = 0.5 * pp[P_J_EQ] * omega_m * omega_m
+    else:
+        e_kin = 0.5 * (pp[P_J_M] + pp[P_M_R]) * omega_m * omega_m
+    return pp[P_K_DQ] * w, e_kin
+
+
+@kernel()
+def _stage_sum(ra, rb, rc, rd, i):
+    """RK4's weighted sum of power i of the four stages, a + 2 b + 2 c + d (times h/6 by the caller)."""
+    return ra[i] + 2.0 * rb[i] + 2.0 * rc[i] + rd[i]
+
+
+@kernel()
+def _regen(p):
+    """The power returned to the DC link, max(-p, 0) [W]."""
+    return -p if p < 0.0 else 0.0
+
+
+@kernel(_sig(f"UniTuple({_F}, 10)", _F, _F, _F, _F, _F, _F, _F, _F, _V, _V))
+def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     """Advance the state by dt with the voltage and elevation held (RK4, ``P_SUBSTEPS``
     sub-steps, more where the rotor turns more than ``P_SUBSTEP_ANGLE`` electrical radians in one of
     them at the speed the step starts with); return the new (i_d, i_q, omega_m, theta_e) and the outputs at the new
     state: (i_alpha, i_beta) (clean), T_e, T_L_mech at ``delta``, v_vehicle; and the
     distance the vehicle moved [m]: r_w / (n_g N) times the (unwrapped) RK4 angle step of
-    eq 13, i.e. eqs 1, 6 integrated by the same RK4."""
+    eq 13, i.e. eqs 1, 6 integrated by the same RK4.
+
+    The energies (the vector ``ee``, ``PLANT_ENERGY_LAYOUT``) get the step's integrals of
+    ``plant_rates``' powers, taken at the RK4 stages with the RK4 weights h/6, h/3, h/3, h/6: the
+    RK4 step of the state extended by the energies, so that the balance closes to RK4's truncation
+    error (the state's arithmetic is the same as without them); ``E_P_DC`` gets the step's mean DC
+    power."""
     n = int(pp[P_SUBSTEPS])
     if pp[P_SUBSTEP_ANGLE] > 0.0:  # at most that angle per sub-step: accurate at top speed
         m = abs(pp[P_N] * omega_m) * dt / pp[P_SUBSTEP_ANGLE]
         if m > n:  # (False for NaN) no more than MAX_SUBSTEPS: a state running away must not hang the step
             n = int(math.ceil(m)) if m < MAX_SUBSTEPS else max(n, MAX_SUBSTEPS)
     h = dt / n
+    s_dc = s_abs = s_reg = s_cu = s_fr = s_sh = s_gear = s_aero = s_roll = s_grade = s_brake = s_inv = s_fe = 0.0
     x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
     for _ in range(n):
-        a0, a1, a2, a3 = plant_derivatives(x0, x1, x2, x3, v_alpha, v_beta, delta, pp)
-        b0, b1, b2, b3 = plant_derivatives(x0 + 0.5 * h * a0, x1 + 0.5 * h * a1, x2 + 0.5 * h * a2,
-                                           x3 + 0.5 * h * a3, v_alpha, v_beta, delta, pp)
-        c0, c1, c2, c3 = plant_derivatives(x0 + 0.5 * h * b0, x1 + 0.5 * h * b1, x2 + 0.5 * h * b2,
-                                           x3 + 0.5 * h * b3, v_alpha, v_beta, delta, pp)
-        d0, d1, d2, d3 = plant_derivatives(x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3,
-                                           v_alpha, v_beta, delta, pp)
+        ra = plant_rates(x0, x1, x2, x3, v_alpha, v_beta, delta, pp)
+        a0, a1, a2, a3 = ra[0], ra[1], ra[2], ra[3]
+        rb = plant_rates(x0 + 0.5 * h * a0, x1 + 0.5 * h * a1, x2 + 0.5 * h * a2,
+                         x3 + 0.5 * h * a3, v_alpha, v_beta, delta, pp)
+        b0, b1, b2, b3 = rb[0], rb[1], rb[2], rb[3]
+        rc = plant_rates(x0 + 0.5 * h * b0, x1 + 0.5 * h * b1, x2 + 0.5 * h * b2,
+                         x3 + 0.5 * h * b3, v_alpha, v_beta, delta, pp)
+        c0, c1, c2, c3 = rc[0], rc[1], rc[2], rc[3]
+        rd = plant_rates(x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3,
+                         v_alpha, v_beta, delta, pp)
+        d0, d1, d2, d3 = rd[0], rd[1], rd[2], rd[3]
+        # the energies: the same RK4 weights on the stages' powers
+        s_dc += _stage_sum(ra, rb, rc, rd, 4)
+        s_abs += abs(ra[4]) + 2.0 * abs(rb[4]) + 2.0 * abs(rc[4]) + abs(rd[4])
+        s_reg += _regen(ra[4]) + 2.0 * _regen(rb[4]) + 2.0 * _regen(rc[4]) + _regen(rd[4])
+        s_cu += _stage_sum(ra, rb, rc, rd, 5)
+        s_fr += _stage_sum(ra, rb, rc, rd, 6)
+        s_sh += _stage_sum(ra, rb, rc, rd, 7)
+        s_gear += _stage_sum(ra, rb, rc, rd, 8)
+        s_aero += _stage_sum(ra, rb, rc, rd, 9)
+        s_roll += _stage_sum(ra, rb, rc, rd, 10)
+        s_grade += _stage_sum(ra, rb, rc, rd, 11)
+        s_brake += _stage_sum(ra, rb, rc, rd, 12)
+        s_inv += _stage_sum(ra, rb, rc, rd, 13)
+        s_fe += _stage_sum(ra, rb, rc, rd, 14)
         x0 += h / 6.0 * (a0 + 2.0 * b0 + 2.0 * c0 + d0)
         x1 += h / 6.0 * (a1 + 2.0 * b1 + 2.0 * c1 + d1)
         x2 += h / 6.0 * (a2 + 2.0 * b2 + 2.0 * c2 + d2)
         x3 += h / 6.0 * (a3 + 2.0 * b3 + 2.0 * c3 + d3)
+    w = h / 6.0
+    ee[E_DC] += w * s_dc
+    ee[E_DC_ABS] += w * s_abs
+    ee[E_REGEN] += w * s_reg
+    ee[E_COPPER] += w * s_cu
+    ee[E_FRICTION] += w * s_fr
+    ee[E_SHAFT] += w * s_sh
+    ee[E_GEAR] += w * s_gear
+    ee[E_AERO] += w * s_aero
+    ee[E_ROLL] += w * s_roll
+    ee[E_GRADE] += w * s_grade
+    ee[E_BRAKE] += w * s_brake
+    ee[E_INVERTER] += w * s_inv
+    ee[E_IRON] += w * s_fe
+    ee[E_P_DC] = w * s_dc / dt
     dx = pp[P_R_W] / (pp[P_N_G] * pp[P_N]) * (x3 - theta_e)
     x3 = wrap_angle(x3)
     i_alpha, i_beta, t_e, t_l, v_v = plant_outputs(x0, x1, x2, x3, delta, pp)
