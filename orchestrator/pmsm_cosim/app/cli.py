@@ -80,7 +80,7 @@ def _load_with_overrides(a):
     :func:`pmsm_cosim.app.overrides.apply_overrides`)."""
     return apply_overrides(a.system, plant=a.plant, controller=a.controller, fmus=a.fmu, stop_time=a.stop_time,
                            step_size=a.step, output_interval=a.output_interval, algorithm=a.algorithm, set=a.set,
-                           profiles=a.profile, record=a.record, cli=True)
+                           profiles=a.profile, record=a.record, cycle=a.cycle, cli=True)
 
 
 def cmd_run(a) -> int:
@@ -93,7 +93,8 @@ def cmd_run(a) -> int:
             _note(w)
     progress = ProgressBar(spec.stop_time) if ProgressBar.wanted(a.quiet) else None
     m = master.run(out, progress=progress, metrics_of=drive_metrics,
-                   extra_settings={"command_line": {"set": list(a.set or ()), "profile": list(a.profile or ())}})
+                   extra_settings={"command_line": {"set": list(a.set or ()), "profile": list(a.profile or ()),
+                                                     **({"cycle": a.cycle} if a.cycle else {})}})
     if "metrics_note" in m:
         _note(m["metrics_note"], a.quiet)
     figures = None
@@ -278,6 +279,10 @@ def _system_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", action="append", metavar="SIGNAL=CSV",
                    help="take a scenario signal from a (time, value) CSV file in the signal's unit, "
                         "e.g. delta=route.csv (repeatable)")
+    p.add_argument("--cycle", metavar="NAME|CSV",
+                   help="drive the speed reference omega_ref by a drive cycle: a shipped one (wltc3b, udds, hwfet, "
+                        "us06) or a CSV file (time_s, speed_kmh|speed_mps|speed_mph); the stop time is the cycle's "
+                        "duration unless --stop-time (docs/cycles.md)")
     p.add_argument("--record", action="extend", nargs="+", metavar="COLUMN",
                    help="record only these columns (and time): the system's (omega_m) or a variable "
                         "(plant.omega_m, the column named as written)")
