@@ -93,7 +93,12 @@ def _wheel(spec: SystemSpec, sig: CycleSignal, where: str) -> tuple[float, float
         if stated is not None:
             out.append(stated)
         elif name in starts:
-            out.append(_positive(starts[name], f"{PLANT}.{name} (the cycle's speed reference uses it)", where))
+            what = "wheel radius r_w [m]" if name == "r_w" else "gear ratio n_g"
+            try:
+                out.append(_positive(starts[name], f"{PLANT}.{name}", where))
+            except CosimError:
+                raise CosimError(f"{where}: {PLANT}.{name} = {starts[name]!r} is not a number > 0 (the {what} the "
+                                 f"speed reference of cycle {sig.cycle.name!r} is made with)") from None
         else:
             out.append(getattr(defaults, name))
     return out[0], out[1]

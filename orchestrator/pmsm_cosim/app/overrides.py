@@ -183,7 +183,7 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
                              f"{close_matches(signal, spec.signals)}; signals: {', '.join(spec.signals) or '(none)'}")
         spec.set_signal_csv(f"{signal}={csv}")
     if set:
-        cycles.resample(spec, _named("set", "plant.r_w/n_g", cli))  # a cycle's reference through the new r_w, n_g
+        cycles.resample(spec, "--set" if cli else "set")  # a cycle's reference through the new r_w, n_g
     if record is not None:
         spec.columns = _columns(spec, record, cli)
     check_references(spec)
