@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from importlib import resources
 
@@ -232,9 +233,13 @@ def test_a_run_follows_the_cycle_and_meets_the_grade_by_position(fmus, tmp_path,
     np.testing.assert_array_equal(r["delta_deg"], np.degrees(road.delta_at(r["x_vehicle"])))
     assert r["x_vehicle"][-1] > 2.5 and r["delta_deg"][-1] == pytest.approx(math.degrees(math.atan(0.1)))
     f = trace_figures(r["time"], r["v_vehicle"], c)
-    print(f"\n[cycle] + [road], 4 s: x = {r['x_vehicle'][-1]:.3f} m, delta up to {r['delta_deg'].max():.3f} deg; "
-          f"inside the band {100 * f['inside_share']:.1f} %, RMSE {f['rmse_kmh']:.3f} km/h, largest deviation "
-          f"{f['max_deviation_kmh']:+.3f} km/h at {f['t_max_deviation']:.2f} s")
+    metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+    assert metrics["trace"] == {"cycle": "cyc", **f}  # the run's own figures of the band
+    assert "cycle cyc: inside the +-2 km/h band" in capsys.readouterr().out
+    with capsys.disabled():
+        print(f"\n[cycle] + [road], 4 s: x = {r['x_vehicle'][-1]:.3f} m, delta up to {r['delta_deg'].max():.3f} "
+              f"deg; inside the band {100 * f['inside_share']:.1f} %, RMSE {f['rmse_kmh']:.3f} km/h, largest "
+              f"deviation {f['max_deviation_kmh']:+.3f} km/h at {f['t_max_deviation']:.2f} s")
     # the same system exported as an SSP package runs to the same numbers
     ssp = tmp_path / "cycle-road.ssp"
     assert main(["export-ssp", str(path), "-o", str(ssp), "--quiet", "--stop-time", "1"]) == 0

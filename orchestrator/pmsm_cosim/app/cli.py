@@ -25,7 +25,7 @@ from ..engine.master import Master
 from ..engine.progress import ProgressBar
 from ..engine.system import ALGORITHMS
 from ..sweeps import prepare_runs, run_sweep
-from . import bench, compare, report
+from . import bench, compare, cycles, report
 from .drive import (
     PACKAGED_SCENARIOS,
     draw_figures,
@@ -92,11 +92,19 @@ def cmd_run(a) -> int:
         for w in master.warnings:
             _note(w)
     progress = ProgressBar(spec.stop_time) if ProgressBar.wanted(a.quiet) else None
-    m = master.run(out, progress=progress, metrics_of=drive_metrics,
+    m = master.run(out, progress=progress, metrics_of=cycles.with_trace_figures(drive_metrics, spec),
                    extra_settings={"command_line": {"set": list(a.set or ()), "profile": list(a.profile or ()),
                                                      **({"cycle": a.cycle} if a.cycle else {})}})
     if "metrics_note" in m:
         _note(m["metrics_note"], a.quiet)
+    trace = m.get("trace")
+    if isinstance(trace, dict):
+        longest = (f", the longest {trace['longest_excursion_s']:.2f} s at {trace['t_longest_excursion']:.2f} s"
+                   if trace["excursions"] else "")
+        print(f"cycle {trace['cycle']}: inside the +-{trace['band_kmh']:g} km/h band "
+              f"{100 * trace['inside_share']:.2f} % of {trace['t_end']:g} s, {trace['excursions']} excursions"
+              f"{longest}; RMSE {trace['rmse_kmh']:.2f} km/h, largest deviation "
+              f"{trace['max_deviation_kmh']:+.2f} km/h at {trace['t_max_deviation']:.2f} s")
     figures = None
     if not a.no_figures and m["rows"] >= 2:
         figures = draw_figures(out, spec.name, a.quiet)

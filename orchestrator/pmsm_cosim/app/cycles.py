@@ -13,6 +13,9 @@ and an ordinary component with its connections. The engine knows FMI and time, n
   position mode (``road`` parameter; a file travels in a copy of the FMU, in its resources/) stepped
   after the others, connected ``position -> road.x`` and ``road.delta -> drives``; the time-based
   signal that drove ``drives`` is dropped and a recorded ``signals.delta`` becomes ``road.delta``.
+
+A run from a cycle adds ``trace`` to its metrics.json (:func:`with_trace_figures`: the tolerance band's
+figures, ``pmsm_ev.results.trace_figures``).
 """
 
 from __future__ import annotations
@@ -24,9 +27,11 @@ from pathlib import Path
 
 from pmsm_ev import cycles as pcycles
 from pmsm_ev.params import VehicleParams
+from pmsm_ev.results import trace_figures
 from pmsm_ev_fmus import build as fmu_build
 
 from ..engine.errors import CosimError, close_matches
+from ..engine.recording import read_results
 from ..engine.signals import Table
 from ..engine.system import SignalSpec, SystemSpec, split_reference, user_path
 
@@ -273,3 +278,29 @@ def road_fmu(path: Path, fmu_dir: Path) -> Path:
         dest.parent.mkdir(parents=True, exist_ok=True)
         fmu_build.write_road_fmu(path, dest, source=source)
     return dest
+
+
+# -- the figures of merit of a run from a cycle ------------------------------------------------------------
+
+def cycle_of(spec: SystemSpec) -> pcycles.Cycle | None:
+    """The cycle that drives ``spec`` (its ``omega_ref`` from ``[cycle]`` or ``--cycle``), None if none."""
+    sig = spec.signals.get(CYCLE_SIGNAL)
+    return sig.cycle if isinstance(sig, CycleSignal) else None
+
+
+def with_trace_figures(metrics_of, spec: SystemSpec):
+    """``metrics_of`` (the master's, ``drive.drive_metrics``) for a run of ``spec``: as it is without a cycle
+    (every other run's metrics.json unchanged); with one, plus ``trace``: ``pmsm_ev.results.trace_figures`` of
+    the recorded ``v_vehicle`` against the cycle (the tolerance band's figures; docs/cycles.md)."""
+    cycle = cycle_of(spec)
+    if cycle is None:
+        return metrics_of
+
+    def measured(out_dir, columns, rows: int) -> dict:
+        m = metrics_of(out_dir, columns, rows)
+        if rows >= 2 and "time" in columns and "v_vehicle" in columns:
+            r = read_results(out_dir)
+            m["trace"] = {"cycle": cycle.name, **trace_figures(r["time"], r["v_vehicle"], cycle)}
+        return m
+
+    return measured
