@@ -250,6 +250,10 @@ def test_a_run_follows_the_cycle_and_meets_the_grade_by_position(fmus, tmp_path,
     assert s["time"][-1] == 1.0
     for col in ("omega_ref", "delta_deg", "omega_m", "x_vehicle", "i_q"):
         np.testing.assert_array_equal(s[col], r[col][:n], err_msg=col)
+    # --cycle on the package: its route component's omega_ref connection gives way, the column follows
+    assert main(["run", str(ssp), "--cycle", str(tmp_path / "cyc.csv"), "--stop-time", "1", "--out",
+                 str(tmp_path / "ssp2"), "--quiet", "--no-figures"]) == 0
+    np.testing.assert_array_equal(read_results(tmp_path / "ssp2")["omega_ref"], r["omega_ref"][:n])
 
 
 def test_set_plant_wheel_and_gear_resamples_the_cycle(tmp_path):

@@ -33,7 +33,7 @@ from pmsm_ev_fmus import build as fmu_build
 from ..engine.errors import CosimError, close_matches
 from ..engine.recording import read_results
 from ..engine.signals import Table
-from ..engine.system import SignalSpec, SystemSpec, split_reference, user_path
+from ..engine.system import ColumnSpec, SignalSpec, SystemSpec, split_reference, user_path
 
 #: the signal a cycle drives, and the input by default
 CYCLE_SIGNAL = "omega_ref"
@@ -123,9 +123,17 @@ def resample(spec: SystemSpec, where: str = "cycle") -> None:
 def drive_with_cycle(spec: SystemSpec, cycle: pcycles.Cycle, drives: list[tuple[str, str]], where: str,
                      r_w: float | None = None, n_g: float | None = None, dt: float = pcycles.REFERENCE_DT) -> None:
     """``spec`` (changed) with the signal ``omega_ref`` the cycle's speed reference, driving ``drives``: a
-    signal of that name is replaced, any other signal driving one of those inputs stops driving it."""
+    signal of that name is replaced, any other signal or connection driving one of those inputs stops
+    driving it."""
     for name, sig in list(spec.signals.items()):
         sig.drives = [d for d in sig.drives if d not in drives]
+    # a connection into one of them (an SSP package's route component) gives way too, and a column that
+    # recorded its source records the cycle's signal instead
+    gone = {(c.src, c.src_var) for c in spec.connections if (c.dst, c.dst_var) in drives}
+    spec.connections = [c for c in spec.connections if (c.dst, c.dst_var) not in drives]
+    spec.columns = [ColumnSpec(col.name, "signal", variable=CYCLE_SIGNAL, unit=col.unit)
+                    if col.kind == "variable" and (col.instance, col.variable) in gone else col
+                    for col in spec.columns]
     sig = CycleSignal(CYCLE_SIGNAL, Table((0.0,), (0.0,), "linear", CYCLE_SIGNAL, "rad/s"), "rad/s", list(drives),
                       "rad/s", "cycle", cycle=cycle, r_w=r_w, n_g=n_g, dt=dt)
     spec.signals[CYCLE_SIGNAL] = sig
