@@ -199,13 +199,14 @@ CYCLE_CSV = "time_s,speed_kmh\n0,0\n1,0\n2,3.6\n3,7.2\n4,7.2\n"
 ROAD_CSV = "distance_m,grade_pct\n0,0\n0.5,0\n2.5,10\n"
 
 
-def system_file(tmp_path, cycle='file = "cyc.csv"', road='file = "road.csv"', extra=""):
+def system_file(tmp_path, cycle='file = "cyc.csv"', road='file = "road.csv"', extra="", stop_time=None):
     """Scenario 1's system with a [cycle] and a [road] section (its time tables left in, replaced), no stop
-    time, x_vehicle recorded."""
+    time (or ``stop_time``), x_vehicle recorded."""
     (tmp_path / "cyc.csv").write_text(CYCLE_CSV, encoding="utf-8")
     (tmp_path / "road.csv").write_text(ROAD_CSV, encoding="utf-8")
     text = (resources.files("pmsm_cosim.app") / "scenarios" / "scenario1.toml").read_text(encoding="utf-8")
-    text = text.replace('name = "scenario1"', 'name = "cycle-road"').replace("stop_time = 350.0", "")
+    text = text.replace('name = "scenario1"', 'name = "cycle-road"')
+    text = text.replace("stop_time = 350.0", "" if stop_time is None else f"stop_time = {stop_time!r}")
     sections = (f"[cycle]\n{cycle}\n\n" if cycle else "") + (f"[road]\n{road}\n\n" if road else "") + extra
     i = text.index("[record]")
     path = tmp_path / "sys.toml"
@@ -319,3 +320,29 @@ def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, monkeypa
 def test_a_cycle_error_is_a_cosim_or_profile_error_of_one_line():
     with pytest.raises(CosimError, match="unknown cycle 'udd'"):
         apply_overrides("scenario1", cycle="udd")
+
+
+def test_a_shipped_road_by_name_becomes_a_component_and_its_connections(tmp_path):
+    """[road] name = "hilly": a RouteProfile component 'road' last in the order, the paper's delta table
+    dropped, the recorded delta_deg taken from road.delta (in deg); the system keeps everything else."""
+    spec = apply_overrides(str(system_file(tmp_path, cycle="", road='name = "hilly"', stop_time=60.0)))
+    assert [c.name for c in spec.components] == ["ctrl", "plant", "road"]
+    road = spec.components[-1]
+    assert road.fmu.name == "RouteProfile.fmu" and road.start == {"road": "hilly"}
+    assert "delta" not in spec.signals and spec.signals["omega_ref"].origin == "table"
+    conns = [str(c) for c in spec.connections]
+    assert conns[-2:] == ["plant.x_vehicle -> road.x", "road.delta -> plant.delta"]
+    column = next(c for c in spec.columns if c.name == "delta_deg")
+    assert (column.kind, column.instance, column.variable, column.unit) == ("variable", "road", "delta", "deg")
+    assert spec.stop_time == 60.0  # the file's: no cycle to take it from
+    with pytest.raises(CosimError, match=r"\[experiment\] needs stop_time"):  # and without one, none
+        apply_overrides(str(system_file(tmp_path, cycle="", road='name = "hilly"')))
+
+
+def test_simulate_takes_a_cycle(fmus):
+    import pmsm_cosim
+
+    result, metrics = pmsm_cosim.simulate("scenario1", cycle="us06", stop_time=0.5, controller="sensored")
+    assert metrics["status"] == "completed" and metrics["trace"]["cycle"] == "us06"
+    assert metrics["trace"]["t_end"] == 0.5 and metrics["settings"]["signals"]["omega_ref"]["origin"].startswith(
+        "cycle us06")
