@@ -21,8 +21,10 @@ from .build import (
     main,
     takes_packaged_starts,
     write_fmu_with_starts,
+    write_road_fmu,
     write_route_fmu,
 )
 
 __all__ = ["FMUS", "OBSERVER_FMUS", "ROUTE_FMU", "BuildError", "build_all", "build_fmu", "content_key",
-           "default_out_dir", "main", "takes_packaged_starts", "write_fmu_with_starts", "write_route_fmu"]
+           "default_out_dir", "main", "takes_packaged_starts", "write_fmu_with_starts", "write_road_fmu",
+           "write_route_fmu"]

@@ -11,7 +11,9 @@ content hash (``pmsm_ev_<hash>``, ``pmsm_ev_fmus_<module>_<hash>``), so that
 The hash covers everything that goes into the FMU and runs there: the slave script, the
 ``fmus`` modules it imports (``metadata.py``, ``slave_support.py``, ...), the ``pmsm_ev``
 modules and subpackages it needs, this build module and the pythonfmu version (not the
-documentation folder, a copy of ``README.md`` that computes nothing). It is stored in
+documentation folder, a copy of ``README.md`` that computes nothing), and the files of the
+``data/`` folder of every bundled ``pmsm_ev`` subpackage (``pmsm_ev.cycles``: the shipped cycles
+and road profiles, read with ``importlib.resources``). It is stored in
 ``resources/build_info.json``; ``build_all`` rebuilds an FMU only when the hash differs (or
 ``force``). The modelDescription is written by the slaves themselves
 (``slave_support.DriveSlave.to_xml``: units, dependencies, InitialUnknowns); the build
@@ -54,6 +56,7 @@ import pythonfmu
 from fmpy.validation import validate_fmu
 from pythonfmu import FmuBuilder
 
+from pmsm_ev.cycles import load_road
 from pmsm_ev.scenarios import route_from_json, route_to_json, scenario_route
 
 from .slave_support import START_VALUES_FILE  # the packaged defaults a slave reads
@@ -226,7 +229,12 @@ def _physics_files(script: str) -> list[Path]:
                 base = package[:len(package) - (node.level - 1)]
                 target = ".".join(base + (node.module.split(".") if node.module else []))
                 wanted(target, [a.name for a in node.names], f"{path}:{node.lineno}")
-    return sorted(path.relative_to(root) for path in seen.values())
+    data = []  # a bundled package's data/ folder travels with it (pmsm_ev.cycles: the shipped cycles and roads)
+    for dotted, path in seen.items():
+        folder = path.parent / "data" if path.name == "__init__.py" else None
+        if folder is not None and folder.is_dir():
+            data += [p for p in folder.rglob("*") if p.is_file() and "__pycache__" not in p.parts]
+    return sorted(path.relative_to(root) for path in [*seen.values(), *data])
 
 
 def _recipe(name: str) -> tuple[str, bool]:
@@ -267,7 +275,7 @@ def _source_signature() -> tuple:
     ``.py`` file of this package and of ``pmsm_ev``, and the pythonfmu version."""
     files = []
     for root in (HERE, physics_dir()):
-        for path in sorted(root.rglob("*.py")):
+        for path in sorted({*root.rglob("*.py"), *(p for p in root.rglob("*") if p.parent.name == "data")}):
             if ".build" in path.relative_to(root).parts:
                 continue  # a build's staging folder (FMUs built into this folder with --out)
             try:
@@ -483,6 +491,26 @@ def write_route_fmu(route_json: str, dest, source=None) -> Path:
         if target not in names:
             raise BuildError(f"{source}: not a RouteProfile FMU (no {target})")
         return {target: route_json.encode("utf-8")}
+
+    return _copy_fmu(source, Path(dest), change)
+
+
+def write_road_fmu(road_file, dest, source=None) -> Path:
+    """A copy of RouteProfile.fmu (``source``, default: the one in ``default_out_dir()``, built if
+    needed) with the road profile file ``road_file`` (CSV, ``pmsm_ev.cycles.load_road``) as
+    ``resources/<its name>``, for the position mode (parameter ``road`` = its name). The file is
+    checked first (a ``CycleError`` naming file, row and problem); the model description is unchanged."""
+    road_file = Path(road_file)
+    load_road(road_file)  # refuse a malformed road here, not in the FMU
+    source = Path(source) if source is not None else build_fmu(ROUTE_FMU)[0]
+    target = f"resources/{road_file.name}"
+
+    def change(names):
+        if f"resources/{ROUTE_FILE}" not in names:
+            raise BuildError(f"{source}: not a RouteProfile FMU (no resources/{ROUTE_FILE})")
+        if target in names:
+            raise BuildError(f"{source}: resources/ already has a file {road_file.name!r}; rename the road file")
+        return {target: road_file.read_bytes()}
 
     return _copy_fmu(source, Path(dest), change)
 

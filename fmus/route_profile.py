@@ -2,6 +2,17 @@
 and speed reference ``omega_ref`` [rad/s], as an FMI 2.0 co-simulation unit, so that a
 whole scenario runs in any master. The profiles are ``pmsm_ev.scenarios.Profile`` objects
 (the orchestrator's own signal evaluation), read from a route file in ``resources/``.
+
+**Position mode** (parameter ``road`` not empty: a shipped road profile by name, ``hilly``, or a
+road file in ``resources/``, ``pmsm_ev.cycles.load_road``): ``delta`` is the road's angle at the
+input ``x`` [m], the distance along the road (connected from the plant's ``x_vehicle``), instead
+of the route's time table (docs/cycles.md, "Grade by position"). An output after
+``fmi2DoStep(t, h)`` is defined at t + h, and x(t + h) is not known then (no direct
+feedthrough), so ``delta`` after the step is ``delta_at(x)`` of the input as it was set for the
+step, x(t): the value the plant holds over its next step from t + h anyway (with the road stepped
+after the plant in a Gauss-Seidel order, the input set for the step is already the plant's x at
+t + h; with Jacobi it lags one step, 3.6 mm at 36 m/s and 10 kHz). Before the first step:
+``delta_at(x)`` of the input's value at initialisation (its start value, 0 m).
 """
 
 from __future__ import annotations
@@ -11,6 +22,7 @@ from pathlib import Path
 from pythonfmu import String
 
 from pmsm_ev import __version__
+from pmsm_ev.cycles import SHIPPED_ROADS, load_road
 from pmsm_ev.scenarios import PACKAGED_ROUTES, load_route, scenario_route
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError
 
@@ -32,7 +44,12 @@ DESCRIPTION = (
     "and moves no breakpoint by a step. No inputs. Parameter 'profile': "
     "'scenario1', 'scenario2' (the paper's scenarios) or the name of a route file in "
     "resources/ (default route.json: scenario 1, or the route an SSP package was written "
-    "with). A Python FMU (pythonfmu): it needs a Python 3 interpreter with numpy."
+    "with). Position mode: parameter 'road' (default '': off) names a shipped road profile "
+    "('hilly') or a road file (CSV, distance against grade or elevation) in resources/; delta "
+    "is then the road angle at the input x [m], the distance along the road: after "
+    "fmi2DoStep(t, h), the angle at x as set for that step (no direct feedthrough); before "
+    "the first step, at x's value at initialisation. "
+    "A Python FMU (pythonfmu): it needs a Python 3 interpreter with numpy."
 )
 
 
@@ -44,14 +61,22 @@ class RouteProfile(DriveSlave):
         self.description = DESCRIPTION
         self.version = __version__
         at_start = "; before the first step: the profile at the start time"
+        self.add_input("x", "m", "position mode: distance along the road (connect the plant's x_vehicle); "
+                       "unused when 'road' is empty")
         self.add_output("delta", "rad", "road elevation angle, uphill positive, at the end of the last step"
-                        + at_start, start=None, start_dependencies=("profile",), display_unit="deg")
+                        + at_start + "; position mode: at the input x as set for the last step",
+                        start=None, start_dependencies=("profile", "road", "x"), display_unit="deg")
         self.add_output("omega_ref", "rad/s", "speed reference at the end of the last step" + at_start,
                         start=None, start_dependencies=("profile",), display_unit="rpm")
         self.add_parameter("profile", DEFAULT_ROUTE, String,
                            description="route: 'scenario1', 'scenario2' or a route file (JSON, "
                                        "pmsm_ev.scenarios.route_to_json) in resources/")
+        self.add_parameter("road", "", String,
+                           description="position mode: '' (off: delta from the route's time table), a shipped "
+                                       f"road profile ({', '.join(SHIPPED_ROADS)}) or a road file (CSV, "
+                                       "pmsm_ev.cycles.load_road) in resources/; delta = the road angle at x")
         self._delta = self._omega_ref = None
+        self._road = None  # position mode: the RoadProfile
         self._t0 = 0.0  # start time (fmi2SetupExperiment)
         self._t = 0.0  # time of the outputs
         self._h0 = None  # size of the first step: the grid t0 + k h0 of the communication points
@@ -69,25 +94,38 @@ class RouteProfile(DriveSlave):
                                     f"inside resources/ (no such file there)")
             route = load_route(path)
         self._delta, self._omega_ref = route["delta"], route["omega_ref"]
+        self._road = self._load_road(self.road) if self.road else None
         self.mark_built()
         self._t, self._h0 = self._t0, None
         self._evaluate()
 
+    def _load_road(self, name: str):
+        if name.strip().lower() in SHIPPED_ROADS:
+            return load_road(name)
+        resources = Path(self.resources or ".").resolve()
+        path = (resources / name).resolve()
+        if resources not in path.parents or not path.is_file():
+            raise FmuUsageError(f"road {name!r}: choose a shipped road ({', '.join(SHIPPED_ROADS)}) or a road file "
+                                f"inside resources/ (no such file there)")
+        return load_road(path)
+
     def physics_state(self):
-        return [self._t, self._h0]
+        return [self._t, self._h0, self.delta]  # delta: position mode's comes from x as set for the last step
 
     def restore_physics(self, snapshot) -> None:
         if self._delta is None or self.needs_rebuild():
             self.build()
         self._t, self._h0 = float(snapshot[0]), snapshot[1]
         self._evaluate()
+        if self._road is not None and len(snapshot) > 2:
+            self.delta = float(snapshot[2])
 
     def forget_physics(self) -> None:
-        self._delta = self._omega_ref = None
+        self._delta = self._omega_ref = self._road = None
 
     def _evaluate(self) -> None:
         t = self._t
-        self.delta = self._delta(t)
+        self.delta = self._delta(t) if self._road is None else self._road.delta_at(self.x)
         self.omega_ref = self._omega_ref(t)
 
     # -- FMI -------------------------------------------------------------------------
@@ -106,7 +144,7 @@ class RouteProfile(DriveSlave):
             if abs(t - self._t0 - k * h0) <= GRID_TOLERANCE * h0:
                 t = self._t0 + k * h0  # on the grid: exactly t_n = n h, as the master's own signals
             self._t = t
-            self.delta = self._delta(t)
+            self.delta = self._delta(t) if self._road is None else self._road.delta_at(self.x)
             self.omega_ref = self._omega_ref(t)
         except Exception as exc:
             self._fail("fmi2DoStep", exc)

@@ -84,10 +84,10 @@ def test_model_description_is_complete(route_fmu):
     assert md.coSimulation.canHandleVariableCommunicationStepSize
     assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
     by_name = {v.name: v for v in md.modelVariables}
-    assert [v.name for v in md.modelVariables if v.causality == "input"] == []
+    assert [v.name for v in md.modelVariables if v.causality == "input"] == ["x"]  # position mode only
     assert [v.name for v in md.modelVariables if v.causality == "output"] == ["delta", "omega_ref"]
     assert (by_name["delta"].unit, by_name["omega_ref"].unit) == ("rad", "rad/s")
-    assert {u.name for u in md.unitDefinitions} == {"rad", "rad/s"}
+    assert {u.name for u in md.unitDefinitions} == {"m", "rad", "rad/s"}
     profile = by_name["profile"]
     assert (profile.causality, profile.type, profile.start, profile.initial) == \
         ("parameter", "String", "route.json", "exact")
@@ -95,7 +95,7 @@ def test_model_description_is_complete(route_fmu):
     assert all(by_name[n].initial == "calculated" for n in ("delta", "omega_ref"))
     assert all(u.dependencies == [] for u in md.outputs)
     assert {u.variable.name: [d.name for d in u.dependencies] for u in md.initialUnknowns} == \
-        {"delta": ["profile"], "omega_ref": ["profile"]}
+        {"delta": ["x", "profile", "road"], "omega_ref": ["profile"]}
 
 
 def test_the_built_fmu_carries_scenario1_as_its_route(route_fmu):
@@ -220,6 +220,120 @@ def test_a_bad_profile_fails_initialisation_with_the_reason(route_fmu, tmp_path,
     fmu.instantiate(callbacks=callbacks, loggingOn=True)
     fmu.setupExperiment(startTime=0.0)
     fmu.setString([vr["profile"]], [profile])
+    fmu.enterInitializationMode()
+    with pytest.raises(Exception):
+        fmu.exitInitializationMode()
+    assert any(message in m for m in messages), messages
+
+
+# -- position mode: the grade by position (docs/cycles.md, "Grade by position") -----------------------------
+
+class RoadRoute(Route):
+    """A RouteProfile instance in position mode: parameter ``road``, input ``x``."""
+
+    def __init__(self, fmu, tmp_path, road, x0=0.0):
+        self.md = fmpy.read_model_description(str(fmu))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=fmpy.extract(str(fmu), str(tmp_path / "road")),
+                             modelIdentifier="RouteProfile", instanceName="road")
+        self.fmu.instantiate()
+        self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.setString([self.vr["road"]], [road])
+        self.fmu.setReal([self.vr["x"]], [x0])
+        self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+
+    def step(self, t, x, h=H):
+        self.fmu.setReal([self.vr["x"]], [x])
+        self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        return self.values()
+
+
+def test_position_mode_gives_the_road_angle_at_the_input_x(route_fmu, tmp_path):
+    """delta after a step is the hilly road's angle at x as set for the step (no direct feedthrough:
+    setting x alone changes nothing until the next step); before the first step, at x's start value;
+    omega_ref keeps the route's time table; the state round trip keeps delta."""
+    from pmsm_ev.cycles import load_road
+
+    road = load_road("hilly")
+    r = RoadRoute(route_fmu, tmp_path, "hilly", x0=1000.0)
+    try:
+        assert r.values()[0] == road.delta_at(1000.0) == math.atan(0.1)
+        xs = (0.0, 540.0, 550.0, 1000.0, 1450.0, 2000.0, 2500.0, 3900.0, 5000.0, -10.0)
+        for n, x in enumerate(xs):
+            delta, omega_ref = r.step(n * H, x)
+            assert delta == road.delta_at(x), x
+            assert omega_ref == scenario_route("scenario1")["omega_ref"]((n + 1) * H)
+        print("\nhilly road by position: delta [deg] at x [m]: "
+              + ", ".join(f"{x:g}: {math.degrees(road.delta_at(x)):.3f}" for x in xs))
+        r.fmu.setReal([r.vr["x"]], [1000.0])  # an input set, no step: the output stays
+        assert r.values()[0] == road.delta_at(-10.0) == 0.0
+        state = r.fmu.getFMUstate()
+        r.step(len(xs) * H, 1000.0)
+        assert r.values()[0] == math.atan(0.1)
+        r.fmu.setFMUstate(state)
+        assert r.values()[0] == 0.0  # the angle of the last step's x, not of the input set after it
+        r.fmu.freeFMUstate(state)
+    finally:
+        r.free()
+
+
+def test_position_mode_reads_a_road_file_in_resources(route_fmu, tmp_path):
+    from pmsm_ev.cycles import load_road
+    from pmsm_ev_fmus import write_road_fmu
+
+    csv = tmp_path / "ramp.csv"
+    csv.write_text("distance_m,elevation_m\n0,0\n100,5\n200,5\n300,-10\n", encoding="utf-8")
+    fmu = write_road_fmu(csv, tmp_path / "RouteProfile_ramp.fmu", source=route_fmu)
+    assert validate_fmu(str(fmu)) == []
+    road = load_road(csv)
+    r = RoadRoute(fmu, tmp_path, "ramp.csv")
+    try:
+        for n, x in enumerate((0.0, 50.0, 100.0, 150.0, 250.0, 299.0, 400.0)):
+            assert r.step(n * H, x)[0] == road.delta_at(x)
+        assert r.values()[0] == -math.asin(15.0 / 100.0)  # the last segment's slope holds after the end
+    finally:
+        r.free()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("distance_m,grade_pct\n0,0\n10,80\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"bad.csv: row 3: grade_pct 80 is a grade of 80 %"):
+        write_road_fmu(bad, tmp_path / "x.fmu", source=route_fmu)
+    assert not (tmp_path / "x.fmu").exists()
+
+
+@pytest.mark.parametrize("road, message", [
+    ("hilly2", "road 'hilly2': choose a shipped road (hilly) or a road file inside resources/"),
+    ("../modelDescription.xml", "inside resources/"),
+    ("route.json", "no distance column"),
+])
+def test_a_bad_road_fails_initialisation(route_fmu, tmp_path, road, message):
+    messages = []
+
+    def log(_env, _instance, status, _category, text):
+        messages.append(text.decode())
+
+    from ctypes import byref
+
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (
+        fmi2CallbackAllocateMemoryTYPE,
+        fmi2CallbackFreeMemoryTYPE,
+        fmi2CallbackFunctions,
+        fmi2CallbackLoggerTYPE,
+    )
+    from fmpy.logging import addLoggerProxy
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(log)
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(byref(callbacks))
+    md = fmpy.read_model_description(str(route_fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=fmpy.extract(str(route_fmu), str(tmp_path / "u")),
+                    modelIdentifier="RouteProfile", instanceName="road")
+    fmu.instantiate(callbacks=callbacks, loggingOn=True)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.setString([vr["road"]], [road])
     fmu.enterInitializationMode()
     with pytest.raises(Exception):
         fmu.exitInitializationMode()

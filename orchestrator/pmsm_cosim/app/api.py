@@ -25,6 +25,7 @@ from ..engine.errors import CosimError
 from ..engine.master import Master
 from ..engine.recording import read_results
 from ..engine.system import SystemSpec
+from . import cycles
 from .drive import draw_figures, drive_metrics, ensure_fmus
 from .overrides import apply_overrides
 
@@ -42,20 +43,20 @@ def _either(ours, fmpys, name: str):
 def prepare(system="scenario1", *, stop_time: float | None = None, step_size: float | None = None,
             output_interval: float | None = None, algorithm: str | None = None, set=None, start_values=None,
             plant=None, controller=None, fmus: Mapping | None = None, profiles: Mapping | None = None,
-            record=None, output=None) -> SystemSpec:
+            record=None, output=None, cycle=None) -> SystemSpec:
     """The system :func:`simulate` runs: ``system`` with its overrides
     (:func:`pmsm_cosim.app.overrides.apply_overrides`), a new :class:`SystemSpec` (one given
     is not changed), checked as far as it can be without the FMUs."""
     return apply_overrides(system, plant=plant, controller=controller, fmus=fmus, stop_time=stop_time,
                            step_size=step_size, output_interval=output_interval, algorithm=algorithm,
                            set=_either(set, start_values, "set"), profiles=profiles,
-                           record=_either(record, output, "record"))
+                           record=_either(record, output, "record"), cycle=cycle)
 
 
 def simulate(system="scenario1", *, stop_time: float | None = None, step_size: float | None = None,
              output_interval: float | None = None, algorithm: str | None = None, set=None, start_values=None,
              plant=None, controller=None, fmus: Mapping | None = None, profiles: Mapping | None = None,
-             record=None, output=None, output_dir=None, figures: bool = False) -> tuple[np.ndarray, dict]:
+             record=None, output=None, output_dir=None, figures: bool = False, cycle=None) -> tuple[np.ndarray, dict]:
     """Co-simulate and return ``(result, metrics)``.
 
     ``system``: a shipped scenario (``"scenario1"``, ``"hill-start"``, ...), a system file, an
@@ -67,7 +68,9 @@ def simulate(system="scenario1", *, stop_time: float | None = None, step_size: f
     FMU) an FMU file, a shipped FMU's name or an observer's (``"ekf4"``, ``"sensorless"``);
     ``profiles`` a signal's table from a CSV file (signal -> CSV); ``record`` the columns to
     record instead of the system's (time first, then each a column of the system, e.g.
-    ``"omega_m"``, or a variable ``"plant.omega_m"``, the column named as written).
+    ``"omega_m"``, or a variable ``"plant.omega_m"``, the column named as written); ``cycle`` a drive
+    cycle (``"wltc3b"`` or a CSV file) as the speed reference ``omega_ref``, the stop time its duration
+    unless ``stop_time`` (:mod:`pmsm_cosim.app.cycles`).
 
     fmpy's names are taken too (``fmpy.simulate_fmu``): ``start_values`` is ``set`` (a dict
     name -> value; with several FMUs in a system a name is ``"instance.var"``, e.g.
@@ -84,12 +87,12 @@ def simulate(system="scenario1", *, stop_time: float | None = None, step_size: f
     """
     spec = prepare(system, stop_time=stop_time, step_size=step_size, output_interval=output_interval,
                    algorithm=algorithm, set=set, start_values=start_values, plant=plant, controller=controller,
-                   fmus=fmus, profiles=profiles, record=record, output=output)
+                   fmus=fmus, profiles=profiles, record=record, output=output, cycle=cycle)
     ensure_fmus(spec, quiet=True)
     master = Master(spec)
     with tempfile.TemporaryDirectory(prefix="pmsm-cosim-") as tmp:
         out = Path(output_dir) if output_dir is not None else Path(tmp)
-        metrics = master.run(out, metrics_of=drive_metrics)
+        metrics = master.run(out, metrics_of=cycles.with_trace_figures(drive_metrics, spec))
         columns = read_results(out) if metrics.get("rows") else {c.name: np.empty(0) for c in spec.columns}
         if figures and output_dir is not None and metrics.get("rows", 0) >= 2:
             draw_figures(out, spec.name, quiet=True)

@@ -25,7 +25,7 @@ from ..engine.master import Master
 from ..engine.progress import ProgressBar
 from ..engine.system import ALGORITHMS
 from ..sweeps import prepare_runs, run_sweep
-from . import bench, compare, report
+from . import bench, compare, cycles, report
 from .drive import (
     PACKAGED_SCENARIOS,
     draw_figures,
@@ -80,7 +80,7 @@ def _load_with_overrides(a):
     :func:`pmsm_cosim.app.overrides.apply_overrides`)."""
     return apply_overrides(a.system, plant=a.plant, controller=a.controller, fmus=a.fmu, stop_time=a.stop_time,
                            step_size=a.step, output_interval=a.output_interval, algorithm=a.algorithm, set=a.set,
-                           profiles=a.profile, record=a.record, cli=True)
+                           profiles=a.profile, record=a.record, cycle=a.cycle, cli=True)
 
 
 def cmd_run(a) -> int:
@@ -92,10 +92,19 @@ def cmd_run(a) -> int:
         for w in master.warnings:
             _note(w)
     progress = ProgressBar(spec.stop_time) if ProgressBar.wanted(a.quiet) else None
-    m = master.run(out, progress=progress, metrics_of=drive_metrics,
-                   extra_settings={"command_line": {"set": list(a.set or ()), "profile": list(a.profile or ())}})
+    m = master.run(out, progress=progress, metrics_of=cycles.with_trace_figures(drive_metrics, spec),
+                   extra_settings={"command_line": {"set": list(a.set or ()), "profile": list(a.profile or ()),
+                                                     **({"cycle": a.cycle} if a.cycle else {})}})
     if "metrics_note" in m:
         _note(m["metrics_note"], a.quiet)
+    trace = m.get("trace")
+    if isinstance(trace, dict):
+        longest = (f", the longest {trace['longest_excursion_s']:.2f} s at {trace['t_longest_excursion']:.2f} s"
+                   if trace["excursions"] else "")
+        print(f"cycle {trace['cycle']}: inside the +-{trace['band_kmh']:g} km/h band "
+              f"{100 * trace['inside_share']:.2f} % of {trace['t_end']:g} s, {trace['excursions']} excursions"
+              f"{longest}; RMSE {trace['rmse_kmh']:.2f} km/h, largest deviation "
+              f"{trace['max_deviation_kmh']:+.2f} km/h at {trace['t_max_deviation']:.2f} s")
     figures = None
     if not a.no_figures and m["rows"] >= 2:
         figures = draw_figures(out, spec.name, a.quiet)
@@ -297,6 +306,10 @@ def _system_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", action="append", metavar="SIGNAL=CSV",
                    help="take a scenario signal from a (time, value) CSV file in the signal's unit, "
                         "e.g. delta=route.csv (repeatable)")
+    p.add_argument("--cycle", metavar="NAME|CSV",
+                   help="drive the speed reference omega_ref by a drive cycle: a shipped one (wltc3b, udds, hwfet, "
+                        "us06) or a CSV file (time_s, speed_kmh|speed_mps|speed_mph); the stop time is the cycle's "
+                        "duration unless --stop-time (docs/cycles.md)")
     p.add_argument("--record", action="extend", nargs="+", metavar="COLUMN",
                    help="record only these columns (and time): the system's (omega_m) or a variable "
                         "(plant.omega_m, the column named as written)")

@@ -21,14 +21,15 @@ from pathlib import Path
 
 from pmsm_ev import __version__
 from pmsm_ev.results import CONTRACT_COLUMNS, compute_metrics
-from pmsm_ev.scenarios import ROUTE_SIGNALS, ProfileError, route_to_json
+from pmsm_ev.scenarios import ROUTE_SIGNALS, Profile, ProfileError, route_to_json
 from pmsm_ev_fmus import build as fmu_build
 
 from ..engine import ssp_export
 from ..engine.errors import CosimError, close_matches, one_line
 from ..engine.loading import load_system as load_system_file
 from ..engine.recording import read_results
-from ..engine.system import SystemSpec
+from ..engine.system import SystemSpec, parse_system, read_toml
+from . import cycles
 
 #: where the shipped scenarios are (package data)
 SCENARIO_PACKAGE = "pmsm_cosim.app"
@@ -92,7 +93,18 @@ def load_system(name_or_path) -> SystemSpec:
     elif path.suffix == "" and not path.exists():
         raise CosimError(f"no scenario or system file {str(path)!r}{close_matches(str(path), PACKAGED_SCENARIOS)}; "
                          f"shipped scenarios: {', '.join(PACKAGED_SCENARIOS)}")
-    return load_system_file(path, fmu_dir=project_fmu_dir())
+    if path.suffix.lower() == ".ssp":
+        return load_system_file(path, fmu_dir=project_fmu_dir())
+    # a system file: the application's sections [cycle] and [road] (module cycles) expanded into what
+    # the engine knows, a signal table and a component with its connections
+    data = read_toml(path, "system file")
+    if not isinstance(data, dict) or not ({"cycle", "road"} & set(data)):
+        return load_system_file(path, fmu_dir=project_fmu_dir())
+    fmu_dir = project_fmu_dir()
+    part = cycles.pop_sections(data, str(path), path.resolve().parent, fmu_dir)
+    spec = parse_system(data, path, fmu_dir=fmu_dir)
+    cycles.apply_cycle_section(spec, part)
+    return spec
 
 
 # --- figures of merit ------------------------------------------------------------------
@@ -178,10 +190,13 @@ def export_ssp(spec: SystemSpec, dest, quiet: bool = False, route_fmu: Path | No
 
     def signal_fmu(spec: SystemSpec, work: Path) -> Path:
         profiles = {name: sig.profile for name, sig in spec.signals.items()}
-        if set(profiles) != set(ROUTE_SIGNALS):
+        if not set(profiles) <= set(ROUTE_SIGNALS):
             raise CosimError(f"{where}export-ssp: the signals must be {' and '.join(ROUTE_SIGNALS)} "
                              f"(the outputs of the RouteProfile FMU that carries them), got "
                              f"{', '.join(profiles)}")
+        for name in ROUTE_SIGNALS:  # one the system does not have (delta, with a road by position): an
+            if name not in profiles:  # unconnected output, 0
+                profiles[name] = Profile((0.0,), (0.0,), "previous", name, ROUTE_SIGNALS[name])
         for name, sig in spec.signals.items():
             if sig.unit not in ("", ROUTE_SIGNALS[name]):
                 raise CosimError(f"{where}export-ssp: signal {name} is in {sig.unit!r}; "

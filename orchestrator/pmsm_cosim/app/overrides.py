@@ -16,6 +16,8 @@ coupling               ``--algorithm A``              ``algorithm=A``
 start values           ``--set INSTANCE.VAR=VALUE``   ``set={"INSTANCE.VAR": VALUE}`` (or fmpy's
                                                       ``start_values=``)
 a signal from a CSV    ``--profile SIGNAL=CSV``       ``profiles={"SIGNAL": CSV}``
+a drive cycle          ``--cycle NAME|CSV``           ``cycle=NAME|CSV`` (omega_ref from the cycle,
+                                                      module ``cycles``; stop time: its duration)
 recorded columns       ``--record NAME ...``          ``record=[NAME, ...]`` (or fmpy's ``output=``)
 =====================  =============================  ==========================================
 
@@ -37,6 +39,7 @@ from pmsm_ev_fmus.build import FMUS, OBSERVER_FMUS
 
 from ..engine.errors import CosimError, close_matches
 from ..engine.system import ALGORITHMS, ColumnSpec, SystemSpec, check_references, resolve_fmu_path, split_reference
+from . import cycles
 from .drive import load_system, project_fmu_dir
 
 #: the instances ``plant`` and ``controller`` replace the FMU of (``--plant``, ``--controller``)
@@ -45,7 +48,7 @@ CONTROLLER_INSTANCE = "ctrl"
 #: the command line's name of each override (the Python API's is the key)
 CLI_FLAGS = {"plant": "--plant", "controller": "--controller", "fmus": "--fmu", "stop_time": "--stop-time",
              "step_size": "--step", "output_interval": "--output-interval", "algorithm": "--algorithm",
-             "set": "--set", "profiles": "--profile", "record": "--record"}
+             "set": "--set", "profiles": "--profile", "record": "--record", "cycle": "--cycle"}
 
 
 def _named(option: str, value, cli: bool) -> str:
@@ -138,7 +141,7 @@ def _columns(spec: SystemSpec, record, cli: bool) -> list[ColumnSpec]:
 
 def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time=None, step_size=None,
                     output_interval=None, algorithm=None, set=None, profiles=None, record=None,
-                    cli: bool = False) -> SystemSpec:
+                    cycle=None, cli: bool = False) -> SystemSpec:
     """The system ``system`` (a :class:`SystemSpec`, copied, never changed, or what
     :func:`~pmsm_cosim.app.drive.load_system` takes) with the overrides (module doc); ``cli``
     names them in messages as the command line does (``--controller X``), else as Python does
@@ -154,6 +157,15 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
         what = _named_item("fmus", instance, value, cli)
         comp = spec.component(instance, what)
         comp.fmu, comp.fmu_text = resolve_fmu(value, what), str(value)
+    if cycle is not None:  # omega_ref from the cycle (module cycles); the stop time its duration unless given
+        what = _named("cycle", cycle, cli)
+        loaded = cycles.load_cycle(str(cycle), what)
+        target = cycles.split_reference(cycles.CYCLE_DRIVES, what)
+        old = spec.signals.get(cycles.CYCLE_SIGNAL)
+        drives = old.drives if old is not None and old.drives else [target]
+        cycles.drive_with_cycle(spec, loaded, drives, what)
+        if stop_time is None:
+            spec.stop_time = loaded.duration
     for option, value in (("stop_time", stop_time), ("step_size", step_size), ("output_interval", output_interval)):
         if value is not None:
             setattr(spec, option, _seconds(value, option, cli))
@@ -170,6 +182,8 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
             raise CosimError(f"{_named_item('profiles', signal, csv, cli)}: unknown signal {signal!r}"
                              f"{close_matches(signal, spec.signals)}; signals: {', '.join(spec.signals) or '(none)'}")
         spec.set_signal_csv(f"{signal}={csv}")
+    if set:
+        cycles.resample(spec, "--set" if cli else "set")  # a cycle's reference through the new r_w, n_g
     if record is not None:
         spec.columns = _columns(spec, record, cli)
     check_references(spec)
