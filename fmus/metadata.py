@@ -136,7 +136,7 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "current_control": (None, "current control: 'paper' (eqs 15-20, decoupling on the filtered references, the "
                               "whole vector scaled at u_max, integrators held) or 'high_speed' (decoupling on the "
                               "current predicted at mid-period, back-EMF priority under the voltage limit with "
-                              "realisable-reference anti-windup, ZOH gain sin(a)/a; docs/high-speed.md)"),
+                              "realisable-reference anti-windup, ZOH gain sin(a)/a; docs/speed-range.md)"),
     # EkfParams: diagonal covariances of eqs 24-27
     "q_i": ("A2", "EKF process noise of the currents, per step"),
     "q_omega": ("rad2/s2", "EKF process noise of the speed, per step (5-state EKFs)"),
@@ -197,7 +197,7 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "psi_adapt": ("1/s", "magnet-flux adaptation gain of the stationary-frame EKF5 (ekf5ab, sensorless); 0 = off"),
     "psi_adapt_speed": ("rad/s", "the magnet-flux adaptation runs while |omega_hat| exceeds this"),
     "discretisation": (None, "the EKFs' current model A2-A3: 'euler' (the paper's forward Euler) or 'bilinear' "
-                             "(Tustin's rule, exact input for a stationary held vector; docs/high-speed.md)"),
+                             "(Tustin's rule, exact input for a stationary held vector; docs/speed-range.md)"),
     # StartupParams: the sensorless unit's low-speed range
     "i_align": ("A", "alignment current at standstill"),
     "t_ramp": ("s", "alignment: ramp of the current to i_align on the +90 deg axis"),

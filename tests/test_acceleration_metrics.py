@@ -63,6 +63,7 @@ def test_acceleration_figures_of_a_constant_acceleration():
     e_regen = np.where(t >= t_brake, 0.6 * (e_kin[np.searchsorted(t, t_brake)] - e_kin), 0.0)
     f = acceleration_figures(_run(t, w_ref, w_m, E_kinetic=e_kin, E_regen=e_regen))
     assert f["t_launch"] == pytest.approx(t_launch, abs=0.011)
+    assert f["v_launch_kmh"] == 0.0
     assert f["t_0_50"] == pytest.approx(50.0 / 3.6 / a, abs=0.011)
     assert f["t_0_100"] == pytest.approx(100.0 / 3.6 / a, abs=0.011)
     assert f["top_speed_kmh"] == pytest.approx(130.0, rel=1e-9)
@@ -81,3 +82,14 @@ def test_no_acceleration_block_below_50_kmh_and_none_in_a_paper_run():
              T_e=np.zeros_like(t))
     m = compute_metrics(r)
     assert "acceleration" not in m and "behind" not in m
+
+
+def test_a_flying_start_launches_where_the_reference_rises():
+    t = np.arange(0.0, 20.0, 0.01)
+    v0 = 200.0 * RATIO
+    v = np.where(t < 2.0, v0, np.minimum(v0 + 4.0 * (t - 2.0), 130.0 / 3.6))
+    w_ref = np.where(t < 2.0, 200.0, 130.0 / 3.6 / RATIO)
+    f = acceleration_figures(_run(t, w_ref, v / RATIO))
+    assert f["t_launch"] == pytest.approx(2.0, abs=0.011)
+    assert f["v_launch_kmh"] == pytest.approx(v0 * 3.6, rel=1e-9)
+    assert f["t_0_50"] == pytest.approx((50.0 / 3.6 - v0) / 4.0, abs=0.011)

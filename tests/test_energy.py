@@ -1,4 +1,4 @@
-"""The plant's energy accounting (docs/energy-model.md): the balance over closed-loop runs, each
+"""The plant's energy accounting (docs/speed-range.md): the balance over closed-loop runs, each
 power against its analytic value, the friction brake, the gear models and the energy metrics."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Current control and discretisation at top speed (issue 23; docs/high-speed.md).
+"""Current control and discretisation at top speed (issue 23; docs/speed-range.md).
 
 At 131 km/h the motor turns at ~1554 rad/s (omega_e dt = 0.62 rad per 1e-4 s period). The tests run the
 kernels the controllers run (``current_step``, ``modulate``, ``control_step``, ``sensorless_step``) on

@@ -20,7 +20,7 @@ Per control period, at t_k, with the plant's measured currents at t_k:
    with ``dead_time_comp`` the vector sent to the inverter gets the dead time's expected
    loss for the measured phase currents added (the observer keeps the command). With
    ``current_control = "high_speed"`` steps 4-5 are the high-speed current control and its
-   ZOH gain sin(a)/a (docs/high-speed.md; ``pmsm_ev.kernels.current_step_hs``, ``modulate``).
+   ZOH gain sin(a)/a (docs/speed-range.md; ``pmsm_ev.kernels.current_step_hs``, ``modulate``).
 
 The controller's motor model is its own ``MotorParams`` (nominal): a plant with another
 R_s, psi, L_q, saturation, temperature or dead time is a model mismatch for the observer.

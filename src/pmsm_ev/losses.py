@@ -8,7 +8,7 @@ v_d = R_s i_d - omega_e psi_q(i_q), v_q = R_s i_q + omega_e psi_d(i_d), and the 
 sinusoids of amplitude |i|. The powers are the kernel's at that state, the inverter's averaged over
 an electrical period (``PERIOD_SAMPLES`` angles; its losses depend on the phase currents'
 instantaneous values). The inverter's dead time is left out: it distorts the voltage, it is not a
-loss (docs/energy-model.md).
+loss (docs/speed-range.md).
 """
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ GEAR_MODELS = ("paper", "power_flow")
 #: how the dq quantities scale to the phase quantities (``MotorParams.dq_convention``)
 DQ_CONVENTIONS = ("paper", "amplitude_invariant")
 #: the current control (``ControllerParams.current_control``) and the observers' discretisation
-#: (``EkfParams.discretisation``); docs/high-speed.md
+#: (``EkfParams.discretisation``); docs/speed-range.md
 CURRENT_CONTROLS = ("paper", "high_speed")
 DISCRETISATIONS = ("euler", "bilinear")
 
@@ -118,7 +118,7 @@ class VehicleParams:
     #: speed scale of the smooth sign of rolling resistance [m/s] [chosen]: 1 cm/s,
     #: far below any driving speed, yet smooth enough for RK4 at 10 kHz.
     v_eps: float = 0.01
-    #: how the gear's efficiency eta acts (docs/energy-model.md). "paper" (default): eq 9 as printed,
+    #: how the gear's efficiency eta acts (docs/speed-range.md). "paper" (default): eq 9 as printed,
     #: which the paper obtains by substituting eqs 1-7 into eq 8 (its reference [1], Kamalakkannan's
     #: vehicle model): the reflected mass and every wheel force divided by eta whatever the direction
     #: of the power, so the model also "loses" 1 - eta when the power flows back from the wheels
@@ -230,7 +230,7 @@ class PlantParams:
     #: ideal). Each phase loses (inv_v0 + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref)) |i_x| +
     #: inv_r_on i_x^2, f_sw = 1 / switching_period; needs v_dc > 0. The defaults are those of a
     #: 650 V / 400 A IGBT six-pack for EV inverters (Infineon HybridPACK 1, FS400R07A1E3, data sheet
-    #: V3.4 2018: V_CEsat = 1.45 V typ. at 400 A, 25 degC); docs/energy-model.md
+    #: V3.4 2018: V_CEsat = 1.45 V typ. at 400 A, 25 degC); docs/speed-range.md
     inverter_losses: bool = False
     #: threshold voltage of the IGBT and the diode [V] (V_CE0 = V_F0, the straight-line model of the
     #: output characteristic) [chosen]: 0.8 V, a trench-field-stop IGBT3's and its diode's knee
@@ -431,7 +431,7 @@ class ControllerParams:
     dead_time_comp: float = 0.0
     #: current scale of the compensation's soft sign [A] [chosen]: the plant's ``dead_time_i0``
     dead_time_comp_i0: float = 2.0
-    #: the current control (docs/high-speed.md). "paper" (default): eqs 15-20 as above, the decoupling
+    #: the current control (docs/speed-range.md). "paper" (default): eqs 15-20 as above, the decoupling
     #: on the filtered references i_dl, i_ql (eqs 17-18), the whole vector scaled to u_max and the
     #: integrators held while it is. "high_speed" [chosen, for omega_e dt up to 0.62 rad at top speed]:
     #: (1) the decoupling and back-EMF terms of eqs 19-20 on the current predicted at the middle of the
@@ -603,7 +603,7 @@ class EkfParams:
     #: sensorless unit's handover speed (back-EMF 10.8 V): below it psi is poorly observable
     psi_adapt_speed: float = 30.0
     #: the discretisation of the current model A2-A3 (every EKF: ekf5, ekf4, ekf5ab, the sensorless
-    #: unit; docs/high-speed.md). "euler" (default): the appendix's forward Euler; at omega_e dt = 0.62
+    #: unit; docs/speed-range.md). "euler" (default): the appendix's forward Euler; at omega_e dt = 0.62
     #: rad (top speed) the eigenvalues 1 + lambda dt of its rotation have |.| = 1.18 > 1. "bilinear"
     #: [chosen]: Tustin's rule (trapezoidal) on A2-A3, (I - A dt/2) i' = (I + A dt/2) i + b dt, whose
     #: rotation keeps |.| = 1 (phase 2 atan(omega_e dt / 2) for omega_e dt), with the voltage of the

@@ -23,7 +23,7 @@ conduction and switching losses (``PlantParams.inverter_losses``, off by default
 kernels too, and so is the energy accounting: ``energy`` holds the DC-link energy, the losses by
 kind, the wheel's work by road force and the brake's energy since the start, integrated with the
 RK4 stages of the state; ``stored`` the magnetic and kinetic energies of the state; ``energies``
-all of them by name (docs/energy-model.md).
+all of them by name (docs/speed-range.md).
 
 The RK4 step, the model (eqs 8-13, 29) and the outputs are ``pmsm_ev.kernels.plant_step``
 (compiled with numba when available, see ``pmsm_ev.accel``); this class holds the state
@@ -54,7 +54,7 @@ ENERGY_SLOTS = {"E_dc": _k.E_DC, "E_dc_abs": _k.E_DC_ABS, "E_regen": _k.E_REGEN,
                 "E_friction": _k.E_FRICTION, "E_shaft": _k.E_SHAFT, "E_gear": _k.E_GEAR, "E_aero": _k.E_AERO,
                 "E_rolling": _k.E_ROLL, "E_grade": _k.E_GRADE, "E_brake": _k.E_BRAKE,
                 "E_inverter": _k.E_INVERTER, "E_iron": _k.E_IRON}
-#: the terms whose sum is E_dc (the energy balance, docs/energy-model.md)
+#: the terms whose sum is E_dc (the energy balance, docs/speed-range.md)
 BALANCE_TERMS = ("E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling", "E_grade",
                  "E_brake", "dE_kinetic", "dW_magnetic")
 

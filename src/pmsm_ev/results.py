@@ -621,7 +621,8 @@ def _first_at_or_above(t: np.ndarray, x: np.ndarray, level: float, t_from: float
 
 def acceleration_figures(r: dict[str, np.ndarray]) -> dict | None:
     """The data sheet's figures of an acceleration run (the car reaches 50 km/h; None otherwise): from the
-    launch (the first row with omega_ref > ``LAUNCH_REF``), ``t_0_50`` and ``t_0_100`` [s] to 50 and
+    launch (the first row whose omega_ref exceeds its first row's by ``LAUNCH_REF``; ``v_launch_kmh``, the
+    speed there: 0 from standstill, a flying start's else), ``t_0_50`` and ``t_0_100`` [s] to 50 and
     100 km/h (None if not reached), ``top_speed_kmh`` and when (``t_top``); the braking from the top speed:
     ``t_brake`` [s], the first row after the top speed whose reference is below its maximum (None if it
     never falls), ``braking_time`` to below 1 km/h, and with the plant's energy columns ``E_kinetic`` and
@@ -630,12 +631,13 @@ def acceleration_figures(r: dict[str, np.ndarray]) -> dict | None:
     t, v, w_ref = r["time"], r["v_vehicle"] * KMH, r["omega_ref"]
     if not len(t) or float(np.max(v)) < 50.0:
         return None
-    launch = np.nonzero(w_ref > LAUNCH_REF)[0]
-    t0 = float(t[launch[0]]) if len(launch) else float(t[0])
+    launch = np.nonzero(w_ref > w_ref[0] + LAUNCH_REF)[0]  # (a flying start: the reference's first rise)
+    i0 = int(launch[0]) if len(launch) else 0
+    t0 = float(t[i0])
     t50 = _first_at_or_above(t, v, 50.0, t0)
     t100 = _first_at_or_above(t, v, 100.0, t0)
     i_top = int(np.argmax(v))
-    out = {"t_launch": t0, "t_0_50": None if t50 is None else t50 - t0,
+    out = {"t_launch": t0, "v_launch_kmh": float(v[i0]), "t_0_50": None if t50 is None else t50 - t0,
            "t_0_100": None if t100 is None else t100 - t0,
            "top_speed_kmh": float(v[i_top]), "t_top": float(t[i_top]),
            "t_brake": None, "braking_time": None}

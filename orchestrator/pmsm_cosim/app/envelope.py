@@ -39,13 +39,15 @@ from ..engine.recording import read_results
 
 #: the groups ``--set`` reaches, and the defaults of the envelope (field weakening on a 360 V DC link)
 GROUPS = {"motor": MotorParams, "controller": ControllerParams, "plant": PlantParams, "vehicle": VehicleParams}
-DEFAULTS = {"controller": {"reference": "fw", "v_dc": 360.0}, "plant": {"v_dc": 360.0}}
+DEFAULTS = {"controller": {"reference": "fw", "v_dc": 360.0}, "plant": {"v_dc": 360.0, "inverter_losses": True}}
+#: the speed axis reaches at least this vehicle speed [km/h] (where the motor can): an EV's top speed
+AXIS_KMH = 150.0
 #: the region colours of the figures, by region code (``pmsm_ev.references.REGIONS``)
 REGION_COLOURS = ("C0", "C1", "C3", "C2", "C4", "0.6")
 #: the speeds of the voltage ellipses in the current plane, as fractions of the envelope's speed range
 ELLIPSE_FRACTIONS = (0.25, 0.5, 1.0)
 #: the efficiency map's grid: speeds x torques [-]
-MAP_SPEEDS, MAP_TORQUES = 36, 31
+MAP_SPEEDS, MAP_TORQUES = 48, 40  # an even number of torques: none at 0, where no power flows
 
 
 def _parse(field, text: str):
@@ -103,15 +105,15 @@ def _run_points(run_dir: Path) -> dict:
     return {k: r[k] for k in ("omega_m", "T_e", "i_d", "i_q") if k in r}
 
 
-def speed_range(lim, speeds: dict, omega_max: float | None) -> float:
-    """The envelope's speed axis [rad/s]: ``omega_max``, else 1.15 x the maximum speed (2.5 x the base speed
-    where the maximum is infinite or beyond 4 x the base; 2000 rad/s without a voltage limit)."""
+def speed_range(speeds: dict, vehicle: VehicleParams, omega_max: float | None) -> float:
+    """The envelope's speed axis [rad/s]: ``omega_max``, else the larger of 2.5 x the base speed and the motor
+    speed of ``AXIS_KMH`` at the wheels (eqs 1, 6), but no more than 1.15 x the maximum speed."""
     if omega_max:
         return float(omega_max)
+    w_axis = AXIS_KMH / 3.6 * vehicle.n_g / vehicle.r_w
     base, top = speeds["base_speed"], speeds["max_speed"]
-    if not math.isfinite(base):
-        return 2000.0
-    return 1.15 * top if math.isfinite(top) and top < 4.0 * base else 2.5 * base
+    w = max(2.5 * base, w_axis) if math.isfinite(base) else w_axis
+    return min(w, 1.15 * top) if math.isfinite(top) else w
 
 
 def efficiency_map(p: dict, lim, omega_max: float, n_speeds: int = MAP_SPEEDS, n_torques: int = MAP_TORQUES) -> dict:
@@ -153,22 +155,11 @@ def _shade_regions(ax, w, t, region):
                    label=references.REGIONS[int(code)], zorder=3)
 
 
-def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency: bool = True) -> dict:
-    """The figures and envelope.json into ``out`` (see the module doc); returns what envelope.json holds."""
-    import matplotlib  # noqa: PLC0415 - matplotlib: heavy, only when drawing
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
-
-    lim = references.limits(p["controller"], p["motor"])
-    speeds = references.region_speeds(lim)
-    w_top = speed_range(lim, speeds, omega_max)
-    w = np.linspace(0.0, w_top, 400)
-    motoring, braking, region = references.torque_envelope(w, lim)
-    points = [(Path(d), _run_points(Path(d))) for d in runs]
-    out.mkdir(parents=True, exist_ok=True)
-
-    fig, (ax, axi) = plt.subplots(1, 2, figsize=(12.0, 4.8))
+def plot_envelope(ax, lim, speeds: dict, w, motoring, braking, region, points=()) -> None:
+    """The torque-speed envelope on ``ax``: the most motoring and braking torque at the speeds ``w``
+    (``references.torque_envelope``), coloured by region, the region speeds, and the operating points
+    (omega_m, T_e) of ``points`` ((run directory, columns) pairs)."""
+    w_top = float(w[-1])
     ax.plot(w, motoring, "k-", lw=0.8)
     ax.plot(w, braking, "k-", lw=0.8)
     _shade_regions(ax, w, motoring, region)
@@ -182,13 +173,32 @@ def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency
         ax.text(0.98 * w_top, braking[-1], f"regen limit {lim.P_regen_max / 1e3:g} kW", fontsize=7, ha="right",
                 va="top")
     for i, (d, r) in enumerate(points):
-        ax.plot(r["omega_m"], r["T_e"], ".", ms=1.5, color=f"C{5 + i}", alpha=0.5, label=f"run {d.name}")
+        ax.plot(r["omega_m"], r["T_e"], ".", ms=1.5, color=f"C{5 + i}", alpha=0.5, label=f"run {d.name}", zorder=4)
     ax.set_xlabel("ω_m [rad/s]")
     ax.set_ylabel("torque [N m]")
     voltage = f"u {lim.u_fw:.0f} V" if lim.u_fw else "no voltage limit"
     ax.set_title(f"torque-speed envelope: I_max {lim.i_max:g} A, T_max {lim.T_max:.1f} N m, {voltage}", fontsize=9)
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=6, loc="lower left", markerscale=3)
+
+
+def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency: bool = True) -> dict:
+    """The figures and envelope.json into ``out`` (see the module doc); returns what envelope.json holds."""
+    import matplotlib  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+
+    lim = references.limits(p["controller"], p["motor"])
+    speeds = references.region_speeds(lim)
+    w_top = speed_range(speeds, p["vehicle"], omega_max)
+    w = np.linspace(0.0, w_top, 400)
+    motoring, braking, region = references.torque_envelope(w, lim)
+    points = [(Path(d), _run_points(Path(d))) for d in runs]
+    out.mkdir(parents=True, exist_ok=True)
+
+    fig, (ax, axi) = plt.subplots(1, 2, figsize=(12.0, 4.8))
+    plot_envelope(ax, lim, speeds, w, motoring, braking, region, points)
 
     # the current plane: the current circle, MTPA, the voltage ellipses, the MTPV line
     phi = np.linspace(0.0, 2.0 * math.pi, 361)
@@ -203,7 +213,9 @@ def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency
             lam = lim.u_fw / we
             axi.plot((lam * np.cos(phi) - lim.psi) / lim.L_d, lam * np.sin(phi) / lim.L_q, "--", lw=0.7,
                      color="0.5")
-            axi.text((lam - lim.psi) / lim.L_d, 0.0, f" {frac * w_top:.0f} rad/s", fontsize=6, color="0.4")
+            x_text = (lam - lim.psi) / lim.L_d
+            if x_text < 0.25 * lim.i_max:
+                axi.text(x_text, 0.0, f" {frac * w_top:.0f} rad/s", fontsize=6, color="0.4")
         mtpv = mtpv_line(lim)
         if mtpv is not None:
             axi.plot(mtpv[0], mtpv[1], "C3-", lw=1.0, label="MTPV")
@@ -240,8 +252,10 @@ def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency
         ax.plot(w, braking, "k-", lw=0.8)
         for i, (d, r) in enumerate(points):
             ax.plot(r["omega_m"], r["T_e"], ".", ms=1.0, color="w", alpha=0.4)
-        inv = "with" if p["plant"].inverter_losses else "without"
-        ax.set_title(f"efficiency: copper + friction losses, {inv} the inverter's (generating: P_dc / P_shaft)",
+        pl = p["plant"]
+        kinds = ["copper", "friction"] + (["inverter"] if pl.inverter_losses else []) + (
+            ["iron"] if (pl.iron_c_h or pl.iron_c_e) else [])
+        ax.set_title(f"motor + inverter efficiency, losses: {', '.join(kinds)} (generating: P_dc / P_shaft)",
                      fontsize=9)
         ax.set_xlabel("ω_m [rad/s]")
         ax.set_ylabel("torque [N m]")

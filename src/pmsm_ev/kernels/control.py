@@ -114,7 +114,7 @@ def speed_step(s, c, omega_ref, omega_est):
 @kernel()
 def current_step_hs(s, c, i_dref, i_qref, i_d, i_q, omega_est):
     """The high-speed current control (``ControllerParams.current_control = "high_speed"``,
-    docs/high-speed.md): the PIs (15-16) on the errors; the decoupling and back-EMF terms of eqs
+    docs/speed-range.md): the PIs (15-16) on the errors; the decoupling and back-EMF terms of eqs
     19-20 on the current predicted at the middle of the period the voltage is applied over,
     x = i + C_CC_PRED (i_ref - i) (the closed loop's first-order response); under the voltage limit
     only the PI part u is shortened, v = f + lam u with |v| = u_max (f, the operating point's own

@@ -43,6 +43,15 @@ SETUPS = {s.key: s for s in (
 #: the sensorless unit from standstill (section "Sensorless from standstill")
 SENSORLESS_SETUP = Setup("sensorless", "sensorless", "estimated", False, "sensorless from standstill")
 
+#: the whole speed range's acceleration runs (section "The whole speed range", ``speed_range``):
+#: (config id, shipped scenario, setup)
+SPEED_RANGE_RUNS = (
+    ("accel-sensored", "acceleration", SETUPS["sensored"]),
+    ("accel-ekf5ab", "acceleration-flying", Setup("ekf5ab-flying", "ekf5ab", "estimated", False,
+                                                  "EKF5 αβ sensorless, flying start at 200 rad/s")),
+    ("accel-sensorless", "acceleration-sensorless", SENSORLESS_SETUP),
+)
+
 #: the paper's scenarios: (short name, shipped scenario)
 PAPER_SCENARIOS = (("s1", "scenario1"), ("s2", "scenario2"))
 #: the realism variants of scenario 2: (short name, shipped scenario, description)
@@ -105,6 +114,7 @@ def all_configs() -> list[Config]:
     setups = {"sensorless": SENSORLESS_SETUP, "sensored": SETUPS["sensored"]}
     configs += [Config(cid, scen, setups[key], "sensorless", sets=sets, stop_time=stop, description=desc)
                 for cid, scen, key, sets, stop, desc in sensorless.config_specs()]
+    configs += [Config(cid, scen, setup, "speed-range") for cid, scen, setup in SPEED_RANGE_RUNS]
     return configs
 
 
