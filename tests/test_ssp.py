@@ -144,7 +144,7 @@ def test_ssd_and_ssv_validate_against_the_ssp_schemas_fmpy_ships(bound):
     assert schema_errors(broken, "SystemStructureDescription.xsd")  # the validation can fail
     ssd = read_ssd(str(bound), validate=True)  # fmpy's reader, with its schema validation
     assert [e.name for e in ssd.system.elements] == ["ctrl", "plant", "route"]
-    assert len(ssd.system.connections) == 8
+    assert len(ssd.system.connections) == 9  # the drive's 7 (with the friction brake) and the route's 2
     (binding,) = ssd.system.elements[1].parameterBindings
     assert [(p.name, p.type, p.value) for p in binding.parameterValues[0].parameters] == [("m_v", "Real", "1200.0")]
     assert ssd.system.elements[0].parameterBindings == []
@@ -163,7 +163,7 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     """What OMSimulator needs (its annotation first in the system, no String in an .ssv, no
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
     now in the system), and still valid SSP 1.0."""
-    assert len(SCENARIOS) == 9  # the paper's 2, their 4 variants, the 3 sensorless runs
+    assert len(SCENARIOS) == 12  # the paper's 2, their 4 variants, the 3 sensorless runs, the 3 acceleration runs
     args = ["export-ssp", scenario, "-o", str(tmp_path / "p.ssp"), "--plant", str(fmus["PmsmEvPlant"]),
             "--controller", str(fmus["FocEkf5"])]
     if angle_source:
@@ -184,8 +184,12 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     master = root.find("ssd:System/ssd:Annotations/ssc:Annotation/oms:Annotations/oms:SimulationInformation/"
                        "oms:FixedStepMaster", NS)
     assert (master.get("description"), float(master.get("stepSize"))) == ("oms-ma", 1e-4)
-    assert fmu_names == sorted(["resources/PmsmEvPlant.fmu", "resources/RouteProfile.fmu",
-                                "resources/FocEkf5_ctrl.fmu" if angle_source else "resources/FocEkf5.fmu"])
+    # a String start value that is not the FMU's default rides in a copy of the FMU: the acceleration runs' set
+    # the reference generator and the plant's gear model (strings), the others only angle_source
+    strings = scenario.startswith("acceleration")
+    assert fmu_names == sorted(["resources/PmsmEvPlant_plant.fmu" if strings else "resources/PmsmEvPlant.fmu",
+                                "resources/RouteProfile.fmu",
+                                "resources/FocEkf5_ctrl.fmu" if angle_source or strings else "resources/FocEkf5.fmu"])
     spec = load_ssp(tmp_path / "p.ssp")
     assert spec.algorithm == "gauss-seidel" and spec.output_interval == 0.01  # the run record is read
 
@@ -420,7 +424,7 @@ def test_cli_export_and_run(fmus, tmp_path, capsys, monkeypatch):
     assert main(["export-ssp", "scenario2", "-o", "s2.ssp", "--stop-time", "0.3", "--set", "plant.m_v=1200",
                  *args]) == 0
     out = capsys.readouterr().out
-    assert "wrote s2.ssp: components ctrl, plant, route; 8 connections; 1 parameter value;" in out
+    assert "wrote s2.ssp: components ctrl, plant, route; 9 connections; 1 parameter value;" in out
     with zipfile.ZipFile("s2.ssp") as z:
         assert b'<ssv:Real value="1200.0" />' in z.read("resources/plant.ssv")
     assert main(["run", "s2.ssp", "--out", "a", "--no-figures", "-q"]) == 0
