@@ -42,7 +42,8 @@ def test_shipped_scenarios_equal_the_library(n, table):
     assert spec.components[1].fmu == project_fmu_dir() / "PmsmEvPlant.fmu"
     assert {str(c) for c in spec.connections} == {
         "plant.i_alpha -> ctrl.i_alpha", "plant.i_beta -> ctrl.i_beta", "plant.theta_e -> ctrl.theta_meas",
-        "plant.omega_m -> ctrl.omega_meas", "ctrl.v_alpha -> plant.v_alpha", "ctrl.v_beta -> plant.v_beta"}
+        "plant.omega_m -> ctrl.omega_meas", "ctrl.v_alpha -> plant.v_alpha", "ctrl.v_beta -> plant.v_beta",
+        "ctrl.T_brake -> plant.T_brake"}
     # recorded columns: exactly the result contract, mapped as documented
     assert tuple(c.name for c in spec.columns) == ALL_COLUMNS
     src = {c.name: c.source for c in spec.columns}
