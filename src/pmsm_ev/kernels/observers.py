@@ -80,37 +80,13 @@ def ekf5_time_update(s, c, v_d, v_q, f03, f13, c_mid):
     s[S_X + 1] = c[C_A_RQ] * i_q - c_wd * w * i_d - c_wpsi * w + c[C_C_VQ] * v_q  # (A3)
     s[S_X + 2] = w + c_tpsi * i_q + c_tdq * i_d * i_q + c[C_C_TL] * t_l  # (A4)
     s[S_X + 3] = th + c_th * w  # (A5); T_L: (A6)
-    for j in range(5):  # A = J_f P, column by column
-        p0 = s[S_P + j]
-        p1 = s[S_P + 5 + j]
-        p2 = s[S_P + 10 + j]
-        p3 = s[S_P + 15 + j]
-        p4 = s[S_P + 20 + j]
-        s[S_A + j] = f00 * p0 + f01 * p1 + f02 * p2 + f03 * p3
-        s[S_A + 5 + j] = f10 * p0 + f11 * p1 + f12 * p2 + f13 * p3
-        s[S_A + 10 + j] = f20 * p0 + f21 * p1 + p2 + f24 * p4
-        s[S_A + 15 + j] = f32 * p2 + p3
-        s[S_A + 20 + j] = p4
-    for i in range(5):  # P^f = A J_f^T + Q: column k of A J_f^T is A (row k of J_f)
-        a0 = s[S_A + 5 * i]
-        a1 = s[S_A + 5 * i + 1]
-        a2 = s[S_A + 5 * i + 2]
-        a3 = s[S_A + 5 * i + 3]
-        a4 = s[S_A + 5 * i + 4]
-        r = S_P + 5 * i
-        s[r] = f00 * a0 + f01 * a1 + f02 * a2 + f03 * a3
-        s[r + 1] = f10 * a0 + f11 * a1 + f12 * a2 + f13 * a3
-        s[r + 2] = f20 * a0 + f21 * a1 + a2 + f24 * a4
-        s[r + 3] = f32 * a2 + a3
-        s[r + 4] = a4
-        s[r + i] += c[C_Q + i]
-    s[S_THETA_PRIOR] = s[S_X + 3]
+    propagate5(s, c, f00, f01, f02, f03, f10, f11, f12, f13, f20, f21, f24, f32)  # (24)
 
 
 @kernel()
 def propagate5(s, c, f00, f01, f02, f03, f10, f11, f12, f13, f20, f21, f24, f32):
-    """P^f = J_f P J_f^T + Q (24) for the EKF5's J_f (rows as in ``ekf5_time_update``, which has the
-    same loop written inline: the paper's per-step path stays as it was)."""
+    """P^f = J_f P J_f^T + Q (24) for the EKF5's J_f (rows as in ``ekf5_time_update``), and the prior
+    angle kept."""
     for j in range(5):  # A = J_f P, column by column
         p0 = s[S_P + j]
         p1 = s[S_P + 5 + j]
