@@ -100,8 +100,14 @@ class RouteProfile(DriveSlave):
         self._evaluate()
 
     def _load_road(self, name: str):
-        if name.strip().lower() in SHIPPED_ROADS:
-            return load_road(name)
+        key = name.strip().lower()
+        if key in SHIPPED_ROADS:
+            # from this instance's resources/: the project code bundled there is imported once per process
+            # under its content-keyed name, so the package's own data folder may be another (since removed)
+            # extraction of an FMU with the same code
+            bundled = load_road.__module__.split(".")[0]
+            path = Path(self.resources or ".").resolve() / bundled / "cycles" / "data" / SHIPPED_ROADS[key]
+            return load_road(path) if path.is_file() else load_road(name)
         resources = Path(self.resources or ".").resolve()
         path = (resources / name).resolve()
         if resources not in path.parents or not path.is_file():
