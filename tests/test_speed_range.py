@@ -118,3 +118,23 @@ def test_the_envelope_is_the_controllers():
     lim = references.limits(p["controller"], p["motor"])
     assert lim == references.limits(ControllerParams(reference="fw", v_dc=360.0, i_max=300.0), MotorParams())
     assert p["plant"].v_dc == 360.0 and p["controller"].i_max == 300.0
+
+
+def test_a_hill_steeper_than_the_torque_is_not_an_error(fmus, tmp_path):
+    """A 60 deg climb asks for more than T_max (153.1 N m holds the car on at most ~50 deg): the run completes,
+    the car rolls back at full torque, and metrics.json says where and by how much it fell behind."""
+    (tmp_path / "cliff.csv").write_text("time,delta\n0,60\n", encoding="utf-8")
+    (tmp_path / "ref.csv").write_text("time,omega_ref\n0,0\n1,200\n", encoding="utf-8")
+    out = tmp_path / "run"
+    assert main(["run", "acceleration", "--profile", f"delta={tmp_path / 'cliff.csv'}", "--profile",
+                 f"omega_ref={tmp_path / 'ref.csv'}", "--stop-time", "4", "--no-figures", "--quiet", "--out",
+                 str(out)]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    r = read_results(out)
+    print(f"60 deg: behind {m['behind']}, T_e max {np.max(r['T_e']):.1f} N m, x at 4 s {r['x_vehicle'][-1]:.2f} m")
+    assert m["status"] == "completed"
+    assert float(np.max(r["T_e"])) == pytest.approx(153.1, abs=1.0)  # full torque, to no avail
+    assert r["x_vehicle"][-1] < -1.0  # it rolls back
+    b = m["behind"]
+    assert b["episodes"] >= 1 and b["largest_kmh"] > 200.0 * 0.2933 / 12.5 * 3.6  # more than the whole reference
+    assert b["first"][1] == pytest.approx(4.0, abs=0.011)  # behind to the end
