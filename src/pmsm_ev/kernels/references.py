@@ -80,6 +80,14 @@ def mtpa_limit_current(i_max, psi, l_d, l_q):
 
 
 @kernel()
+def safeguarded_newton(x, f, slope, lo, hi):
+    """The next iterate of a root search of an increasing function on the bracket (lo, hi): Newton's step
+    x - f / slope, or the bracket's midpoint where the slope is not positive or the step leaves it."""
+    nxt = x - f / slope if slope > 0.0 else 0.5 * (lo + hi)
+    return nxt if lo < nxt < hi else 0.5 * (lo + hi)
+
+
+@kernel()
 def mtpa_q_current(t, k, psi, l_d, l_q):
     """The i_q >= 0 on MTPA that gives the torque t >= 0 [A]: safeguarded Newton on the bracket
     [0, t / (k psi)] (on MTPA T >= k psi i_q: the reluctance term adds), bisection when a step leaves it.
@@ -95,16 +103,10 @@ def mtpa_q_current(t, k, psi, l_d, l_q):
         root = math.sqrt(psi * psi + 4.0 * dl * dl * x * x)
         i_d = -2.0 * dl * x * x / (psi + root)
         f = k * x * (psi - dl * i_d) - t
-        if f > 0.0:
-            hi = x
-        else:
-            lo = x
+        lo, hi = (lo, x) if f > 0.0 else (x, hi)
         if abs(f) <= 1e-13 * t:
             break
-        slope = k * ((psi - dl * i_d) + 2.0 * dl * dl * x * x / root)
-        nxt = x - f / slope
-        if not lo < nxt < hi:
-            nxt = 0.5 * (lo + hi)
+        nxt = safeguarded_newton(x, f, k * ((psi - dl * i_d) + 2.0 * dl * dl * x * x / root), lo, hi)
         if nxt == x:
             break
         x = nxt
@@ -144,16 +146,10 @@ def circle_angle(t, lam, k, psi, l_d, l_q, d_top):
     x = d_top * t / t_top
     for _ in range(_ITERATIONS):
         f = k * lam * math.sin(x) * (a * math.cos(x) + b) - t
-        if f > 0.0:
-            hi = x
-        else:
-            lo = x
+        lo, hi = (lo, x) if f > 0.0 else (x, hi)
         if abs(f) <= 1e-13 * t:
             break
-        slope = k * lam * (a * math.cos(2.0 * x) + b * math.cos(x))
-        nxt = x - f / slope if slope > 0.0 else 0.5 * (lo + hi)
-        if not lo < nxt < hi:
-            nxt = 0.5 * (lo + hi)
+        nxt = safeguarded_newton(x, f, k * lam * (a * math.cos(2.0 * x) + b * math.cos(x)), lo, hi)
         if nxt == x:
             break
         x = nxt

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from pmsm_ev import references
+from pmsm_ev.params import VehicleParams
 from pmsm_ev.results import KMH, figures_where, row_timing_corrected_angle_error, run_timing, wheel_ratio
 
 from .. import envelope
@@ -67,7 +68,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
         axes[0].plot(t, r["v_vehicle"] * KMH, lw=0.9, color=f"C{i}", label=label)
         axes[1].plot(t, r["T_e"], lw=0.9, color=f"C{i}")
         if "T_brake" in r:
-            axes[1].plot(t, -r["T_brake"] / 12.5, lw=0.7, color=f"C{i}", ls=":")
+            axes[1].plot(t, -r["T_brake"] / VehicleParams().n_g, lw=0.7, color=f"C{i}", ls=":")
         if "P_dc" in r:
             axes[2].plot(t, r["P_dc"] / 1e3, lw=0.9, color=f"C{i}")
     r0 = runs[0][2].r
