@@ -13,6 +13,7 @@ from pmsm_ev_fmus.build import FMUS
 
 from .. import sweeps
 from ..engine.errors import CosimError, close_matches
+from . import cycles
 from .drive import PACKAGED_SCENARIOS, draw_figures, drive_metrics, ensure_fmus, load_system, project_fmu_dir
 
 #: the sweeps shipped with the package (``pmsm_cosim/app/sweeps/<name>.toml``)
@@ -20,7 +21,8 @@ PACKAGED_SWEEPS = ("ekf5_load_noise",
                    "robust_rs_psi_sensorless", "robust_rs_psi_ekf5ab", "robust_rs_psi_ekf5paper",
                    "robust_lq_load_sensorless", "robust_lq_load_ekf5ab", "robust_lq_load_ekf5paper",
                    "robust_rs_psi_sensorless_adapt", "robust_lq_load_sensorless_adapt",
-                   "robust_montecarlo_sensorless", "robust_montecarlo_sensorless_adapt", "robust_deadtime_hill")
+                   "robust_montecarlo_sensorless", "robust_montecarlo_sensorless_adapt", "robust_deadtime_hill",
+                   "cycle_montecarlo_wltc3b")
 #: the metric a sweep file without ``metric`` plots
 DEFAULT_METRIC = "speed_rms_error"
 
@@ -30,6 +32,7 @@ def drive_hooks() -> sweeps.SweepHooks:
     return sweeps.SweepHooks(
         load_system=load_system, system_names=PACKAGED_SCENARIOS, fmu_dir=project_fmu_dir(),
         fmu_names=tuple(FMUS), prepare=ensure_fmus, metrics_of=drive_metrics, figures=draw_figures,
+        metrics_for=cycles.with_trace_figures, adjust=cycles.resample,
         summary_metrics=SUMMARY_METRICS, summary_units=dict(SUMMARY_UNITS), summary_of=summary_metrics,
         run_errors=(ParameterError, ProfileError), default_metric=DEFAULT_METRIC)
 

@@ -104,13 +104,14 @@ def run_signature(spec: SystemSpec, fmu_hashes: dict[str, str]) -> str:
 
 
 def _apply(spec: SystemSpec, param: Param, value, base_dir: Path, hooks: SweepHooks) -> None:
-    if param.kind == "scale":  # every value of the signal's table times the factor
+    if param.kind in ("scale", "offset"):  # every value of the signal's table times the factor, or plus
         sig = spec.signals.get(param.variable)
         if sig is None:
             raise CosimError(f"the system has no signal {param.variable!r}{close_matches(param.variable, spec.signals)}"
                              f"; its signals: {', '.join(spec.signals) or 'none'}")
-        prof = sig.profile
-        sig.profile = replace(prof, values=tuple(float(value) * v for v in prof.values))
+        prof, x = sig.profile, float(value)
+        values = tuple(x * v for v in prof.values) if param.kind == "scale" else tuple(v + x for v in prof.values)
+        sig.profile = replace(prof, values=values)
         return
     comp = spec.component(param.instance)  # an unknown instance: close matches
     if param.kind == "fmu":
@@ -149,11 +150,20 @@ def prepare_runs(sweep: SweepSpec, quiet: bool = True) -> list[PreparedRun]:
         if sweep.output_interval is not None:
             spec.output_interval = sweep.output_interval
         params = {name: parse_param(name, where) for name in values if name != "system"}
-        for name, param in params.items():
-            try:
-                _apply(spec, param, values[name], sweep.base_dir, hooks)
-            except CosimError as exc:
-                raise CosimError(f"{origin(name)}: {exc}") from None
+        # start values and FMUs first, then what the application derives from them (hooks.adjust), then the
+        # factors and offsets on signal tables (on the derived signals too)
+        on_signals = [n for n, p in params.items() if p.kind in ("scale", "offset")]
+        for names in ([n for n in params if n not in on_signals], on_signals):
+            if names is on_signals and hooks.adjust is not None:
+                try:
+                    hooks.adjust(spec)
+                except CosimError as exc:
+                    raise CosimError(f"{where}: run {plan.id}: {exc}") from None
+            for name in names:
+                try:
+                    _apply(spec, params[name], values[name], sweep.base_dir, hooks)
+                except CosimError as exc:
+                    raise CosimError(f"{origin(name)}: {exc}") from None
         key = (system, tuple((c.name, str(c.fmu)) for c in spec.components))
         if key not in checked:
             if hooks.prepare is not None and (not built or any(not c.fmu.is_file() for c in spec.components)):
@@ -248,8 +258,11 @@ def execute_run(task: dict, blobs: dict[str, bytes]) -> dict:
     try:
         try:
             master = Master(spec)
+            metrics_of = hooks.metrics_of
+            if hooks.metrics_for is not None:
+                metrics_of = hooks.metrics_for(metrics_of, spec)
             metrics = master.run(out, extra_settings={"sweep": task["sweep"]}, catch_sigint=False,
-                                 metrics_of=hooks.metrics_of)
+                                 metrics_of=metrics_of)
         except (CosimError, *hooks.run_errors) as exc:
             result["error"] = one_line(exc)
         except Exception as exc:  # noqa: BLE001 - any failure is the run's, not the sweep's

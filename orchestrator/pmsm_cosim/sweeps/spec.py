@@ -3,9 +3,10 @@
 A *sweep file* (TOML, ``docs/sweeps.md``) names a base system or scenario, the values
 fixed for every run and the swept parameters: a grid (a list of values or a linear/log
 range per parameter, crossed) and/or random samples (uniform, log-uniform or a choice,
-drawn with a seed). A parameter is a start value ``INSTANCE.VAR`` (as ``--set``), the
-FMU of an instance ``fmu.INSTANCE`` (as ``--fmu``), a factor on a signal table
-``scale.SIGNAL``, or the ``system`` itself. What a sweep's application adds (its scenarios
+drawn with a seed; whole numbers drawn uniformly). A parameter is a start value
+``INSTANCE.VAR`` (as ``--set``), the FMU of an instance ``fmu.INSTANCE`` (as ``--fmu``), a
+factor on a signal table ``scale.SIGNAL``, a constant added to a signal table
+``offset.SIGNAL``, or the ``system`` itself. What a sweep's application adds (its scenarios
 by name, its FMUs, its figures of merit) comes in :class:`SweepHooks`.
 """
 
@@ -29,7 +30,7 @@ TOP_KEYS = ("name", "description", "system", "stop_time", "output_interval", "me
             "grid", "random")
 GRID_KEYS = ("values", "from", "to", "num", "scale")
 SCALES = ("linear", "log")
-RANDOM_KEYS = ("uniform", "log_uniform", "choice")
+RANDOM_KEYS = ("uniform", "log_uniform", "choice", "integers")
 RANDOM_SETTINGS = ("samples", "seed")
 #: numbers in summary.csv besides the figures of merit
 BOOKKEEPING = ("wall_time_s", "us_per_step")
@@ -59,6 +60,12 @@ class SweepHooks:
     prepare: Callable[[SystemSpec, bool], None] | None = None
     #: the master's ``metrics_of(out_dir, columns, rows)``: a run's figures of merit
     metrics_of: Callable | None = None
+    #: ``metrics_for(metrics_of, spec)``: the ``metrics_of`` of a run of ``spec`` (e.g. with figures that
+    #: depend on the run's system, as a drive cycle's tolerance band); default ``metrics_of`` itself
+    metrics_for: Callable | None = None
+    #: ``adjust(spec)`` after a run's swept and fixed values are applied to its system (e.g. a signal
+    #: derived from start values made again with the run's values)
+    adjust: Callable[[SystemSpec], None] | None = None
     #: ``figures(run_dir, name, quiet)``: draw a run's figures (``figures = true`` in a sweep)
     figures: Callable | None = None
     #: the figures of merit of summary.csv: names, units and ``summary_of(metrics) -> {name: value}``
@@ -75,7 +82,8 @@ class SweepHooks:
 @dataclass(frozen=True)
 class Param:
     """A swept or fixed parameter: ``kind`` "start" (INSTANCE.VAR), "fmu" (fmu.INSTANCE), "scale"
-    (scale.SIGNAL: a factor on the values of one of the system's signal tables) or "system"."""
+    (scale.SIGNAL: a factor on the values of one of the system's signal tables), "offset"
+    (offset.SIGNAL: a constant added to them, in the signal's unit) or "system"."""
 
     name: str
     kind: str
@@ -122,14 +130,14 @@ class SweepSpec:
 
 
 def parse_param(name: str, where: str) -> Param:
-    """``system``, ``fmu.INSTANCE``, ``scale.SIGNAL`` or ``INSTANCE.VAR``."""
+    """``system``, ``fmu.INSTANCE``, ``scale.SIGNAL``, ``offset.SIGNAL`` or ``INSTANCE.VAR``."""
     if name == "system":
         return Param(name, "system")
     inst, var = split_reference(name, f"{where}: {name!r}")
     if inst == "fmu":
         return Param(name, "fmu", instance=var)
-    if inst == "scale":
-        return Param(name, "scale", variable=var)
+    if inst in ("scale", "offset"):
+        return Param(name, inst, variable=var)
     return Param(name, "start", inst, var)
 
 
@@ -185,7 +193,7 @@ def _grid_values(param: Param, spec, where: str) -> tuple[list, bool]:
             missing = [k for k in ("from", "to", "num") if k not in spec]
             if missing:
                 raise CosimError(f"{where}: a range needs from, to and num (missing {', '.join(missing)})")
-            if param.kind not in ("start", "scale"):
+            if param.kind not in ("start", "scale", "offset"):
                 raise CosimError(f"{where}: {param.name} takes a list of values, not a range")
             lo, hi = _finite(spec["from"], f"{where}.from"), _finite(spec["to"], f"{where}.to")
             num = spec["num"]
@@ -222,6 +230,8 @@ def _check_value(param: Param, value, where: str) -> None:
             raise CosimError(f"{where}: {param.name} values must be non-empty strings (got {value!r})")
     elif param.kind == "scale":
         _finite(value, f"{where}: {param.name} (a factor on the signal's values)")
+    elif param.kind == "offset":
+        _finite(value, f"{where}: {param.name} (a constant added to the signal's values)")
     elif not _scalar(value):
         raise CosimError(f"{where}: values must be numbers, booleans or strings (got {value!r})")
     elif isinstance(value, float) and not math.isfinite(value):
@@ -230,8 +240,8 @@ def _check_value(param: Param, value, where: str) -> None:
 
 def _random_law(param: Param, spec, where: str) -> tuple[str, tuple]:
     if not isinstance(spec, dict):
-        raise CosimError(f"{where}: expected {{ uniform = [A, B] }}, {{ log_uniform = [A, B] }} "
-                         f"or {{ choice = [...] }}")
+        raise CosimError(f"{where}: expected {{ uniform = [A, B] }}, {{ log_uniform = [A, B] }}, "
+                         f"{{ integers = [A, B] }} or {{ choice = [...] }}")
     _check_keys(spec, RANDOM_KEYS, where)
     if len(spec) != 1:
         raise CosimError(f"{where}: give exactly one of {', '.join(RANDOM_KEYS)}")
@@ -242,10 +252,16 @@ def _random_law(param: Param, spec, where: str) -> tuple[str, tuple]:
         for v in args:
             _check_value(param, v, f"{where}.choice")
         return law, tuple(args)
-    if param.kind not in ("start", "scale"):
+    if param.kind not in ("start", "scale", "offset"):
         raise CosimError(f"{where}: {param.name} takes a choice of values, not a range")
     if not isinstance(args, list) or len(args) != 2:
         raise CosimError(f"{where}.{law} must be [low, high]")
+    if law == "integers":
+        if not all(isinstance(x, int) and not isinstance(x, bool) for x in args):
+            raise CosimError(f"{where}.integers must be two whole numbers [low, high] (got {args!r})")
+        if not args[0] <= args[1]:
+            raise CosimError(f"{where}.integers: low must be <= high (got {args!r})")
+        return law, (args[0], args[1])
     lo, hi = (_finite(x, f"{where}.{law}") for x in args)
     if not lo < hi:
         raise CosimError(f"{where}.{law}: low must be < high (got [{lo:g}, {hi:g}])")
@@ -259,6 +275,8 @@ def _draw(law: str, args: tuple, rng, n: int) -> list:
         return [float(x) for x in rng.uniform(args[0], args[1], n)]
     if law == "log_uniform":
         return [float(math.exp(x)) for x in rng.uniform(math.log(args[0]), math.log(args[1]), n)]
+    if law == "integers":  # low .. high, both included, each equally likely
+        return [int(x) for x in rng.integers(args[0], args[1], n, endpoint=True)]
     return [args[int(k)] for k in rng.integers(0, len(args), n)]
 
 
