@@ -266,10 +266,10 @@ def cmd_report(a) -> int:
         raise CosimError(f"--jobs must be >= 1 (got {a.jobs})")
     if a.robustness:
         command = "pmsm-cosim report --robustness" + (" --small" if a.small else "") + (
-            f" --stop-time {a.stop_time:g}" if a.stop_time else "")
+            f" --stop-time {a.stop_time:g}" if a.stop_time else "") + (f" --only {' '.join(a.only)}" if a.only else "")
         report.robustness.generate(out=a.out, runs_dir=a.runs or "runs/robustness", workers=a.jobs,
                                    small=a.small, stop_time=a.stop_time, run=not a.no_run, command=command,
-                                   log=lambda msg: print(msg, file=sys.stderr, flush=True))
+                                   log=lambda msg: print(msg, file=sys.stderr, flush=True), only=a.only)
         return 0
     if a.small or a.no_run:
         raise CosimError("--small and --no-run go with --robustness")
@@ -456,7 +456,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="stop time of every run [s] (default: the scenarios' 350 s); short for a quick look")
     rp.add_argument("--only", nargs="+", metavar="PATTERN",
                     help="(re)run only the configurations whose id contains PATTERN (or matches it as a "
-                         "glob), e.g. ekf5ab; the others are taken from RUNS as they are")
+                         "glob), e.g. ekf5ab; with --robustness the sweeps whose name does, e.g. "
+                         "cycle_montecarlo_wltc3b; the others are taken from RUNS as they are")
     rp.add_argument("--force", action="store_true", help="rerun the (selected) configurations even when up to date")
     rp.add_argument("--list", action="store_true", help="list the configuration ids and exit")
     rp.add_argument("--robustness", action="store_true",

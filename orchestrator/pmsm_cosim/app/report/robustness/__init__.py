@@ -11,15 +11,17 @@ The plant's parameters are swept against the controller's nominal ones (``plant.
 each for the sensorless unit from standstill (with and without the EKF's psi adaptation), the
 stationary-frame EKF5 at a flying start and the paper's EKF5 in its own mode (angle measured, for
 reference); a Monte-Carlo run of the sensorless unit (200 samples of every mismatch at once plus
-sigma = 1 A sensor noise, with and without the adaptation); and the hill start with an inverter
-dead time, with and without the controller's compensation.
+sigma = 1 A sensor noise, with and without the adaptation); the hill start with an inverter
+dead time, with and without the controller's compensation; and a Monte-Carlo run on a drive cycle
+(WLTC 3b, the sensorless unit: occupants, a grade offset, the mismatches and the noise; :mod:`.cycle`).
 
 In four parts: :mod:`.runs` (the sweeps and running them), :mod:`.metrics` (each run's figures,
 the stability rule, the grids and the findings the text states), :mod:`.figures` and
 :mod:`.document` (the page). ``generate`` runs the sweeps (a run already completed with the same
 settings and FMUs is reused: the sweep engine's resume) and writes the page; every number in it
-comes from the runs. ``small=True`` shrinks every grid to 3 x 3 and the Monte-Carlo run to a few
-samples (CI, a quick look).
+comes from the runs. ``small=True`` shrinks every grid to 3 x 3 and the Monte-Carlo runs to a few
+samples (the drive cycle's to its first seconds; CI, a quick look); ``only`` runs only the sweeps it
+names (``runs.select_sweeps``) and takes the others from ``runs_dir`` as they are.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import json
 import os
 from pathlib import Path
 
+from .cycle import INSIDE_MIN, cycle_figure, cycle_rows, failure_reasons, findings
 from .document import render
 from .figures import dead_time_figure, map_figure, monte_carlo_figure
 from .metrics import (
@@ -44,6 +47,7 @@ from .metrics import (
 )
 from .runs import (
     CONTROLLERS,
+    CYCLE_MONTE_CARLO,
     DEAD_TIME,
     MAPS,
     MONTE_CARLO,
@@ -52,24 +56,27 @@ from .runs import (
     SWEEPS,
     Map,
     run_sweeps,
+    select_sweeps,
     sweep_spec,
 )
 
-__all__ = ["CONTROLLERS", "DEAD_TIME", "DIVERGED_LIMIT", "MAPS", "MONTE_CARLO", "MONTE_CARLO_ADAPT",
-           "SMALL_SAMPLES", "SPEED_LIMIT", "SWEEPS", "T_FROM", "Collected", "Map", "classify", "collect",
-           "generate", "grid_of", "render", "run_metrics", "run_sweeps", "sweep_results", "sweep_spec", "wilson"]
+__all__ = ["CONTROLLERS", "CYCLE_MONTE_CARLO", "DEAD_TIME", "DIVERGED_LIMIT", "INSIDE_MIN", "MAPS", "MONTE_CARLO",
+           "MONTE_CARLO_ADAPT", "SMALL_SAMPLES", "SPEED_LIMIT", "SWEEPS", "T_FROM", "Collected", "Map", "classify",
+           "collect", "cycle_figure", "cycle_rows", "failure_reasons", "findings", "generate", "grid_of", "render",
+           "run_metrics", "run_sweeps", "select_sweeps", "sweep_results", "sweep_spec", "wilson"]
 
 
 def generate(out: Path | str = "docs", runs_dir: Path | str = "runs/robustness", workers: int = 2,
              small: bool = False, stop_time: float | None = None, run: bool = True,
-             command: str = "pmsm-cosim report --robustness", log=print) -> Path:
+             command: str = "pmsm-cosim report --robustness", log=print, only=None) -> Path:
     """Run the sweeps (unless ``run`` is False: then the runs in ``runs_dir`` as they are) and write
     ``out/robustness.md`` with its figures in ``out/robustness/``. Returns the page's path."""
     out, runs_dir = Path(out), Path(runs_dir)
     timing = None
     record = runs_dir / "generation.json"  # the cost of the last generation that made runs
     if run:
-        timing = run_sweeps(runs_dir, workers, small, stop_time, log=log)
+        names = select_sweeps(only) if only else SWEEPS
+        timing = run_sweeps(runs_dir, workers, small, stop_time, names=names, log=log)
         timing.update(workers=workers, load=" ".join(f"{x:.2f}" for x in os.getloadavg()), cores=os.cpu_count())
         if timing["runs"]:
             record.write_text(json.dumps(timing, indent=1) + "\n", encoding="utf-8")
@@ -87,6 +94,9 @@ def generate(out: Path | str = "docs", runs_dir: Path | str = "runs/robustness",
         figs[f"mc{k}"] = monte_carlo_figure(rows, fig_dir / f"monte_carlo{'_adapt' if k else ''}.png", label, t_from)
     if c.dead:
         figs["dead"] = dead_time_figure(c.dead, fig_dir / "dead_time_hill.png")
+    if c.cycle:
+        figs["cycle"] = cycle_figure(c.cycle, fig_dir / "cycle_monte_carlo.png",
+                                     f"Monte-Carlo on a drive cycle: {len(c.cycle)} samples of {CYCLE_MONTE_CARLO}")
     page = out / "robustness.md"
     page.write_text(render(c, figs, timing, command, small), encoding="utf-8")
     log(f"wrote {page} and {len(figs)} figures in {fig_dir}")

@@ -14,6 +14,7 @@ import numpy as np
 
 from pmsm_ev.params import EkfParams, MotorParams
 
+from .cycle import cycle_text
 from .figures import dead_time_label
 from .metrics import (
     DEAD_CLIMB,
@@ -346,6 +347,7 @@ def render(c: Collected, figs: dict, timing: dict | None, command: str, small: b
     L += rs_psi_text(c.grids.get("rs_psi", {}), c.t_from)
     L += lq_load_text(c.grids.get("lq_load", {}))
     L += _monte_carlo(c, figs)
+    L += cycle_text(c.cycle, c.cycle_design, figs.get("cycle"), timing)
     L += dead_time_text(c.dead, figs)
     L += _cost(timing)
     return "\n".join(L) + "\n"

@@ -29,7 +29,8 @@ from pmsm_ev.results import figures_where, run_timing, tracking_figures
 
 from ....engine.recording import read_results
 from ....sweeps import read_summary
-from .runs import ANGLE_USED, CONTROLLERS, DEAD_TIME, MAPS, MONTE_CARLOS, Map, sweep_spec
+from . import cycle as cycle_mc  # its rows (cycle uses this module's wilson: imported by name)
+from .runs import ANGLE_USED, CONTROLLERS, CYCLE_MONTE_CARLO, DEAD_TIME, MAPS, MONTE_CARLOS, Map, sweep_spec
 
 T_FROM = 20.0  #: the metrics' window starts here [s] (past the start-up and the road step)
 #: stable below this speed RMS error after T_FROM [rad/s] (2.5 % of 200 rad/s)
@@ -218,7 +219,8 @@ def dead_run(row: dict, run_dir: Path) -> DeadRun:
 class Collected:
     """The runs of a robustness report, summarised: ``grids`` {map key: {controller: grid}},
     ``mc`` {label: rows}, ``dead`` [DeadRun], ``routes`` {sweep name: ``route_of`` its first run},
-    ``mc_design`` {label: the Monte-Carlo sweep's spec}; ``t_from``: the start of the figures' window [s]."""
+    ``mc_design`` {label: the Monte-Carlo sweep's spec}; ``t_from``: the start of the figures' window [s];
+    ``cycle`` the drive cycle Monte-Carlo's rows (``cycle.cycle_rows``) and ``cycle_design`` its spec."""
 
     grids: dict
     mc: dict
@@ -226,6 +228,8 @@ class Collected:
     routes: dict
     mc_design: dict
     t_from: float = T_FROM
+    cycle: list = field(default_factory=list)
+    cycle_design: object = None
 
 
 def collect(runs_dir: Path, t_from: float = T_FROM) -> Collected:
@@ -255,7 +259,10 @@ def collect(runs_dir: Path, t_from: float = T_FROM) -> Collected:
         for row in read_summary(dead_dir / "summary.csv"):
             if row["status"] == "completed":
                 dead.append(dead_run(row, _run_dir(dead_dir, row)))
-    return Collected(grids, mc, dead, routes, design, t_from)
+    cycle, cycle_design = [], None
+    if (runs_dir / CYCLE_MONTE_CARLO / "summary.csv").is_file():
+        cycle, cycle_design = cycle_mc.cycle_rows(runs_dir / CYCLE_MONTE_CARLO), sweep_spec(CYCLE_MONTE_CARLO)
+    return Collected(grids, mc, dead, routes, design, t_from, cycle, cycle_design)
 
 
 def failure_rates(rows: list[dict]) -> dict:

@@ -4,6 +4,7 @@ time on the hill start), as the shipped sweep files define them, and running the
 from __future__ import annotations
 
 import copy
+import fnmatch
 import json
 import time
 from dataclasses import dataclass
@@ -11,6 +12,7 @@ from pathlib import Path
 
 from pmsm_ev.params import MotorParams
 
+from ....engine.errors import CosimError
 from ....engine.system import read_toml
 from ....sweeps import local_cluster, run_sweep
 from ...studies import load_sweep, packaged_sweep, parse_sweep
@@ -49,15 +51,32 @@ MONTE_CARLO_ADAPT = "robust_montecarlo_sensorless_adapt"
 #: the Monte-Carlo sweeps and their labels
 MONTE_CARLOS = ((MONTE_CARLO, "sensorless unit"), (MONTE_CARLO_ADAPT, "sensorless unit + ψ adaptation"))
 DEAD_TIME = "robust_deadtime_hill"
+#: the Monte-Carlo on a drive cycle (WLTC 3b, the sensorless unit; ``cycle.py``)
+CYCLE_MONTE_CARLO = "cycle_montecarlo_wltc3b"
 SWEEPS = tuple(f"robust_{m.key}_{c}" for m in MAPS for c, _ in CONTROLLERS) + (MONTE_CARLO, MONTE_CARLO_ADAPT,
-                                                                              DEAD_TIME)
+                                                                              DEAD_TIME, CYCLE_MONTE_CARLO)
 SMALL_SAMPLES = 6  #: Monte-Carlo samples of the small version
+#: the small version's drive cycle runs stop here [s] (unless a stop time is given): a check, not the cycle
+SMALL_CYCLE_STOP_TIME = 30.0
+
+
+def select_sweeps(patterns, names=SWEEPS) -> tuple[str, ...]:
+    """The sweeps whose name matches one of the patterns (fnmatch; a plain word matches any name containing
+    it, as the report's ``--only``), in ``names``' order; none matching is an error naming them."""
+    pats = [p if any(ch in p for ch in "*?[") else f"*{p}*" for p in patterns]
+    chosen = tuple(n for n in names if any(fnmatch.fnmatchcase(n, p) for p in pats))
+    if not chosen:
+        raise CosimError(f"--only {' '.join(patterns)}: matches no robustness sweep; sweeps: {', '.join(names)}")
+    return chosen
 
 
 def sweep_spec(name: str, small: bool = False, stop_time: float | None = None):
     """The shipped sweep ``name``; ``small``: every grid axis cut to its first, middle and last
-    value and the Monte-Carlo run to ``SMALL_SAMPLES``; ``stop_time`` overrides the file's."""
+    value, the Monte-Carlo run to ``SMALL_SAMPLES`` and the drive cycle's runs to
+    ``SMALL_CYCLE_STOP_TIME``; ``stop_time`` overrides the file's."""
     path = packaged_sweep(name)
+    if small and stop_time is None and name == CYCLE_MONTE_CARLO:
+        stop_time = SMALL_CYCLE_STOP_TIME
     if not small and stop_time is None:
         return load_sweep(path)
     data = copy.deepcopy(read_toml(path, "sweep file"))

@@ -1,0 +1,308 @@
+"""The robustness report's Monte-Carlo on a drive cycle (``cycle_montecarlo_wltc3b.toml``): each sample's
+figures from its summary row and metrics.json, the failure rule, the counts with their interval, the Wh/km
+distribution, what a sample costs, its figure and its section of the page.
+
+**The failure rule** (defined here once; the page quotes it): a sample fails if it did not complete, or its
+speed was inside the tolerance band (``pmsm_ev.results.trace_figures``: +-2 km/h around the trace, taken
+over +-1 s) for less than ``INSIDE_MIN`` of the cycle (metrics.json ``trace`` ``inside_share``; a completed
+run without it fails too), or its angle slipped an electrical turn (``synchronism`` ``slipped_turns``), or
+the controller's safe state latched (``synchronism`` ``fault_latched``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pmsm_ev import cycles as pcycles
+from pmsm_ev.params import MotorParams, VehicleParams
+
+from ....sweeps import read_summary
+from . import metrics  # its wilson (metrics reads this module's rows: both imported by name)
+
+#: a sample follows the cycle if its speed is inside the tolerance band for at least this share of it
+INSIDE_MIN = 0.99
+#: one occupant (driver or passenger) [kg] [chosen: the 75 kg of a person in EU 1230/2012's mass in running order]
+OCCUPANT_KG = 75.0
+#: the failure reasons, in the page's order
+REASONS = ("did not complete", "left the band", "slipped a turn", "fault latched")
+#: the worker counts the page prices a thousand samples on
+THOUSAND_ON = (2, 16, 64)
+#: the sweep parameters of the design: vehicle mass, grade offset
+MASS = "plant.m_v"
+GRADE = "offset.delta"
+_M = MotorParams()
+#: the motor mismatches: sweep parameter -> (label, the controller's nominal value)
+NOMINAL = {"plant.R_s": ("R_s", _M.R_s), "plant.psi": ("ψ", _M.psi), "plant.L_q": ("L_q", _M.L_q),
+           "plant.L_d": ("L_d", _M.L_d)}
+
+
+def _num(x) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def failure_reasons(status: str, inside_share: float, slipped_turns: float, fault_latched: float) -> list[str]:
+    """Why a sample failed (``REASONS``; empty: it passed). NaN slipped_turns or fault_latched (a controller
+    without the sensorless unit's columns) count as none; a NaN inside_share of a completed run fails."""
+    if status != "completed":
+        return [REASONS[0]]
+    out = []
+    if not inside_share >= INSIDE_MIN:
+        out.append(REASONS[1])
+    if slipped_turns > 0:
+        out.append(REASONS[2])
+    if fault_latched > 0:
+        out.append(REASONS[3])
+    return out
+
+
+def occupants(m_v: float, base: float | None = None) -> float:
+    """The occupants a vehicle mass stands for: (m_v - the plant's m_v) / OCCUPANT_KG."""
+    base = VehicleParams().m_v if base is None else base
+    return (m_v - base) / OCCUPANT_KG
+
+
+def grade_pct(delta_deg: float) -> float:
+    """A road angle [deg] as a grade [%]: 100 tan(delta)."""
+    return 100.0 * math.tan(math.radians(delta_deg))
+
+
+def cycle_rows(out: Path) -> list[dict]:
+    """summary.csv of the cycle sweep's directory, each row with its numbers, ``occupants``, ``grade_pct``,
+    ``reasons`` and ``failed``, and from metrics.json (completed runs) ``macro_steps``, ``init_time_s``,
+    ``step_size``, ``stop_time``, ``t_end`` (of the trace) and ``cycle``."""
+    rows = []
+    for row in read_summary(Path(out) / "summary.csv"):
+        r = dict(row)
+        for key in ("plant.m_v", "offset.delta", "inside_share", "slipped_turns", "fault_latched", "dc_Wh_per_km",
+                    "wall_time_s", "us_per_step"):
+            r[key] = _num(row.get(key))
+        r["occupants"] = occupants(r[MASS]) if math.isfinite(r[MASS]) else math.nan
+        r["grade_pct"] = grade_pct(r[GRADE]) if math.isfinite(r[GRADE]) else math.nan
+        r["reasons"] = failure_reasons(r["status"], r["inside_share"], r["slipped_turns"], r["fault_latched"])
+        r["failed"] = bool(r["reasons"])
+        m = {}
+        if r["status"] == "completed":
+            try:
+                m = json.loads((Path(out) / "runs" / r["run"] / "metrics.json").read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                m = {}
+        trace = m.get("trace") or {}
+        r.update(macro_steps=_num(m.get("macro_steps")), init_time_s=_num(m.get("init_time_s")),
+                 step_size=_num(m.get("step_size")), stop_time=_num(m.get("stop_time")),
+                 t_end=_num(trace.get("t_end")), cycle=trace.get("cycle"))
+        rows.append(r)
+    return rows
+
+
+@dataclass
+class CycleFindings:
+    n: int
+    failures: int
+    interval: tuple[float, float]  #: Wilson 95 % of failures / n
+    by_reason: dict  #: reason -> samples (a sample may have several)
+    wh: dict  #: mean, median, min, max [Wh/km] of the completed samples with a figure, and their count
+    cost: dict = field(default_factory=dict)
+
+
+def _stats(values) -> dict:
+    v = [x for x in values if math.isfinite(x)]
+    if not v:
+        return {"count": 0, "mean": math.nan, "median": math.nan, "min": math.nan, "max": math.nan}
+    return {"count": len(v), "mean": statistics.fmean(v), "median": statistics.median(v), "min": min(v),
+            "max": max(v)}
+
+
+def sample_cost(rows: list[dict], cycle_duration: float | None) -> dict:
+    """What one sample cost (medians over the completed samples: wall time [s], us/step, steps, stop time)
+    and, for a whole cycle of ``cycle_duration`` [s], the steps, the wall time of one sample (its us/step times
+    the steps, plus its initialisation) and of a thousand on each of ``THOUSAND_ON`` workers [h]."""
+    done = [r for r in rows if r["status"] == "completed" and math.isfinite(r["us_per_step"])]
+    if not done:
+        return {}
+    med = {k: statistics.median(r[k] for r in done) for k in ("wall_time_s", "us_per_step", "macro_steps",
+                                                               "stop_time", "step_size", "init_time_s")}
+    out = {"samples": len(done), **med}
+    if cycle_duration and math.isfinite(med["step_size"]) and med["step_size"] > 0:
+        steps = cycle_duration / med["step_size"]
+        whole = med["us_per_step"] * 1e-6 * steps + (med["init_time_s"] if math.isfinite(med["init_time_s"]) else 0)
+        out.update(cycle_duration=cycle_duration, cycle_steps=steps, cycle_wall_s=whole,
+                   thousand_h={n: 1000.0 * whole / n / 3600.0 for n in THOUSAND_ON})
+    return out
+
+
+def findings(rows: list[dict], cycle_duration: float | None = None) -> CycleFindings:
+    n = len(rows)
+    fails = sum(r["failed"] for r in rows)
+    by_reason = {reason: sum(reason in r["reasons"] for r in rows) for reason in REASONS}
+    wh = _stats(r["dc_Wh_per_km"] for r in rows if r["status"] == "completed")
+    return CycleFindings(n, fails, metrics.wilson(fails, n), by_reason, wh, sample_cost(rows, cycle_duration))
+
+
+def cycle_duration_of(rows: list[dict]) -> float | None:
+    """The duration [s] of the cycle the samples drove (named in their trace figures), None if unknown."""
+    name = next((r["cycle"] for r in rows if r.get("cycle")), None)
+    if name is None or name.lower() not in pcycles.names():
+        return None
+    return float(pcycles.load(name).duration)
+
+
+# --- the figure ------------------------------------------------------------------------------------
+
+def cycle_figure(rows: list[dict], path: Path, label: str) -> Path:
+    """The Wh/km histogram (passed and failed samples stacked) and Wh/km against the vehicle mass (colour:
+    the grade offset; failures crossed, a sample without a Wh/km figure on the axis)."""
+    from .figures import _plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+
+    plt = _plt()
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11.0, 4.0))
+    ok = [r["dc_Wh_per_km"] for r in rows if not r["failed"] and math.isfinite(r["dc_Wh_per_km"])]
+    bad = [r["dc_Wh_per_km"] for r in rows if r["failed"] and math.isfinite(r["dc_Wh_per_km"])]
+    both = ok + bad
+    if both:
+        lo, hi = min(both), max(both)
+        bins = np.linspace(lo - 0.5, hi + 0.5, 16) if hi - lo < 1e-9 else np.linspace(lo, hi, 16)
+        ax0.hist([ok, bad], bins=bins, stacked=True, color=["tab:blue", "tab:red"],
+                 label=[f"passed ({len(ok)})", f"failed ({len(bad)})"])
+    ax0.set_xlabel("energy at the DC link [Wh/km]")
+    ax0.set_ylabel("samples")
+    ax0.legend(fontsize=7)
+    ax0.grid(alpha=0.3)
+    fin = [r for r in rows if math.isfinite(r["dc_Wh_per_km"])]
+    if fin:
+        grades = [r["grade_pct"] for r in fin]
+        lim = max(1e-9, max(abs(g) for g in grades if math.isfinite(g)) if any(map(math.isfinite, grades)) else 1.0)
+        sc = ax1.scatter([r[MASS] for r in fin], [r["dc_Wh_per_km"] for r in fin], c=grades, cmap="coolwarm",
+                         vmin=-lim, vmax=lim, s=28, edgecolors="k", linewidths=0.4)
+        fig.colorbar(sc, ax=ax1, label="grade offset [%]")
+    failed = [r for r in fin if r["failed"]]
+    if failed:
+        ax1.scatter([r[MASS] for r in failed], [r["dc_Wh_per_km"] for r in failed], marker="x", s=70,
+                    c="tab:red", label=f"failed ({sum(r['failed'] for r in rows)})")
+    no_fig = [r for r in rows if not math.isfinite(r["dc_Wh_per_km"]) and math.isfinite(r[MASS])]
+    if no_fig:
+        from matplotlib.transforms import blended_transform_factory  # noqa: PLC0415 - matplotlib: only drawing
+
+        tr = blended_transform_factory(ax1.transData, ax1.transAxes)
+        ax1.plot([r[MASS] for r in no_fig], [0.03] * len(no_fig), "x", color="tab:red", ms=8, transform=tr,
+                 clip_on=False, label=f"no Wh/km figure ({len(no_fig)})")
+    ax1.set_xlabel("vehicle mass m_v [kg] (plant; 75 kg an occupant)")
+    ax1.set_ylabel("energy at the DC link [Wh/km]")
+    if failed or no_fig:
+        ax1.legend(fontsize=7)
+    ax1.grid(alpha=0.3)
+    fig.suptitle(label, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+# --- the section -----------------------------------------------------------------------------------
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.1f} %"
+
+
+def _hours(h: float) -> str:
+    return f"{h:.1f} h" if h >= 1 else f"{60 * h:.0f} min"
+
+
+def design_text(design) -> str:
+    """What the sweep draws, from its spec (``SweepSpec``)."""
+    parts = []
+    law = design.random.get(MASS)
+    if law and law[0] == "choice":
+        n_occ = sorted(occupants(float(v)) for v in law[1])
+        parts.append(f"{len(law[1])} vehicle masses m_v = {', '.join(f'{float(v):g}' for v in law[1])} kg, "
+                     f"equally likely ({n_occ[0]:g} to {n_occ[-1]:g} occupants of {OCCUPANT_KG:g} kg on the "
+                     f"plant's {VehicleParams().m_v:g} kg)")
+    law = design.random.get(GRADE)
+    if law and law[0] == "uniform":
+        a, b = law[1]
+        parts.append(f"a grade offset, a constant road angle over the whole cycle, uniform over "
+                     f"{grade_pct(a):+.2f} … {grade_pct(b):+.2f} % ({a:+.4g} … {b:+.4g}°)")
+    mism = []
+    for key, (label, nom) in NOMINAL.items():
+        law = design.random.get(key)
+        if law and law[0] == "uniform":
+            a, b = law[1]
+            mism.append(f"{label} {100 * (a / nom - 1):+.0f} … {100 * (b / nom - 1):+.0f} %")
+    if mism:
+        parts.append("the motor mismatches " + ", ".join(mism) + " (uniform)")
+    noise = design.fixed.get("plant.sensor_noise")
+    if noise:
+        seeded = "plant.sensor_seed" in design.random
+        parts.append(f"σ = {noise:g} A noise on each phase current" + (", its seed drawn for each sample"
+                                                                          if seeded else ""))
+    return "; ".join(parts)
+
+
+def cycle_text(rows: list[dict], design, fig: Path | None, timing: dict | None = None) -> list[str]:
+    """The section of the page: the design, the failure rule, the table of counts and Wh/km, the failed
+    samples, the figure and what a sample costs."""
+    if not rows:
+        return []
+    duration = cycle_duration_of(rows)
+    f = findings(rows, duration)
+    cycle = next((r["cycle"] for r in rows if r.get("cycle")), "the cycle")
+    stop = f.cost.get("stop_time", math.nan)
+    short = duration is not None and math.isfinite(stop) and stop < duration - 1e-9
+    L = ["## Monte-Carlo on a drive cycle", "",
+         f"{f.n} samples (of the file's {design.samples}) of `{design.name}.toml` on `{design.system}`, "
+         f"the sensorless unit from standstill through {cycle}"
+         + (f" **cut to its first {stop:g} s** (of {duration:g} s): the figures are of that part only"
+            if short else "") + ": " + design_text(design) + ", all drawn at once. "
+         f"A sample **fails** if it did not complete, its speed was inside the ±2 km/h / ±1 s tolerance band for "
+         f"less than {100 * INSIDE_MIN:g} % of the cycle, it slipped an electrical turn, or the safe state "
+         "latched (`robustness/cycle.py`).", "",
+         "| samples | failures | failure rate | 95 % interval (Wilson) | "
+         + " | ".join(REASONS) + " | Wh/km mean | median | range |",
+         "|---" * (7 + len(REASONS)) + "|"]
+    lo, hi = f.interval
+    wh = f.wh
+    wh_cells = (f"{wh['mean']:.1f} | {wh['median']:.1f} | {wh['min']:.1f} … {wh['max']:.1f}" if wh["count"]
+                else "– | – | –")
+    L.append(f"| {f.n} | {f.failures} | **{f.failures}/{f.n} = {_pct(f.failures / f.n)}** | "
+             f"{_pct(lo)} … {_pct(hi)} | " + " | ".join(str(f.by_reason[k]) for k in REASONS) + f" | {wh_cells} |")
+    L += ["", f"Wh/km: the DC link's energy over the distance driven (metrics.json `energy` `dc_Wh_per_km`), of "
+              f"the {wh['count']} completed samples with a distance; the reasons add up to more than the failures "
+              "where a sample failed for several.", ""]
+    if fig is not None:
+        L += [f"![Monte-Carlo on {cycle}](robustness/{fig.name})", ""]
+    bad = [r for r in rows if r["failed"]]
+    if bad:
+        L += ["Failed samples (occupants, grade offset, share inside the band, turns slipped):", ""]
+        for r in bad[:10]:
+            L.append(f"- `{r['run']}`: {r['occupants']:g} occupants, {r['grade_pct']:+.2f} %, "
+                     f"inside {_pct(r['inside_share']) if math.isfinite(r['inside_share']) else '–'}, "
+                     f"{r['slipped_turns']:g} turns slipped: {', '.join(r['reasons'])}"
+                     + (f" ({r['error']})" if r.get("error") else ""))
+        if len(bad) > 10:
+            L.append(f"- and {len(bad) - 10} more (summary.csv)")
+        L.append("")
+    c = f.cost
+    if c:
+        text = (f"**What a sample costs.** Median over the {c['samples']} completed samples: {c['macro_steps']:.0f} "
+                f"steps of {c['step_size'] * 1e6:g} µs ({c['stop_time']:g} s) in {c['wall_time_s']:.1f} s of wall "
+                f"time, {c['us_per_step']:.1f} µs per step (metrics.json `wall_time_s`, `us_per_step`, each "
+                f"sample on one Dask worker process")
+        if timing and timing.get("workers"):
+            text += f"; {timing['workers']} workers on {timing.get('cores', '?')} cores, load average {timing['load']}"
+        text += ")."
+        if "cycle_wall_s" in c:
+            text += (f" At that rate a whole {cycle} of {c['cycle_duration']:g} s is {c['cycle_steps']:.3g} steps, "
+                     f"{c['cycle_wall_s'] / 60:.1f} min a sample; a thousand samples take "
+                     + ", ".join(f"{_hours(h)} on {n} workers" for n, h in c["thousand_h"].items())
+                     + " (one sample per worker process, one per core; the sweep engine resumes an interrupted "
+                       "sweep).")
+        L += [text, ""]
+    return L
