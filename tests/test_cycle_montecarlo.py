@@ -59,6 +59,24 @@ def test_offset_adds_to_the_signal_table_and_r_w_resamples_the_cycle(tmp_path):
     assert "r_w = 0.3 m" in sig.origin
 
 
+def test_a_system_with_a_road_sweeps(tmp_path):
+    """[road] (a RouteProfile component by position) and [cycle] in a sweep's system: each run carries the
+    road component, its FMU shipped with the others, and the sweep's mass."""
+    project_fmus()
+    base = (packaged_sweep(NAME).parent / "robustness" / "wltc3b_sensorless.toml").read_text(encoding="utf-8")
+    (tmp_path / "sys.toml").write_text(base.replace("[cycle]", '[road]\nname = "hilly"\n\n[cycle]'), encoding="utf-8")
+    (tmp_path / "s.toml").write_text('system = "sys.toml"\nstop_time = 1.0\n[grid]\n"plant.m_v" = [900.0, 1200.0]\n',
+                                     encoding="utf-8")
+    runs = prepare_runs(load_sweep(tmp_path / "s.toml"))
+    for run, m_v in zip(runs, (900.0, 1200.0)):
+        assert run.spec.component("road").start["road"] == "hilly" and "road" in run.fmus
+        assert "delta" not in run.spec.signals  # the road drives plant.delta by position
+        assert {(c.src, c.src_var, c.dst, c.dst_var) for c in run.spec.connections} >= {
+            ("plant", "x_vehicle", "road", "x"), ("road", "delta", "plant", "delta")}
+        assert run.spec.component("plant").start["m_v"] == m_v
+        assert run.spec.signals["omega_ref"].cycle.name == "wltc3b"
+
+
 def test_integers_law_draws_whole_numbers_low_to_high_included():
     data = {"system": "scenario1", "random": {"samples": 400, "seed": 3, "plant.sensor_seed": {"integers": [0, 2]}}}
     values = [r.params["plant.sensor_seed"] for r in parse_sweep(data).runs]
@@ -137,6 +155,25 @@ def test_only_selects_sweeps_by_name():
     assert rr.select_sweeps(["robust_rs_psi_*"]) == tuple(f"robust_rs_psi_{k}" for k, _ in rr.CONTROLLERS)
     with pytest.raises(CosimError, match="matches no robustness sweep"):
         rr.select_sweeps(["hwfet"])
+
+
+def test_report_only_runs_the_named_sweeps(tmp_path, monkeypatch):
+    from pmsm_cosim.app import cli
+
+    seen = {}
+
+    def fake_run_sweeps(runs_dir, workers, small, stop_time, names, log):
+        seen.update(names=names, workers=workers, stop_time=stop_time)
+        return {"runs": 0, "elapsed": 0.0, "run_walls": 0.0}
+
+    monkeypatch.setattr(rr, "run_sweeps", fake_run_sweeps)
+    assert cli.main(["report", "--robustness", "--only", "cycle_montecarlo", "--runs", str(tmp_path / "runs"),
+                     "--out", str(tmp_path / "docs"), "--jobs", "3"]) == 0
+    assert seen == {"names": (NAME,), "workers": 3, "stop_time": None}
+    text = (tmp_path / "docs" / "robustness.md").read_text(encoding="utf-8")
+    assert "`pmsm-cosim report --robustness --only cycle_montecarlo`" in text
+    assert cli.main(["report", "--robustness", "--only", "hwfet", "--runs", str(tmp_path / "runs"),
+                     "--out", str(tmp_path / "docs")]) == 2
 
 
 # --- the failure rule and its interval on made-up figures ----------------------------------------------

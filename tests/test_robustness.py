@@ -1,7 +1,8 @@
 """Robustness maps (orchestrator/pmsm_cosim/app/report/robustness/,
 orchestrator/pmsm_cosim/app/sweeps/robust_*.toml): the sweep engine's signal factor, the figures
 of merit of a run and the stability rule, the failure-rate interval, a small version of every map
-(3 x 3, 6 s runs: past the sensorless unit's start-up) on a 2-worker local cluster, page included,
+(3 x 3, 6 s runs: past the sensorless unit's start-up; the drive cycle's Monte-Carlo cut to 6 s) on a
+2-worker local cluster, page included,
 and the page's claims on synthetic summaries (a changed input changes the claim)."""
 
 from __future__ import annotations
@@ -106,7 +107,7 @@ def test_small_maps_on_a_two_worker_cluster(tmp_path):
     runs = tmp_path / "runs"
     timing = rr.run_sweeps(runs, workers=2, small=True, stop_time=STOP, log=lambda msg: None)
     n_maps = len(rr.MAPS) * len(rr.CONTROLLERS)
-    assert timing["runs"] == n_maps * 9 + 2 * rr.SMALL_SAMPLES + 4
+    assert timing["runs"] == n_maps * 9 + 2 * rr.SMALL_SAMPLES + 4 + rr.SMALL_SAMPLES  # ... + the drive cycle
     page = rr.generate(out=tmp_path / "docs", runs_dir=runs, small=True, stop_time=STOP, run=False,
                        log=lambda msg: None)
     c = rr.collect(runs, t_from=T_FROM_SMALL)
@@ -133,14 +134,16 @@ def test_small_maps_on_a_two_worker_cluster(tmp_path):
     stuck = {**r, "omega_m": np.zeros_like(r["omega_m"])}
     assert not followed_the_start(stuck) and not rr.run_metrics(stuck, 1e-4, 4, T_FROM_SMALL)["stable"]
     assert [len(rows) for rows in c.mc.values()] == [rr.SMALL_SAMPLES] * 2 and len(c.dead) == 4
+    assert len(c.cycle) == rr.SMALL_SAMPLES and all(r["status"] == "completed" for r in c.cycle)
     assert c.routes["robust_rs_psi_sensorless"]["ramp_from"] == pytest.approx(2.5)
     assert c.routes["robust_rs_psi_ekf5ab"]["step_at"] == pytest.approx(5.0)
     text = page.read_text(encoding="utf-8")
     assert "Small version" in text and "failure rate" in text and "95 % interval" in text
     assert f"speed RMS error after {T_FROM_SMALL:g} s is below" in text
     assert "sensorless unit, from standstill: 6 s, reference 0 → 70 rad/s over 2.5-6 s" in text
+    assert f"## Monte-Carlo on a drive cycle\n\n{rr.SMALL_SAMPLES} samples (of the file's 30)" in text
     for name in ("map_rs_psi.png", "map_lq_load.png", "monte_carlo.png", "monte_carlo_adapt.png",
-                 "dead_time_hill.png"):
+                 "dead_time_hill.png", "cycle_monte_carlo.png"):
         assert (tmp_path / "docs" / "robustness" / name).stat().st_size > 5000
 
 
