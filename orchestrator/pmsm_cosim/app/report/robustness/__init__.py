@@ -30,9 +30,9 @@ import json
 import os
 from pathlib import Path
 
-from .cycle import INSIDE_MIN, cycle_figure, cycle_rows, failure_reasons, findings
+from .cycle import INSIDE_MIN, cycle_rows, failure_reasons, findings
 from .document import render
-from .figures import dead_time_figure, map_figure, monte_carlo_figure
+from .figures import cycle_figure, dead_time_figure, map_figure, monte_carlo_figure
 from .metrics import (
     DIVERGED_LIMIT,
     SPEED_LIMIT,

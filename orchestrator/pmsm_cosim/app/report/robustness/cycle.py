@@ -1,6 +1,6 @@
 """The robustness report's Monte-Carlo on a drive cycle (``cycle_montecarlo_wltc3b.toml``): each sample's
 figures from its summary row and metrics.json, the failure rule, the counts with their interval, the Wh/km
-distribution, what a sample costs, its figure and its section of the page.
+distribution, what a sample costs, and its section of the page (its figure: ``figures.cycle_figure``).
 
 **The failure rule** (defined here once; the page quotes it): a sample fails if it did not complete, or its
 speed was inside the tolerance band (``pmsm_ev.results.trace_figures``: +-2 km/h around the trace, taken
@@ -17,13 +17,11 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from pmsm_ev import cycles as pcycles
 from pmsm_ev.params import MotorParams, VehicleParams
 
 from ....sweeps import read_summary
-from . import metrics  # its wilson (metrics reads this module's rows: both imported by name)
+from .interval import wilson
 
 #: a sample follows the cycle if its speed is inside the tolerance band for at least this share of it
 INSIDE_MIN = 0.99
@@ -144,7 +142,7 @@ def findings(rows: list[dict], cycle_duration: float | None = None) -> CycleFind
     fails = sum(r["failed"] for r in rows)
     by_reason = {reason: sum(reason in r["reasons"] for r in rows) for reason in REASONS}
     wh = _stats(r["dc_Wh_per_km"] for r in rows if r["status"] == "completed")
-    return CycleFindings(n, fails, metrics.wilson(fails, n), by_reason, wh, sample_cost(rows, cycle_duration))
+    return CycleFindings(n, fails, wilson(fails, n), by_reason, wh, sample_cost(rows, cycle_duration))
 
 
 def cycle_duration_of(rows: list[dict]) -> float | None:
@@ -153,57 +151,6 @@ def cycle_duration_of(rows: list[dict]) -> float | None:
     if name is None or name.lower() not in pcycles.names():
         return None
     return float(pcycles.load(name).duration)
-
-
-# --- the figure ------------------------------------------------------------------------------------
-
-def cycle_figure(rows: list[dict], path: Path, label: str) -> Path:
-    """The Wh/km histogram (passed and failed samples stacked) and Wh/km against the vehicle mass (colour:
-    the grade offset; failures crossed, a sample without a Wh/km figure on the axis)."""
-    from .figures import _plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
-
-    plt = _plt()
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11.0, 4.0))
-    ok = [r["dc_Wh_per_km"] for r in rows if not r["failed"] and math.isfinite(r["dc_Wh_per_km"])]
-    bad = [r["dc_Wh_per_km"] for r in rows if r["failed"] and math.isfinite(r["dc_Wh_per_km"])]
-    both = ok + bad
-    if both:
-        lo, hi = min(both), max(both)
-        bins = np.linspace(lo - 0.5, hi + 0.5, 16) if hi - lo < 1e-9 else np.linspace(lo, hi, 16)
-        ax0.hist([ok, bad], bins=bins, stacked=True, color=["tab:blue", "tab:red"],
-                 label=[f"passed ({len(ok)})", f"failed ({len(bad)})"])
-    ax0.set_xlabel("energy at the DC link [Wh/km]")
-    ax0.set_ylabel("samples")
-    ax0.legend(fontsize=7)
-    ax0.grid(alpha=0.3)
-    fin = [r for r in rows if math.isfinite(r["dc_Wh_per_km"])]
-    if fin:
-        grades = [r["grade_pct"] for r in fin]
-        lim = max(1e-9, max(abs(g) for g in grades if math.isfinite(g)) if any(map(math.isfinite, grades)) else 1.0)
-        sc = ax1.scatter([r[MASS] for r in fin], [r["dc_Wh_per_km"] for r in fin], c=grades, cmap="coolwarm",
-                         vmin=-lim, vmax=lim, s=28, edgecolors="k", linewidths=0.4)
-        fig.colorbar(sc, ax=ax1, label="grade offset [%]")
-    failed = [r for r in fin if r["failed"]]
-    if failed:
-        ax1.scatter([r[MASS] for r in failed], [r["dc_Wh_per_km"] for r in failed], marker="x", s=70,
-                    c="tab:red", label=f"failed ({sum(r['failed'] for r in rows)})")
-    no_fig = [r for r in rows if not math.isfinite(r["dc_Wh_per_km"]) and math.isfinite(r[MASS])]
-    if no_fig:
-        from matplotlib.transforms import blended_transform_factory  # noqa: PLC0415 - matplotlib: only drawing
-
-        tr = blended_transform_factory(ax1.transData, ax1.transAxes)
-        ax1.plot([r[MASS] for r in no_fig], [0.03] * len(no_fig), "x", color="tab:red", ms=8, transform=tr,
-                 clip_on=False, label=f"no Wh/km figure ({len(no_fig)})")
-    ax1.set_xlabel("vehicle mass m_v [kg] (plant; 75 kg an occupant)")
-    ax1.set_ylabel("energy at the DC link [Wh/km]")
-    if failed or no_fig:
-        ax1.legend(fontsize=7)
-    ax1.grid(alpha=0.3)
-    fig.suptitle(label, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
 
 
 # --- the section -----------------------------------------------------------------------------------

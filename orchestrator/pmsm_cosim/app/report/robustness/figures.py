@@ -1,5 +1,6 @@
 """The robustness report's figures: the maps' heat maps, the Monte-Carlo scatter and histogram,
-the dead-time runs on the hill start (matplotlib, loaded only when drawing)."""
+the Monte-Carlo on a drive cycle (Wh/km), the dead-time runs on the hill start (matplotlib, loaded
+only when drawing)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 from pmsm_ev.params import MotorParams
 from pmsm_ev.results import row_timing_corrected_angle_error
 
+from .cycle import MASS
 from .metrics import DIVERGED_LIMIT, SPEED_LIMIT, T_FROM, DeadRun
 from .runs import CONTROLLERS, Map
 
@@ -151,6 +153,55 @@ def dead_time_figure(runs: list[DeadRun], path: Path) -> Path:
                       + (f", {v_dc.pop():g} V DC link" if len(v_dc) == 1 else ""))
     for ax in axes:
         ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+# --- the Monte-Carlo on a drive cycle ------------------------------------------------------------
+
+def cycle_figure(rows: list[dict], path: Path, label: str) -> Path:
+    """The Wh/km histogram (passed and failed samples stacked) and Wh/km against the vehicle mass (colour:
+    the grade offset; failures crossed, a sample without a Wh/km figure on the axis)."""
+    plt = _plt()
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11.0, 4.0))
+    ok = [r["dc_Wh_per_km"] for r in rows if not r["failed"] and math.isfinite(r["dc_Wh_per_km"])]
+    bad = [r["dc_Wh_per_km"] for r in rows if r["failed"] and math.isfinite(r["dc_Wh_per_km"])]
+    both = ok + bad
+    if both:
+        lo, hi = min(both), max(both)
+        bins = np.linspace(lo - 0.5, hi + 0.5, 16) if hi - lo < 1e-9 else np.linspace(lo, hi, 16)
+        ax0.hist([ok, bad], bins=bins, stacked=True, color=["tab:blue", "tab:red"],
+                 label=[f"passed ({len(ok)})", f"failed ({len(bad)})"])
+    ax0.set_xlabel("energy at the DC link [Wh/km]")
+    ax0.set_ylabel("samples")
+    ax0.legend(fontsize=7)
+    ax0.grid(alpha=0.3)
+    fin = [r for r in rows if math.isfinite(r["dc_Wh_per_km"])]
+    if fin:
+        grades = [r["grade_pct"] for r in fin]
+        lim = max(1e-9, max(abs(g) for g in grades if math.isfinite(g)) if any(map(math.isfinite, grades)) else 1.0)
+        sc = ax1.scatter([r[MASS] for r in fin], [r["dc_Wh_per_km"] for r in fin], c=grades, cmap="coolwarm",
+                         vmin=-lim, vmax=lim, s=28, edgecolors="k", linewidths=0.4)
+        fig.colorbar(sc, ax=ax1, label="grade offset [%]")
+    failed = [r for r in fin if r["failed"]]
+    if failed:
+        ax1.scatter([r[MASS] for r in failed], [r["dc_Wh_per_km"] for r in failed], marker="x", s=70,
+                    c="tab:red", label=f"failed ({sum(r['failed'] for r in rows)})")
+    no_fig = [r for r in rows if not math.isfinite(r["dc_Wh_per_km"]) and math.isfinite(r[MASS])]
+    if no_fig:
+        from matplotlib.transforms import blended_transform_factory  # noqa: PLC0415 - matplotlib: only drawing
+
+        tr = blended_transform_factory(ax1.transData, ax1.transAxes)
+        ax1.plot([r[MASS] for r in no_fig], [0.03] * len(no_fig), "x", color="tab:red", ms=8, transform=tr,
+                 clip_on=False, label=f"no Wh/km figure ({len(no_fig)})")
+    ax1.set_xlabel("vehicle mass m_v [kg] (plant; 75 kg an occupant)")
+    ax1.set_ylabel("energy at the DC link [Wh/km]")
+    if failed or no_fig:
+        ax1.legend(fontsize=7)
+    ax1.grid(alpha=0.3)
+    fig.suptitle(label, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -29,7 +29,8 @@ from pmsm_ev.results import figures_where, run_timing, tracking_figures
 
 from ....engine.recording import read_results
 from ....sweeps import read_summary
-from . import cycle as cycle_mc  # its rows (cycle uses this module's wilson: imported by name)
+from . import cycle as cycle_mc
+from .interval import wilson
 from .runs import ANGLE_USED, CONTROLLERS, CYCLE_MONTE_CARLO, DEAD_TIME, MAPS, MONTE_CARLOS, Map, sweep_spec
 
 T_FROM = 20.0  #: the metrics' window starts here [s] (past the start-up and the road step)
@@ -98,16 +99,6 @@ def sweep_results(out: Path, t_from: float = T_FROM, angle_used: bool = True) ->
             row.update(stable=False, diverged=row["status"] == "failed")
         rows.append(row)
     return rows
-
-
-def wilson(failures: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
-    """The Wilson score interval of a proportion failures / n (95 % by default)."""
-    if n == 0:
-        return math.nan, math.nan
-    p = failures / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def _axis(values, nominal):
