@@ -28,6 +28,7 @@ UNITS: dict[str, dict[str, float]] = {
     "W": {"kg": 1, "m": 2, "s": -3},
     "N2.m2": {"kg": 2, "m": 4, "s": -4},
     "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
+    "N.m.s2/rad2": {"kg": 1, "m": 2, "rad": -2},
     "m/s": {"m": 1, "s": -1},
     "m/s2": {"m": 1, "s": -2},
     "m": {"m": 1},
@@ -129,6 +130,12 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                         "current-loop transients, the rotation during a period)"),
     "P_regen_max": ("W", "regenerative power limit of the references 'mtpa' and 'fw' (0 = no limit): a braking "
                          "demand beyond it goes to the friction brake (T_brake)"),
+    "speed_feedforward": (None, "the speed loop's feedforward (references 'mtpa' and 'fw'): 'none', 'inertia' "
+                                "(J_eq x the reference's acceleration) or 'inertia+road' (plus the level road's "
+                                "load at the reference speed, ff_T0 + ff_T1 |w| + ff_T2 w^2); docs/cycles.md"),
+    "ff_T0": ("N.m", "road-load feedforward at the shaft: constant term (Table II's rolling and head-wind drag)"),
+    "ff_T1": ("N.m.s/rad", "road-load feedforward at the shaft: term in |omega_ref|"),
+    "ff_T2": ("N.m.s2/rad2", "road-load feedforward at the shaft: term in omega_ref^2"),
     "decoupling": (None, "decoupling signs: 'physical' (cancels the back-EMF and cross-coupling of eq 11) "
                          "or 'paper' (eq 20 as printed)"),
     "angle_advance": (None, "advance of the inverse-Park angle, in control periods of omega_hat"),

@@ -77,7 +77,8 @@ _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_
 #: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 #: the reference generator's outputs, zeroed by ``reset``
-_REFERENCE_STATE = (_k.S_I_DREF, _k.S_T_REF, _k.S_T_BRAKE, _k.S_REGION, _k.S_T_AVAIL)
+_REFERENCE_STATE = (_k.S_I_DREF, _k.S_T_REF, _k.S_T_BRAKE, _k.S_REGION, _k.S_T_AVAIL,
+                    _k.S_W_REF_PREV, _k.S_FF_PRIMED, _k.S_T_FF)
 
 
 def _slot(index: int, doc: str) -> property:
@@ -171,6 +172,13 @@ class ControlUnit:
         c[_k.C_K_DQN] = m.k_dq * m.N
         c[_k.C_P_REGEN] = float(pr.P_regen_max)
         c[_k.C_BRAKE_GAIN] = pr.n_g * pr.eta
+        # the speed loop's feedforward: off ("none") by default
+        c[_k.C_FF] = 0.0 if pr.speed_feedforward == "none" else 1.0
+        c[_k.C_J_FF] = m.J_m + pr.J_load if c[_k.C_FF] else 0.0
+        road = pr.speed_feedforward == "inertia+road"
+        c[_k.C_FF_T0] = float(pr.ff_T0) if road else 0.0
+        c[_k.C_FF_T1] = float(pr.ff_T1) if road else 0.0
+        c[_k.C_FF_T2] = float(pr.ff_T2) if road else 0.0
         self.reset()
 
     def reset(self) -> None:

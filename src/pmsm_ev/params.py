@@ -34,6 +34,8 @@ DQ_CONVENTIONS = ("paper", "amplitude_invariant")
 #: the current control (``ControllerParams.current_control``) and the observers' discretisation
 #: (``EkfParams.discretisation``); docs/speed-range.md
 CURRENT_CONTROLS = ("paper", "high_speed")
+#: the speed loop's feedforward (``ControllerParams.speed_feedforward``; docs/cycles.md)
+SPEED_FEEDFORWARDS = ("none", "inertia", "inertia+road")
 DISCRETISATIONS = ("euler", "bilinear")
 
 
@@ -153,6 +155,21 @@ def equivalent_inertia(motor: MotorParams, vehicle: VehicleParams) -> float:
     """J_eq = J_m + r_w^2 m_v / (eta n_g^2) [kg m^2], the left side of eq 9 (0.526 by default)."""
     return motor.J_m + vehicle.reflected_inertia
 
+
+def road_load_coefficients(vehicle: VehicleParams) -> tuple[float, float, float]:
+    """The road load on a level road at the motor shaft as coast-down coefficients (T0 [N m], T1 [N m s/rad],
+    T2 [N m s^2/rad^2]): T = T0 + T1 omega + T2 omega^2 for omega >= 0 is eqs 3-4's rolling resistance
+    c_r m_v g and drag 1/2 rho_a c_d A_f (v + v_a)^2 at v = omega r_w / n_g, through eq 9's r_w / (eta n_g)
+    (3.06 N m, 9.03e-4, 5.30e-6 with Table II: 17.19 N m at 1550 rad/s, 131 km/h). The road-load
+    coefficients f0, f1, f2 of a coast-down test (UN GTR No. 15, Annex 4) carried to the shaft."""
+    k = vehicle.r_w / (vehicle.eta * vehicle.n_g)  # a wheel force's torque at the shaft, eq 9
+    w = vehicle.r_w / vehicle.n_g  # v per omega [m/rad]
+    drag = 0.5 * vehicle.rho_a * vehicle.c_d * vehicle.A_f
+    return (k * (vehicle.c_r * vehicle.m_v * vehicle.g + drag * vehicle.v_a**2),
+            k * 2.0 * drag * vehicle.v_a * w, k * drag * w * w)
+
+
+_ROAD_LOAD = road_load_coefficients(VehicleParams())
 
 #: reference temperature of Table I's R_s and psi [degC] [chosen]: data-sheet values are
 #: usually given at 20-25 degC; 20 degC, the reference of copper's alpha = 0.00393 1/K
@@ -483,6 +500,20 @@ class ControllerParams:
     #: gear efficiency of that conversion [-] [T2]: ``VehicleParams.eta``; T_brake = the shaft torque
     #: left x n_g x eta (a wheel torque T_b acts on the shaft as T_b / (eta n_g), eq 29)
     eta: float = VehicleParams().eta
+    #: the speed loop's feedforward (docs/cycles.md) [chosen: "none", the paper's drive, a PI alone], the
+    #: reference generator's modes only. The soft speed PI (omega_n 2 rad/s, for the observers) lags a drive
+    #: cycle's accelerations by seconds; a two-degree-of-freedom speed controller adds the torque the
+    #: reference itself needs, so the PI only corrects what the model misses (``kernels.speed_feedforward``).
+    #: "inertia": J omega_ref', the reference's acceleration on the speed PI's own inertia J_m + ``J_load``
+    #: (J_eq, 0.526 kg m^2), its slope taken over the last period; "inertia+road": plus the level road's
+    #: load at the reference speed, sign(omega_ref) (``ff_T0`` + ``ff_T1`` |omega_ref| + ``ff_T2``
+    #: omega_ref^2). The sum is clamped at the torque available, the PI at what is left of it.
+    speed_feedforward: str = "none"
+    #: the road-load feedforward's coast-down coefficients at the shaft (``road_load_coefficients``), Table
+    #: II's level road by default: constant [N m], in |omega| [N m s/rad], in omega^2 [N m s^2/rad^2]
+    ff_T0: float = _ROAD_LOAD[0]
+    ff_T1: float = _ROAD_LOAD[1]
+    ff_T2: float = _ROAD_LOAD[2]
 
     @property
     def u_limit(self) -> float:
@@ -541,6 +572,14 @@ class ControllerParams:
                                         f"limit (got {self.P_regen_max})")
         _require(self.n_g > 0, f"n_g must be > 0 (got {self.n_g})")
         _require(0 < self.eta <= 1, f"eta must be in (0, 1] (got {self.eta})")
+        _require(self.speed_feedforward in SPEED_FEEDFORWARDS,
+                 f"speed_feedforward must be one of {SPEED_FEEDFORWARDS} (got {self.speed_feedforward!r})")
+        _require(self.speed_feedforward == "none" or self.reference != "paper",
+                 f"speed_feedforward {self.speed_feedforward!r} needs reference 'mtpa' or 'fw' (the paper's "
+                 f"reference has no torque demand to add it to)")
+        for name in ("ff_T0", "ff_T1", "ff_T2"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be >= 0 (got {value})")
         _require(self.reference != "fw" or self.v_dc > 0,
                  "reference 'fw' (field weakening) needs the DC-link voltage: set v_dc > 0 V")
         _require(self.v_dc == 0 or self.u_max == _U_MAX_DEFAULT,

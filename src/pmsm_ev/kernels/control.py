@@ -25,10 +25,15 @@ from .layout import (
     C_DTC_I0,
     C_DTC_V,
     C_ESTIMATED,
+    C_FF,
+    C_FF_T0,
+    C_FF_T1,
+    C_FF_T2,
     C_HALF_PERIOD_N,
     C_I_D_REF,
     C_I_MAX,
     C_I_Q_MAX,
+    C_J_FF,
     C_K_DQN,
     C_K_T,
     C_KI_ID,
@@ -52,6 +57,7 @@ from .layout import (
     C_U_MAX,
     C_ZOH,
     OBS_EKF5AB,
+    S_FF_PRIMED,
     S_I_D,
     S_I_DL,
     S_I_DREF,
@@ -64,6 +70,7 @@ from .layout import (
     S_SAT,
     S_T_AVAIL,
     S_T_BRAKE,
+    S_T_FF,
     S_T_REF,
     S_THETA_PRIOR,
     S_U_PREV_0,
@@ -75,6 +82,7 @@ from .layout import (
     S_V_OUT_BETA,
     S_V_Q,
     S_W_INT,
+    S_W_REF_PREV,
     S_X,
 )
 from .observers import adapt_psi, observer_correct, observer_predict
@@ -94,6 +102,44 @@ def speed_pi(s, c, omega_ref, omega_est, limit):
     if out == unsat or (unsat > limit) != (e > 0):
         s[S_W_INT] += c[C_KI_W] * e * c[C_DT]
     return out
+
+
+@kernel()
+def speed_pi_between(s, c, omega_ref, omega_est, lo, hi):
+    """Speed PI, eq 14, its output [A] limited to [``lo``, ``hi``] (lo <= 0 <= hi), with conditional
+    integration: ``speed_pi`` with the clamp moved by a feedforward's share of it."""
+    e = omega_ref - omega_est
+    unsat = c[C_KP_W] * e + s[S_W_INT]  # (14)
+    out = min(max(unsat, lo), hi)
+    # anti-windup: integrate unless the output is clamped and e pushes further out
+    if out == unsat or (unsat > hi and e < 0) or (unsat < lo and e > 0):
+        s[S_W_INT] += c[C_KI_W] * e * c[C_DT]
+    return out
+
+
+@kernel()
+def speed_feedforward(s, c, omega_ref):
+    """The speed loop's feedforward of this period, ``S_T_FF`` [N m] (``ControllerParams.speed_feedforward``,
+    docs/cycles.md): the torque the reference itself needs, so that the PI (eq 14) only corrects what
+    the model misses (a two-degree-of-freedom speed controller). The acceleration term J omega_ref' on
+    the speed PI's own inertia ``C_J_FF`` (J_m + J_load = J_eq, eq 9's left side), with the reference's
+    slope over the last period (omega_ref - omega_ref_prev) / dt (0 in the first period: no history);
+    and the road load at the reference's speed, sign(omega_ref) (T0 + T1 |omega_ref| + T2 omega_ref^2)
+    (coast-down coefficients at the shaft, ``C_FF_T0..2``: eqs 3-4's rolling and drag; 0 at a stand).
+    Called every period, whatever the mode, so that the slope is always the last period's."""
+    if s[S_FF_PRIMED] != 0.0:
+        a_ref = (omega_ref - s[S_W_REF_PREV]) / c[C_DT]
+    else:
+        a_ref = 0.0
+        s[S_FF_PRIMED] = 1.0
+    s[S_W_REF_PREV] = omega_ref
+    w = abs(omega_ref)
+    road = c[C_FF_T0] + (c[C_FF_T1] + c[C_FF_T2] * w) * w
+    if omega_ref < 0.0:
+        road = -road
+    elif omega_ref == 0.0:
+        road = 0.0
+    s[S_T_FF] = c[C_J_FF] * a_ref + road
 
 
 @kernel(_sig(_F, _V, _V, _F, _F))
@@ -207,13 +253,18 @@ def references_of(s, c, t_dem, omega_est, t_env, lam, d_top, region_top):
 def torque_speed_step(s, c, omega_ref, omega_est):
     """The speed loop of the reference generator's modes (``C_REF_MODE`` != 0): the speed PI (eq 14,
     the same gains) commands the torque T = k_t x its output (k_t = k_dq N psi, ``C_K_T``: the loop gain
-    of the paper's mode), its clamp and conditional integration at the torque available at the present
-    speed (``envelope``, within T_max: no windup where field weakening gives less than asked); the
-    generator turns T into (i_dref, i_qref) (``generate_references``)."""
+    of the paper's mode), plus with ``C_FF`` the feedforward ``S_T_FF`` (``speed_feedforward``); its clamp
+    and conditional integration at the torque available at the present speed (``envelope``, within T_max:
+    no windup where field weakening gives less than asked); the generator turns T into (i_dref, i_qref)
+    (``generate_references``)."""
     k_t = c[C_K_T]
     t_env, lam, d_top, region_top = envelope(omega_est, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_N],
                                              c[C_I_MAX], c[C_U_FW])
     t_cap = min(t_env, c[C_T_MAX])
+    if c[C_FF] != 0.0:  # the feedforward (``speed_feedforward``, this period's) plus the PI on what is left
+        t_ff = min(max(s[S_T_FF], -t_cap), t_cap)
+        u = speed_pi_between(s, c, omega_ref, omega_est, (-t_cap - t_ff) / k_t, (t_cap - t_ff) / k_t)  # (14)
+        return references_of(s, c, k_t * u + t_ff, omega_est, t_env, lam, d_top, region_top)
     u = speed_pi(s, c, omega_ref, omega_est, t_cap / k_t)  # (14)
     return references_of(s, c, k_t * u, omega_est, t_env, lam, d_top, region_top)
 
@@ -338,6 +389,8 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
         theta_ctrl = theta_meas
     omega_hat = s[S_X + 2]
     if c[C_REF_MODE] != 0.0:  # the reference generator: MTPA, field weakening, limits, regen
+        if c[C_FF] != 0.0:
+            speed_feedforward(s, c, omega_ref)
         i_dref, i_qref = torque_speed_step(s, c, omega_ref, omega_hat)
     else:  # the paper's: i_d = i_d_ref, i_q from the speed PI
         i_dref = c[C_I_D_REF]

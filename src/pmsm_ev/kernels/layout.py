@@ -257,7 +257,11 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_T_BRAKE", 1, "the friction brake's demand at the wheels [N m, >= 0] (``C_REF_MODE`` != 0)"),
     ("S_REGION", 1, "the reference generator's region (``kernels.references`` REGION_*)"),
     ("S_T_AVAIL", 1, "the torque available at the present speed, either sign [N m]: the speed PI's clamp"),
-), size=119)
+    # the speed loop's feedforward (``C_FF``, ``speed_feedforward``)
+    ("S_W_REF_PREV", 1, "the speed reference of the last period [rad/s]"),
+    ("S_FF_PRIMED", 1, "1.0 once a period has given S_W_REF_PREV"),
+    ("S_T_FF", 1, "the feedforward torque of this period [N m]: C_J_FF x the reference's slope plus the road load"),
+), size=122)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -352,7 +356,13 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_K_DQN", 1, "k_dq N: eq 12's torque factor [-]"),
     ("C_P_REGEN", 1, "the regenerative power limit [W] (0: none)"),
     ("C_BRAKE_GAIN", 1, "n_g eta: a shaft torque's friction-brake torque at the wheels [-]"),
-), size=95)
+    # the speed loop's feedforward (``pmsm_ev.params.ControllerParams.speed_feedforward``)
+    ("C_FF", 1, "1.0: the speed loop's feedforward on (the reference generator's modes only)"),
+    ("C_J_FF", 1, "the inertia of the acceleration feedforward [kg m^2]: the speed PI's J_m + J_load"),
+    ("C_FF_T0", 1, "the road-load feedforward's constant term at the shaft [N m] (0: none)"),
+    ("C_FF_T1", 1, "... its term in |omega_ref| [N m s/rad]"),
+    ("C_FF_T2", 1, "... its term in omega_ref^2 [N m s^2/rad^2]"),
+), size=100)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())

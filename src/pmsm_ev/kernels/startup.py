@@ -10,7 +10,15 @@ from __future__ import annotations
 
 import math
 
-from .control import current_step, generate_references, modulate, speed_step, store_command, torque_speed_step
+from .control import (
+    current_step,
+    generate_references,
+    modulate,
+    speed_feedforward,
+    speed_step,
+    store_command,
+    torque_speed_step,
+)
 from .jit import F as _F
 from .jit import V as _V
 from .jit import kernel
@@ -29,6 +37,7 @@ from .layout import (
     C_E_GUARD,
     C_E_MAX,
     C_FAULT_TIME,
+    C_FF,
     C_GUARD,
     C_HALF_PERIOD_N,
     C_I_ALIGN,
@@ -95,6 +104,7 @@ from .layout import (
     S_PHI,
     S_SLIP,
     S_STILL_OUT,
+    S_T_FF,
     S_THETA_CTRL,
     S_THETA_PRIOR,
     S_U_PREV_0,
@@ -174,7 +184,8 @@ def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
     if c[C_REF_MODE] != 0.0:  # the reference generator's modes: (14) returns the present torque / k_t,
         # which the generator turns into its references (the current PIs seated on them)
         t_seat = s[S_X + 4] if on_load else c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
-        s[S_W_INT] = t_seat / c[C_K_T] - c[C_KP_W] * (omega_ref - omega_hat)
+        t_pi = t_seat - s[S_T_FF] if c[C_FF] != 0.0 else t_seat  # the feedforward's share is its own
+        s[S_W_INT] = t_pi / c[C_K_T] - c[C_KP_W] * (omega_ref - omega_hat)
         i_dref, i_seat = generate_references(s, c, t_seat, omega_hat)
     elif on_load:
         i_dref = c[C_I_D_REF]
@@ -358,6 +369,8 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         adapt_psi(s, c)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
         omega_ref = 0.0
+    if c[C_FF] != 0.0:  # the speed loop's feedforward, its slope kept up in every mode
+        speed_feedforward(s, c, omega_ref)
     t = s[S_CLOCK] * dt
     s[S_CLOCK] += 1.0
     mode = s[S_MODE]
