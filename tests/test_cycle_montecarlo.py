@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from orchestrator_support import project_fmus
+from pmsm_cosim.app.drive import packaged_scenario
 from pmsm_cosim.app.report import robustness as rr
 from pmsm_cosim.app.report.robustness import cycle as rc
 from pmsm_cosim.app.studies import load_sweep, packaged_sweep, parse_sweep
@@ -44,7 +45,7 @@ def _data(**changes) -> dict:
 
 def test_offset_adds_to_the_signal_table_and_r_w_resamples_the_cycle(tmp_path):
     project_fmus()
-    base = packaged_sweep(NAME).parent / "robustness" / "wltc3b_sensorless.toml"
+    base = packaged_scenario("wltc3b-sensorless")
     path = tmp_path / "s.toml"
     path.write_text(f'system = "{base.as_posix()}"\nstop_time = 1.0\n[set]\n"plant.r_w" = 0.3\n'
                     '[grid]\n"offset.delta" = [-1.0, 0.5]\n', encoding="utf-8")
@@ -63,8 +64,9 @@ def test_a_system_with_a_road_sweeps(tmp_path):
     """[road] (a RouteProfile component by position) and [cycle] in a sweep's system: each run carries the
     road component, its FMU shipped with the others, and the sweep's mass."""
     project_fmus()
-    base = (packaged_sweep(NAME).parent / "robustness" / "wltc3b_sensorless.toml").read_text(encoding="utf-8")
-    (tmp_path / "sys.toml").write_text(base.replace("[cycle]", '[road]\nname = "hilly"\n\n[cycle]'), encoding="utf-8")
+    base = packaged_scenario("wltc3b-sensorless").read_text(encoding="utf-8")
+    with_road = base.replace("\n[cycle]", '\n[road]\nname = "hilly"\n\n[cycle]', 1)
+    (tmp_path / "sys.toml").write_text(with_road, encoding="utf-8")
     (tmp_path / "s.toml").write_text('system = "sys.toml"\nstop_time = 1.0\n[grid]\n"plant.m_v" = [900.0, 1200.0]\n',
                                      encoding="utf-8")
     runs = prepare_runs(load_sweep(tmp_path / "s.toml"))
@@ -134,7 +136,8 @@ def test_the_shipped_sweep_draws_the_stated_design():
             assert a <= p[key] <= b
     assert len({r.params["plant.sensor_seed"] for r in sweep.runs}) == len(sweep.runs)
     # the base system: the sensorless unit on WLTC 3b, 1 A noise, a level road the offset shifts
-    spec = sweep.hooks.load_system(str(packaged_sweep(NAME).parent / sweep.system))
+    assert sweep.system == "wltc3b-sensorless"
+    spec = sweep.hooks.load_system(sweep.system)
     assert spec.signals["omega_ref"].cycle.name == "wltc3b" and spec.stop_time == 1800.0
     assert spec.component("ctrl").fmu.name == "FocSensorless.fmu"
     assert spec.component("plant").start["sensor_noise"] == 1.0 and "m_v" not in spec.component("plant").start
