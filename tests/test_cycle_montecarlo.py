@@ -225,7 +225,7 @@ def test_findings_on_made_up_samples():
 
 # --- one short sweep on Dask, and its section of the page --------------------------------------------------
 
-STOP = 30.0  #: [s] of WLTC 3b: standing to 11 s, the first acceleration to 47.5 km/h at 26 s, braking
+STOP = 30.0  #: [s] of WLTC 3b: standing to 11 s (the alignment, I-f), then accelerating to 41.3 km/h at 30 s
 
 
 def test_two_samples_on_a_two_worker_cluster_and_the_page(tmp_path):

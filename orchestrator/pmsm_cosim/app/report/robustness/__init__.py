@@ -96,7 +96,8 @@ def generate(out: Path | str = "docs", runs_dir: Path | str = "runs/robustness",
         figs["dead"] = dead_time_figure(c.dead, fig_dir / "dead_time_hill.png")
     if c.cycle:
         figs["cycle"] = cycle_figure(c.cycle, fig_dir / "cycle_monte_carlo.png",
-                                     f"Monte-Carlo on a drive cycle: {len(c.cycle)} samples of {CYCLE_MONTE_CARLO}")
+                                     f"Monte-Carlo on a drive cycle ({CYCLE_MONTE_CARLO}): {len(c.cycle)} samples, "
+                                     f"{sum(r['failed'] for r in c.cycle)} failed")
     page = out / "robustness.md"
     page.write_text(render(c, figs, timing, command, small), encoding="utf-8")
     log(f"wrote {page} and {len(figs)} figures in {fig_dir}")

@@ -76,7 +76,8 @@ def grade_pct(delta_deg: float) -> float:
 def cycle_rows(out: Path) -> list[dict]:
     """summary.csv of the cycle sweep's directory, each row with its numbers, ``occupants``, ``grade_pct``,
     ``reasons`` and ``failed``, and from metrics.json (completed runs) ``macro_steps``, ``init_time_s``,
-    ``step_size``, ``stop_time``, ``t_end`` (of the trace) and ``cycle``."""
+    ``step_size``, ``stop_time``, ``t_end`` and ``cycle`` (of the trace) and ``t_fault`` [s] (the safe state
+    latched; NaN: never)."""
     rows = []
     for row in read_summary(Path(out) / "summary.csv"):
         r = dict(row)
@@ -93,10 +94,10 @@ def cycle_rows(out: Path) -> list[dict]:
                 m = json.loads((Path(out) / "runs" / r["run"] / "metrics.json").read_text(encoding="utf-8"))
             except (OSError, ValueError):
                 m = {}
-        trace = m.get("trace") or {}
+        trace, sync = m.get("trace") or {}, m.get("synchronism") or {}
         r.update(macro_steps=_num(m.get("macro_steps")), init_time_s=_num(m.get("init_time_s")),
                  step_size=_num(m.get("step_size")), stop_time=_num(m.get("stop_time")),
-                 t_end=_num(trace.get("t_end")), cycle=trace.get("cycle"))
+                 t_end=_num(trace.get("t_end")), cycle=trace.get("cycle"), t_fault=_num(sync.get("t_fault")))
         rows.append(r)
     return rows
 
@@ -227,11 +228,13 @@ def cycle_text(rows: list[dict], design, fig: Path | None, timing: dict | None =
         L += [f"![Monte-Carlo on {cycle}](robustness/{fig.name})", ""]
     bad = [r for r in rows if r["failed"]]
     if bad:
-        L += ["Failed samples (occupants, grade offset, share inside the band, turns slipped):", ""]
+        L += ["Failed samples (vehicle mass, grade offset, share of the cycle inside the band, turns slipped):", ""]
         for r in bad[:10]:
-            L.append(f"- `{r['run']}`: {r['occupants']:g} occupants, {r['grade_pct']:+.2f} %, "
-                     f"inside {_pct(r['inside_share']) if math.isfinite(r['inside_share']) else '–'}, "
-                     f"{r['slipped_turns']:g} turns slipped: {', '.join(r['reasons'])}"
+            inside = _pct(r["inside_share"]) if math.isfinite(r["inside_share"]) else "–"
+            fault = f" (at {r['t_fault']:g} s)" if math.isfinite(r.get("t_fault", math.nan)) else ""
+            L.append(f"- `{r['run']}`: m_v {r[MASS]:g} kg ({r['occupants']:g} × {OCCUPANT_KG:g} kg), grade "
+                     f"{r['grade_pct']:+.2f} %, inside {inside}, {r['slipped_turns']:g} turns slipped: "
+                     + ", ".join(r["reasons"]).replace(REASONS[3], REASONS[3] + fault)
                      + (f" ({r['error']})" if r.get("error") else ""))
         if len(bad) > 10:
             L.append(f"- and {len(bad) - 10} more (summary.csv)")

@@ -173,7 +173,7 @@ def cycle_figure(rows: list[dict], path: Path, label: str) -> Path:
         lo, hi = min(both), max(both)
         bins = np.linspace(lo - 0.5, hi + 0.5, 16) if hi - lo < 1e-9 else np.linspace(lo, hi, 16)
         ax0.hist([ok, bad], bins=bins, stacked=True, color=["tab:blue", "tab:red"],
-                 label=[f"passed ({len(ok)})", f"failed ({len(bad)})"])
+                 label=[f"passed ({len(ok)})", f"failed, with a Wh/km figure ({len(bad)})"])
     ax0.set_xlabel("energy at the DC link [Wh/km]")
     ax0.set_ylabel("samples")
     ax0.legend(fontsize=7)
@@ -196,6 +196,9 @@ def cycle_figure(rows: list[dict], path: Path, label: str) -> Path:
         tr = blended_transform_factory(ax1.transData, ax1.transAxes)
         ax1.plot([r[MASS] for r in no_fig], [0.03] * len(no_fig), "x", color="tab:red", ms=8, transform=tr,
                  clip_on=False, label=f"no Wh/km figure ({len(no_fig)})")
+    masses = sorted({r[MASS] for r in rows if math.isfinite(r[MASS])})
+    if masses:
+        ax1.set_xticks(masses)
     ax1.set_xlabel("vehicle mass m_v [kg] (plant; 75 kg an occupant)")
     ax1.set_ylabel("energy at the DC link [Wh/km]")
     if failed or no_fig:
