@@ -95,3 +95,22 @@ def test_a_stop_and_restart_on_the_ten_percent_climb(fmus, tmp_path, controller)
     assert trace["inside_share"] >= 0.99
     if controller:
         assert m["synchronism"]["slipped_turns"] == 0
+
+
+def test_a_cycle_that_moves_before_the_alignment_ends(fmus, tmp_path, monkeypatch):
+    """A user's cycle that asks to move at 1 s, before the sensorless unit has aligned (2.35 s): the unit
+    aligns first, then catches up through I-f into FOC, no turn slipped; the band's figures name the one
+    excursion, at the start and about as long as the alignment still had to run, and nothing after it."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "early.csv").write_text("time_s,speed_kmh\n0,0\n1,5\n4,25\n10,50\n15,50\n20,0\n25,0\n")
+    r, m = _run(tmp_path, "early", 25, "us06-sensorless", "--cycle", "early.csv")
+    trace, sync = m["trace"], m["synchronism"]
+    print(f"\nexcursions {trace['excursion_lengths_s']} from {trace['t_longest_excursion']:.2f} s; modes "
+          f"{m['sensorless']['mode_changes']}; slipped {sync['slipped_turns']}")
+    assert trace["excursions"] == 1 and trace["t_longest_excursion"] < 2.0
+    assert 1.5 < trace["longest_excursion_s"] < 3.0
+    assert trace["t_longest_excursion"] + trace["longest_excursion_s"] < 4.5
+    assert sync["slipped_turns"] == 0 and sync["episodes"] == 0
+    assert m["sensorless"]["mode_changes"][0][0] == pytest.approx(2.35, abs=0.05)
+    late = r["time"] > 6.0
+    assert np.max(np.abs(r["omega_ref"][late] - r["omega_m"][late])) < 15.0  # caught up: < 1.3 km/h
