@@ -105,6 +105,12 @@ def cmd_run(a) -> int:
               f"{100 * trace['inside_share']:.2f} % of {trace['t_end']:g} s, {trace['excursions']} excursions"
               f"{longest}; RMSE {trace['rmse_kmh']:.2f} km/h, largest deviation "
               f"{trace['max_deviation_kmh']:+.2f} km/h at {trace['t_max_deviation']:.2f} s")
+        energy = m.get("energy")
+        if isinstance(energy, dict) and energy.get("dc_Wh_per_km") is not None:
+            share = energy["regen_Wh"] / energy["drawn_Wh"] if energy["drawn_Wh"] > 0 else 0.0
+            print(f"energy: {energy['dc_Wh_per_km']:.1f} Wh/km at the DC link ({energy['dc_Wh']:.1f} Wh over "
+                  f"{energy['distance_m'] / 1e3:.2f} km), {energy['regen_Wh']:.1f} Wh regenerated "
+                  f"({100 * share:.1f} % of the {energy['drawn_Wh']:.1f} Wh drawn)")
     figures = None
     if not a.no_figures and m["rows"] >= 2:
         figures = draw_figures(out, spec.name, a.quiet)
