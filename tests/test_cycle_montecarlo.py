@@ -51,7 +51,8 @@ def test_offset_adds_to_the_signal_table_and_r_w_resamples_the_cycle(tmp_path):
                     '[grid]\n"offset.delta" = [-1.0, 0.5]\n', encoding="utf-8")
     runs = prepare_runs(load_sweep(path))
     for run, x in zip(runs, (-1.0, 0.5)):
-        assert list(run.spec.signals["delta"].profile.values) == [0.0 + x]  # the table [[0, 0]] deg, plus x
+        # the table [[0, 0]] in deg, plus x deg: the profile is in the input's unit, rad
+        assert list(run.spec.signals["delta"].profile.values) == [math.radians(0.0 + x)]
     assert runs[0].signature != runs[1].signature
     # the cycle's omega_ref made with the run's r_w: omega = v n_g / r_w
     sig = runs[0].spec.signals["omega_ref"]

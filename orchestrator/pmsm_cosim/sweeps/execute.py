@@ -42,7 +42,7 @@ from ..engine.fmu import FmuInstance, convert_start, variable_unit
 from ..engine.master import Master
 from ..engine.progress import CountBar
 from ..engine.recording import write_metrics
-from ..engine.system import SystemSpec, resolve_fmu_path
+from ..engine.system import SIGNAL_CONVERSIONS, SystemSpec, resolve_fmu_path
 from .spec import RUNS_DIR, Param, RunPlan, SweepHooks, SweepSpec, parse_param
 from .summary import _row, plot_summary, write_summary
 
@@ -110,6 +110,8 @@ def _apply(spec: SystemSpec, param: Param, value, base_dir: Path, hooks: SweepHo
             raise CosimError(f"the system has no signal {param.variable!r}{close_matches(param.variable, spec.signals)}"
                              f"; its signals: {', '.join(spec.signals) or 'none'}")
         prof, x = sig.profile, float(value)
+        if param.kind == "offset" and sig.written_unit in SIGNAL_CONVERSIONS:  # the offset is in the table's
+            x = SIGNAL_CONVERSIONS[sig.written_unit][1](x)  # unit (deg), the profile in the input's (rad)
         values = tuple(x * v for v in prof.values) if param.kind == "scale" else tuple(v + x for v in prof.values)
         sig.profile = replace(prof, values=values)
         return
