@@ -188,6 +188,7 @@ class _Stepper:
     step_size: float
     handle: object = None
     do_step: object = None
+    do_step_typed: object = None  #: fmi2DoStep without argtypes (``LeanCalls.do_step_typed``)
     transfers: list = field(default_factory=list)  #: [_Transfer] into this component's inputs
     pending: list = field(default_factory=list)  #: queued signal targets (multi-rate)
 
@@ -228,7 +229,8 @@ class Master:
         for comp in s.components:
             inst = self.instances[comp.name]
             st = _Stepper(inst, comp.step_multiple, comp.step_multiple * self.h,
-                          handle=inst.lean.handle, do_step=inst.lean.do_step)
+                          handle=inst.lean.handle, do_step=inst.lean.do_step,
+                          do_step_typed=inst.lean.do_step_typed)
             self.steppers.append(st)
             by_name[comp.name] = st
         # connections grouped by (destination, source, type): one get and one set per group
@@ -514,12 +516,12 @@ class Master:
         ns = {"_StepFailed": _StepFailed, "_Interrupted": _Interrupted, "update": self._update_signals,
               "h": self.h, "fail_get": self._get_failed, "fail_set": self._put_failed,
               "fail_step": self._step_failed, "check_finite": self._check_finite, "flush": self._flush_pending,
-              "vsum": sum}
+              "vsum": sum, "t_c": ctypes.c_double(0.0), "true_c": ctypes.c_int(1)}
         jacobi = self.spec.algorithm == "jacobi"
         reads, writes, steps = [], [], []
         for i, st in enumerate(self.steppers):
             ns[f"st{i}"], ns[f"pend{i}"] = st, st.pending
-            ns[f"do{i}"], ns[f"h{i}"] = functools.partial(st.do_step, st.handle), st.step_size
+            ns[f"do{i}"], ns[f"h{i}_c"] = functools.partial(st.do_step_typed, st.handle), ctypes.c_double(st.step_size)
             guard = f"if n % {st.multiple} == 0:" if st.multiple > 1 else None
             ind = "    " if guard else ""
 
@@ -546,7 +548,7 @@ class Master:
             flush = []
             if st.multiple > 1 and any(tg.stepper is st for sig in self.signals for tg in sig.targets):
                 flush = [f"{ind}if pend{i}: flush(st{i}, t)"]  # queued signal inputs
-            step = [f"{ind}if (s := do{i}(t, h{i}, 1)) > 1: raise fail_step(st{i}, t, s)"]
+            step = [f"{ind}if (s := do{i}(t_c, h{i}_c, true_c)) > 1: raise fail_step(st{i}, t, s)"]
             if jacobi:  # all reads at t_n, then all writes, then all steps
                 reads += block(read)
                 writes += block(write + flush)
@@ -562,6 +564,7 @@ class Master:
             "            if n >= sig_next:",
             "                sig_next = update(n)",
             "            t = n * h",
+            "            t_c.value = t  # the time of fmi2DoStep, as a C double (do_step_typed)",
             *("            " + line for line in body),
             "    except _StepFailed as exc:",
             "        exc.n = n",
