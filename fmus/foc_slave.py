@@ -2,7 +2,8 @@
 FocSensorless: ``pmsm_ev.control_unit.ControlUnit`` as an FMI 2.0 co-simulation unit.
 
 No equations here: a control period is ``ControlUnit.step(i_alpha, i_beta, omega_ref,
-theta_meas, omega_meas)``, then the unit's outputs are copied into the output variables.
+theta_meas, omega_meas)`` (called as the unit's ``kernel_step``), then the unit's outputs are
+copied into the output variables.
 
 The unit keeps its own sample clock: the sample period ``dt`` is a parameter (0, the
 default: the size of the first communication step), the sample instants are
@@ -179,6 +180,7 @@ class FocSlave(DriveSlave):
                                  self.parameters(ControllerParams), self.parameters(EkfParams), dt,
                                  self.parameters(StartupParams) if self._sensorless else None)
         self._measured_frame = self._unit.angle_source == "measured"
+        self._kernel_step = self._unit.kernel_step
         self.mark_built()
         self._copy_outputs()
 
@@ -242,10 +244,10 @@ class FocSlave(DriveSlave):
                 if self._sensorless:  # never reads theta_meas, omega_meas
                     (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
                      self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode, self.fault, self.theta_ctrl,
-                     self.omega_ctrl) = self._unit.step(self.i_alpha, self.i_beta, self.omega_ref)
+                     self.omega_ctrl) = self._kernel_step(self.i_alpha, self.i_beta, self.omega_ref)
                 else:
                     (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
-                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._unit.step(
+                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._kernel_step(
                         self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
                     self.omega_ctrl = self.omega_hat
                     self.theta_ctrl = self.theta_meas if self._measured_frame else self.theta_hat

@@ -58,6 +58,7 @@ import ctypes
 import dataclasses
 import functools
 import json
+import operator
 import os
 import re
 import sys
@@ -85,6 +86,9 @@ LICENSE = "MIT"
 START_TIME, STOP_TIME, STEP_SIZE = 0.0, 350.0, 1.0e-4
 
 _KINDS = {"float": Real, "int": Integer, "bool": Boolean, "str": String}
+#: the most value-reference sets whose get_real reader a slave keeps (memory stays bounded whatever
+#: a master asks for)
+_READS_KEPT = 64
 #: parameter defaults of a packaged copy of an FMU (resources/), see ``packaged_starts``
 START_VALUES_FILE = "start_values.json"
 
@@ -207,6 +211,9 @@ class DriveSlave(Fmi2Slave):
         self._real_names: list = []
         #: by value reference: the attribute of a Real input (set_real writes it), None otherwise
         self._real_inputs: list = []
+        #: get_real's readers by the tuple of value references asked for (a master asks for the same few
+        #: sets every step): (operator.attrgetter of their attributes, whether it is one)
+        self._real_reads: dict = {}
         self._initialized = False
         self._stale = True  # parameters changed since the physics was built
         self._built_with = None  # parameter values the physics was built with
@@ -359,8 +366,16 @@ class DriveSlave(Fmi2Slave):
         try:
             if self._stale:  # only before initialisation: outputs calculated from parameters
                 self.build()
-            names = self._real_names
-            return [getattr(self, names[vr]) for vr in vrs]
+            key = tuple(vrs)
+            read = self._real_reads.get(key)
+            if read is None:
+                names = self._real_names
+                values = [getattr(self, names[vr]) for vr in vrs]  # raises for a vr that is not a Real
+                if 0 < len(key) and len(self._real_reads) < _READS_KEPT:
+                    self._real_reads[key] = (operator.attrgetter(*[names[vr] for vr in vrs]), len(key) == 1)
+                return values
+            get, single = read
+            return [get(self)] if single else [*get(self)]
         except Exception as exc:
             exc = self._checked_access(self._real_getters, vrs, exc)
             self._fail("fmi2GetReal", exc)

@@ -15,6 +15,10 @@ from pmsm_cosim.engine.recording import read_results
 def test_bench_refuses_a_short_slice(capsys):
     assert main(["bench", "--slice", "5", "--no-memory"]) == 2
     assert "--slice must be" in capsys.readouterr().err
+    assert main(["bench", "--cycle-slice", "5", "--no-memory"]) == 2
+    assert "--cycle-slice must be a whole number of 1e-4 s steps and at least 10 s (got 5)" in capsys.readouterr().err
+    assert main(["bench", "--cycle-slice", "2000", "--no-memory"]) == 2
+    assert "--cycle-slice must be at most wltc3b's 1800 s (got 2000)" in capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")
@@ -42,3 +46,22 @@ def test_passthrough_fmus_compute_nothing(passthrough, tmp_path):
     assert r["omega_ref"][-1] > 0.0  # the signal reached the controller...
     for col in ("v_alpha", "v_beta", "v_q", "omega_hat", "omega_m", "i_d", "T_e"):
         assert (r[col] == r[col][0]).all(), col  # ...which computed nothing, nor did the plant
+
+
+def test_the_cycle_case_is_the_sensorless_drive_on_wltc(passthrough, tmp_path):
+    """(e), (f): acceleration-sensorless's settings with the cycle's speed reference (a linear table, set
+    with the controller's connections), the real or the pass-through FMUs."""
+    real = project_fmus()
+    spec = bench.cycle_spec(0.05, real["PmsmEvPlant"], real["FocSensorless"])
+    ctrl = spec.component("ctrl", "test")
+    assert ctrl.fmu == real["FocSensorless"] and ctrl.start["reference"] == "fw"
+    assert ctrl.start["current_control"] == "high_speed" and ctrl.start["discretisation"] == "bilinear"
+    assert spec.component("plant", "test").start["gear_model"] == "power_flow"
+    assert spec.signals["omega_ref"].profile.interpolation == "linear"
+    assert spec.stop_time == 0.05
+    m = Master(spec)
+    assert m.run(tmp_path / "real", catch_sigint=False)["status"] == "completed"
+    assert [tr.signals for tr in m.steppers[0].transfers] == [["ctrl.omega_ref"]]
+    assert read_results(tmp_path / "real")["mode"][-1] == 0.0  # aligning: the sensorless unit
+    dummy = bench.cycle_spec(0.05, passthrough["PassThroughPlant"], passthrough["PassThroughFoc"])
+    assert Master(dummy).run(tmp_path / "dummy", catch_sigint=False)["status"] == "completed"

@@ -902,6 +902,33 @@ def test_slave_classes_validate_in_plain_python():
     assert ctrl._unit.dt == 2e-4  # the first step size is the sample period
 
 
+def test_get_real_reads_the_present_values_of_the_same_references_every_time():
+    """get_real keeps a reader per set of value references asked for: the values it gives are those of
+    the moment (outputs after a step, a property of the unit), and a reference that is not a Real
+    variable is still refused after a set was kept."""
+    from pmsm_ev_fmus.foc_sensorless import FocSensorless
+    from pmsm_ev_fmus.slave_support import FmuUsageError
+
+    slave = FocSensorless(instance_name="direct")
+    vr = {v.name: ref for ref, v in slave.vars.items()}
+    slave.exit_initialization_mode()
+    refs = [vr["v_alpha"], vr["mode"], vr["T_brake"]]
+    seen = []
+    for k in range(30000):  # into the alignment's ramp: the voltage moves
+        slave.i_alpha, slave.i_beta = 0.01 * math.sin(k), 0.0
+        slave.do_step(k * DT, DT)
+        if k % 10000 == 0:
+            seen.append(slave.get_real(refs))
+            assert seen[-1] == [slave.v_alpha, slave.mode, slave._unit.T_brake]
+            assert slave.get_real([vr["v_alpha"]]) == [slave.v_alpha]
+    assert len({tuple(v) for v in seen}) == len(seen)  # the values of the moment, not the first ones
+    assert (tuple(refs), ) == tuple(key for key in slave._real_reads if len(key) == 3)
+    with pytest.raises(FmuUsageError, match="is not a Real"):
+        slave.get_real([vr["v_alpha"], vr["reference"]])
+    with pytest.raises(FmuUsageError, match="no variable has the value reference 100000"):
+        slave.get_real([vr["v_alpha"], 100000])
+
+
 FAILURE_SCRIPT = """
 import sys, fmpy
 from fmpy.fmi2 import FMU2Slave

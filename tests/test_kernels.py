@@ -16,6 +16,7 @@ import pytest
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import accel, kernels
 from pmsm_ev.kernels import layout
+from pmsm_ev.plant import Plant
 from pmsm_ev.results import ALL_COLUMNS
 from regression_runs import CASES
 
@@ -125,6 +126,26 @@ def test_vectors_follow_the_mode():
         assert isinstance(v, np.ndarray) and v.dtype == np.float64 and v.flags.c_contiguous
     else:
         assert v == [0.0, 0.0, 0.0]
+
+
+def test_a_kernels_direct_entry_gives_the_dispatchers_numbers():
+    """``accel.direct``: the compiled entry point of a kernel with one signature (no per-call dispatch),
+    the same machine code: the same bits; a function that is not a compiled kernel comes back as it is."""
+    k = accel.kernels()
+    plant = Plant()  # its parameter vector filled from the defaults
+    pp, energy = plant._pp, plant.energy
+    fast = accel.direct(k.plant_step)
+    args = (10.0, 50.0, 100.0, 0.3, 20.0, -15.0, 0.01, 1e-4)
+    e1, e2 = (energy.copy(), energy.copy()) if accel.compiled() else (list(energy), list(energy))
+    assert fast(*args, pp, e1) == k.plant_step(*args, pp, e2)
+    assert list(e1) == list(e2) and any(e1)
+    if accel.compiled():
+        assert fast is not k.plant_step
+        with pytest.raises(TypeError):
+            fast(*args, list(pp), e1)  # no conversion: a vector must be an array
+    else:
+        assert fast is k.plant_step
+    assert accel.direct(len) is len
 
 
 

@@ -120,6 +120,43 @@ def test_signals_are_profile_values_at_k_times_step_and_set_only_on_change(tmp_p
     assert r["u_sets"][-1] == 3
 
 
+RAMP_INTO_W = """
+[signals.ramp]
+interpolation = "linear"
+table = [[0.001, 0.0], [0.006, 1.3], [0.0075, -0.4]]
+drives = "snk.w"
+"""
+
+
+@pytest.mark.parametrize("loop", ["generated", "plain"])
+@pytest.mark.parametrize("algorithm, snk_multiple", [("gauss-seidel", 1), ("jacobi", 1), ("gauss-seidel", 3)])
+def test_a_ramp_goes_in_the_set_of_the_connections(tmp_path, loop, algorithm, snk_multiple):
+    """A linear table's input into a component with Real connections is set in their fmi2SetReal (one
+    call, its value after theirs): the component sees the table's value at each of its steps, bit for
+    bit, as when the input is set on its own (the input recorded: it is, so that the row shows it)."""
+    ramp = Profile((0.001, 0.006, 0.0075), (0.0, 1.3, -0.4), "linear")
+    record = {"time": '"time"', "ramp": '"signals.ramp"', "last_w": '"snk.last_w"', "last_u": '"snk.last_u"',
+              "y": '"src.y"', "calls": '"snk.calls"'}
+    runs = {}
+    for merged in (True, False):
+        rec = dict(record) if merged else {**record, "w": '"snk.w"'}
+        path = toy_system(tmp_path, signals=RAMP_INTO_W, stop_time=0.012, algorithm=algorithm,
+                          snk_multiple=snk_multiple, record=rec, name=f"ramp{int(merged)}")
+        m = Master(load_system(path), loop=loop)
+        out = tmp_path / f"out{int(merged)}"
+        assert m.run(out, catch_sigint=False)["status"] == "completed"
+        snk = m.steppers[1]
+        assert [tr.signals for tr in snk.transfers] == ([["snk.w"]] if merged else [[]])
+        runs[merged] = read_results(out)
+    r = runs[True]
+    assert list(r["ramp"]) == [ramp(n * STEP) for n in range(13)]
+    for n in range(1, 13):  # the value at the component's last step, n0 = the last multiple below n
+        n0 = (n - 1) // snk_multiple * snk_multiple
+        assert r["last_w"][n] == ramp(n0 * STEP)
+    for col in record:
+        assert list(r[col]) == list(runs[False][col])
+
+
 def test_signal_from_csv(tmp_path):
     csv = tmp_path / "route.csv"
     csv.write_text("time,angle_deg\n0,0\n0.002,3\n0.005,-4\n")

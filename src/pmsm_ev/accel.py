@@ -179,6 +179,18 @@ def compiled() -> bool:
     return kernels() is not _source
 
 
+def direct(fn):
+    """The fastest callable of the kernel ``fn`` (of ``kernels()``): a compiled kernel with its one
+    explicit signature as its compiled entry point, which skips numba's per-call type dispatch
+    (~0.15 us a call; the same machine code, so the same numbers; arguments of another type are a
+    TypeError); any other ``fn`` as it is."""
+    overloads = getattr(fn, "overloads", None)
+    if not overloads or len(overloads) != 1:
+        return fn
+    entry = getattr(next(iter(overloads.values())), "entry_point", None)
+    return entry if callable(entry) else fn
+
+
 def vector(n: int):
     """A zeroed vector of n floats for the kernels."""
     if compiled():

@@ -40,6 +40,7 @@ frame's angle and speed as outputs 13-16.
 
 from __future__ import annotations
 
+import functools
 import math
 
 from . import accel
@@ -121,6 +122,12 @@ class ControlUnit:
         self._kernels = accel.kernels()
         self._s = accel.vector(_k.UNIT_STATE)
         self._c = accel.vector(_k.UNIT_PARAMS)
+        #: the step's kernel on this unit's vectors (what ``step`` calls, for a caller's hot loop):
+        #: ``(i_alpha, i_beta, omega_ref)`` of the sensorless unit, ``(i_alpha, i_beta, omega_ref,
+        #: theta_meas, omega_meas)`` of the others; returns ``step``'s outputs
+        self.kernel_step = functools.partial(
+            accel.direct(self._kernels.sensorless_step if observer == "sensorless" else self._kernels.control_step),
+            self._s, self._c)
         self.observer = make_observer(observer, self.motor, dt, self.ekf_params, state=self._s, params=self._c)
         # the sensored baseline has no angle estimate of its own: always the measured angle;
         # the sensorless unit has no other
@@ -287,8 +294,8 @@ class ControlUnit:
         via ``estimates``); the sensorless unit adds its mode and ignores theta_meas and
         omega_meas."""
         if self.sensorless:
-            return self._kernels.sensorless_step(self._s, self._c, i_alpha, i_beta, omega_ref)
-        return self._kernels.control_step(self._s, self._c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas)
+            return self.kernel_step(i_alpha, i_beta, omega_ref)
+        return self.kernel_step(i_alpha, i_beta, omega_ref, theta_meas, omega_meas)
 
     # outputs of the observer, for recording
     @property

@@ -114,6 +114,7 @@ class Plant:
             self._pp[slot] = float(value)
         #: the energies since the start [J] (``pmsm_ev.kernels.PLANT_ENERGY_LAYOUT``, ``energies`` by name)
         self.energy = accel.vector(_k.PLANT_ENERGY)
+        self._plant_step = accel.direct(self._kernels.plant_step)
         self.reset()
 
     def reset(self) -> None:
@@ -199,8 +200,8 @@ class Plant:
                 v_alpha *= self._u_lim / mag
                 v_beta *= self._u_lim / mag
         self.v_alpha_applied, self.v_beta_applied = v_alpha, v_beta
-        out = self._kernels.plant_step(self.i_d, self.i_q, self.omega_m, self.theta_e,
-                                       v_alpha, v_beta, delta, dt, self._pp, self.energy)
+        out = self._plant_step(self.i_d, self.i_q, self.omega_m, self.theta_e, v_alpha, v_beta, delta, dt,
+                               self._pp, self.energy)
         (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta,
          self.T_e, self.T_L_mech, self.v_vehicle, dx) = out
         out = out[:9]

@@ -13,13 +13,25 @@ wall time per macro step of
     value changes, as the master does (its loop is a Python ``for`` over ``execution.step()``;
     nothing is recorded);
 
-and prints one table with the ratios a/b and d/a, in wall time (what a user waits) and in
+and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 60 s: standing to
+11 s, the alignment and the I-f start, then the drive away, 44.5 km/h at 35 s, 14.7 km/h at 60 s),
+
+(e) the sensorless cycle drive: the master with ``PmsmEvPlant`` + ``FocSensorless`` in the
+    settings of ``acceleration-sensorless`` (the reference generator in field weakening on
+    360 V, the high-speed current control, Tustin's current model, the regenerative limit
+    and the friction brake, the plant's inverter losses and power-flow gear), the cycle's
+    omega_ref a linear table that changes every step;
+(f) the same system, signals and cycle with the pass-through FMUs: the FMI floor of (e);
+
+and prints one table with the ratios a/b, d/a and e/f, in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
-includes its worker threads). (a)-(c) include the recording of a row
+includes its worker threads). (a)-(c), (e), (f) include the recording of a row
 every 10 ms, as in a normal run. With ``memory`` it also runs ``pmsm-cosim run scenario1``
 (figures included) for 100 s and for the full 350 s, each in a fresh process, and prints
 their wall time and peak resident memory (``wait4`` of that process): memory must not grow
-with the duration.
+with the duration. With ``cycle_memory`` it runs the whole WLTC 3b sensorless,
+``pmsm-cosim run acceleration-sensorless --cycle wltc3b`` (figures included), for half the
+cycle (900 s) and the whole (1800 s, 18 million steps), likewise.
 
 Timings on a shared machine vary with its load: the 1, 5 and 15 min load averages are
 printed with the table.
@@ -38,16 +50,22 @@ import time
 from pathlib import Path
 
 from pmsm_ev import accel
+from pmsm_ev import cycles as pcycles
 from pmsm_ev_fmus.build import BENCH_FMUS, build_all, build_fmu
 
 from ..engine.errors import CosimError
 from ..engine.master import Master
 from .drive import load_system, project_fmu_dir
+from .overrides import apply_overrides
 from .reference import run_reference
 
 SCENARIO = "scenario1"
 DEFAULT_SLICE = 20.0  #: [s] of simulated time per case
 MEMORY_STOP_TIMES = (100.0, 350.0)
+CYCLE_SYSTEM = "acceleration-sensorless"  #: cases (e), (f): the sensorless unit's settings on a cycle
+CYCLE = "wltc3b"
+DEFAULT_CYCLE_SLICE = 60.0  #: [s] of the cycle in cases (e), (f)
+CYCLE_MEMORY_STOP_TIMES = (900.0, 1800.0)  #: half the WLTC, the whole
 
 
 def load_average() -> str:
@@ -73,11 +91,22 @@ def _spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None)
     return spec
 
 
+def cycle_spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None):
+    """The system of (e) and (f): ``acceleration-sensorless --cycle wltc3b --stop-time stop_time``."""
+    spec = apply_overrides(CYCLE_SYSTEM, cycle=CYCLE, stop_time=stop_time)
+    if plant is not None:
+        spec.set_fmu("plant", plant)
+    if ctrl is not None:
+        spec.set_fmu("ctrl", ctrl)
+    return spec
+
+
 def cosim_us_per_step(stop_time: float, work: Path, plant: Path | None = None,
-                      ctrl: Path | None = None) -> tuple[float, float]:
-    """(a) or (b): the master's loop (wall, CPU) time per macro step [us]."""
+                      ctrl: Path | None = None, spec=None) -> tuple[float, float]:
+    """(a), (b), or (e), (f) with the ``spec`` of ``cycle_spec``: the master's loop (wall, CPU) time
+    per macro step [us]."""
     out = Path(tempfile.mkdtemp(prefix="cosim-", dir=work))
-    master = Master(_spec(stop_time, plant, ctrl))
+    master = Master(spec if spec is not None else _spec(stop_time, plant, ctrl))
     m = master.run(out, catch_sigint=False)
     if m["status"] != "completed":
         raise CosimError(f"benchmark run did not complete: {m['status']}")
@@ -148,13 +177,15 @@ def passthrough_fmus(out_dir: Path) -> dict[str, Path]:
 
 
 def project_fmus() -> dict[str, Path]:
-    return build_all(out_dir=project_fmu_dir(), names=["PmsmEvPlant", "FocEkf5"])
+    return build_all(out_dir=project_fmu_dir(), names=["PmsmEvPlant", "FocEkf5", "FocSensorless"])
 
 
 # -- memory: a fresh process per run ---------------------------------------------------------
-def run_child(stop_time: float, out_dir: Path) -> tuple[float, float, str]:
-    """``pmsm-cosim run scenario1 --stop-time T`` in a new process: (wall s, peak RSS MB, last line)."""
-    cmd = [sys.executable, "-m", "pmsm_cosim.app.cli", "run", SCENARIO, "--stop-time", repr(stop_time),
+def run_child(stop_time: float, out_dir: Path, system: str = SCENARIO, options=(), lines: int = 1
+              ) -> tuple[float, float, str]:
+    """``pmsm-cosim run SYSTEM [options] --stop-time T`` in a new process: (wall s, peak RSS MB, its
+    last ``lines`` lines of output)."""
+    cmd = [sys.executable, "-m", "pmsm_cosim.app.cli", "run", system, *options, "--stop-time", repr(stop_time),
            "--out", str(out_dir), "--quiet"]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -163,15 +194,33 @@ def run_child(stop_time: float, out_dir: Path) -> tuple[float, float, str]:
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
     proc.stdout.close()
-    last = output.strip().splitlines()[-1] if output.strip() else ""
+    tail = output.strip().splitlines()[-lines:] if output.strip() else [""]
     if proc.returncode != 0:
-        raise CosimError(f"{' '.join(cmd[2:])} exited with {proc.returncode}: {last}")
-    return wall, usage.ru_maxrss / 1024.0, last  # ru_maxrss is in KiB on Linux
+        raise CosimError(f"{' '.join(cmd[2:])} exited with {proc.returncode}: {tail[-1]}")
+    return wall, usage.ru_maxrss / 1024.0, "\n".join(tail)  # ru_maxrss is in KiB on Linux
+
+
+def memory_runs(say, stop_times, work: Path, system: str = SCENARIO, options=(), lines: int = 1) -> dict:
+    """``run_child`` for each stop time, printed: {T: (wall s, peak RSS MB)}; the growth of the peak
+    against the first."""
+    mem = {}
+    for stop in stop_times:
+        wall, rss, tail = run_child(stop, work / f"run-{system}-{stop:g}", system, options, lines)
+        mem[stop] = (wall, rss)
+        extra = ""
+        if stop != stop_times[0]:
+            base = mem[stop_times[0]][1]
+            extra = f" ({100.0 * (rss - base) / base:+.1f} % vs T = {stop_times[0]:g} s)"
+        say(f"  T = {stop:>5g} s: {wall:7.1f} s wall, peak RSS {rss:7.1f} MB{extra}; "
+            f"load average {load_average()}")
+        for line in tail.splitlines():
+            say(f"      {line}")
+    return mem
 
 
 # -- the report ------------------------------------------------------------------------------
 def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: bool = True,
-              out=sys.stdout) -> dict:
+              out=sys.stdout, cycle_slice: float = DEFAULT_CYCLE_SLICE, cycle_memory: bool = False) -> dict:
     def say(text: str = "") -> None:
         print(text, file=out, flush=True)
 
@@ -182,48 +231,54 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         dummy = passthrough_fmus(work / "fmus")
         plant, ctrl = real["PmsmEvPlant"], real["FocEkf5"]
         n = round(slice_s / 1e-4)
-        say(f"step cost: {SCENARIO}, t = 0 .. {slice_s:g} s, dt = 1e-4 s ({n} macro steps per case); "
-            f"physics kernels: {jit_mode()}")
+        say(f"step cost: {SCENARIO}, t = 0 .. {slice_s:g} s, dt = 1e-4 s ({n} macro steps per case (a)-(d)); "
+            f"{CYCLE_SYSTEM} --cycle {CYCLE}, t = 0 .. {cycle_slice:g} s ({round(cycle_slice / 1e-4)} per case "
+            f"(e), (f)); physics kernels: {jit_mode()}")
         say(f"load average at start: {load_average()}")
         results["a"] = cosim_us_per_step(slice_s, work, plant, ctrl)
         results["b"] = cosim_us_per_step(slice_s, work, dummy["PassThroughPlant"], dummy["PassThroughFoc"])
         results["c"] = reference_us_per_step(slice_s, work)
         results["d"] = libcosim_us_per_step(slice_s, plant, ctrl) if libcosim else None
+        results["e"] = cosim_us_per_step(cycle_slice, work,
+                                         spec=cycle_spec(cycle_slice, plant, real["FocSensorless"]))
+        results["f"] = cosim_us_per_step(cycle_slice, work, spec=cycle_spec(
+            cycle_slice, dummy["PassThroughPlant"], dummy["PassThroughFoc"]))
         rows = [
             ("(a) orchestrator + PmsmEvPlant/FocEkf5 FMUs", results["a"]),
             ("(b) orchestrator + pass-through FMUs", results["b"]),
             ("(c) monolithic reference (no FMUs)", results["c"]),
             ("(d) libcosim + PmsmEvPlant/FocEkf5 FMUs", results["d"]),
+            ("(e) sensorless cycle drive: FocSensorless FMUs", results["e"]),
+            ("(f) the same with pass-through FMUs", results["f"]),
         ]
-        say(f"{'case':<46}{'us/step wall':>14}{'us/step CPU':>13}")
+        say(f"{'case':<50}{'us/step wall':>14}{'us/step CPU':>13}")
         for label, value in rows:
             if value is None:
-                say(f"{label:<46}{'n/a':>14}  (" + ("libcosimpy not installed)" if libcosim else "skipped)"))
+                say(f"{label:<50}{'n/a':>14}  (" + ("libcosimpy not installed)" if libcosim else "skipped)"))
             else:
-                say(f"{label:<46}{value[0]:>14.2f}{value[1]:>13.2f}")
+                say(f"{label:<50}{value[0]:>14.2f}{value[1]:>13.2f}")
 
         def ratio(label, x, y):
-            say(f"{label:<46}{x[0] / y[0]:>14.2f}{x[1] / y[1]:>13.2f}")
+            say(f"{label:<50}{x[0] / y[0]:>14.2f}{x[1] / y[1]:>13.2f}")
 
         ratio("a/b", results["a"], results["b"])
         if results["d"] is not None:
             ratio("d/a", results["d"], results["a"])
+        ratio("e/f", results["e"], results["f"])
+        whole = round(pcycles.load(CYCLE).duration / 1e-4)
+        say(f"{'(e) x the whole ' + CYCLE + f' ({whole} steps) [s]':<50}{results['e'][0] * whole * 1e-6:>14.1f}"
+            f"{results['e'][1] * whole * 1e-6:>13.1f}")
         say(f"load average at end: {load_average()}")
         if memory:
             say()
             say(f"memory: 'pmsm-cosim run {SCENARIO} --stop-time T' (figures included), a fresh process each")
-            mem = {}
-            for stop in MEMORY_STOP_TIMES:
-                wall, rss, last = run_child(stop, work / f"run{stop:g}")
-                mem[stop] = (wall, rss)
-                extra = ""
-                if stop != MEMORY_STOP_TIMES[0]:
-                    base = mem[MEMORY_STOP_TIMES[0]][1]
-                    extra = f" ({100.0 * (rss - base) / base:+.1f} % vs T = {MEMORY_STOP_TIMES[0]:g} s)"
-                say(f"  T = {stop:>5g} s: {wall:7.1f} s wall, peak RSS {rss:7.1f} MB{extra}; "
-                    f"load average {load_average()}")
-                say(f"      {last}")
-            results["memory"] = mem
+            results["memory"] = memory_runs(say, MEMORY_STOP_TIMES, work)
+        if cycle_memory:
+            say()
+            say(f"memory: 'pmsm-cosim run {CYCLE_SYSTEM} --cycle {CYCLE} --stop-time T' (figures included), "
+                f"a fresh process each")
+            results["cycle_memory"] = memory_runs(say, CYCLE_MEMORY_STOP_TIMES, work, CYCLE_SYSTEM,
+                                                  ("--cycle", CYCLE), lines=2)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return results
@@ -235,12 +290,27 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--no-memory", action="store_true",
                     help="skip the 100 s and 350 s runs that measure peak memory (about 2 min)")
     ap.add_argument("--no-libcosim", action="store_true", help="skip case (d)")
+    ap.add_argument("--cycle-slice", type=float, default=DEFAULT_CYCLE_SLICE, metavar="S",
+                    help=f"simulated seconds of {CYCLE} in cases (e), (f), from t = 0 (default "
+                         f"{DEFAULT_CYCLE_SLICE:g}; at least 10)")
+    ap.add_argument("--cycle-memory", action="store_true",
+                    help=f"also run the whole {CYCLE} sensorless ('pmsm-cosim run {CYCLE_SYSTEM} --cycle {CYCLE}', "
+                         f"18 million steps) and half of it, wall time and peak memory (about 2 x 3-5 min)")
+
+
+def _check_slice(value: float, option: str) -> None:
+    if not (value >= 10.0 and math.isfinite(value)) or abs(round(value / 1e-4) * 1e-4 - value) > 1e-9:
+        raise CosimError(f"{option} must be a whole number of 1e-4 s steps and at least 10 s (got {value:g})")
 
 
 def run_from_args(a) -> int:
-    if not (a.slice >= 10.0 and math.isfinite(a.slice)) or abs(round(a.slice / 1e-4) * 1e-4 - a.slice) > 1e-9:
-        raise CosimError(f"--slice must be a whole number of 1e-4 s steps and at least 10 s (got {a.slice:g})")
-    run_bench(a.slice, memory=not a.no_memory, libcosim=not a.no_libcosim)
+    _check_slice(a.slice, "--slice")
+    _check_slice(a.cycle_slice, "--cycle-slice")
+    if a.cycle_slice > pcycles.load(CYCLE).duration:
+        raise CosimError(f"--cycle-slice must be at most {CYCLE}'s {pcycles.load(CYCLE).duration:g} s "
+                         f"(got {a.cycle_slice:g})")
+    run_bench(a.slice, memory=not a.no_memory, libcosim=not a.no_libcosim, cycle_slice=a.cycle_slice,
+              cycle_memory=a.cycle_memory)
     return 0
 
 

@@ -381,7 +381,10 @@ class LeanCalls:
     cost). These copies have no ``argtypes`` for get/set and are called with arguments that
     already have their C types: the handle ``handle`` (``c_void_p``), a value-reference
     array, a ``c_size_t`` count (:meth:`count`) and a value array. ``do_step`` keeps
-    ``argtypes`` (its time arguments are Python floats).
+    ``argtypes`` (its time arguments are Python floats); ``do_step_typed`` is the same
+    fmi2DoStep without them, for arguments that have their C types already (the handle,
+    ``c_double`` time and step size, a ``c_int`` flag: the loop sets one ``c_double`` to the
+    time of each step rather than have ctypes convert two floats and an int per call).
 
     For a Python FMU (``python_fmu``: pythonfmu) they come from a ``ctypes.PyDLL`` handle on
     the same library: the GIL is not released around the call, which the FMU would take back
@@ -402,6 +405,10 @@ class LeanCalls:
         self.get_real, self.set_real = self._get["Real"], self._set["Real"]
         self.do_step = self._function(lib, "fmi2DoStep",
                                       [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int])
+        # lib[name] is a function object of its own (getattr's is kept on the library): no argtypes
+        self.do_step_typed = lib["fmi2DoStep"]
+        self.do_step_typed.restype = ctypes.c_int
+        self.do_step_typed.argtypes = None
 
     @staticmethod
     def _function(lib, name, argtypes):

@@ -19,6 +19,11 @@ Coupling, at each base step n (after the row of t_n is recorded):
 Scenario signals are evaluated as ``profile(n * h)`` (re-evaluated only when the
 profile can have changed: every step on a linear ramp, at the breakpoints of a
 piecewise-constant table) and an input they drive is set only when its value changed.
+A linear table's input into a component that has Real connections (a speed reference
+sampled as a table, which changes every step) goes in the same fmi2SetReal as those
+connections' values, one more value in that call instead of a call of its own (unless
+the input is itself a recorded column: then it is set at once, so that the row of t_n
+shows it); the component sees the same value at its step either way.
 
 Connections join variables of the same FMI type (Real, Integer, Boolean, String, or
 Enumeration of the same enumeration type): per (destination, source, type) one fmi2Get and
@@ -141,6 +146,8 @@ class _SignalTarget:
     label: str
     immediate: bool  #: set at once when the value changes (single-rate), else queued
     queued: bool = False
+    #: the value's slot is in a connection transfer's buffer: set with those values (no call of its own)
+    merged: bool = False
 
 
 @dataclass
@@ -151,6 +158,8 @@ class _Signal:
     value: float = math.nan
     next_n: int = 0  #: the first base step at which the profile must be evaluated again
     ramp_end: int = 0  #: on a linear segment: the first step at or after its end
+    #: that segment's constants (``Table.segment``): its value at t is v0 + dv * (t - t0) / dt
+    segment: tuple = (0.0, 0.0, 0.0, 1.0)
 
 
 @dataclass
@@ -164,8 +173,10 @@ class _Transfer:
     buf: object  #: the ctypes value array the calls see
     conns: list  #: the connections, in the order of ``buf``
     #: Real: an array.array whose memory ``buf`` is (the loop sums it several times faster
-    #: than it could index the ctypes array); other types: None
+    #: than it could index the ctypes array); other types: None. After the connections' values
+    #: it may hold signal inputs (``_SignalTarget.merged``), set with them
     values: object = None
+    signals: list = field(default_factory=list)  #: the labels of those signal inputs
 
 
 @dataclass
@@ -177,6 +188,7 @@ class _Stepper:
     step_size: float
     handle: object = None
     do_step: object = None
+    do_step_typed: object = None  #: fmi2DoStep without argtypes (``LeanCalls.do_step_typed``)
     transfers: list = field(default_factory=list)  #: [_Transfer] into this component's inputs
     pending: list = field(default_factory=list)  #: queued signal targets (multi-rate)
 
@@ -217,7 +229,8 @@ class Master:
         for comp in s.components:
             inst = self.instances[comp.name]
             st = _Stepper(inst, comp.step_multiple, comp.step_multiple * self.h,
-                          handle=inst.lean.handle, do_step=inst.lean.do_step)
+                          handle=inst.lean.handle, do_step=inst.lean.do_step,
+                          do_step_typed=inst.lean.do_step_typed)
             self.steppers.append(st)
             by_name[comp.name] = st
         # connections grouped by (destination, source, type): one get and one set per group
@@ -260,10 +273,40 @@ class Master:
                 self._flush_pending(st, 0.0)
         except _StepFailed as exc:
             raise CosimError(str(exc)) from None
+        self._merge_ramp_inputs()
         for comp in s.components:
             self.instances[comp.name].exit_initialization()
         self._build_recorder()
         self._steps = self._compile_steps() if self.loop == "generated" else self._plain_steps
+
+    def _merge_ramp_inputs(self) -> None:
+        """Give each input of a linear table (set at once by the initialisation) a slot in the buffer of
+        its component's first Real transfer, set with it from now on (see the module's docstring)."""
+        recorded = {(col.instance, col.variable) for col in self.spec.columns if col.kind == "variable"}
+        for sig in self.signals:
+            if getattr(sig.profile, "interpolation", None) != "linear" or len(sig.profile.times) < 2:
+                continue
+            for tg in sig.targets:
+                inst_name, _, var = tg.label.partition(".")
+                real = [tr for tr in tg.stepper.transfers if tr.kind == "Real"]
+                if not real or (inst_name, var) in recorded:
+                    continue
+                tr, inst = real[0], tg.stepper.inst
+                src = self.instances[tr.src]
+                k = len(tr.values) - len(tr.signals)  # the connections' values
+                svr = vr_array([src.variables[c.src_var].valueReference for c in tr.conns])
+                dvr = vr_array([inst.variables[c.dst_var].valueReference for c in tr.conns]
+                               + [inst.variables[label.partition(".")[2]].valueReference
+                                  for label in tr.signals + [tg.label]])
+                values = array.array("d", list(tr.values) + [sig.value])
+                buf = (ctypes.c_double * len(values)).from_buffer(values)
+                tr.get = functools.partial(src.lean.getter("Real"), src.lean.handle, svr, src.lean.count(k), buf)
+                tr.set = functools.partial(inst.lean.setter("Real"), inst.lean.handle, dvr,
+                                           inst.lean.count(len(values)), buf)
+                tr.values, tr.buf = values, buf
+                tr.signals.append(tg.label)
+                tg.buf = (ctypes.c_double * 1).from_buffer(values, 8 * (len(values) - 1))
+                tg.merged = True
 
     def _build_recorder(self) -> None:
         """Per instance, one get call per type for the recorded variables; a row plan."""
@@ -312,13 +355,16 @@ class Master:
             m += 1
         return m
 
-    def _next_eval(self, profile, n: int) -> tuple[int, int]:
-        """(next step at which ``profile`` can differ from ``profile(n h)``, end of the ramp)."""
+    def _next_eval(self, sig: _Signal, n: int) -> tuple[int, int]:
+        """(next step at which ``sig.profile`` can differ from ``profile(n h)``, end of the ramp);
+        on a ramp, its constants in ``sig.segment``."""
+        profile = sig.profile
         ts = profile.times
         i = bisect.bisect_right(ts, n * self.h) - 1
         if i + 1 >= len(ts):
             return _NEVER, 0  # after the last breakpoint: constant
         if profile.interpolation == "linear" and i >= 0:
+            sig.segment = profile.segment(i)
             return n + 1, self._first_step_at(ts[i + 1], n)  # on a ramp: every step
         return self._first_step_at(ts[i + 1], n), 0  # constant until the next breakpoint
 
@@ -329,11 +375,17 @@ class Master:
         nxt = _NEVER
         for sig in self.signals:
             if n >= sig.next_n:
-                v = sig.profile(t)
+                if n < sig.ramp_end:  # on the ramp of the last evaluation: profile(t), its constants kept
+                    v0, dv, t0, dts = sig.segment
+                    v = v0 + dv * (t - t0) / dts
+                else:
+                    v = sig.profile(t)
                 if v != sig.value:
                     sig.value = v
                     for tg in sig.targets:
                         tg.buf[0] = v
+                        if tg.merged:  # set with its component's connections
+                            continue
                         if tg.immediate:
                             status = tg.set()
                             if status > 1:
@@ -344,7 +396,7 @@ class Master:
                 if n + 1 < sig.ramp_end:
                     sig.next_n = n + 1
                 else:
-                    sig.next_n, sig.ramp_end = self._next_eval(sig.profile, n)
+                    sig.next_n, sig.ramp_end = self._next_eval(sig, n)
             if sig.next_n < nxt:
                 nxt = sig.next_n
         return nxt
@@ -376,7 +428,8 @@ class Master:
     def _put_failed(self, st: _Stepper, j: int, t: float, status: int) -> _StepFailed:
         tr = st.transfers[j]
         st.inst.note_status(status)
-        return _StepFailed(self._describe(st.inst, f"fmi2Set{tr.kind} of the inputs from {tr.src}", t))
+        extra = "".join(f", {label}" for label in tr.signals)
+        return _StepFailed(self._describe(st.inst, f"fmi2Set{tr.kind} of the inputs from {tr.src}{extra}", t))
 
     def _check_finite(self, st: _Stepper, j: int, t: float) -> None:
         """Raise if a Real value just read for a connection is NaN or infinite (the loop calls
@@ -463,12 +516,12 @@ class Master:
         ns = {"_StepFailed": _StepFailed, "_Interrupted": _Interrupted, "update": self._update_signals,
               "h": self.h, "fail_get": self._get_failed, "fail_set": self._put_failed,
               "fail_step": self._step_failed, "check_finite": self._check_finite, "flush": self._flush_pending,
-              "vsum": sum}
+              "vsum": sum, "t_c": ctypes.c_double(0.0), "true_c": ctypes.c_int(1)}
         jacobi = self.spec.algorithm == "jacobi"
         reads, writes, steps = [], [], []
         for i, st in enumerate(self.steppers):
             ns[f"st{i}"], ns[f"pend{i}"] = st, st.pending
-            ns[f"do{i}"], ns[f"h{i}"] = functools.partial(st.do_step, st.handle), st.step_size
+            ns[f"do{i}"], ns[f"h{i}_c"] = functools.partial(st.do_step_typed, st.handle), ctypes.c_double(st.step_size)
             guard = f"if n % {st.multiple} == 0:" if st.multiple > 1 else None
             ind = "    " if guard else ""
 
@@ -481,7 +534,7 @@ class Master:
                 read += [f"{ind}if (s := get{i}_{j}()) > 1: raise fail_get(st{i}, {j}, t, s)"]
                 if tr.kind == "Real":
                     ns[f"buf{i}_{j}"] = tr.values
-                    if len(tr.values) <= _UNROLL:
+                    if len(tr.values) <= _UNROLL:  # (signal inputs after the connections: finite)
                         total = " + ".join(f"buf{i}_{j}[{k}]" for k in range(len(tr.values)))
                     else:
                         total = f"vsum(buf{i}_{j})"
@@ -495,7 +548,7 @@ class Master:
             flush = []
             if st.multiple > 1 and any(tg.stepper is st for sig in self.signals for tg in sig.targets):
                 flush = [f"{ind}if pend{i}: flush(st{i}, t)"]  # queued signal inputs
-            step = [f"{ind}if (s := do{i}(t, h{i}, 1)) > 1: raise fail_step(st{i}, t, s)"]
+            step = [f"{ind}if (s := do{i}(t_c, h{i}_c, true_c)) > 1: raise fail_step(st{i}, t, s)"]
             if jacobi:  # all reads at t_n, then all writes, then all steps
                 reads += block(read)
                 writes += block(write + flush)
@@ -511,6 +564,7 @@ class Master:
             "            if n >= sig_next:",
             "                sig_next = update(n)",
             "            t = n * h",
+            "            t_c.value = t  # the time of fmi2DoStep, as a C double (do_step_typed)",
             *("            " + line for line in body),
             "    except _StepFailed as exc:",
             "        exc.n = n",

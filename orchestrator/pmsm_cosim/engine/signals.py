@@ -59,6 +59,12 @@ class Table:
         t0, t1 = ts[i], ts[i + 1]
         return vs[i] + (vs[i + 1] - vs[i]) * (t - t0) / (t1 - t0)
 
+    def segment(self, i: int) -> tuple[float, float, float, float]:
+        """The constants (v0, dv, t0, dt) of the linear segment from breakpoint i to i + 1: for a t in
+        it, ``v0 + dv * (t - t0) / dt`` is ``self(t)``, bit for bit (the same operations)."""
+        ts, vs = self.times, self.values
+        return vs[i], vs[i + 1] - vs[i], ts[i], ts[i + 1] - ts[i]
+
 
 def _show(text: str, limit: int = 40) -> str:
     """``repr`` of a piece of a file, on one line and cut to ``limit`` characters."""
