@@ -289,19 +289,22 @@ def render(data, fig_names) -> list[str]:
         bal, wc = f["whole"]["balance"], f["whole"]["wheel"]
         checks.append((scen, setup.label, bal, wc))
     if checks:
-        bal_ok = all(b.get("passed") for _, _, b, _ in checks)
-        wc_ok = all(w.get("passed") for _, _, _, w in checks)
+        def where(failed) -> str:
+            return "in every run" if not failed else "in every run except " + "; ".join(failed)
+
+        bal_bad = [f"{sc}, {lb} ({_num(b.get('relative'), '.2e')})" for sc, lb, b, _ in checks if not b.get("passed")]
+        wc_bad = [f"{sc}, {lb} (net {_pct(w.get('net_rel'), '.2f')}, traction {_pct(w.get('traction_rel'), '.2f')})"
+                  for sc, lb, _, w in checks if not w.get("passed")]
         worst_b = max(checks, key=lambda c: abs(c[2].get("relative") or 0.0))
         worst_w = max(checks, key=lambda c: max(abs(c[3].get("net_rel") or 0.0), abs(c[3].get("traction_rel") or 0.0)))
         wl = [c for c in checks if c[0] == "wltc3b"]
         L.append(
-            f"The energy balance closes to {cycle_energy.BALANCE_TOL:g} of the DC throughput in "
-            f"{'every run' if bal_ok else 'not every run'} (the largest: {worst_b[0]}, {worst_b[1]}, "
-            f"{_num(worst_b[2].get('relative'), '.2e')}, {_num(worst_b[2].get('residual_Wh'), '.2e')} Wh of "
-            f"{_num(worst_b[2].get('throughput_Wh'), '.1f')} Wh)"
+            f"The energy balance closes to {cycle_energy.BALANCE_TOL:g} of the DC throughput {where(bal_bad)} "
+            f"(the largest: {worst_b[0]}, {worst_b[1]}, {_num(worst_b[2].get('relative'), '.2e')}, "
+            f"{_num(worst_b[2].get('residual_Wh'), '.2e')} Wh of {_num(worst_b[2].get('throughput_Wh'), '.1f')} Wh)"
             + (f"; over the sensored WLTC {_num(wl[0][2].get('relative'), '.2e')}" if wl else "")
-            + f". The wheel energy agrees with the road-load integral within {100 * cycle_energy.WHEEL_TOL:g} % in "
-            f"{'every run' if wc_ok else 'not every run'} (the largest difference: {worst_w[0]}, {worst_w[1]}, "
+            + f". The wheel energy agrees with the road-load integral within {100 * cycle_energy.WHEEL_TOL:g} % "
+            f"{where(wc_bad)} (the largest difference: {worst_w[0]}, {worst_w[1]}, "
             f"net {_pct(worst_w[3].get('net_rel'), '.4f')}, traction {_pct(worst_w[3].get('traction_rel'), '.4f')})"
             + (f"; the sensored WLTC's wheels took {wl[0][3]['wheel']['traction_Wh']:.1f} Wh in traction and gave "
                f"{wl[0][3]['wheel']['braking_Wh']:.1f} Wh in braking ({wl[0][3]['brake_Wh']:.2f} Wh of it to the "
