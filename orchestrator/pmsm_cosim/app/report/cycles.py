@@ -311,6 +311,22 @@ def render(data, fig_names) -> list[str]:
                f"friction brake), the road-load integral {wl[0][3]['road_load']['traction_Wh']:.1f} and "
                f"{wl[0][3]['road_load']['braking_Wh']:.1f} Wh" if wl and wl[0][3].get("wheel") else "")
             + ".\n")
+    hilly, level = rows.get("cyc-wltc3b-hilly"), rows.get("cyc-wltc3b")
+    if hilly and hilly["whole"]:
+        e = hilly["whole"]["energy"]
+        r = data.runs["cyc-wltc3b-hilly"].r
+        climb = r["x_vehicle"][r["delta_deg"] > 0.0]
+        lv = (level or {}).get("whole") or {}
+        L.append(
+            f"On the hilly road (`wltc3b-hilly`, sensored): the grade took {e['road_Wh']['grade']:.1f} Wh net "
+            f"(the potential energy at the end against the start), "
+            + (f"the car was on the climb from {float(climb[0]):.0f} m to {float(climb[-1]):.0f} m, " if climb.size
+               else "")
+            + f"rolled back at most {_num(hilly['synchronism'].get('roll_back_m'), '.3f')} m, and drew "
+            f"{_num(e.get('dc_Wh_per_km'))} Wh/km at the DC link"
+            + (f" against {_num(lv['energy'].get('dc_Wh_per_km'))} on the level road" if lv.get("energy") else "")
+            + f", {_pct(hilly['whole'].get('regen_share'), '.1f')} of the drawn energy regenerated"
+            + (f" ({_pct(lv.get('regen_share'), '.1f')} level)" if lv else "") + ".\n")
     for name in ("cyc_wltc3b_trace", "cyc_envelope"):
         if name in fig_names:
             L.append(f"![{name}](results/{name}.png)\n")
