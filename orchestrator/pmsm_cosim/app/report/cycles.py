@@ -27,11 +27,13 @@ AT_LIMIT = 0.98
 WLTC_PAIR = ("cyc-wltc3b", "cyc-wltc3b-sensorless")
 #: the angle error is drawn where the rotor turns faster than this [rad/s] (at standstill no back-EMF shows it)
 ANGLE_FROM_SPEED = 20.0
-#: the kinds of energy of the bars, in stacking order: (label, path in phase_energy's energy block)
+#: the kinds of energy of the bars, in stacking order: (label, path in phase_energy's energy block); with the
+#: stored energies' changes (0 for a phase from standstill to standstill) they add up to the DC link's net
 KINDS = (("aero", ("road_Wh", "aero")), ("rolling", ("road_Wh", "rolling")), ("grade", ("road_Wh", "grade")),
          ("friction brake", ("brake_Wh",)), ("copper", ("losses_Wh", "copper")),
          ("inverter", ("losses_Wh", "inverter")), ("iron", ("losses_Wh", "iron")),
-         ("motor friction", ("losses_Wh", "friction")), ("gear", ("losses_Wh", "gear")))
+         ("motor friction", ("losses_Wh", "friction")), ("gear", ("losses_Wh", "gear")),
+         ("kinetic energy gained", ("kinetic_change_Wh",)), ("magnetic energy gained", ("magnetic_change_Wh",)))
 LOSS_KINDS = ("copper", "inverter", "iron", "friction", "gear")
 
 
@@ -452,8 +454,8 @@ def figures(data, fig_dir: Path) -> list[Path]:
             for k, (kind, path) in enumerate(KINDS):
                 val = np.array([_get(p["energy"], path) for p in f["phases"]]) / km
                 bottom = np.where(val >= 0, pos, neg)
-                ax.bar(x, val, width * 0.95, bottom=bottom, color=f"C{k}", label=kind if j == 0 else None,
-                       hatch="//" if j else None, edgecolor="k", lw=0.3)
+                ax.bar(x, val, width * 0.95, bottom=bottom, color=plt.get_cmap("tab20")(k),
+                       label=kind if j == 0 else None, hatch="//" if j else None, edgecolor="k", lw=0.3)
                 pos, neg = pos + np.maximum(val, 0), neg + np.minimum(val, 0)
             dc = np.array([p["energy"]["dc_Wh"] for p in f["phases"]]) / km
             ax.plot(x, dc, "kD", ms=4, label="DC link, net" if j == 0 else None)
