@@ -128,6 +128,13 @@ def test_a_run_outside_the_band_is_flagged_with_where_and_why(runs, tmp_path):
     assert "wltc3b-sensorless" not in text.split("where and why:")[1].split("\n\n")[0]
     # the edited speed no longer matches the plant's wheel energy: the check says so
     assert "within 1 % in every run except wltc3b, sensored (net" in text
+    # a run that stopped early says so, with its last row
+    m["status"] = "diverged"
+    (bad / "metrics.json").write_text(json.dumps(m))
+    data = Data(cycle_configs(), {"cyc-wltc3b": bad})
+    text = "\n".join(cycles.render(data, []))
+    assert "| wltc3b | sensored | diverged (30 s) |" in text
+    assert f"the run did not complete (status diverged, last row at {r['time'][-1]:.2f} s)" in text
 
 
 def test_the_zoom_window_is_a_stop_and_restart_within_the_run():
