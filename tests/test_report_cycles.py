@@ -123,7 +123,7 @@ def test_a_run_outside_the_band_is_flagged_with_where_and_why(runs, tmp_path):
     line = next(x for x in text.splitlines() if x.startswith("- **wltc3b, sensored**"))
     t0, length = m["trace"]["t_longest_excursion"], m["trace"]["longest_excursion_s"]
     assert 19.0 <= t0 <= 21.0 and 3.0 <= length <= 6.0
-    assert f"inside the band only {share:.2f} % of the time" in line
+    assert f"inside the band only {share:.2f} % of the time ({m['trace']['excursions']} excursions: low " in line
     assert f"the longest, {length:.2f} s from {t0:.2f} s (phase low" in line and "ahead of the trace" in line
     assert "wltc3b-sensorless" not in text.split("where and why:")[1].split("\n\n")[0]
     # the edited speed no longer matches the plant's wheel energy: the check says so

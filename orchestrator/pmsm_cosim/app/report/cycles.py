@@ -83,6 +83,22 @@ def _phase_at(cycle, t: float) -> str:
     return "-"
 
 
+def excursions_by_phase(r: dict, cycle, trace: dict) -> str:
+    """The excursions outside the band by the phase they start in, with their total time: "low 2 (3.10 s), ..."
+    (the rows outside ``trace_band``, as ``pmsm_ev.results.trace_figures`` counts them)."""
+    t = r["time"]
+    keep = t <= trace["t_end"] + 1e-9
+    t, v = t[keep], r["v_vehicle"][keep]
+    lower, upper = trace_band(cycle.time, cycle.speed, trace["band_kmh"], trace["window_s"], t)
+    outside = np.concatenate(([0], ((v < lower - 1e-9) | (v > upper + 1e-9)).astype(np.int8), [0]))
+    starts, ends = np.nonzero(np.diff(outside) == 1)[0], np.nonzero(np.diff(outside) == -1)[0]
+    dt_row = float(np.median(np.diff(t)))
+    count: dict[str, list[float]] = {}
+    for a, b in zip(starts, ends):
+        count.setdefault(_phase_at(cycle, float(t[a])), []).append((b - a) * dt_row)
+    return ", ".join(f"{name} {len(x)} ({sum(x):.2f} s)" for name, x in count.items())
+
+
 def diagnosis(run, f: dict, lim) -> str:
     """Where and why a run left the band (or stopped), from its rows: the longest excursion's start, length,
     phase, the trace's speed there and the largest shortfall or excess in it, and what the drive was doing
@@ -114,7 +130,8 @@ def diagnosis(run, f: dict, lim) -> str:
             what.append(f"{s.get('episodes', 0)} loss-of-synchronism episodes in the run"
                         + (f", the fault latched at {s['t_fault']:.2f} s" if s.get("fault_latched") else ""))
         parts.append(
-            f"inside the band only {100 * share:.2f} % of the time ({tr['excursions']} excursions); the longest, "
+            f"inside the band only {100 * share:.2f} % of the time ({tr['excursions']} excursions: "
+            f"{excursions_by_phase(r, cycle, tr)}); the longest, "
             f"{length:.2f} s from {t0:.2f} s (phase {_phase_at(cycle, t0)}, trace at "
             f"{float(np.interp(t0, cycle.time, cycle.speed)) * KMH:.1f} km/h), the car "
             f"{abs(worst):.2f} km/h {'behind' if worst < 0 else 'ahead of'} the trace at most; meanwhile the drive "
