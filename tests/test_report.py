@@ -123,8 +123,8 @@ def test_report_cli_errors(tmp_path, capsys):
     assert main(["report", "--list"]) == 0
     ids = capsys.readouterr().out.split()
     assert "s1-ekf5-paper:" in ids and "s2-angle-ekf5ab:" in ids and "sl-hill-exact-sensorless:" in ids
-    assert len(report.CONFIGS) == 28 + 18 + 16 + 3  # paper and realism; sensorless: 3 x 3 x 2 + 8 angles x 2;
-    # the whole speed range: 3 acceleration runs
+    assert len(report.CONFIGS) == 28 + 18 + 16 + 3 + 9  # paper and realism; sensorless: 3 x 3 x 2 + 8 angles x 2;
+    # the whole speed range: 3 acceleration runs; the drive cycles: 4 cycles x 2 controllers + wltc3b-hilly
 
 
 def synthetic_run(t, theta_err, delta_deg, omega_m):

@@ -30,7 +30,7 @@ ALL_COLUMNS = CONTRACT_COLUMNS + EXTRA_COLUMNS
 SENSORLESS_COLUMNS = ("x_vehicle", "mode", "fault", "theta_ctrl", "omega_ctrl")
 #: the plant's energy outputs [J] (``pmsm_ev.plant.Plant.energies``, the plant FMU's outputs of the same
 #: names) and the position [m]: a run that records them all gets the energy block of its metrics
-#: (``energy_metrics``); no shipped scenario records them yet
+#: (``energy_metrics``); the acceleration and drive-cycle scenarios record them (``pmsm_ev.cycle_energy``: per phase)
 ENERGY_COLUMNS = ("E_dc", "E_regen", "E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling",
                   "E_grade", "E_brake", "E_kinetic", "W_magnetic", "x_vehicle")
 #: the least distance [m] for a figure per kilometre: 10 m, a car's length or two (below it, a run

@@ -18,14 +18,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import robustness, sensorless, synchronism
+from . import cycles, robustness, sensorless, synchronism
 from .configs import CONFIGS, OBSERVER_FMUS, SETUPS, T_FROM, Config, select
 from .document import RECOVERED, TABLE_KEYS, Data, _figures, load_split, recovery, render
 from .runs import _fmu_hashes, _key, reusable, run_configs
 
 __all__ = ["CONFIGS", "OBSERVER_FMUS", "RECOVERED", "SETUPS", "TABLE_KEYS", "T_FROM", "Config", "Data", "generate",
            "load_split", "recovery", "render", "reusable", "robustness", "run_configs", "select", "sensorless",
-           "synchronism",
+           "synchronism", "cycles",
            "_fmu_hashes", "_key"]
 
 

@@ -52,6 +52,14 @@ SPEED_RANGE_RUNS = (
     ("accel-sensorless", "acceleration-sensorless", SENSORLESS_SETUP),
 )
 
+#: the drive cycles (section "Drive cycles", ``cycles``): (config id, shipped scenario, setup); the sensored
+#: drive sets the reference, the sensorless unit from standstill is held to it
+CYCLE_RUNS = tuple(
+    (f"cyc-{name}{suffix}", f"{name}{suffix}", setup)
+    for name in ("wltc3b", "udds", "hwfet", "us06")
+    for suffix, setup in (("", SETUPS["sensored"]), ("-sensorless", SENSORLESS_SETUP))
+) + (("cyc-wltc3b-hilly", "wltc3b-hilly", SETUPS["sensored"]),)
+
 #: the paper's scenarios: (short name, shipped scenario)
 PAPER_SCENARIOS = (("s1", "scenario1"), ("s2", "scenario2"))
 #: the realism variants of scenario 2: (short name, shipped scenario, description)
@@ -73,7 +81,7 @@ class Config:
     id: str
     scenario: str  #: shipped scenario name
     setup: Setup
-    section: str  #: "paper", "realism" or "sensorless"
+    section: str  #: "paper", "realism", "sensorless", "speed-range" or "cycles"
     variant: str = ""  #: short name of the realism variant
     sets: tuple[str, ...] = ()  #: more start values (``--set``)
     stop_time: float | None = None  #: its own stop time [s]; a shorter one of the report's wins
@@ -115,6 +123,7 @@ def all_configs() -> list[Config]:
     configs += [Config(cid, scen, setups[key], "sensorless", sets=sets, stop_time=stop, description=desc)
                 for cid, scen, key, sets, stop, desc in sensorless.config_specs()]
     configs += [Config(cid, scen, setup, "speed-range") for cid, scen, setup in SPEED_RANGE_RUNS]
+    configs += [Config(cid, scen, setup, "cycles") for cid, scen, setup in CYCLE_RUNS]
     return configs
 
 

@@ -19,7 +19,7 @@ from pmsm_ev.params import (
 from pmsm_ev.results import angle_recovery, plateau_split, run_timing
 
 from ..compare import COLUMNS, Run, format_value, load_run, markdown_table, plot_overlay, summarize
-from . import sensorless, speed_range, synchronism
+from . import cycles, sensorless, speed_range, synchronism
 from .configs import FIG_NAMES, FLYING_SPEED, REALISM_SCENARIOS, REALISM_SETUPS, SETUPS, T_FROM, Config
 
 # --- the document ------------------------------------------------------------------------
@@ -177,6 +177,7 @@ def _figures(data: Data, fig_dir: Path) -> list[Path]:
                                      title=f"Scenario 2, {desc}: angle error over the first 3 s"))
     made += sensorless.figures(data, fig_dir)
     made += speed_range.figures(data, fig_dir)
+    made += cycles.figures(data, fig_dir)
     return made
 
 
@@ -462,6 +463,7 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
     L += sensorless.render(d, fig_names)
     L += synchronism.render(d.sync, fig_names)
     L += speed_range.render(d, fig_names)
+    L += cycles.render(d, fig_names)
     L.append("## The paper's errata and how the project handles them\n")
     L.append(
         "- **Eq 20** prints v_q = u_q − N ω L_d i_dl − N ω ψ: its terms add to, rather than cancel, the "
