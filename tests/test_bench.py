@@ -49,14 +49,16 @@ def test_passthrough_fmus_compute_nothing(passthrough, tmp_path):
 
 
 def test_the_cycle_case_is_the_sensorless_drive_on_wltc(passthrough, tmp_path):
-    """(e), (f): acceleration-sensorless's settings with the cycle's speed reference (a linear table, set
-    with the controller's connections), the real or the pass-through FMUs."""
+    """(e), (f): the shipped wltc3b-sensorless (the speed range's settings, the feedforward, 1 A noise) with the
+    cycle's speed reference (a linear table, set with the controller's connections), the real or the
+    pass-through FMUs."""
     real = project_fmus()
     spec = bench.cycle_spec(0.05, real["PmsmEvPlant"], real["FocSensorless"])
     ctrl = spec.component("ctrl", "test")
     assert ctrl.fmu == real["FocSensorless"] and ctrl.start["reference"] == "fw"
     assert ctrl.start["current_control"] == "high_speed" and ctrl.start["discretisation"] == "bilinear"
     assert spec.component("plant", "test").start["gear_model"] == "power_flow"
+    assert ctrl.start["speed_feedforward"] == "inertia+road" and spec.component("plant", "test").start["sensor_noise"] == 1
     assert spec.signals["omega_ref"].profile.interpolation == "linear"
     assert spec.stop_time == 0.05
     m = Master(spec)

@@ -16,21 +16,22 @@ wall time per macro step of
 and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 60 s: standing to
 11 s, the alignment and the I-f start, then the drive away, 44.5 km/h at 35 s, 14.7 km/h at 60 s),
 
-(e) the sensorless cycle drive: the master with ``PmsmEvPlant`` + ``FocSensorless`` in the
-    settings of ``acceleration-sensorless`` (the reference generator in field weakening on
-    360 V, the high-speed current control, Tustin's current model, the regenerative limit
-    and the friction brake, the plant's inverter losses and power-flow gear), the cycle's
-    omega_ref a linear table that changes every step;
+(e) the sensorless cycle drive: the master with ``PmsmEvPlant`` + ``FocSensorless`` as the shipped
+    scenario ``wltc3b-sensorless`` runs them (the reference generator in field weakening on
+    360 V, the high-speed current control, Tustin's current model, the speed loop's feedforward,
+    the regenerative limit and the friction brake, the plant's inverter losses, power-flow gear
+    and 1 A of current noise; a row every 50 ms), the cycle's omega_ref a linear table that
+    changes every step;
 (f) the same system, signals and cycle with the pass-through FMUs: the FMI floor of (e);
 
 and prints one table with the ratios a/b, d/a and e/f, in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
-includes its worker threads). (a)-(c), (e), (f) include the recording of a row
-every 10 ms, as in a normal run. With ``memory`` it also runs ``pmsm-cosim run scenario1``
+includes its worker threads). (a)-(c) include the recording of a row every 10 ms, (e), (f) every
+50 ms, as in a normal run of their scenario. With ``memory`` it also runs ``pmsm-cosim run scenario1``
 (figures included) for 100 s and for the full 350 s, each in a fresh process, and prints
 their wall time and peak resident memory (``wait4`` of that process): memory must not grow
 with the duration. With ``cycle_memory`` it runs the whole WLTC 3b sensorless,
-``pmsm-cosim run acceleration-sensorless --cycle wltc3b`` (figures included), for half the
+``pmsm-cosim run wltc3b-sensorless`` (figures included), for half the
 cycle (900 s) and the whole (1800 s, 18 million steps), likewise.
 
 Timings on a shared machine vary with its load: the 1, 5 and 15 min load averages are
@@ -62,7 +63,7 @@ from .reference import run_reference
 SCENARIO = "scenario1"
 DEFAULT_SLICE = 20.0  #: [s] of simulated time per case
 MEMORY_STOP_TIMES = (100.0, 350.0)
-CYCLE_SYSTEM = "acceleration-sensorless"  #: cases (e), (f): the sensorless unit's settings on a cycle
+CYCLE_SYSTEM = "wltc3b-sensorless"  #: cases (e), (f): the shipped sensorless cycle scenario
 CYCLE = "wltc3b"
 DEFAULT_CYCLE_SLICE = 60.0  #: [s] of the cycle in cases (e), (f)
 CYCLE_MEMORY_STOP_TIMES = (900.0, 1800.0)  #: half the WLTC, the whole
@@ -92,7 +93,7 @@ def _spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None)
 
 
 def cycle_spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None):
-    """The system of (e) and (f): ``acceleration-sensorless --cycle wltc3b --stop-time stop_time``."""
+    """The system of (e) and (f): ``wltc3b-sensorless --cycle wltc3b --stop-time stop_time``."""
     spec = apply_overrides(CYCLE_SYSTEM, cycle=CYCLE, stop_time=stop_time)
     if plant is not None:
         spec.set_fmu("plant", plant)
