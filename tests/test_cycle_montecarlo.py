@@ -204,6 +204,17 @@ def _row(k, status="completed", inside=1.0, slips=0.0, fault=0.0, wh=150.0):
             "cycle": "wltc3b"}
 
 
+def test_where_a_failed_sample_left_the_band():
+    """A failed sample's line says where: its longest excursion, its episodes and, when the unit's last change
+    of mode came before the excursion ended, that one (a unit that never handed over to FOC again)."""
+    stuck = {"t_longest": 141.25, "longest_s": 38.8, "episodes": 0.0, "last_mode": (98.25, 1.0)}
+    assert rc.where_text(stuck) == ("longest excursion 38.8 s from 141.2 s; 0 loss-of-synchronism episodes; "
+                                    "the unit's last change of mode: to I-f at 98.2 s")
+    later = dict(stuck, last_mode=(1794.6, 1.0))  # the last change after the excursion: not the cause
+    assert rc.where_text(later) == "longest excursion 38.8 s from 141.2 s; 0 loss-of-synchronism episodes"
+    assert rc.where_text({"last_mode": (math.nan, math.nan)}) == ""
+
+
 def test_findings_on_made_up_samples():
     rows = [_row(k, wh=140.0 + k) for k in range(26)]
     rows += [_row(26, inside=0.98, wh=170.0), _row(27, slips=1.0, fault=1.0, wh=175.0), _row(28, status="failed"),

@@ -40,6 +40,10 @@ NOMINAL = {"plant.R_s": ("R_s", _M.R_s), "plant.psi": ("ψ", _M.psi), "plant.L_q
            "plant.L_d": ("L_d", _M.L_d)}
 
 
+#: the sensorless unit's modes (``pmsm_ev.kernels`` MODE_*: metrics.json ``sensorless`` ``mode_changes``)
+MODE_NAMES = {0.0: "alignment", 1.0: "I-f", 2.0: "FOC on the EKF"}
+
+
 def _num(x) -> float:
     try:
         return float(x)
@@ -95,11 +99,31 @@ def cycle_rows(out: Path) -> list[dict]:
             except (OSError, ValueError):
                 m = {}
         trace, sync = m.get("trace") or {}, m.get("synchronism") or {}
+        changes = (m.get("sensorless") or {}).get("mode_changes") or []
         r.update(macro_steps=_num(m.get("macro_steps")), init_time_s=_num(m.get("init_time_s")),
                  step_size=_num(m.get("step_size")), stop_time=_num(m.get("stop_time")),
-                 t_end=_num(trace.get("t_end")), cycle=trace.get("cycle"), t_fault=_num(sync.get("t_fault")))
+                 t_end=_num(trace.get("t_end")), cycle=trace.get("cycle"), t_fault=_num(sync.get("t_fault")),
+                 t_longest=_num(trace.get("t_longest_excursion")), longest_s=_num(trace.get("longest_excursion_s")),
+                 episodes=_num(sync.get("episodes")),
+                 last_mode=(_num(changes[-1][0]), _num(changes[-1][2])) if changes else (math.nan, math.nan))
         rows.append(r)
     return rows
+
+
+def where_text(r: dict) -> str:
+    """Where a failed sample left the band and what the sensorless unit did: its longest excursion, its
+    loss-of-synchronism episodes, and its last change of mode when that came before the excursion's end (a
+    unit that never handed over to FOC again)."""
+    parts = []
+    if math.isfinite(r.get("t_longest", math.nan)):
+        parts.append(f"longest excursion {r['longest_s']:.1f} s from {r['t_longest']:.1f} s")
+    if math.isfinite(r.get("episodes", math.nan)):
+        parts.append(f"{r['episodes']:g} loss-of-synchronism episodes")
+    t_last, mode = r.get("last_mode", (math.nan, math.nan))
+    if math.isfinite(t_last) and math.isfinite(r.get("t_longest", math.nan)) and mode in MODE_NAMES:
+        if t_last <= r["t_longest"] + r["longest_s"]:
+            parts.append(f"the unit's last change of mode: to {MODE_NAMES[mode]} at {t_last:.1f} s")
+    return "; ".join(parts)
 
 
 @dataclass
@@ -235,7 +259,8 @@ def cycle_text(rows: list[dict], design, fig: Path | None, timing: dict | None =
             L.append(f"- `{r['run']}`: m_v {r[MASS]:g} kg ({r['occupants']:g} × {OCCUPANT_KG:g} kg), grade "
                      f"{r['grade_pct']:+.2f} %, inside {inside}, {r['slipped_turns']:g} turns slipped: "
                      + ", ".join(r["reasons"]).replace(REASONS[3], REASONS[3] + fault)
-                     + (f" ({r['error']})" if r.get("error") else ""))
+                     + (f" ({r['error']})" if r.get("error") else "")
+                     + (f"; {w}" if (w := where_text(r)) else ""))
         if len(bad) > 10:
             L.append(f"- and {len(bad) - 10} more (summary.csv)")
         L.append("")
