@@ -163,7 +163,7 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     """What OMSimulator needs (its annotation first in the system, no String in an .ssv, no
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
     now in the system), and still valid SSP 1.0."""
-    assert len(SCENARIOS) == 12  # the paper's 2, their 4 variants, the 3 sensorless runs, the 3 acceleration runs
+    assert len(SCENARIOS) == 21  # the paper's 2, their 4 variants, 3 sensorless, 3 acceleration, 9 drive-cycle runs
     args = ["export-ssp", scenario, "-o", str(tmp_path / "p.ssp"), "--plant", str(fmus["PmsmEvPlant"]),
             "--controller", str(fmus["FocEkf5"])]
     if angle_source:
@@ -184,14 +184,18 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     master = root.find("ssd:System/ssd:Annotations/ssc:Annotation/oms:Annotations/oms:SimulationInformation/"
                        "oms:FixedStepMaster", NS)
     assert (master.get("description"), float(master.get("stepSize"))) == ("oms-ma", 1e-4)
-    # a String start value that is not the FMU's default rides in a copy of the FMU: the acceleration runs' set
-    # the reference generator and the plant's gear model (strings), the others only angle_source
-    strings = scenario.startswith("acceleration")
+    # a String start value that is not the FMU's default rides in a copy of the FMU: the acceleration and cycle
+    # runs' set the reference generator and the plant's gear model (strings), the others only angle_source; the
+    # hilly road's RouteProfile in position mode carries its road name
+    cycle = scenario.split("-")[0] in ("wltc3b", "udds", "hwfet", "us06")
+    strings = scenario.startswith("acceleration") or cycle
     assert fmu_names == sorted(["resources/PmsmEvPlant_plant.fmu" if strings else "resources/PmsmEvPlant.fmu",
                                 "resources/RouteProfile.fmu",
-                                "resources/FocEkf5_ctrl.fmu" if angle_source or strings else "resources/FocEkf5.fmu"])
+                                "resources/FocEkf5_ctrl.fmu" if angle_source or strings else "resources/FocEkf5.fmu"]
+                               + (["resources/RouteProfile_road.fmu"] if scenario.endswith("-hilly") else []))
     spec = load_ssp(tmp_path / "p.ssp")
-    assert spec.algorithm == "gauss-seidel" and spec.output_interval == 0.01  # the run record is read
+    assert spec.algorithm == "gauss-seidel"  # the run record is read
+    assert spec.output_interval == (0.05 if cycle else 0.01)
 
 
 def test_the_package_reads_back_as_the_same_system(package, fmus):
