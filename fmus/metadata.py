@@ -244,6 +244,11 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "still_speed": ("rad/s", "below this |omega_hat| and |omega_if| in I-f the car stands: the guard and the I-f "
                              "sizing use the EKF's angle and load of when the stand began, the EKF is put back "
                              "there when it ends (no back-EMF shows the angle); 0 = never"),
+    "if_deadline": ("s", "in I-f with |omega_ref| above omega_up this long, the handover up to FOC on the EKF is "
+                         "forced (the I-f speed above omega_up, the EKF's alike, not slipping): an episode; 0 = never"),
+    "stall_time": ("s", "in I-f with |omega_ref| above omega_up this long, the drive has stalled: the rotor is "
+                        "realigned from standstill (an episode); 0 = never"),
+    "realign_max": (None, "realignments after a stall, without a handover up in between, before the fault latches"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),

@@ -790,6 +790,22 @@ class StartupParams:
     #: the unit is reset; zero torque is not safe on a slope [chosen: 1 s, 3 s]
     recover_time: float = 1.0
     fault_time: float = 3.0
+    #: the handover up overdue [s] [chosen: 1 s]: in I-f with |omega_ref| above ``omega_up`` this long
+    #: (a healthy launch hands over ``agree_time`` after the I-f speed passes ``omega_up``: 0.3-0.5 s after
+    #: the reference does, measured on the shipped sensorless cycles), the I-f speed above ``omega_up``,
+    #: the EKF's speed of the same sign above ``omega_down`` and the rotor not slipping, the handover is
+    #: forced: FOC on the EKF, as after a loss of synchronism at speed, an episode. A rotor that swings on a
+    #: large I-f vector with a mismatched motor model (L_q 18 % below the EKF's: the EKF's speed swings
+    #: +-10 rad/s about the I-f speed) never agrees for ``agree_time``, and the vector pulls out of step
+    #: within seconds; the EKF's angle there is within 0.3 rad, enough for FOC (docs/sensorless.md); 0: never
+    if_deadline: float = 1.0
+    #: the drive stalled [s] [chosen: 3 s]: in I-f with |omega_ref| above ``omega_up`` this long (the
+    #: handover neither came nor could be forced: the rotor does not follow the vector), the rotor is
+    #: realigned: the alignment from standstill run again (the angle is unknown at a stand), the current
+    #: PIs reset, an episode; after ``realign_max`` realignments without a handover up in between, the
+    #: fault latches (the safe state); 0: never
+    stall_time: float = 3.0
+    realign_max: int = 2
 
     @property
     def align_time(self) -> float:
@@ -813,6 +829,10 @@ class StartupParams:
             _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
         _require(self.fault_time > self.recover_time,
                  f"fault_time must be > recover_time (got {self.fault_time} <= {self.recover_time} s)")
+        _require(self.stall_time == 0 or self.stall_time > self.if_deadline,
+                 f"stall_time must be > if_deadline or 0 (got {self.stall_time} <= {self.if_deadline} s)")
+        _require(float(self.realign_max).is_integer(),
+                 f"realign_max must be a whole number (got {self.realign_max})")
 
 
 #: the EKF of the sensorless unit: the paper's covariances, the drive's whole inertia J_eq

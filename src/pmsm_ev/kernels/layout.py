@@ -261,7 +261,10 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_W_REF_PREV", 1, "the speed reference of the last period [rad/s]"),
     ("S_FF_PRIMED", 1, "1.0 once a period has given S_W_REF_PREV"),
     ("S_T_FF", 1, "the feedforward torque of this period [N m]: C_J_FF x the reference's slope plus the road load"),
-), size=122)
+    # the sensorless unit's handover deadline and stall (``C_IF_DEADLINE``, ``C_STALL_TIME``)
+    ("S_IF_DUE", 1, "how long the unit has been in I-f with |omega_ref| above C_W_UP [s]"),
+    ("S_REALIGN", 1, "the realignments after a stall since the last handover up [-]"),
+), size=124)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -362,7 +365,11 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_FF_T0", 1, "the road-load feedforward's constant term at the shaft [N m] (0: none)"),
     ("C_FF_T1", 1, "... its term in |omega_ref| [N m s/rad]"),
     ("C_FF_T2", 1, "... its term in omega_ref^2 [N m s^2/rad^2]"),
-), size=100)
+    # the sensorless unit's handover deadline and stall (``pmsm_ev.params.StartupParams``)
+    ("C_IF_DEADLINE", 1, "in I-f with |omega_ref| above C_W_UP this long, the handover up is forced [s]"),
+    ("C_STALL_TIME", 1, "... this long, the drive has stalled: a realignment [s]"),
+    ("C_REALIGN_MAX", 1, "realignments after a stall before the fault latches [-]"),
+), size=103)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())

@@ -48,6 +48,7 @@ from .layout import (
     C_I_RATE_LOAD,
     C_IF_ACCEL,
     C_IF_DAMP,
+    C_IF_DEADLINE,
     C_IF_MARGIN,
     C_J_IF,
     C_K_DQN,
@@ -62,12 +63,14 @@ from .layout import (
     C_PAPER_SIGNS,
     C_PSI,
     C_PSI_ADAPT,
+    C_REALIGN_MAX,
     C_RECOVER_TIME,
     C_REF_MODE,
     C_SIN_E,
     C_SLIP_FILTER,
     C_SLIP_TIME,
     C_SLIP_TOL,
+    C_STALL_TIME,
     C_STILL,
     C_T_HOLD,
     C_T_RAMP,
@@ -93,6 +96,7 @@ from .layout import (
     S_I_MAG,
     S_I_QL,
     S_I_TGT,
+    S_IF_DUE,
     S_INSYNC,
     S_INT_D,
     S_INT_Q,
@@ -102,6 +106,7 @@ from .layout import (
     S_OMEGA_IF,
     S_P,
     S_PHI,
+    S_REALIGN,
     S_SLIP,
     S_STILL_OUT,
     S_T_FF,
@@ -333,6 +338,10 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
        while an episode lasts (also when ``C_GUARD`` is off) and in the safe state. An episode
        ends after ``C_RECOVER_TIME`` in synchronism; one older than ``C_FAULT_TIME`` latches the
        fault: the safe state is a stop and hold (the reference taken as 0, the I-f current at the limit).
+    6. Handover deadline and stall (I-f with |omega_ref| above ``C_W_UP``, ``S_IF_DUE``): after
+       ``C_IF_DEADLINE`` the handover up is forced if the rotor turns with the vector (FOC on the EKF, an
+       episode); after ``C_STALL_TIME`` the rotor is aligned again from standstill (an episode), at most
+       ``C_REALIGN_MAX`` times without a handover up in between, then the fault latches.
     In alignment and I-f the current PIs work in the vector's frame (reference on its d
     axis, no decoupling: the back-EMF is small there and the integrators carry it).
     """
@@ -461,7 +470,48 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
                 s[S_AGREE] = 0.0
             if s[S_AGREE] >= c[C_AGREE_TIME]:  # handover up: FOC on the EKF, seated on the present state
                 seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, False)
+                s[S_REALIGN] = 0.0
                 mode = MODE_EKF
+        if mode == MODE_IF and s[S_FAULT] != FAULT_LATCHED and abs(omega_ref) > c[C_W_UP]:
+            s[S_IF_DUE] += dt  # the reference asks for FOC's speed range, the unit is still in I-f
+        else:
+            s[S_IF_DUE] = 0.0
+        if (0.0 < c[C_IF_DEADLINE] <= s[S_IF_DUE] and not slipping and abs(w_if) > c[C_W_UP]
+                and abs(omega_hat) >= c[C_W_DOWN] and omega_hat * w_if > 0.0):
+            # the handover up overdue (the EKF's speed swings about the I-f speed and never agrees for
+            # C_AGREE_TIME): forced, FOC on the EKF, which holds the angle at this speed (back-EMF), an episode
+            seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)
+            s[S_REALIGN] = 0.0
+            trouble = True
+            s[S_INSYNC] = 0.0
+            if s[S_EPISODE] == 0.0:
+                s[S_EPISODE] = dt
+            mode = MODE_EKF
+        elif 0.0 < c[C_STALL_TIME] <= s[S_IF_DUE]:
+            # stalled (a limit reached): the rotor does not follow the vector; at a stand no back-EMF shows
+            # its angle, so it is aligned again from standstill, an episode; realign_max times at most
+            # without a handover up in between, then the fault latches (the safe state)
+            s[S_IF_DUE] = 0.0
+            trouble = True
+            s[S_INSYNC] = 0.0
+            if s[S_EPISODE] == 0.0:
+                s[S_EPISODE] = dt
+            if s[S_REALIGN] < c[C_REALIGN_MAX]:
+                s[S_REALIGN] += 1.0
+                s[S_CLOCK] = 0.0  # the alignment's clock: it starts with the next period
+                s[S_I_MAG] = 0.0
+                s[S_I_TGT] = 0.0
+                s[S_OMEGA_IF] = 0.0
+                s[S_SLIP] = 0.0
+                s[S_AGREE] = 0.0
+                s[S_GUARD] = 0.0
+                s[S_LOS] = 0.0
+                s[S_ANCHORED] = 0.0
+                s[S_INT_D] = 0.0
+                s[S_INT_Q] = 0.0
+                mode = MODE_ALIGN
+            else:
+                s[S_FAULT] = FAULT_LATCHED
     if s[S_EPISODE] > 0.0:  # a loss-of-synchronism episode: recovered, or the fault latched
         s[S_EPISODE] += dt
         s[S_INSYNC] = 0.0 if trouble else s[S_INSYNC] + dt

@@ -1,0 +1,107 @@
+"""The sensorless unit never stays in I-f while the reference asks for FOC's speed range
+(``StartupParams.if_deadline``, ``stall_time``, ``realign_max``; docs/sensorless.md, "Handover deadline and
+stall"). The case is the one the Monte-Carlo on WLTC found: the plant's L_q 19 % below the EKF's and a large
+I-f vector (400 A, as after a stop whose braking or load estimate raised it). The EKF's speed then swings
+about the I-f speed by +-10 rad/s, the handover's agreement never lasts ``agree_time``, and the vector pulls
+out of step at 90 rad/s: the car stands with the vector swinging at 400 A and, before these detectors,
+nothing said so (no episode, no fault)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from orchestrator_support import project_fmus
+from pmsm_cosim.app.cli import main
+from pmsm_cosim.engine.recording import read_results
+from pmsm_ev import kernels as _k
+from pmsm_ev.params import ParameterError, StartupParams
+
+#: a large I-f vector on a plant whose L_q is 19 % below the unit's model (0.29 mH)
+MISMATCH = ("ctrl.i_if=400", "plant.L_q=0.000234")
+
+
+@pytest.fixture(scope="module")
+def fmus():
+    return project_fmus()
+
+
+def _run(tmp_path, name, stop, *sets):
+    out = tmp_path / name
+    argv = ["run", "wltc3b-sensorless", "--stop-time", str(stop), "--no-figures", "--quiet", "--out", str(out)]
+    assert main(argv + ["--set", *MISMATCH, *sets]) == 0
+    return read_results(out), json.loads((out / "metrics.json").read_text())
+
+
+def _due(r) -> float:
+    """The time of the first handover up after |omega_ref| passed omega_up, less that time [s]."""
+    t, m, w = r["time"], r["mode"], np.abs(r["omega_ref"])
+    up = int(np.argmax((m[1:] == _k.MODE_EKF) & (m[:-1] == _k.MODE_IF))) + 1
+    start = up
+    while start > 0 and w[start - 1] > StartupParams().omega_up and m[start - 1] == _k.MODE_IF:
+        start -= 1
+    return float(t[up] - t[start])
+
+
+def test_without_the_deadline_the_unit_stays_in_i_f_and_says_nothing(fmus, tmp_path):
+    """The defect, kept reproducible: deadlines off, the launch at 13 s never hands over, the rotor pulls
+    out and stands while the reference climbs to 45 km/h, and no episode is reported."""
+    r, m = _run(tmp_path, "off", 25, "ctrl.if_deadline=0", "ctrl.stall_time=0")
+    after = r["time"] > 13.0
+    assert np.all(r["mode"][after] == _k.MODE_IF)
+    assert m["trace"]["inside_share"] < 0.7
+    assert abs(r["omega_m"][-1]) < 3.0 and r["omega_ref"][-1] > 300.0  # stands, the reference at 300 rad/s
+    assert m["synchronism"]["episodes"] == 0 and not m["synchronism"]["fault_latched"]
+
+
+def test_an_overdue_handover_is_forced_and_the_car_follows_the_trace(fmus, tmp_path):
+    """With the defaults the handover comes if_deadline (1 s) after |omega_ref| passed omega_up (a healthy
+    launch takes agree_time, 0.3 s), as an episode that ends in synchronism; the car stays in the band."""
+    r, m = _run(tmp_path, "on", 25)
+    assert _due(r) == pytest.approx(StartupParams().if_deadline, abs=0.051)
+    assert m["trace"]["inside_share"] == 1.0
+    s = m["synchronism"]
+    assert s["episodes"] == 1 and not s["fault_latched"] and 14.0 < s["t_first_episode"] < 14.5
+    assert r["fault"][-1] == _k.FAULT_NONE and r["mode"][-1] == _k.MODE_EKF
+    assert np.max(np.abs(r["omega_m"] - r["omega_hat"])[r["time"] > 16.0]) < 5.0
+
+
+def test_a_stalled_rotor_is_realigned_and_drives_on(fmus, tmp_path):
+    """The forced handover off: the rotor pulls out and stands; stall_time (3 s) after |omega_ref| passed
+    omega_up the unit aligns again from standstill (an episode), starts in I-f and hands over: the car is
+    back in the band within 7 s of the stall."""
+    st = StartupParams()
+    r, m = _run(tmp_path, "stall", 30, "ctrl.if_deadline=0")
+    changes = m["sensorless"]["mode_changes"]
+    t_stall = next(t for t, a, b in changes if a == _k.MODE_IF and b == _k.MODE_ALIGN)
+    assert 16.0 < t_stall < 16.6
+    t_up = next(t for t, a, b in changes if t > t_stall and b == _k.MODE_EKF)
+    assert t_up - t_stall < st.align_time + 1.5
+    s = m["synchronism"]
+    assert s["episodes"] == 1 and s["t_first_episode"] == pytest.approx(t_stall, abs=0.051)
+    assert not s["fault_latched"] and r["fault"][-1] == _k.FAULT_NONE
+    late = r["time"] > t_stall + 7.0
+    assert np.max(np.abs(r["omega_m"] - r["omega_ref"])[late]) < 20.0  # 20 rad/s = 1.7 km/h
+
+
+def test_a_stall_with_no_realignment_left_latches_the_safe_state(fmus, tmp_path):
+    """realign_max = 0: the stall latches the fault at once: the reference taken as 0, the vector held at
+    the current limit; the car does not move."""
+    r, m = _run(tmp_path, "latched", 22, "ctrl.if_deadline=0", "ctrl.realign_max=0")
+    s = m["synchronism"]
+    assert s["fault_latched"] and 16.0 < s["t_fault"] < 16.6
+    after = r["time"] > s["t_fault"] + 0.5
+    assert np.all(r["fault"][after] == _k.FAULT_LATCHED) and np.all(r["mode"][after] == _k.MODE_IF)
+    assert np.all(np.abs(r["omega_ctrl"][after]) < 15.0) and np.all(np.abs(r["omega_m"][after]) < 3.0)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"stall_time": 1.0}, r"stall_time must be > if_deadline or 0 \(got 1.0 <= 1.0 s\)"),
+    ({"realign_max": 1.5}, r"realign_max must be a whole number \(got 1.5\)"),
+    ({"if_deadline": -1.0}, r"if_deadline must be finite and >= 0 \(got -1.0\)"),
+])
+def test_the_deadline_parameters_are_checked(changes, message):
+    with pytest.raises(ParameterError, match=message):
+        StartupParams(**changes).validate()
