@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from c_fmu_support import build_c_fmu, c_compiler
+from fmpy_process import simulate_fmu
 from pmsm_cosim.app.cli import main
 from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.engine.master import Master
@@ -126,7 +127,7 @@ def test_the_same_outputs_as_fmpy(tmp_path, c_fmus):
     """The counter alone in fmpy gives the counter's columns; the consumer in fmpy, fed the
     counter's Integer, Enumeration and Boolean outputs as inputs, gives the consumer's."""
     _, r = run(typed_system(tmp_path, c_fmus), tmp_path / "out")
-    counter = fmpy.simulate_fmu(str(c_fmus["Counter"]), stop_time=0.2, step_size=H, output_interval=H,
+    counter = simulate_fmu(str(c_fmus["Counter"]), stop_time=0.2, step_size=H, output_interval=H,
                                 start_values={"step_by": 3, "prefix": "c"},
                                 output=["count", "level", "odd", "time_out"])
     assert list(counter["time"]) == list(r["time"])
@@ -142,7 +143,7 @@ def test_the_same_outputs_as_fmpy(tmp_path, c_fmus):
                     f"comparison needs fmpy >= 0.3.23 (the counter's passed)")
     inputs = np.array(list(zip(counter["time"], counter["count"], counter["level"], counter["odd"])),
                       dtype=[("time", float), ("k", np.int32), ("lvl", np.int32), ("flag", np.bool_)])
-    consumer = fmpy.simulate_fmu(str(c_fmus["Consumer"]), stop_time=0.2, step_size=H, output_interval=H,
+    consumer = simulate_fmu(str(c_fmus["Consumer"]), stop_time=0.2, step_size=H, output_interval=H,
                                  start_values={"invert": True}, input=inputs,
                                  output=["k_seen", "k_sum", "lvl_seen", "flag_seen"])
     assert list(consumer["time"]) == list(r["time"])
@@ -210,7 +211,7 @@ def test_a_termination_request_ends_the_run_as_completed(tmp_path, c_fmus, loop)
     assert (m["terminated_by"], m["terminated_at"], m["macro_steps"], m["rows"]) == ("stopper", 0.5, 50, 51)
     assert json.loads((tmp_path / "out" / "metrics.json").read_text())["terminated_by"] == "stopper"
     assert r["time"][-1] == 0.5 and list(r["count"]) == list(range(51))
-    ref = fmpy.simulate_fmu(str(c_fmus["Stopper"]), stop_time=1.0, step_size=H, output_interval=H,
+    ref = simulate_fmu(str(c_fmus["Stopper"]), stop_time=1.0, step_size=H, output_interval=H,
                             output=["y", "steps"])
     # fmpy records the time the FMU reached once more when it stops: the same row twice
     assert ref["time"][-1] == ref["time"][-2] == 0.5

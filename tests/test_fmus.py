@@ -33,6 +33,7 @@ from fmpy.fmi2 import (
 from fmpy.validation import validate_fmu
 
 import pmsm_ev_fmus
+from fmpy_process import simulate_fmu
 from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import __version__
@@ -260,7 +261,7 @@ def test_a_physics_package_folder_is_bundled_whole(fmus, tmp_path, monkeypatch):
         <= names and f"resources/pmsm_ev_{tag}/transforms.py" not in names
     signals = np.array([(0.0, 1.0, 0.5, 0.0), (0.01, 1.0, 0.5, 0.0)],
                        dtype=[("time", float), ("v_alpha", float), ("v_beta", float), ("delta", float)])
-    runs = [fmpy.simulate_fmu(str(fmu), stop_time=0.01, step_size=DT, output_interval=DT, input=signals,
+    runs = [simulate_fmu(str(fmu), stop_time=0.01, step_size=DT, output_interval=DT, input=signals,
                               start_values={"theta_e0": 0.3}, output=["i_d", "i_q", "theta_e"])
             for fmu in (fmus["PmsmEvPlant"], path)]
     for name in ("i_d", "i_q", "theta_e"):
@@ -462,7 +463,7 @@ def test_plant_with_rotor_held_settles_to_ohmic_currents(fmus):
     stop = 0.15  # 6.4 L_d/R_s (23 ms), 4.5 L_q/R_s (33 ms)
     signals = np.array([(0.0, v_alpha, v_beta, 0.0), (stop, v_alpha, v_beta, 0.0)],
                        dtype=[("time", float), ("v_alpha", float), ("v_beta", float), ("delta", float)])
-    r = fmpy.simulate_fmu(str(fmus["PmsmEvPlant"]), stop_time=stop, step_size=DT, output_interval=DT,
+    r = simulate_fmu(str(fmus["PmsmEvPlant"]), stop_time=stop, step_size=DT, output_interval=DT,
                           input=signals, start_values={"m_v": 1e12, "theta_e0": theta0},
                           output=["i_d", "i_q", "i_alpha", "i_beta", "omega_m", "theta_e", "T_e"])
     t = r["time"]
@@ -491,7 +492,7 @@ def test_plant_fmu_dead_time_and_delay_follow_the_switching_period(fmus, step):
     assert (var.causality, var.unit, float(var.start)) == ("parameter", "s", 1e-4)
     signals = np.array([(0.0, 12.0, 0.0, 0.0), (1.0, 12.0, 0.0, 0.0)],
                        dtype=[("time", float), ("v_alpha", float), ("v_beta", float), ("delta", float)])
-    r = fmpy.simulate_fmu(str(fmus["PmsmEvPlant"]), stop_time=0.3, step_size=step, output_interval=step,
+    r = simulate_fmu(str(fmus["PmsmEvPlant"]), stop_time=0.3, step_size=step, output_interval=step,
                           input=signals, output=["i_d"],
                           start_values={"m_v": 1e12, "v_dc": 360.0, "dead_time": 2e-6, "inverter_delay": 1})
     assert r["i_d"][-1] == pytest.approx((12.0 - 4.0 / 3.0 * 7.2) / MotorParams().R_s, rel=1e-4)
@@ -505,7 +506,7 @@ def test_controller_with_constant_inputs_gives_bounded_voltages(fmus, name, angl
     u_max = ControllerParams().u_max
     signals = np.array([(0.0, 20.0, -5.0, 100.0, 0.4, 10.0), (1.0, 20.0, -5.0, 100.0, 0.4, 10.0)],
                        dtype=[("time", float)] + [(n, float) for n in CTRL_INPUTS])
-    r = fmpy.simulate_fmu(str(fmus[name]), stop_time=0.2, step_size=DT, output_interval=DT, input=signals,
+    r = simulate_fmu(str(fmus[name]), stop_time=0.2, step_size=DT, output_interval=DT, input=signals,
                           start_values={"angle_source": angle_source})
     for n in CTRL_OUTPUTS:
         assert np.all(np.isfinite(r[n])), n

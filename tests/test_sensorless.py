@@ -12,10 +12,10 @@ import math
 from importlib import resources
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
 
+from fmpy_process import simulate_fmu
 from orchestrator_support import project_fmus
 from pmsm_cosim.app.drive import load_system
 from pmsm_cosim.app.reference import run_reference
@@ -115,7 +115,7 @@ def test_the_fmu_never_reads_theta_meas_and_omega_meas():
     def run(theta, omega):
         signals = np.array([(0.0, 20.0, -5.0, 50.0, theta, omega), (1.0, 25.0, 3.0, 50.0, theta, omega)],
                            dtype=[("time", float)] + [(n, float) for n in names])
-        return fmpy.simulate_fmu(fmu, stop_time=0.05, step_size=DT, output_interval=DT, input=signals)
+        return simulate_fmu(fmu, stop_time=0.05, step_size=DT, output_interval=DT, input=signals)
 
     a, b = run(0.4, 10.0), run(math.nan, math.nan)
     for name in a.dtype.names:
