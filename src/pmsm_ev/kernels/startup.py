@@ -309,6 +309,15 @@ def relock(s, c, omega_hat, omega_ref):
     s[S_SLIP] = 0.0
 
 
+@kernel()
+def begin_episode(s, c):
+    """Out of synchronism this period: a loss-of-synchronism episode begins, or the one running goes on
+    (its age kept, ``C_FAULT_TIME``), and the time in synchronism that would end it starts again."""
+    s[S_INSYNC] = 0.0
+    if s[S_EPISODE] == 0.0:
+        s[S_EPISODE] = c[C_DT]
+
+
 #: the time in which a relocked vector's torque is meant to bring the speed to the reference [s]
 _RELOCK_TIME = 0.5
 
@@ -453,9 +462,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         s[S_LOS] = s[S_LOS] + dt if trouble else 0.0
         if s[S_LOS] >= c[C_SLIP_TIME]:
             s[S_LOS] = 0.0
-            s[S_INSYNC] = 0.0
-            if s[S_EPISODE] == 0.0:
-                s[S_EPISODE] = dt
+            begin_episode(s, c)
             # at the limit (not slipping) there is nothing more to give: the episode runs on to the fault
             if slipping and abs(omega_hat) >= c[C_W_DOWN]:  # loss of synchronism, the rotor turns and the
                 seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)  # EKF holds its angle: flying handover
@@ -483,9 +490,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)
             s[S_REALIGN] = 0.0
             trouble = True
-            s[S_INSYNC] = 0.0
-            if s[S_EPISODE] == 0.0:
-                s[S_EPISODE] = dt
+            begin_episode(s, c)
             mode = MODE_EKF
         elif 0.0 < c[C_STALL_TIME] <= s[S_IF_DUE]:
             # stalled (a limit reached): the rotor does not follow the vector; at a stand no back-EMF shows
@@ -493,9 +498,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             # without a handover up in between, then the fault latches (the safe state)
             s[S_IF_DUE] = 0.0
             trouble = True
-            s[S_INSYNC] = 0.0
-            if s[S_EPISODE] == 0.0:
-                s[S_EPISODE] = dt
+            begin_episode(s, c)
             if s[S_REALIGN] < c[C_REALIGN_MAX]:
                 s[S_REALIGN] += 1.0
                 s[S_CLOCK] = 0.0  # the alignment's clock: it starts with the next period
