@@ -123,6 +123,25 @@ def test_plain_loop_equals_the_generated_one_with_typed_connections(tmp_path, c_
             (tmp_path / f"plain_{algorithm}" / "results.csv").read_bytes()
 
 
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_compiled_loop_with_integer_enumeration_and_boolean_connections(tmp_path, c_fmus, algorithm):
+    """The compiled loop calls fmi2GetInteger/fmi2SetInteger/fmi2GetBoolean/... by address like
+    fmi2GetReal: the same rows as the generated loop. With the String connection as well it is not
+    the default (the strings are copied between the calls, in Python) and refused by name."""
+    comps = [("counter", "Counter", 'step_by = 3, prefix = "c"'), ("consumer", "Consumer", "invert = true")]
+    columns = {**COUNTER_COLUMNS, **{k: v for k, v in CONSUMER_COLUMNS.items() if not k.startswith("text")}}
+    path = system(tmp_path, c_fmus, comps, TYPED[:3], columns, algorithm=algorithm, name="typed3")
+    m_comp, r_comp = run(path, tmp_path / "comp", "compiled")
+    m_gen, r_gen = run(path, tmp_path / "gen", "generated")
+    assert (m_comp["loop"], m_gen["loop"]) == ("compiled", "generated")
+    assert (tmp_path / "comp" / "results.csv").read_bytes() == (tmp_path / "gen" / "results.csv").read_bytes()
+    assert list(r_comp["k_seen"][1:]) != [0] * (len(r_comp["k_seen"]) - 1)  # the Integer values went across
+    with_strings = typed_system(tmp_path, c_fmus, algorithm=algorithm)
+    assert run(with_strings, tmp_path / "default")[0]["loop"] == "generated"
+    with pytest.raises(CosimError, match=r"^the compiled loop cannot step typed: consumer has String connections"):
+        run(with_strings, tmp_path / "named", "compiled")
+
+
 def test_the_same_outputs_as_fmpy(tmp_path, c_fmus):
     """The counter alone in fmpy gives the counter's columns; the consumer in fmpy, fed the
     counter's Integer, Enumeration and Boolean outputs as inputs, gives the consumer's."""
@@ -201,7 +220,7 @@ def test_a_string_cannot_be_recorded(tmp_path, c_fmus):
 
 # --- termination ----------------------------------------------------------------------------
 
-@pytest.mark.parametrize("loop", ["generated", "plain"])
+@pytest.mark.parametrize("loop", ["compiled", "generated", "plain"])
 def test_a_termination_request_ends_the_run_as_completed(tmp_path, c_fmus, loop):
     path = system(tmp_path, c_fmus, [("stopper", "Stopper", ""), ("counter", "Counter", "")],
                   record={"y": "stopper.y", "steps": "stopper.steps", "count": "counter.count"}, stop_time=1.0,

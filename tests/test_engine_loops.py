@@ -1,6 +1,8 @@
-"""The engine's two stepping loops: the plain one (ordinary Python, for a debugger) gives
-the same results.csv, byte for byte, as the generated one on every shipped scenario; the
-generated one's tracebacks show its source lines."""
+"""The engine's three stepping loops give the same results.csv, byte for byte, on every shipped
+scenario and on the toys: the compiled one (machine code, the default where numba is), the generated
+one and the plain one (ordinary Python, for a debugger); the generated one's tracebacks show its
+source lines; a loop that cannot step a system is refused when asked for by name, and replaced by the
+generated one otherwise."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from pmsm_cosim.engine.master import _NEVER, LOOP_ENV, Master, _StepFailed
 
 #: simulated time per scenario [s]: enough for every component and signal to act a few times
 SECONDS = 0.3
+LINEAR = '[signals.s]\ninterpolation = "linear"\ntable = [[0, 0], [0.004, 2], [0.007, -1]]\ndrives = "snk.w"\n'
 
 
 def _run(spec_source, out, loop, stop_time=None):
@@ -32,34 +35,86 @@ def test_every_shipped_scenario_is_in_the_comparison():
 
 
 @pytest.mark.parametrize("scenario", PACKAGED_SCENARIOS)
-def test_plain_loop_gives_the_generated_loops_results_bit_for_bit(tmp_path, scenario):
+def test_the_three_loops_give_the_same_results_bit_for_bit(tmp_path, scenario):
     project_fmus()
-    m_gen, gen = _run(scenario, tmp_path / "gen", "generated", SECONDS)
-    m_plain, plain = _run(scenario, tmp_path / "plain", "plain", SECONDS)
-    assert (m_gen["status"], m_plain["status"]) == ("completed", "completed")
-    assert (m_gen["loop"], m_plain["loop"]) == ("generated", "plain")
-    assert m_gen["macro_steps"] == m_plain["macro_steps"] > 0
+    runs = {loop: _run(scenario, tmp_path / loop, loop, SECONDS) for loop in ("compiled", "generated", "plain")}
+    for loop, (metrics, _) in runs.items():
+        assert (metrics["status"], metrics["loop"]) == ("completed", loop)
+        assert metrics["macro_steps"] == round(SECONDS / metrics["step_size"])
+    gen = runs["generated"][1]
     assert gen.count(b"\n") > 2
-    assert plain == gen
+    assert runs["compiled"][1] == gen
+    assert runs["plain"][1] == gen
+
+
+def test_compiled_loop_through_a_cycle_s_ramps_and_the_row_boundaries(tmp_path):
+    """The WLTC's speed reference (a linear table, a breakpoint every 0.1 s, merged into the controller's
+    call) is evaluated inside the compiled loop: over 12-13 s it ramps up from the first stop, with its
+    segments cut by the rows (every 500 steps) and the chunks."""
+    project_fmus()
+    out = {}
+    for loop in ("compiled", "generated"):
+        spec = load_system("wltc3b-sensorless")
+        spec.stop_time = 13.0
+        m = Master(spec, loop=loop)
+        metrics = m.run(tmp_path / loop, catch_sigint=False)
+        assert (metrics["status"], metrics["loop"]) == ("completed", loop)
+        out[loop] = (tmp_path / loop / "results.csv").read_bytes()
+    assert out["compiled"] == out["generated"]
+    rows = out["compiled"].decode().splitlines()
+    header = rows[0].split(",")
+    omega_ref = [float(r.split(",")[header.index("omega_ref")]) for r in rows[1:]]
+    assert omega_ref[0] == 0.0 and max(omega_ref) > 10.0  # the car moved off within the run
 
 
 @pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
 @pytest.mark.parametrize("multiples", [(1, 1), (2, 3)])
-def test_plain_loop_equals_the_generated_one_on_the_toys(tmp_path, algorithm, multiples):
-    sig = '[signals.s]\ninterpolation = "linear"\ntable = [[0, 0], [0.004, 2], [0.007, -1]]\ndrives = "snk.w"\n'
+def test_the_loops_are_equal_on_the_toys(tmp_path, algorithm, multiples):
     path = toy_system(tmp_path, algorithm=algorithm, src_multiple=multiples[0], snk_multiple=multiples[1],
-                      stop_time=0.012, signals=sig)
-    _, gen = _run(path, tmp_path / "gen", "generated")
-    _, plain = _run(path, tmp_path / "plain", "plain")
-    assert plain == gen
+                      stop_time=0.012, signals=LINEAR)
+    (m_comp, comp), (_, gen), (_, plain) = (_run(path, tmp_path / loop, loop)
+                                            for loop in ("compiled", "generated", "plain"))
+    assert m_comp["loop"] == "compiled"
+    assert comp == gen == plain
 
 
-def test_plain_loop_reports_a_failed_step_as_the_generated_one(tmp_path):
+def test_the_loops_report_a_failed_step_alike(tmp_path):
     path = toy_system(tmp_path, snk_start="raise_at = 4")
     m_gen, gen = _run(path, tmp_path / "gen", "generated")
-    m_plain, plain = _run(path, tmp_path / "plain", "plain")
     assert m_gen["status"].startswith("failed: snk: fmi2DoStep failed at t = 0.003 s")
-    assert (m_plain["status"], m_plain["macro_steps"], plain) == (m_gen["status"], 3, gen)
+    for loop in ("compiled", "plain"):
+        m, rows = _run(path, tmp_path / loop, loop)
+        assert (m["status"], m["macro_steps"], rows) == (m_gen["status"], 3, gen)
+
+
+def test_a_sum_that_overflows_is_not_a_value_that_is_not_finite(tmp_path):
+    """src.y = 1e308 reaches snk.u and snk.w: their sum overflows, each is finite, the run goes on; at the
+    next step y = 2e308 = inf, which the loop refuses, naming the connection."""
+    path = toy_system(tmp_path, connections=('"src.y -> snk.u"', '"src.y -> snk.w"'),
+                      record={"time": '"time"', "last_u": '"snk.last_u"'})
+    runs = {}
+    for loop in ("compiled", "generated", "plain"):
+        spec = load_system(path)
+        spec.set_start("src.slope=1e308")
+        runs[loop] = Master(spec, loop=loop).run(tmp_path / loop, catch_sigint=False)
+        assert runs[loop]["status"] == "failed: src.y is not finite (inf) at t = 0.001 s, before it reached snk.u"
+        assert runs[loop]["macro_steps"] == 1
+    assert (tmp_path / "compiled" / "results.csv").read_bytes() == (tmp_path / "generated" / "results.csv").read_bytes()
+
+
+def test_a_system_the_compiled_loop_cannot_step(tmp_path):
+    """A multi-rate component with a signal input that is not merged into its connections' call (a
+    piecewise-constant table, queued until that component's step) is the generated loop's by default, and
+    refused, with the reason, when the compiled loop is asked for by name."""
+    sig = '[signals.s]\ninterpolation = "previous"\ntable = [[0, 0], [0.004, 2]]\ndrives = "snk.w"\n'
+    path = toy_system(tmp_path, snk_multiple=3, stop_time=0.012, signals=sig)
+    m_default, default = _run(path, tmp_path / "default", None)
+    assert m_default["loop"] == "generated"
+    assert default == _run(path, tmp_path / "plain", "plain")[1]
+    with pytest.raises(CosimError, match=r"^the compiled loop cannot step toy: snk is stepped every 3 steps and "
+                                         r"has signal inputs$"):
+        Master(load_system(path), loop="compiled").run(tmp_path / "named", catch_sigint=False)
+    assert not (tmp_path / "named").exists()  # refused before anything was written
 
 
 def test_loop_from_the_environment(tmp_path, monkeypatch):
@@ -69,9 +124,11 @@ def test_loop_from_the_environment(tmp_path, monkeypatch):
     assert m.loop == "plain"
     m.close()
     assert Master(spec, loop="generated").loop == "generated"  # the argument wins
+    monkeypatch.delenv(LOOP_ENV)
+    assert Master(spec).loop == "compiled"  # the default (where numba can run it: after the set-up)
     monkeypatch.setenv(LOOP_ENV, "unrolled")
     with pytest.raises(CosimError, match=r"^PMSM_COSIM_LOOP: 'unrolled' is not a stepping loop; choose one of "
-                                         r"generated, plain$"):
+                                         r"compiled, generated, plain$"):
         Master(spec)
     with pytest.raises(CosimError, match=r"^loop: 'fast' is not a stepping loop"):
         Master(spec, loop="fast")

@@ -67,6 +67,8 @@ CYCLE_SYSTEM = "wltc3b-sensorless"  #: cases (e), (f): the shipped sensorless cy
 CYCLE = "wltc3b"
 DEFAULT_CYCLE_SLICE = 60.0  #: [s] of the cycle in cases (e), (f)
 CYCLE_MEMORY_STOP_TIMES = (900.0, 1800.0)  #: half the WLTC, the whole
+#: the master's stepping loop of each case run (metrics.json's "loop"; $PMSM_COSIM_LOOP chooses it)
+LOOPS_SEEN: list[str] = []
 
 
 def load_average() -> str:
@@ -111,6 +113,7 @@ def cosim_us_per_step(stop_time: float, work: Path, plant: Path | None = None,
     m = master.run(out, catch_sigint=False)
     if m["status"] != "completed":
         raise CosimError(f"benchmark run did not complete: {m['status']}")
+    LOOPS_SEEN.append(m["loop"])
     return m["us_per_step"], 1e6 * master.loop_cpu_time / m["macro_steps"]
 
 
@@ -269,6 +272,7 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         whole = round(pcycles.load(CYCLE).duration / 1e-4)
         say(f"{'(e) x the whole ' + CYCLE + f' ({whole} steps) [s]':<50}{results['e'][0] * whole * 1e-6:>14.1f}"
             f"{results['e'][1] * whole * 1e-6:>13.1f}")
+        say(f"master's stepping loop: {', '.join(sorted(set(LOOPS_SEEN)))} (PMSM_COSIM_LOOP chooses)")
         say(f"load average at end: {load_average()}")
         if memory:
             say()

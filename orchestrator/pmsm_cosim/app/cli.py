@@ -21,7 +21,7 @@ from pmsm_ev_fmus.build import OBSERVER_FMUS
 
 from ..engine.errors import CosimError, one_line
 from ..engine.fmu import read_description, variable_unit
-from ..engine.master import Master
+from ..engine.master import LOOPS, Master
 from ..engine.progress import ProgressBar
 from ..engine.system import ALGORITHMS
 from ..sweeps import prepare_runs, run_sweep
@@ -87,7 +87,7 @@ def cmd_run(a) -> int:
     spec = _load_with_overrides(a)
     out = Path(a.out) if a.out else Path("runs") / spec.name
     ensure_fmus(spec, a.quiet)
-    master = Master(spec, loop="plain" if a.plain_loop else None)
+    master = Master(spec, loop=a.loop)
     if not a.quiet:
         for w in master.warnings:
             _note(w)
@@ -345,9 +345,12 @@ def build_parser() -> argparse.ArgumentParser:
     _system_options(r)
     r.add_argument("--out", metavar="DIR", help="output directory (default: runs/<scenario name>)")
     r.add_argument("--no-figures", action="store_true", help="do not draw figures")
-    r.add_argument("--plain-loop", action="store_true",
-                   help="step with the plain Python loop (for a debugger; same results, slower) instead of the "
-                        "generated one (also: PMSM_COSIM_LOOP=plain)")
+    r.add_argument("--loop", choices=LOOPS, default=None,
+                   help="the stepping loop (same results): compiled (machine code, the default where numba "
+                        "is), generated (unrolled Python) or plain (Python for a debugger; also: "
+                        "PMSM_COSIM_LOOP=...)")
+    r.add_argument("--plain-loop", action="store_const", const="plain", dest="loop",
+                   help="the same as --loop plain")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes")
     r.set_defaults(func=cmd_run)
 

@@ -45,14 +45,17 @@ whose ``do_step`` returns False asks to terminate: with an error logged, that is
 or if it discards the step without asking to terminate (this master does not retry a step
 with a smaller size).
 
-Two loops step the system, the same FMI calls in the same order (so bit-identical
-results): the *generated* one (default), source text unrolled over the components and
-compiled once per run, the fastest; and the *plain* one (:meth:`Master._plain_steps`),
+Three loops step the system, the same FMI calls in the same order (so bit-identical
+results): the *compiled* one (default where numba is installed), machine code that calls the
+FMUs' C functions by address (:mod:`pmsm_cosim.engine.native`), the fastest; the *generated*
+one, source text unrolled over the components and compiled once per run (the default
+without numba, and for a system the compiled one cannot step: String connections, a
+multi-rate component with signal inputs); and the *plain* one (:meth:`Master._plain_steps`),
 ordinary Python over the components a debugger can step through. ``Master(spec,
-loop="plain")`` or the environment variable ``PMSM_COSIM_LOOP=plain`` selects it
-(``pmsm-cosim run --plain-loop``). The generated source is registered in :mod:`linecache`
-under ``<generated steps of SYSTEM>``, so tracebacks show its lines
-(``Master.step_source`` holds it).
+loop=...)`` or the environment variable ``PMSM_COSIM_LOOP`` selects one (``pmsm-cosim run
+--loop``, ``--plain-loop``); a loop asked for by name that cannot step the system is an
+error. The generated source is registered in :mod:`linecache` under ``<generated steps of
+SYSTEM>``, so tracebacks show its lines (``Master.step_source`` holds it).
 """
 
 from __future__ import annotations
@@ -84,22 +87,26 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _NEVER = sys.maxsize
 #: connections per transfer up to which the finiteness check is an unrolled sum
 _UNROLL = 8
-#: the stepping loops: "generated" (unrolled source, compiled per run), "plain" (for debugging)
-LOOPS = ("generated", "plain")
+#: the stepping loops: "compiled" (machine code, numba), "generated" (unrolled source, compiled per
+#: run), "plain" (for debugging)
+LOOPS = ("compiled", "generated", "plain")
 #: the environment variable that selects the loop when ``Master(loop=None)``
 LOOP_ENV = "PMSM_COSIM_LOOP"
 #: ctypes type of a value of each FMI type in fmi2Get*/fmi2Set* (Enumeration: Integer calls)
 _CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int, "String": ctypes.c_char_p}
 
 
-def loop_choice(loop: str | None = None) -> str:
-    """The stepping loop to use: ``loop`` if given, else $PMSM_COSIM_LOOP, else "generated"."""
+def loop_choice(loop: str | None = None) -> tuple[str, bool]:
+    """(the stepping loop to use, whether it was asked for by name): ``loop`` if given, else
+    $PMSM_COSIM_LOOP, else "compiled" (which falls back to "generated" where it cannot run)."""
     where = "loop"
     if loop is None:
-        loop, where = os.environ.get(LOOP_ENV, "").strip() or "generated", LOOP_ENV
+        loop, where = os.environ.get(LOOP_ENV, "").strip(), LOOP_ENV
+        if not loop:
+            return "compiled", False
     if loop not in LOOPS:
         raise CosimError(f"{where}: {loop!r} is not a stepping loop; choose one of {', '.join(LOOPS)}")
-    return loop
+    return loop, True
 
 
 def hold_strings(buf) -> None:
@@ -197,7 +204,8 @@ class Master:
     """Check a :class:`SystemSpec` against its FMUs and run it."""
 
     def __init__(self, spec: SystemSpec, loop: str | None = None):
-        self.loop = loop_choice(loop)  #: "generated" or "plain" (see the module's docstring)
+        #: "compiled", "generated" or "plain" (see the module's docstring); after the set-up, the one that runs
+        self.loop, self._loop_named = loop_choice(loop)
         self.step_source = ""  #: the generated loop's source (after the set-up of a generated run)
         self.spec = spec
         self.h = spec.step_size
@@ -277,7 +285,30 @@ class Master:
         for comp in s.components:
             self.instances[comp.name].exit_initialization()
         self._build_recorder()
-        self._steps = self._compile_steps() if self.loop == "generated" else self._plain_steps
+        if self.loop == "compiled":
+            self._steps = self._native_steps()
+        if self.loop == "generated":
+            self._steps = self._compile_steps()
+        elif self.loop == "plain":
+            self._steps = self._plain_steps
+
+    def _native_steps(self):
+        """The compiled loop of this system (``pmsm_cosim.engine.native``), compiled (or loaded from
+        numba's cache) now; None, and ``self.loop`` "generated", if it cannot step this system and was
+        not asked for by name (then: CosimError, with the reason)."""
+        try:
+            from . import native  # noqa: PLC0415 - numba (LLVM) is heavy and optional: imported for this loop only
+            reason = native.unsupported(self)
+            if not reason:
+                steps = native.NativeSteps(self, _Interrupted)
+                steps.compile()
+                return steps
+        except Exception as exc:  # numba missing, or an LLVM that cannot compile
+            reason = f"numba is not available ({type(exc).__name__}: {one_line(exc)})"
+        if self._loop_named:
+            raise CosimError(f"the compiled loop cannot step {self.spec.name}: {reason}")
+        self.loop = "generated"
+        return None
 
     def _merge_ramp_inputs(self) -> None:
         """Give each input of a linear table (set at once by the initialisation) a slot in the buffer of
