@@ -59,6 +59,25 @@ def test_gaussian_pair_is_standard_normal():
     assert abs(np.mean(x)) < 0.03 and abs(np.std(x) - 1.0) < 0.02
 
 
+def test_the_compiled_noise_is_the_plain_python_noise_bit_for_bit():
+    """The kernel gaussian_pair compiled (uint64 arithmetic) and as plain Python (masked integers):
+    the same pair for seeds and sample numbers over the whole 64-bit range (a uint64 times an integer
+    literal is an int64 in numba, whose shifts keep the sign: that would change every sample)."""
+    from pmsm_ev import accel
+    from pmsm_ev.kernels import plant as plain
+
+    if not accel.compiled():
+        pytest.skip(f"the kernels are not compiled here: {accel.describe()}")
+    compiled = accel.direct(accel.kernels().gaussian_pair)
+    rng = np.random.default_rng(5)
+    seeds = [0, 1, 2**63 - 1, 2**63, 2**64 - 1] + [int(x) for x in rng.integers(0, 2**63, 40)]
+    samples = [0, 1, 17, 2**31, 2**62 + 3, 2**63 - 1, 2**64 - 1] + [int(x) for x in rng.integers(0, 2**62, 40)]
+    for seed in seeds:
+        for n in samples:
+            assert compiled(seed, n) == plain.gaussian_pair(seed, n), (seed, n)
+    assert gaussian_pair(-1, 5) == plain.gaussian_pair(2**64 - 1, 5)  # any integer seed: its low 64 bits
+
+
 def test_offset_and_gain_error():
     ea, eb, p = measure_errors(PlantParams(sensor_offset_a=0.3, sensor_gain_b=1.02), n=3000)
     i_b_true = -0.5 * p.i_alpha_true + 0.5 * math.sqrt(3) * p.i_beta_true

@@ -115,6 +115,8 @@ class Plant:
         #: the energies since the start [J] (``pmsm_ev.kernels.PLANT_ENERGY_LAYOUT``, ``energies`` by name)
         self.energy = accel.vector(_k.PLANT_ENERGY)
         self._plant_step = accel.direct(self._kernels.plant_step)
+        #: the current sensors' noise: stream sensor_seed (its low 64 bits), sample k at the k-th measurement
+        self._noise, self._seed64 = accel.direct(self._kernels.gaussian_pair), int(p.sensor_seed) & _k.MASK64
         self.reset()
 
     def reset(self) -> None:
@@ -271,7 +273,7 @@ class Plant:
         m_a = p.sensor_gain_a * i_a + p.sensor_offset_a
         m_b = p.sensor_gain_b * i_b + p.sensor_offset_b
         if p.sensor_noise > 0:
-            n_a, n_b = gaussian_pair(int(p.sensor_seed), sample)
+            n_a, n_b = self._noise(self._seed64, sample)
             m_a += p.sensor_noise * n_a
             m_b += p.sensor_noise * n_b
         if self._lsb:
@@ -284,24 +286,7 @@ class Plant:
         return min(max(round(x / self._lsb) * self._lsb, -r), r)
 
 
-_MASK64 = (1 << 64) - 1
-
-
-def _splitmix64(x: int) -> int:
-    x = (x + 0x9E3779B97F4A7C15) & _MASK64
-    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
-    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & _MASK64
-    return x ^ (x >> 31)
-
-
 def gaussian_pair(seed: int, n: int) -> tuple[float, float]:
-    """Two independent standard normal numbers for sample n of stream ``seed``.
-
-    Counter-based (splitmix64 + Box-Muller): the n-th sample depends only on (seed, n),
-    so a saved and restored plant continues the same noise sequence.
-    """
-    base = _splitmix64(seed & _MASK64) ^ ((n * 2) & _MASK64)
-    u1 = 1.0 - (_splitmix64(base) >> 11) * (1.0 / 9007199254740992.0)  # (0, 1]
-    u2 = (_splitmix64(base ^ 0xD1B54A32D192ED03) >> 11) * (1.0 / 9007199254740992.0)
-    r = math.sqrt(-2.0 * math.log(u1))
-    return r * math.cos(2.0 * math.pi * u2), r * math.sin(2.0 * math.pi * u2)
+    """Two independent standard normal numbers for sample n of stream ``seed`` (any integer: its
+    low 64 bits), the kernel ``pmsm_ev.kernels.gaussian_pair`` (splitmix64 + Box-Muller)."""
+    return _k.gaussian_pair(seed & _k.MASK64, n)

@@ -5,7 +5,7 @@ dead time (``dead_time_error``), magnetic saturation (flux-form eqs 10-12, ``sat
 the winding's temperature (``winding_resistance``, ``thermal_step``); the friction brake, the gear
 model ``power_flow`` (``power_flow_gear``), the inverter's losses (``inverter_loss``) and the energy
 accounting (``plant_rates``' powers, integrated by ``plant_step`` with the RK4 weights of the state;
-``stored_energies``), docs/speed-range.md.
+``stored_energies``), docs/speed-range.md; the current sensors' noise (``gaussian_pair``).
 
 The parameter vector ``pp`` is laid out by ``pmsm_ev.kernels.layout.PLANT_PARAMS_LAYOUT`` (``P_*``).
 """
@@ -520,3 +520,32 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     x3 = wrap_angle(x3)
     i_alpha, i_beta, t_e, t_l, v_v = plant_outputs(x0, x1, x2, x3, delta, pp)
     return x0, x1, x2, x3, i_alpha, i_beta, t_e, t_l, v_v, dx
+
+
+# -- the current sensors' noise ---------------------------------------------------------------
+MASK64 = (1 << 64) - 1  #: the low 64 bits (plain Python's integers do not wrap; numba's uint64 do)
+
+
+@kernel()
+def splitmix64(x):
+    """The splitmix64 mix of the 64-bit integer x (Steele, Lea and Flood 2014)."""
+    x = (x + 0x9E3779B97F4A7C15) & MASK64
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & MASK64
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & MASK64
+    return x ^ (x >> 31)
+
+
+@kernel(_sig("UniTuple(float64, 2)", "uint64", "uint64"))
+def gaussian_pair(seed, n):
+    """Two independent standard normal numbers for sample n of stream ``seed`` (both 0 <= ... < 2**64).
+
+    Counter-based (splitmix64 + Box-Muller): the n-th sample depends only on (seed, n),
+    so a saved and restored plant continues the same noise sequence. Compiled, the integers are
+    uint64 and wrap; in plain Python the masks wrap them: the same numbers either way (n + n, not
+    n * 2: numba types a uint64 times an integer literal as int64, whose shifts keep the sign).
+    """
+    base = splitmix64(seed & MASK64) ^ ((n + n) & MASK64)
+    u1 = 1.0 - (splitmix64(base) >> 11) * (1.0 / 9007199254740992.0)  # (0, 1]
+    u2 = (splitmix64(base ^ 0xD1B54A32D192ED03) >> 11) * (1.0 / 9007199254740992.0)
+    r = math.sqrt(-2.0 * math.log(u1))
+    return r * math.cos(2.0 * math.pi * u2), r * math.sin(2.0 * math.pi * u2)
