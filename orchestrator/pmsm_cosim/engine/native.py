@@ -163,8 +163,7 @@ class NativeSteps:
         self.interrupted = interrupted  #: the exception class of an interrupted chunk, called with n
         self.h = master.h
         self.jacobi = master.spec.algorithm == "jacobi"
-        transfers = [(i, j, st, tr) for i, st in enumerate(master.steppers) for j, tr in enumerate(st.transfers)]
-        n_real = sum(len(tr.values) for *_, tr in transfers if tr.kind == "Real")
+        n_real = sum(len(tr.values) for st in master.steppers for tr in st.transfers if tr.kind == "Real")
         self.values = np.zeros(max(n_real, 1))
         self.where = []  # row k of io -> (stepper index, transfer index)
         io, offset, real, slot_of = [], [], [], {}
@@ -244,8 +243,9 @@ class NativeSteps:
                         slots += sig_slots
                         consts += [sig.segment] * len(sig_slots)
                         lim = min(lim, sig.ramp_end)
+                in_loop = {id(sig) for sig, _ in ramping}
                 for sig in m.signals:
-                    if not any(sig is r for r, _ in ramping):
+                    if id(sig) not in in_loop:
                         lim = min(lim, sig.next_n)
                 ramp = ((np.array(slots, dtype=np.intp), np.array(consts, dtype=np.float64).reshape(-1, 4))
                         if slots else self._no_ramp)
