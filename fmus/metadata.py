@@ -244,10 +244,14 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "still_speed": ("rad/s", "below this |omega_hat| and |omega_if| in I-f the car stands: the guard and the I-f "
                              "sizing use the EKF's angle and load of when the stand began, the EKF is put back "
                              "there when it ends (no back-EMF shows the angle); 0 = never"),
+    "anchor_speed": ("rad/s", "in I-f at this |omega_hat| or faster the EKF's angle relative to the vector and its "
+                              "load are kept: a stand is anchored on them, and the EKF restarted on the vector's "
+                              "angle plus that offset when it ends; 0 = the EKF's at the stand's start"),
     "if_deadline": ("s", "in I-f with |omega_ref| above omega_up this long, the handover up to FOC on the EKF is "
                          "forced (the I-f speed above omega_up, the EKF's alike, not slipping): an episode; 0 = never"),
     "stall_time": ("s", "in I-f with |omega_ref| above omega_up this long, the drive has stalled: the rotor is "
-                        "realigned from standstill (an episode); 0 = never"),
+                        "realigned from standstill (an episode; a rotor turning at omega_down or faster: FOC "
+                        "on the EKF); 0 = never"),
     "realign_max": (None, "realignments after a stall, without a handover up in between, before the fault latches"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "

@@ -761,6 +761,17 @@ class StartupParams:
     #: with it; the guard and the I-f sizing take the angle and the load of when the stand began, and
     #: the EKF is put back there when it ends; 0: never
     still_speed: float = 0.5
+    #: what a stand is anchored on [rad/s] [chosen: 10 rad/s]: in I-f at this |omega_hat| or faster the
+    #: EKF's angle less the vector's (the rotor's place on the vector) and its load are kept; a stand
+    #: then takes the vector's angle plus that offset, and that load, and the EKF is restarted at the
+    #: vector's angle plus that offset when the stand ends (the vector may have turned since it began).
+    #: Below ~10 rad/s an EKF with a mismatched motor model is not to be trusted: the resistance error
+    #: against a back-EMF of N omega psi = 3.6 V at 10 rad/s (+50 % R_s at 160 A: 0.69 V, ~0.2 rad);
+    #: measured on WLTC's stop at 445-511 s with R_s +10 %, L_q -24 % (cycle Monte-Carlo sample 17): the
+    #: EKF's angle 0.03 rad off at 10 rad/s, 0.46 rad at the stand's 0.5 rad/s, which the restart used
+    #: to inherit (its load 23 N m against 1.6; the I-f current then rose to the limit and the rotor
+    #: slipped 9 turns); 0: the EKF's angle and load at the stand's start, as before
+    anchor_speed: float = 10.0
     #: design load angle of the I-f drive [rad] [chosen]: 60 deg. The I-f acceleration is held to
     #: what N psi i sin(60 deg) leaves over the load the EKF sees, and the current raised to what
     #: the asked acceleration and the load need at 60 deg: sin 60 = 0.87 of the pull-out torque
@@ -802,8 +813,9 @@ class StartupParams:
     #: the drive stalled [s] [chosen: 3 s]: in I-f with |omega_ref| above ``omega_up`` this long (the
     #: handover neither came nor could be forced: the rotor does not follow the vector), the rotor is
     #: realigned: the alignment from standstill run again (the angle is unknown at a stand), the current
-    #: PIs reset, an episode; after ``realign_max`` realignments without a handover up in between, the
-    #: fault latches (the safe state); 0: never
+    #: PIs reset, an episode (a rotor turning the vector's way at |omega_hat| >= ``omega_down`` then gets
+    #: FOC on the EKF instead, counted as a realignment); after ``realign_max`` realignments without a
+    #: handover up in between, the fault latches (the safe state); 0: never
     stall_time: float = 3.0
     realign_max: int = 2
 

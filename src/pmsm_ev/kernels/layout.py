@@ -246,9 +246,9 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_THETA_CTRL", 1, "the control frame's angle of the last period [rad]"),
     ("S_OMEGA_CTRL", 1, "the control frame's speed of the last period [rad/s]"),
     # the car standing in I-f (``C_STILL``)
-    ("S_ANCHOR", 1, "the EKF's angle when the stand began [rad]"),
+    ("S_ANCHOR", 1, "the rotor's angle when the stand began [rad]: the vector's and S_TRUST_OFF"),
     ("S_ANCHORED", 1, "1.0 while the car stands"),
-    ("S_ANCHOR_TL", 1, "the EKF's load when the stand began [N m]"),
+    ("S_ANCHOR_TL", 1, "the load when the stand began [N m]: S_TRUST_TL"),
     ("S_STILL_OUT", 1, "how long |omega_hat| has been above C_STILL while standing [s] (the stand ends at "
                        "C_SLIP_TIME / 2)"),
     # reference generator
@@ -264,7 +264,12 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     # the sensorless unit's handover deadline and stall (``C_IF_DEADLINE``, ``C_STALL_TIME``)
     ("S_IF_DUE", 1, "how long the unit has been in I-f with |omega_ref| above C_W_UP [s]"),
     ("S_REALIGN", 1, "the realignments after a stall since the last handover up [-]"),
-), size=124)
+    # the stand's anchor, relative to the I-f vector (``C_ANCHOR_SPEED``)
+    ("S_TRUST_OFF", 1, "the EKF's angle less the I-f vector's, when it last saw the rotor turn at C_ANCHOR_SPEED "
+                       "or faster in I-f (or was restarted on the vector) [rad]"),
+    ("S_TRUST_TL", 1, "the EKF's load at that moment [N m]"),
+    ("S_ANCHOR_REL", 1, "the stand's anchor less the I-f vector's angle when the stand began [rad]"),
+), size=127)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -369,7 +374,9 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_IF_DEADLINE", 1, "in I-f with |omega_ref| above C_W_UP this long, the handover up is forced [s]"),
     ("C_STALL_TIME", 1, "... this long, the drive has stalled: a realignment [s]"),
     ("C_REALIGN_MAX", 1, "realignments after a stall before the fault latches [-]"),
-), size=103)
+    ("C_ANCHOR_SPEED", 1, "in I-f at this |omega_hat| or faster the EKF's angle (relative to the vector) and load "
+                          "are what a stand is anchored on [rad/s]"),
+), size=104)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())
