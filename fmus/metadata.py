@@ -242,7 +242,7 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                             "the alignment: I-f on the EKF's angle at i_q_max (a car parked on a slope); 0 = never"),
     "align_slip_time": ("s", "... for this long"),
     "still_speed": ("rad/s", "below this |omega_hat| and |omega_if| in I-f the car stands: the guard and the I-f "
-                             "sizing use the EKF's angle and load of when the stand began, the EKF is put back "
+                             "sizing use the angle and load it is anchored on (anchor_speed), the EKF is put back "
                              "there when it ends (no back-EMF shows the angle); 0 = never"),
     "anchor_speed": ("rad/s", "in I-f at this |omega_hat| or faster the EKF's angle relative to the vector and its "
                               "load are kept: a stand is anchored on them, and the EKF restarted on the vector's "

@@ -414,8 +414,8 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     elif s[S_MODE] == MODE_IF:
         # the EKF believed on the rotor's place on the vector and on the load where it sees the rotor turn
         # (C_ANCHOR_SPEED), or the guard holds the vector, or it says that the vector leads (or trails) the
-        # rotor by more than the design load angle or that the rotor has moved on the vector by that much
-        # since it was last believed (a load that changed: the EKF saw the motion). Else, at low speed, not:
+        # rotor by more than the design load angle or that the rotor has moved on the vector by more than
+        # _TRUST_MOVE since it was last believed (a load that changed: the EKF saw the motion). Else, at low speed, not:
         # with a mismatched motor model its angle and load drift there with the current (the resistance's
         # error), and an I-f current sized on that load would feed the drift (docs/sensorless.md)
         lead = wrap_angle(s[S_PHI] - s[S_X + 3])
