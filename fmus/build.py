@@ -43,9 +43,12 @@ import html
 import importlib
 import json
 import os
+import platform
 import re
 import shutil
+import subprocess
 import sys
+import sysconfig
 import tempfile
 import time
 import xml.etree.ElementTree as ET
@@ -94,6 +97,72 @@ DEFAULT_ROUTE = "scenario1"
 
 class BuildError(RuntimeError):
     """An FMU cannot be built."""
+
+
+#: the lean binding (fmus/README.md, "The lean binding"): its C source, the name pythonfmu's own library takes
+#: beside it in binaries/linux64/, and the environment variable that chooses the binding of the FMUs built
+#: ("lean", the default, or "pythonfmu": pythonfmu's library alone)
+LEAN_SOURCE = HERE / "lean_binding.c"
+INNER_LIBRARY = "pythonfmu-export.so"
+ENV_BINDING = "PMSM_EV_FMU_BINDING"
+BINDINGS = ("lean", "pythonfmu")
+
+
+def binding_requested() -> str:
+    """The binding the FMUs are built with: ``$PMSM_EV_FMU_BINDING`` ("lean" by default, or "pythonfmu");
+    "pythonfmu" where the lean one does not exist (not Linux on x86-64)."""
+    choice = os.environ.get(ENV_BINDING, "lean").strip() or "lean"
+    if choice not in BINDINGS:
+        raise BuildError(f"{ENV_BINDING}={choice!r}: choose one of {', '.join(BINDINGS)}")
+    if choice == "lean" and not (sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64")):
+        return "pythonfmu"
+    return choice
+
+
+def lean_library() -> tuple[Path | None, str]:
+    """The lean binding compiled for this Python (``cc``, or ``$CC``; the limited API, no libpython linked),
+    kept in the user's cache (``user_cache_dir()/binding/``) under the hash of its source and of the Python
+    headers: (path, "") or (None, why it cannot be built)."""
+    source = LEAN_SOURCE.read_bytes()
+    key = hashlib.sha256(source + sysconfig.get_paths()["include"].encode()).hexdigest()[:16]
+    folder = user_cache_dir() / "binding"
+    target = folder / f"lean-{key}.so"
+    if target.is_file():
+        return target, ""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".lean-", suffix=".so", dir=folder)
+        os.close(fd)
+    except OSError as exc:
+        return None, f"cannot write {folder} ({exc.strerror or exc})"
+    command = [os.environ.get("CC", "cc"), "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall",
+               f"-I{sysconfig.get_paths()['include']}", str(LEAN_SOURCE), "-o", tmp, "-ldl"]
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+        if done.returncode != 0:
+            lines = (done.stderr or done.stdout).strip().splitlines()
+            return None, f"{command[0]} failed: {lines[0] if lines else 'exit ' + str(done.returncode)}"
+        os.replace(tmp, target)
+        return target, ""
+    except (OSError, subprocess.SubprocessError) as exc:
+        return None, f"no C compiler ({command[0]}: {exc})"
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _bind(fmu: Path, name: str, library: Path) -> None:
+    """Put the lean binding ``library`` in front of pythonfmu's in ``fmu``: pythonfmu's
+    ``binaries/linux64/<name>.so`` becomes ``binaries/linux64/pythonfmu-export.so``, the binding takes its name."""
+    member, inner = f"binaries/linux64/{name}.so", f"binaries/linux64/{INNER_LIBRARY}"
+
+    def change(names):
+        if member not in names:
+            raise BuildError(f"{fmu}: pythonfmu wrote no {member}")
+        with zipfile.ZipFile(fmu) as z:
+            return {member: library.read_bytes(), inner: z.read(member)}
+
+    _copy_fmu(fmu, fmu, change)
 
 
 #: the environment variable that names the folder of the project's FMUs (overrides the cache)
@@ -259,6 +328,10 @@ def source_hash(name: str) -> str:
     add("fmu", f"{name} {script} {variable_step}".encode())
     add("pythonfmu", _pythonfmu_version().encode())
     add("build.py", Path(__file__).read_bytes())
+    binding = binding_requested()
+    add("binding", binding.encode())
+    if binding == "lean":
+        add("lean_binding.c", LEAN_SOURCE.read_bytes())
     for module in sorted(_fmus_modules(script)):
         add(f"fmus/{module}", (HERE / module).read_bytes())
     root = physics_dir()
@@ -283,7 +356,9 @@ def _source_signature() -> tuple:
             except OSError:
                 continue
             files.append((str(path), st.st_size, st.st_mtime_ns))
-    return (_pythonfmu_version(), tuple(files))
+    st = LEAN_SOURCE.stat()
+    files.append((str(LEAN_SOURCE), st.st_size, st.st_mtime_ns))
+    return (_pythonfmu_version(), os.environ.get(ENV_BINDING, ""), tuple(files))
 
 
 def content_key() -> str:
@@ -345,7 +420,7 @@ def is_up_to_date(name: str, out_dir=None) -> bool:
     return info is not None and info.get("hash") == source_hash(name)
 
 
-def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]:
+def _stage(name: str, digest: str, stage: Path, binding: str = "pythonfmu") -> tuple[Path, list[Path], Path]:
     """Write the renamed sources into ``stage``; return (script, project files, doc dir)."""
     script, variable_step = _recipe(name)
     tag = digest[:8]
@@ -377,6 +452,7 @@ def _stage(name: str, digest: str, stage: Path) -> tuple[Path, list[Path], Path]
         "physics_package": physics.name,
         "project_version": importlib.import_module(PHYSICS_PACKAGE).__version__,
         "pythonfmu": _pythonfmu_version(),
+        "binding": binding,
         "python_built_with": sys.version.split()[0],
         "start_values": START_VALUES_FILE,
         "files_sha256": files,
@@ -417,14 +493,19 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
         raise BuildError(f"pythonfmu imported from {Path(pythonfmu.__file__).parent} has no binaries "
                          "(an FMU's bundled copy?): build FMUs before loading any in this process")
 
+    library, why = lean_library() if binding_requested() == "lean" else (None, "")
+    if why:
+        print(f"warning: {name}.fmu gets pythonfmu's binding, not the lean one: {why}", file=sys.stderr)
     stage = _make_stage(out, name)
     saved_path, saved_modules = list(sys.path), set(sys.modules)
     try:
-        script, project_files, doc = _stage(name, digest, stage)
+        script, project_files, doc = _stage(name, digest, stage, "lean" if library else "pythonfmu")
         built = FmuBuilder.build_FMU(
             script, dest=stage / f"{name}.fmu", project_files=project_files, documentation_folder=doc,
             canGetAndSetFMUstate=True, canSerializeFMUstate=True,
             canHandleVariableCommunicationStepSize=_recipe(name)[1])
+        if library is not None:
+            _bind(built, name, library)
         _check(built, name)
         os.replace(built, target)
     finally:

@@ -136,6 +136,34 @@ def _release_wrapper_libraries() -> None:
     _WRAPPER_LIBRARIES.clear()
 
 
+#: the lean binding's entry point (``fmus/lean_binding.c``): where a slave offers itself
+LEAN_OFFER = "pmsm_fmu_offer"
+#: the lean binding's offer function of each FMU library folder of this process (None: pythonfmu's own binary)
+_LEAN_OFFERS: dict[str, object] = {}
+
+
+def lean_offer(resources):
+    """The ``pmsm_fmu_offer`` function of the lean binding that holds the FMU unpacked around
+    ``resources`` (``binaries/linux64/<model>.so``, already loaded by the host), or None when its
+    binary is pythonfmu's own (another platform, a build without a C compiler, another host's copy)."""
+    if not resources or not sys.platform.startswith("linux"):
+        return None
+    folder = str(Path(resources).parent / "binaries" / "linux64")
+    if folder not in _LEAN_OFFERS:
+        _LEAN_OFFERS[folder] = None
+        for library in sorted(Path(folder).glob("*.so")):
+            try:  # the library the host loaded (by this path), with the GIL held across the call
+                handle = ctypes.PyDLL(str(library), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+            except OSError:
+                continue
+            offer = getattr(handle, LEAN_OFFER, None)
+            if offer is not None:
+                offer.argtypes, offer.restype = [ctypes.py_object], ctypes.c_int
+                _LEAN_OFFERS[folder] = offer
+                break
+    return _LEAN_OFFERS[folder]
+
+
 class FmuUsageError(RuntimeError):
     """An FMI call that the FMU cannot honour (illegal value or call sequence)."""
 
@@ -353,6 +381,23 @@ class DriveSlave(Fmi2Slave):
         except Exception as exc:
             self._fail("fmi2SetupExperiment", exc)
             raise
+
+    def enter_initialization_mode(self):
+        """Offer this slave to the lean binding, if the FMU's library is it (``fmus/lean_binding.c``:
+        once initialised, the binding reads the Real variables, writes the Real inputs and calls
+        ``do_step`` itself; everything else, and anything that would fail, goes through pythonfmu)."""
+        offer = lean_offer(self.resources)
+        if offer is not None:
+            offer((self, self.__dict__, self.do_step, self._defer_step, self.log_queue, tuple(self._real_names),
+                   tuple(name is not None for name in self._real_inputs)))
+
+    def _defer_step(self, exc: BaseException) -> None:
+        """The lean binding's ``do_step`` raised ``exc``: raise it again from pythonfmu's fmi2DoStep,
+        which the binding calls next, so that pythonfmu reports it as it reports any exception."""
+        def raise_again(*_args):
+            raise exc
+
+        self.do_step = raise_again
 
     def exit_initialization_mode(self):
         try:

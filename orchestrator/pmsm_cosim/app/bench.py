@@ -52,7 +52,7 @@ from pathlib import Path
 
 from pmsm_ev import accel
 from pmsm_ev import cycles as pcycles
-from pmsm_ev_fmus.build import BENCH_FMUS, build_all, build_fmu
+from pmsm_ev_fmus.build import BENCH_FMUS, ENV_BINDING, build_all, build_fmu, read_build_info
 
 from ..engine.errors import CosimError
 from ..engine.master import Master
@@ -184,6 +184,12 @@ def project_fmus() -> dict[str, Path]:
     return build_all(out_dir=project_fmu_dir(), names=["PmsmEvPlant", "FocEkf5", "FocSensorless"])
 
 
+def bindings() -> str:
+    """The FMI binding of the FMUs measured (build_info.json's "binding": fmus/README.md, "The lean binding")."""
+    found = {(read_build_info(path) or {}).get("binding", "pythonfmu") for path in project_fmus().values()}
+    return ", ".join(sorted(found))
+
+
 # -- memory: a fresh process per run ---------------------------------------------------------
 def run_child(stop_time: float, out_dir: Path, system: str = SCENARIO, options=(), lines: int = 1
               ) -> tuple[float, float, str]:
@@ -273,6 +279,7 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         say(f"{'(e) x the whole ' + CYCLE + f' ({whole} steps) [s]':<50}{results['e'][0] * whole * 1e-6:>14.1f}"
             f"{results['e'][1] * whole * 1e-6:>13.1f}")
         say(f"master's stepping loop: {', '.join(sorted(set(LOOPS_SEEN)))} (PMSM_COSIM_LOOP chooses)")
+        say(f"the FMUs' binding: {bindings()} ({ENV_BINDING} chooses)")
         say(f"load average at end: {load_average()}")
         if memory:
             say()

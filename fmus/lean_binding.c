@@ -1,0 +1,558 @@
+/*
+ * The project's lean FMI 2.0 binding (Linux): the FMU's binaries/linux64/<model>.so in front of pythonfmu's
+ * own library (pythonfmu-export.so, beside it). Why and what it does: fmus/README.md, "The lean binding";
+ * docs/performance.md.
+ *
+ * Every FMI function is pythonfmu's, forwarded, except the three of the per-step path once the slave has
+ * offered itself (DriveSlave.enter_initialization_mode calls pmsm_fmu_offer, on this thread, inside the
+ * forwarded fmi2EnterInitializationMode) and fmi2ExitInitializationMode has succeeded:
+ *
+ *   fmi2GetReal    the slave's attributes read directly (what DriveSlave.get_real returns: the same objects,
+ *                  the same doubles), when every value reference names a Real and the slave is not stale;
+ *   fmi2SetReal    the Real inputs written into the instance dict (what DriveSlave.set_real does), when every
+ *                  value reference names a Real input;
+ *   fmi2DoStep     the slave's do_step called directly.
+ *
+ * Anything else, or anything that fails on the way, goes to pythonfmu's function with the same arguments, so
+ * that the errors, their log messages and their statuses are pythonfmu's: a get or set that would fail is
+ * never half done here (all checks come first; a failing attribute read is cleared and the whole call
+ * forwarded, reads have no side effect). An exception in do_step is handed to the slave (defer), which
+ * raises it again from pythonfmu's fmi2DoStep, forwarded: pythonfmu logs and returns it as it always did.
+ * Messages the slave queued during a direct step are flushed by a zero-length fmi2GetReal, forwarded
+ * (pythonfmu drains the queue after every call, with its own debug-logging filter).
+ * fmi2GetRealStatus (the last successful time) and fmi2GetBooleanStatus (terminated) are answered here
+ * for every step, direct or forwarded, as pythonfmu answers them.
+ *
+ * Python's limited API (3.8), as pythonfmu's library: no libpython is linked; the host process provides it.
+ */
+#define Py_LIMITED_API 0x03080000
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <dlfcn.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef void* fmi2Component;
+typedef void* fmi2ComponentEnvironment;
+typedef void* fmi2FMUstate;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Integer;
+typedef int fmi2Boolean;
+typedef char fmi2Char;
+typedef const fmi2Char* fmi2String;
+typedef char fmi2Byte;
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
+typedef struct {
+    fmi2CallbackLogger logger;
+    void* (*allocateMemory)(size_t, size_t);
+    void (*freeMemory)(void*);
+    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+#define EXPORT __attribute__((visibility("default")))
+#define INNER_LIBRARY "pythonfmu-export.so"
+
+/* -- pythonfmu's library ------------------------------------------------------------------------------ */
+static void* inner_library = NULL;
+
+static void* inner(const char* name)
+{
+    if (inner_library == NULL) {
+        Dl_info self;
+        if (!dladdr((void*)&inner, &self) || self.dli_fname == NULL) return NULL;
+        size_t n = strlen(self.dli_fname);
+        char* path = malloc(n + sizeof(INNER_LIBRARY) + 1);
+        if (path == NULL) return NULL;
+        memcpy(path, self.dli_fname, n + 1);
+        char* slash = strrchr(path, '/');
+        strcpy(slash ? slash + 1 : path, INNER_LIBRARY);
+        inner_library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+        free(path);
+        if (inner_library == NULL) return NULL;
+    }
+    return dlsym(inner_library, name);
+}
+
+/* forward(name, type, args...): pythonfmu's function `name` of type `type`, or fmi2Error if missing */
+#define FORWARD(name, type, ...)                                                                             \
+    do {                                                                                                     \
+        static type fn = NULL;                                                                               \
+        if (fn == NULL) fn = (type)inner(#name);                                                             \
+        if (fn == NULL) return fmi2Error;                                                                    \
+        return fn(__VA_ARGS__);                                                                              \
+    } while (0)
+
+/* -- an instance ------------------------------------------------------------------------------------------ */
+typedef struct {
+    fmi2Component inner;        /* pythonfmu's instance */
+    int ready;                  /* the direct path is on (offered, initialised, no failure handed over) */
+    double last_successful_time;
+    int terminated;
+    /* the slave's offer (strong references, released with the GIL held) */
+    PyObject* slave;            /* the pythonfmu.Fmi2Slave */
+    PyObject* attributes;       /* its instance dict */
+    PyObject* do_step;          /* its bound do_step */
+    PyObject* defer;            /* defer(exc): make its do_step raise exc (from pythonfmu's fmi2DoStep) */
+    PyObject* log_queue;        /* the list pythonfmu drains after every call */
+    PyObject* stale_name;       /* "_stale" */
+    Py_ssize_t n;               /* value references 0 .. n-1 */
+    PyObject** names;           /* by value reference: the attribute of a Real variable, or NULL */
+    unsigned char* inputs;      /* by value reference: 1 for a Real input */
+    PyObject* offer;            /* the tuple offered (keeps the names alive) */
+} Instance;
+
+/* the offer made on this thread during the forwarded fmi2EnterInitializationMode */
+static __thread PyObject* pending_offer = NULL;
+
+/* pmsm_fmu_offer((slave, attributes, do_step, defer, log_queue, names, inputs)), called by the slave
+ * through ctypes.PyDLL (the GIL held): names and inputs are sequences by value reference (a str or None;
+ * a truth value). Returns 0, or -1 if the offer is malformed (then nothing is kept). */
+EXPORT int pmsm_fmu_offer(PyObject* offer)
+{
+    if (!PyTuple_Check(offer) || PyTuple_Size(offer) != 7) return -1;
+    Py_XDECREF(pending_offer);
+    Py_INCREF(offer);
+    pending_offer = offer;
+    return 0;
+}
+
+static void drop_offer(Instance* w)
+{
+    w->ready = 0;
+    if (w->offer == NULL) return;
+    free(w->names);
+    free(w->inputs);
+    w->names = NULL;
+    w->inputs = NULL;
+    Py_CLEAR(w->offer);
+    Py_CLEAR(w->slave);
+    Py_CLEAR(w->attributes);
+    Py_CLEAR(w->do_step);
+    Py_CLEAR(w->defer);
+    Py_CLEAR(w->log_queue);
+    Py_CLEAR(w->stale_name);
+    w->n = 0;
+}
+
+static void drop_offer_gil(Instance* w)
+{
+    if (w->offer == NULL && pending_offer == NULL) return;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    drop_offer(w);
+    Py_CLEAR(pending_offer);
+    PyGILState_Release(gil);
+}
+
+/* take this thread's pending offer (GIL held); a malformed one is dropped (the direct path stays off) */
+static void take_offer(Instance* w)
+{
+    PyObject* offer = pending_offer;
+    pending_offer = NULL;
+    drop_offer(w);
+    if (offer == NULL) return;
+    PyObject* names = PyTuple_GetItem(offer, 5);
+    PyObject* inputs = PyTuple_GetItem(offer, 6);
+    Py_ssize_t n = names ? PySequence_Size(names) : -1;
+    if (n < 0 || PySequence_Size(inputs) != n) goto bad;
+    w->names = calloc((size_t)n + 1, sizeof(PyObject*));
+    w->inputs = calloc((size_t)n + 1, 1);
+    if (w->names == NULL || w->inputs == NULL) goto bad;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject* name = PySequence_GetItem(names, i);
+        PyObject* input = PySequence_GetItem(inputs, i);
+        int is_input = input ? PyObject_IsTrue(input) : -1;
+        Py_XDECREF(input);
+        if (name == NULL || is_input < 0) {
+            Py_XDECREF(name);
+            goto bad;
+        }
+        if (name != Py_None && !PyUnicode_Check(name)) {
+            Py_DECREF(name);
+            goto bad;
+        }
+        if (name != Py_None) {
+            w->names[i] = name; /* borrowed below: `offer` keeps the sequence, which keeps the str */
+            w->inputs[i] = (unsigned char)(is_input > 0);
+        }
+        Py_DECREF(name);
+    }
+    w->n = n;
+    w->offer = offer;
+    w->slave = PyTuple_GetItem(offer, 0);
+    w->attributes = PyTuple_GetItem(offer, 1);
+    w->do_step = PyTuple_GetItem(offer, 2);
+    w->defer = PyTuple_GetItem(offer, 3);
+    w->log_queue = PyTuple_GetItem(offer, 4);
+    Py_XINCREF(w->slave);
+    Py_XINCREF(w->attributes);
+    Py_XINCREF(w->do_step);
+    Py_XINCREF(w->defer);
+    Py_XINCREF(w->log_queue);
+    w->stale_name = PyUnicode_FromString("_stale");
+    if (!w->slave || !w->attributes || !PyDict_Check(w->attributes) || !w->do_step || !w->defer || !w->log_queue
+        || !PyList_Check(w->log_queue) || !w->stale_name)
+        goto bad;
+    return;
+bad:
+    PyErr_Clear();
+    if (w->offer == NULL) {
+        free(w->names);
+        free(w->inputs);
+        w->names = NULL;
+        w->inputs = NULL;
+        w->n = 0;
+        Py_DECREF(offer);
+    } else {
+        drop_offer(w);
+    }
+}
+
+/* -- the FMI functions ---------------------------------------------------------------------------------- */
+EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
+EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
+
+typedef fmi2Component (*instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions*,
+                                       fmi2Boolean, fmi2Boolean);
+
+EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                                     fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
+                                     fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    instantiate_t fn = (instantiate_t)inner("fmi2Instantiate");
+    if (fn == NULL) {
+        if (functions && functions->logger)
+            functions->logger(functions->componentEnvironment, instanceName, fmi2Fatal, "error",
+                              "cannot load " INNER_LIBRARY " beside the FMU's library: %s", dlerror());
+        return NULL;
+    }
+    Instance* w = calloc(1, sizeof(Instance));
+    if (w == NULL) return NULL;
+    w->inner = fn(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible, loggingOn);
+    if (w->inner == NULL) {
+        free(w);
+        return NULL;
+    }
+    w->last_successful_time = NAN;
+    return w;
+}
+
+#define W ((Instance*)c)
+
+typedef void (*free_t)(fmi2Component);
+EXPORT void fmi2FreeInstance(fmi2Component c)
+{
+    if (c == NULL) return;
+    drop_offer_gil(W);
+    free_t fn = (free_t)inner("fmi2FreeInstance");
+    if (fn != NULL) fn(W->inner);
+    free(W);
+}
+
+typedef fmi2Status (*debug_t)(fmi2Component, fmi2Boolean, size_t, const fmi2String[]);
+EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[])
+{
+    FORWARD(fmi2SetDebugLogging, debug_t, W->inner, on, n, categories);
+}
+
+typedef fmi2Status (*setup_t)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
+EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol, fmi2Real start,
+                                      fmi2Boolean stopDefined, fmi2Real stop)
+{
+    FORWARD(fmi2SetupExperiment, setup_t, W->inner, tolDefined, tol, start, stopDefined, stop);
+}
+
+typedef fmi2Status (*plain_t)(fmi2Component);
+EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    static plain_t fn = NULL;
+    if (fn == NULL) fn = (plain_t)inner("fmi2EnterInitializationMode");
+    if (fn == NULL) return fmi2Error;
+    drop_offer_gil(W);
+    fmi2Status status = fn(W->inner);
+    PyGILState_STATE gil = PyGILState_Ensure();
+    if (status == fmi2OK || status == fmi2Warning) {
+        take_offer(W);
+    } else {
+        Py_CLEAR(pending_offer);
+    }
+    PyGILState_Release(gil);
+    return status;
+}
+
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    static plain_t fn = NULL;
+    if (fn == NULL) fn = (plain_t)inner("fmi2ExitInitializationMode");
+    if (fn == NULL) return fmi2Error;
+    fmi2Status status = fn(W->inner);
+    W->ready = W->offer != NULL && (status == fmi2OK || status == fmi2Warning);
+    return status;
+}
+
+EXPORT fmi2Status fmi2Terminate(fmi2Component c)
+{
+    FORWARD(fmi2Terminate, plain_t, W->inner);
+}
+
+EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    drop_offer_gil(W); /* pythonfmu makes a new slave: it offers itself at the next initialisation */
+    W->last_successful_time = NAN;
+    W->terminated = 0;
+    FORWARD(fmi2Reset, plain_t, W->inner);
+}
+
+typedef fmi2Status (*get_real_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
+typedef fmi2Status (*set_real_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
+
+static fmi2Status forward_get_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    FORWARD(fmi2GetReal, get_real_t, W->inner, vr, nvr, value);
+}
+
+static fmi2Status forward_set_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                   const fmi2Real value[])
+{
+    FORWARD(fmi2SetReal, set_real_t, W->inner, vr, nvr, value);
+}
+
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    Instance* w = W;
+    if (!w->ready || nvr == 0) return forward_get_real(c, vr, nvr, value);
+    for (size_t i = 0; i < nvr; i++)
+        if ((Py_ssize_t)vr[i] >= w->n || w->names[vr[i]] == NULL) return forward_get_real(c, vr, nvr, value);
+    PyGILState_STATE gil = PyGILState_Ensure();
+    PyObject* stale = PyObject_GetAttr(w->slave, w->stale_name);
+    int is_stale = stale ? PyObject_IsTrue(stale) : -1;
+    Py_XDECREF(stale);
+    int ok = is_stale == 0;
+    for (size_t i = 0; ok && i < nvr; i++) {
+        PyObject* v = PyObject_GetAttr(w->slave, w->names[vr[i]]);
+        if (v == NULL) {
+            ok = 0;
+            break;
+        }
+        value[i] = PyFloat_AsDouble(v);
+        Py_DECREF(v);
+        if (value[i] == -1.0 && PyErr_Occurred()) ok = 0;
+    }
+    if (!ok) PyErr_Clear();
+    PyGILState_Release(gil);
+    return ok ? fmi2OK : forward_get_real(c, vr, nvr, value);
+}
+
+EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    Instance* w = W;
+    if (!w->ready || nvr == 0) return forward_set_real(c, vr, nvr, value);
+    for (size_t i = 0; i < nvr; i++)
+        if ((Py_ssize_t)vr[i] >= w->n || !w->inputs[vr[i]]) return forward_set_real(c, vr, nvr, value);
+    PyGILState_STATE gil = PyGILState_Ensure();
+    int ok = 1;
+    for (size_t i = 0; ok && i < nvr; i++) {
+        PyObject* v = PyFloat_FromDouble(value[i]);
+        ok = v != NULL && PyDict_SetItem(w->attributes, w->names[vr[i]], v) == 0;
+        Py_XDECREF(v);
+    }
+    if (!ok) { /* out of memory: the inputs set so far are set again by pythonfmu's call */
+        PyErr_Clear();
+    }
+    PyGILState_Release(gil);
+    return ok ? fmi2OK : forward_set_real(c, vr, nvr, value);
+}
+
+typedef fmi2Status (*get_int_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]);
+typedef fmi2Status (*set_int_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
+typedef fmi2Status (*get_str_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2String[]);
+typedef fmi2Status (*set_str_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]);
+
+EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
+{
+    FORWARD(fmi2GetInteger, get_int_t, W->inner, vr, nvr, value);
+}
+EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
+{
+    FORWARD(fmi2GetBoolean, get_int_t, W->inner, vr, nvr, value);
+}
+EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
+{
+    FORWARD(fmi2GetString, get_str_t, W->inner, vr, nvr, value);
+}
+EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                 const fmi2Integer value[])
+{
+    FORWARD(fmi2SetInteger, set_int_t, W->inner, vr, nvr, value);
+}
+EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                 const fmi2Boolean value[])
+{
+    FORWARD(fmi2SetBoolean, set_int_t, W->inner, vr, nvr, value);
+}
+EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                const fmi2String value[])
+{
+    FORWARD(fmi2SetString, set_str_t, W->inner, vr, nvr, value);
+}
+
+typedef fmi2Status (*state_t)(fmi2Component, fmi2FMUstate*);
+typedef fmi2Status (*set_state_t)(fmi2Component, fmi2FMUstate);
+typedef fmi2Status (*state_size_t)(fmi2Component, fmi2FMUstate, size_t*);
+typedef fmi2Status (*serialize_t)(fmi2Component, fmi2FMUstate, fmi2Byte[], size_t);
+typedef fmi2Status (*deserialize_t)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate*);
+
+EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state)
+{
+    FORWARD(fmi2GetFMUstate, state_t, W->inner, state);
+}
+EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+{
+    FORWARD(fmi2SetFMUstate, set_state_t, W->inner, state);
+}
+EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state)
+{
+    FORWARD(fmi2FreeFMUstate, state_t, W->inner, state);
+}
+EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size)
+{
+    FORWARD(fmi2SerializedFMUstateSize, state_size_t, W->inner, state, size);
+}
+EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
+{
+    FORWARD(fmi2SerializeFMUstate, serialize_t, W->inner, state, bytes, size);
+}
+EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate* state)
+{
+    FORWARD(fmi2DeSerializeFMUstate, deserialize_t, W->inner, bytes, size, state);
+}
+
+typedef fmi2Status (*derivative_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2ValueReference[],
+                                   size_t, const fmi2Real[], fmi2Real[]);
+typedef fmi2Status (*input_derivatives_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[],
+                                          const fmi2Real[]);
+typedef fmi2Status (*output_derivatives_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[],
+                                           fmi2Real[]);
+
+EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference unknown[], size_t nu,
+                                               const fmi2ValueReference known[], size_t nk, const fmi2Real dv[],
+                                               fmi2Real df[])
+{
+    FORWARD(fmi2GetDirectionalDerivative, derivative_t, W->inner, unknown, nu, known, nk, dv, df);
+}
+EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                              const fmi2Integer order[], const fmi2Real value[])
+{
+    FORWARD(fmi2SetRealInputDerivatives, input_derivatives_t, W->inner, vr, nvr, order, value);
+}
+EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                               const fmi2Integer order[], fmi2Real value[])
+{
+    FORWARD(fmi2GetRealOutputDerivatives, output_derivatives_t, W->inner, vr, nvr, order, value);
+}
+
+typedef fmi2Status (*do_step_t)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+
+static fmi2Status forward_do_step(Instance* w, fmi2Real t, fmi2Real h, fmi2Boolean flag)
+{
+    static do_step_t fn = NULL;
+    if (fn == NULL) fn = (do_step_t)inner("fmi2DoStep");
+    if (fn == NULL) return fmi2Error;
+    fmi2Status status = fn(w->inner, t, h, flag);
+    if (status == fmi2OK) w->last_successful_time = t + h;
+    if (status == fmi2Discard) {
+        w->last_successful_time = t;
+        w->terminated = 1;
+    }
+    return status;
+}
+
+EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean flag)
+{
+    Instance* w = W;
+    if (!w->ready) return forward_do_step(w, t, h, flag);
+    PyGILState_STATE gil = PyGILState_Ensure();
+    PyObject* pt = PyFloat_FromDouble(t);
+    PyObject* ph = PyFloat_FromDouble(h);
+    PyObject* result = (pt && ph) ? PyObject_CallFunctionObjArgs(w->do_step, pt, ph, NULL) : NULL;
+    Py_XDECREF(pt);
+    Py_XDECREF(ph);
+    if (result == NULL) { /* hand the exception to the slave: pythonfmu's fmi2DoStep raises and reports it */
+        PyObject *type, *exc, *traceback;
+        PyErr_Fetch(&type, &exc, &traceback);
+        PyErr_NormalizeException(&type, &exc, &traceback);
+        if (exc != NULL && traceback != NULL) PyException_SetTraceback(exc, traceback);
+        PyObject* deferred = exc ? PyObject_CallFunctionObjArgs(w->defer, exc, NULL) : NULL;
+        Py_XDECREF(deferred);
+        PyErr_Clear();
+        Py_XDECREF(type);
+        Py_XDECREF(exc);
+        Py_XDECREF(traceback);
+        drop_offer(w); /* the direct path stays off for this slave */
+        PyGILState_Release(gil);
+        return forward_do_step(w, t, h, flag);
+    }
+    int ok = PyObject_IsTrue(result);
+    Py_DECREF(result);
+    Py_ssize_t queued = PyList_Size(w->log_queue);
+    PyErr_Clear();
+    PyGILState_Release(gil);
+    if (ok > 0) {
+        w->last_successful_time = t + h;
+    } else {
+        w->last_successful_time = t;
+        w->terminated = 1;
+    }
+    if (queued > 0) { /* pythonfmu drains the queue after any call: an empty read */
+        fmi2ValueReference none = 0;
+        fmi2Real nothing = 0.0;
+        forward_get_real(c, &none, 0, &nothing);
+    }
+    return ok > 0 ? fmi2OK : fmi2Discard;
+}
+
+EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    FORWARD(fmi2CancelStep, plain_t, W->inner);
+}
+
+typedef fmi2Status (*status_t)(fmi2Component, const fmi2StatusKind, fmi2Status*);
+typedef fmi2Status (*real_status_t)(fmi2Component, const fmi2StatusKind, fmi2Real*);
+typedef fmi2Status (*int_status_t)(fmi2Component, const fmi2StatusKind, fmi2Integer*);
+typedef fmi2Status (*bool_status_t)(fmi2Component, const fmi2StatusKind, fmi2Boolean*);
+typedef fmi2Status (*str_status_t)(fmi2Component, const fmi2StatusKind, fmi2String*);
+
+EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status* value)
+{
+    FORWARD(fmi2GetStatus, status_t, W->inner, s, value);
+}
+EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value)
+{
+    if (s == fmi2LastSuccessfulTime) {
+        *value = W->last_successful_time;
+        return fmi2OK;
+    }
+    FORWARD(fmi2GetRealStatus, real_status_t, W->inner, s, value);
+}
+EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer* value)
+{
+    FORWARD(fmi2GetIntegerStatus, int_status_t, W->inner, s, value);
+}
+EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value)
+{
+    if (s == fmi2Terminated) {
+        *value = W->terminated ? 1 : 0;
+        return fmi2OK;
+    }
+    FORWARD(fmi2GetBooleanStatus, bool_status_t, W->inner, s, value);
+}
+EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String* value)
+{
+    FORWARD(fmi2GetStringStatus, str_status_t, W->inner, s, value);
+}
