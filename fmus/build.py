@@ -367,12 +367,34 @@ def content_key() -> str:
     named by it. Computed once per state of the sources in a process."""
     signature = _source_signature()
     if signature not in _content_keys:
-        h = hashlib.sha256()
-        for name in sorted(FMUS):
-            h.update(f"{name}\0{source_hash(name)}\0".encode())
+        # the key of these sources, as a process before found it (hashing every source of the 7 FMUs takes
+        # seconds): a file named by a hash of the signature in the user's cache, written atomically
+        seen = user_cache_dir() / "fmus" / "keys" / hashlib.sha256(repr(signature).encode()).hexdigest()[:32]
+        try:
+            key = seen.read_text(encoding="ascii").strip()
+        except OSError:
+            key = ""
+        if not re.fullmatch(r"[0-9a-f]{16}", key):
+            h = hashlib.sha256()
+            for name in sorted(FMUS):
+                h.update(f"{name}\0{source_hash(name)}\0".encode())
+            key = h.hexdigest()[:16]
+            _remember(seen, key)
         _content_keys.clear()
-        _content_keys[signature] = h.hexdigest()[:16]
+        _content_keys[signature] = key
     return _content_keys[signature]
+
+
+def _remember(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically; nothing if the folder cannot be written."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".key-", dir=path.parent)
+        with os.fdopen(fd, "w", encoding="ascii") as f:
+            f.write(text + "\n")
+        os.replace(tmp, path)
+    except OSError:
+        pass
 
 
 def _bundled_module(module: str, tag: str) -> str:

@@ -78,6 +78,27 @@ def test_the_compiled_noise_is_the_plain_python_noise_bit_for_bit():
     assert gaussian_pair(-1, 5) == plain.gaussian_pair(2**64 - 1, 5)  # any integer seed: its low 64 bits
 
 
+def test_the_compiled_measurement_is_the_plain_python_one_bit_for_bit():
+    """The kernel measured_currents (sensors, noise, the ADC, Clarke) compiled and as plain Python: the same
+    pair, ADC ties at half an LSB included (numba's round, like Python's, rounds half to even), clipping at
+    the range, with and without noise."""
+    from pmsm_ev import accel
+    from pmsm_ev.kernels import plant as plain
+
+    if not accel.compiled():
+        pytest.skip(f"the kernels are not compiled here: {accel.describe()}")
+    compiled = accel.direct(accel.kernels().measured_currents)
+    rng = np.random.default_rng(9)
+    lsb = 2 * 400.0 / 2**12
+    currents = [(0.0, 0.0), (0.5 * lsb, 0.0), (1.5 * lsb, 2.5 * lsb), (-2.5 * lsb, 0.5 * lsb), (900.0, -900.0)]
+    currents += [tuple(float(x) for x in rng.uniform(-450, 450, 2)) for _ in range(300)]
+    options = [(1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 400.0), (1.01, 0.3, 0.98, -0.2, 1.0, 0.0, 400.0),
+               (1.0, 0.0, 1.0, 0.0, 0.0, lsb, 400.0), (1.0, 0.1, 1.0, 0.0, 2.0, lsb, 400.0)]
+    for k, (i_alpha, i_beta) in enumerate(currents):
+        for args in options:
+            assert compiled(i_alpha, i_beta, 7, k, *args) == plain.measured_currents(i_alpha, i_beta, 7, k, *args)
+
+
 def test_offset_and_gain_error():
     ea, eb, p = measure_errors(PlantParams(sensor_offset_a=0.3, sensor_gain_b=1.02), n=3000)
     i_b_true = -0.5 * p.i_alpha_true + 0.5 * math.sqrt(3) * p.i_beta_true

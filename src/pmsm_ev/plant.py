@@ -46,7 +46,7 @@ from .params import (
     magnet_flux,
     winding_resistance,
 )
-from .transforms import clarke, wrap_angle
+from .transforms import wrap_angle
 
 #: the energies of ``Plant.energy`` by name (the plant FMU's outputs of the same names) [J]; E_dc_abs is the
 #: throughput (the integral of |P_dc|), E_regen what went back into the DC link, E_shaft omega T_e
@@ -116,7 +116,10 @@ class Plant:
         self.energy = accel.vector(_k.PLANT_ENERGY)
         self._plant_step = accel.direct(self._kernels.plant_step)
         #: the current sensors' noise: stream sensor_seed (its low 64 bits), sample k at the k-th measurement
-        self._noise, self._seed64 = accel.direct(self._kernels.gaussian_pair), int(p.sensor_seed) & _k.MASK64
+        self._seed64 = int(p.sensor_seed) & _k.MASK64
+        self._measured = accel.direct(self._kernels.measured_currents)
+        self._sensor_args = tuple(float(x) for x in (p.sensor_gain_a, p.sensor_offset_a, p.sensor_gain_b,
+                                                     p.sensor_offset_b, p.sensor_noise, self._lsb, p.adc_range))
         self.reset()
 
     def reset(self) -> None:
@@ -266,24 +269,8 @@ class Plant:
 
     def _measure(self, i_alpha: float, i_beta: float, sample: int) -> tuple[float, float]:
         """Phase currents a, b through the sensors and the ADC (noise of sample ``sample``),
-        back to alpha-beta."""
-        p = self.params
-        i_a = i_alpha
-        i_b = -0.5 * i_alpha + 0.5 * math.sqrt(3.0) * i_beta
-        m_a = p.sensor_gain_a * i_a + p.sensor_offset_a
-        m_b = p.sensor_gain_b * i_b + p.sensor_offset_b
-        if p.sensor_noise > 0:
-            n_a, n_b = self._noise(self._seed64, sample)
-            m_a += p.sensor_noise * n_a
-            m_b += p.sensor_noise * n_b
-        if self._lsb:
-            m_a = self._quantise(m_a)
-            m_b = self._quantise(m_b)
-        return clarke(m_a, m_b, -m_a - m_b)  # two sensors: i_c = -i_a - i_b
-
-    def _quantise(self, x: float) -> float:
-        r = self.params.adc_range
-        return min(max(round(x / self._lsb) * self._lsb, -r), r)
+        back to alpha-beta: the kernel ``measured_currents``."""
+        return self._measured(i_alpha, i_beta, self._seed64, sample, *self._sensor_args)
 
 
 def gaussian_pair(seed: int, n: int) -> tuple[float, float]:

@@ -549,3 +549,26 @@ def gaussian_pair(seed, n):
     u2 = (splitmix64(base ^ 0xD1B54A32D192ED03) >> 11) * (1.0 / 9007199254740992.0)
     r = math.sqrt(-2.0 * math.log(u1))
     return r * math.cos(2.0 * math.pi * u2), r * math.sin(2.0 * math.pi * u2)
+
+
+_SQRT3 = math.sqrt(3.0)
+
+
+@kernel(_sig(f"UniTuple({_F}, 2)", _F, _F, "uint64", "uint64", _F, _F, _F, _F, _F, _F, _F))
+def measured_currents(i_alpha, i_beta, seed, n, gain_a, offset_a, gain_b, offset_b, noise, lsb, adc_range):
+    """The currents (i_alpha, i_beta) as the controller measures them, sample n: phases a and b through
+    their sensors (gain, offset [A], the noise ``noise`` [A] x ``gaussian_pair(seed, n)``), the ADC's
+    quantisation (step ``lsb`` [A], 0 = none; clipped to +-``adc_range``), back to alpha-beta with
+    i_c = -i_a - i_b (two sensors). Amplitude-invariant Clarke as ``pmsm_ev.transforms``."""
+    i_b = -0.5 * i_alpha + 0.5 * _SQRT3 * i_beta
+    m_a = gain_a * i_alpha + offset_a
+    m_b = gain_b * i_b + offset_b
+    if noise > 0:
+        n_a, n_b = gaussian_pair(seed, n)
+        m_a += noise * n_a
+        m_b += noise * n_b
+    if lsb > 0:
+        m_a = min(max(round(m_a / lsb) * lsb, -adc_range), adc_range)
+        m_b = min(max(round(m_b / lsb) * lsb, -adc_range), adc_range)
+    m_c = -m_a - m_b
+    return (2.0 * m_a - m_b - m_c) / 3.0, (m_b - m_c) / _SQRT3
