@@ -99,6 +99,40 @@ def test_the_compiled_measurement_is_the_plain_python_one_bit_for_bit():
             assert compiled(i_alpha, i_beta, 7, k, *args) == plain.measured_currents(i_alpha, i_beta, 7, k, *args)
 
 
+def test_the_step_with_its_measurement_is_the_two_kernels_one_after_the_other():
+    """plant_step_measured (the plant's per-step path with sensors) is plant_step then measured_currents of
+    its clean currents, bit for bit: compiled against the two compiled kernels and against the plain Python
+    ones, over a drive whose speed needs several RK4 sub-steps, the energies included; and a Plant stepped
+    with sensors gives the sensors' reading of its own clean currents."""
+    from pmsm_ev import accel
+    from pmsm_ev.kernels import plant as plain
+
+    k = accel.kernels()
+    plant = Plant(plant=PlantParams(sensor_noise=1.0, sensor_offset_a=0.2, sensor_gain_b=1.01, adc_bits=12))
+    pp = plant._pp
+    sensor = plant._sensor_args
+    assert sensor[5] > 0  # the ADC's step
+    fused, step, measured = (accel.direct(k.plant_step_measured), accel.direct(k.plant_step),
+                             accel.direct(k.measured_currents))
+    rng = np.random.default_rng(3)
+    for n in range(200):
+        x = tuple(float(v) for v in rng.uniform([-300, -300, -1600, -3.2], [300, 300, 1600, 3.2]))
+        u = tuple(float(v) for v in rng.uniform(-250, 250, 2))
+        e1, e2, e3 = (plant.energy.copy(), plant.energy.copy(), list(plant.energy)) if accel.compiled() else (
+            list(plant.energy), list(plant.energy), list(plant.energy))
+        out = fused(*x, *u, 0.02, 1e-4, pp, e1, 11, n, *sensor)
+        two = step(*x, *u, 0.02, 1e-4, pp, e2)
+        assert out == two + measured(two[4], two[5], 11, n, *sensor)
+        plain_pp = list(pp)
+        two_plain = plain.plant_step(*x, *u, 0.02, 1e-4, plain_pp, e3)
+        assert out == two_plain + plain.measured_currents(two_plain[4], two_plain[5], 11, n, *sensor)
+        assert list(e1) == list(e2) == e3
+    for _ in range(5):
+        out = plant.step(120.0, -80.0, 0.0, 1e-4)
+        assert (out[4], out[5]) == plant._measure(plant.i_alpha_true, plant.i_beta_true, plant.samples - 1)
+        assert out[4] != plant.i_alpha_true
+
+
 def test_offset_and_gain_error():
     ea, eb, p = measure_errors(PlantParams(sensor_offset_a=0.3, sensor_gain_b=1.02), n=3000)
     i_b_true = -0.5 * p.i_alpha_true + 0.5 * math.sqrt(3) * p.i_beta_true

@@ -123,6 +123,9 @@ class ControlUnit:
         self._kernels = accel.kernels()
         self._s = accel.vector(_k.UNIT_STATE)
         self._c = accel.vector(_k.UNIT_PARAMS)
+        #: the state vector read from Python at every step (``T_brake``): a memoryview of the numpy vector,
+        #: whose items are Python floats (the same doubles, without numpy's scalar per read), or the list
+        self._s_items = self._s if isinstance(self._s, list) else memoryview(self._s)
         #: the step's kernel on this unit's vectors (what ``step`` calls, for a caller's hot loop):
         #: ``(i_alpha, i_beta, omega_ref)`` of the sensorless unit, ``(i_alpha, i_beta, omega_ref,
         #: theta_meas, omega_meas)`` of the others; returns ``step``'s outputs
@@ -265,8 +268,11 @@ class ControlUnit:
     @property
     def T_brake(self) -> float:
         """The friction brake's demand at the wheels of the last period [N m, >= 0]: the braking shaft torque
-        the motor does not give (the regen limit, the envelope) x n_g eta; 0 in the paper's mode."""
-        return float(self._s[_k.S_T_BRAKE]) if self.reference and self._foc() else 0.0
+        the motor does not give (the regen limit, the envelope) x n_g eta; 0 in the paper's mode.
+        (Read at every step by the FMU: ``_foc`` written out, on ``_s_items``.)"""
+        s = self._s_items
+        return (float(s[_k.S_T_BRAKE]) if self.reference and (not self.sensorless or s[_k.S_MODE] == _k.MODE_EKF)
+                else 0.0)
 
     @property
     def ref_region(self) -> float:

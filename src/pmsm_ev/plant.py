@@ -115,6 +115,7 @@ class Plant:
         #: the energies since the start [J] (``pmsm_ev.kernels.PLANT_ENERGY_LAYOUT``, ``energies`` by name)
         self.energy = accel.vector(_k.PLANT_ENERGY)
         self._plant_step = accel.direct(self._kernels.plant_step)
+        self._plant_step_measured = accel.direct(self._kernels.plant_step_measured)
         #: the current sensors' noise: stream sensor_seed (its low 64 bits), sample k at the k-th measurement
         self._seed64 = int(p.sensor_seed) & _k.MASK64
         self._measured = accel.direct(self._kernels.measured_currents)
@@ -195,32 +196,38 @@ class Plant:
         if T_brake != self.T_brake:
             self.T_brake = T_brake if T_brake > 0.0 else 0.0
             self._pp[_k.P_T_BRAKE] = self.T_brake
-        p = self.params
         if self.delay:
             v_alpha, v_beta = self._delayed(v_alpha, v_beta, dt)
         self.clock += dt
-        if self._u_lim:  # linear range of the inverter: |v| <= v_dc / sqrt(3)
+        u_lim = self._u_lim
+        if u_lim:  # linear range of the inverter: |v| <= v_dc / sqrt(3)
             mag = math.hypot(v_alpha, v_beta)
-            if mag > self._u_lim:
-                v_alpha *= self._u_lim / mag
-                v_beta *= self._u_lim / mag
+            if mag > u_lim:
+                v_alpha *= u_lim / mag
+                v_beta *= u_lim / mag
         self.v_alpha_applied, self.v_beta_applied = v_alpha, v_beta
-        out = self._plant_step(self.i_d, self.i_q, self.omega_m, self.theta_e, v_alpha, v_beta, delta, dt,
-                               self._pp, self.energy)
-        (self.i_d, self.i_q, self.omega_m, self.theta_e, self.i_alpha, self.i_beta,
-         self.T_e, self.T_L_mech, self.v_vehicle, dx) = out
-        out = out[:9]
+        sample = self.samples
+        self.samples = sample + 1
+        if self._sensors:  # the step and the measurement (``_measure``) in one kernel call
+            (i_d, i_q, omega_m, theta_e, i_alpha_true, i_beta_true, T_e, T_L_mech, v_vehicle, dx, i_alpha,
+             i_beta) = self._plant_step_measured(self.i_d, self.i_q, self.omega_m, self.theta_e, v_alpha, v_beta,
+                                                 delta, dt, self._pp, self.energy, self._seed64, sample,
+                                                 *self._sensor_args)
+        else:
+            (i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle, dx) = self._plant_step(
+                self.i_d, self.i_q, self.omega_m, self.theta_e, v_alpha, v_beta, delta, dt, self._pp, self.energy)
+            i_alpha_true, i_beta_true = i_alpha, i_beta
+        self.i_d, self.i_q, self.omega_m, self.theta_e = i_d, i_q, omega_m, theta_e
+        self.T_e, self.T_L_mech, self.v_vehicle = T_e, T_L_mech, v_vehicle
         self.x_vehicle += dx
         if self._thermal:  # the copper losses heat the winding; R_s follows for the next step
+            p = self.params
             self.T_winding, self._pp[_k.P_R_S] = self._kernels.winding_thermal_step(
-                self.T_winding, self.i_d, self.i_q, self.motor.R_s, p.alpha_R, TEMPERATURE_REF, p.T_ambient,
+                self.T_winding, i_d, i_q, self.motor.R_s, p.alpha_R, TEMPERATURE_REF, p.T_ambient,
                 p.thermal_R, p.thermal_C, dt, self.motor.k_dq)
-        self.i_alpha_true, self.i_beta_true = self.i_alpha, self.i_beta
-        self.samples += 1
-        if self._sensors:
-            self.i_alpha, self.i_beta = self._measure(self.i_alpha, self.i_beta, self.samples - 1)
-            out = out[:4] + (self.i_alpha, self.i_beta) + out[6:]
-        return out
+        self.i_alpha_true, self.i_beta_true = i_alpha_true, i_beta_true
+        self.i_alpha, self.i_beta = i_alpha, i_beta
+        return i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle
 
     # -- energies ------------------------------------------------------------------
     @property

@@ -572,3 +572,15 @@ def measured_currents(i_alpha, i_beta, seed, n, gain_a, offset_a, gain_b, offset
         m_b = min(max(round(m_b / lsb) * lsb, -adc_range), adc_range)
     m_c = -m_a - m_b
     return (2.0 * m_a - m_b - m_c) / 3.0, (m_b - m_c) / _SQRT3
+
+
+@kernel(_sig(f"UniTuple({_F}, 12)", _F, _F, _F, _F, _F, _F, _F, _F, _V, _V, "uint64", "uint64",
+             _F, _F, _F, _F, _F, _F, _F))
+def plant_step_measured(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee, seed, n,
+                        gain_a, offset_a, gain_b, offset_b, noise, lsb, adc_range):
+    """``plant_step``, then ``measured_currents`` of its (clean) currents for sample n, in one call (the
+    plant's per-step path with current sensors): ``plant_step``'s ten results, then the measured
+    (i_alpha, i_beta). The same operations as the two calls one after the other."""
+    r = plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee)
+    m = measured_currents(r[4], r[5], seed, n, gain_a, offset_a, gain_b, offset_b, noise, lsb, adc_range)
+    return r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], m[0], m[1]
