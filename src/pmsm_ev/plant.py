@@ -26,8 +26,9 @@ RK4 stages of the state; ``stored`` the magnetic and kinetic energies of the sta
 all of them by name (docs/speed-range.md).
 
 The RK4 step, the model (eqs 8-13, 29) and the outputs are ``pmsm_ev.kernels.plant_step``
-(compiled with numba when available, see ``pmsm_ev.accel``); this class holds the state
-and the parameters and adds the optional sensors and inverter.
+(compiled with numba when available, see ``pmsm_ev.accel``), with the current sensors'
+``plant_step_measured``; this class holds the state and the parameters and adds the optional
+sensors and inverter.
 """
 
 from __future__ import annotations

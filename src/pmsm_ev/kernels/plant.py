@@ -5,7 +5,8 @@ dead time (``dead_time_error``), magnetic saturation (flux-form eqs 10-12, ``sat
 the winding's temperature (``winding_resistance``, ``thermal_step``); the friction brake, the gear
 model ``power_flow`` (``power_flow_gear``), the inverter's losses (``inverter_loss``) and the energy
 accounting (``plant_rates``' powers, integrated by ``plant_step`` with the RK4 weights of the state;
-``stored_energies``), docs/speed-range.md; the current sensors' noise (``gaussian_pair``).
+``stored_energies``), docs/speed-range.md; the current sensors (``gaussian_pair``, ``measured_currents``) and
+the step with its measurement in one call (``plant_step_measured``).
 
 The parameter vector ``pp`` is laid out by ``pmsm_ev.kernels.layout.PLANT_PARAMS_LAYOUT`` (``P_*``).
 """
