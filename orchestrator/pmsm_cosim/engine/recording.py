@@ -9,9 +9,9 @@ of merit the application computed, written atomically.
 
 from __future__ import annotations
 
-import array
 import json
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -50,19 +50,20 @@ class ResultWriter:
 def read_results(path) -> dict[str, np.ndarray]:
     """results.csv (or its directory) -> {column: array}. Tolerates a cut last line.
 
-    Read line by line into one array of doubles: memory is the size of the numbers (8
-    bytes each), not of the text and its Python objects, whatever the length of the run."""
+    Read line by line (the complete lines: as many fields as the header) into one array of
+    doubles by numpy's parser (the same doubles as ``float``): memory is the size of the numbers
+    (8 bytes each), not of the text and its Python objects, whatever the length of the run."""
     path = Path(path)
     if path.is_dir():
         path = path / "results.csv"
     with open(path, encoding="ascii") as fh:
         header = fh.readline().strip().split(",")
         commas = len(header) - 1
-        values = array.array("d")
-        for line in fh:
-            if line.count(",") == commas:
-                values.extend(map(float, line.split(",")))
-    data = np.frombuffer(values, dtype=float).reshape(-1, len(header))
+        with warnings.catch_warnings():  # a run cut before its first row: no data, no warning
+            warnings.simplefilter("ignore", UserWarning)
+            data = np.loadtxt((line for line in fh if line.count(",") == commas), delimiter=",", dtype=float,
+                              ndmin=2, comments=None)
+    data = data.reshape(-1, len(header))
     return {name: data[:, i] for i, name in enumerate(header)}
 
 
