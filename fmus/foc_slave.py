@@ -27,6 +27,7 @@ from pmsm_ev.params import (
     SENSORLESS_EKF,
     ControllerParams,
     EkfParams,
+    InjectionParams,
     MotorParams,
     ParameterError,
     StartupParams,
@@ -109,8 +110,10 @@ class FocSlave(DriveSlave):
                         + hold, discrete=True)
 
         self.add_output("mode", None, "operating mode: 0 alignment at standstill, 1 I-f (current-frequency) "
-                                      "drive, 2 FOC on the observer's angle and speed (only the sensorless "
-                                      "unit has modes 0 and 1; the others are always 2)" + hold,
+                                      "drive, 2 FOC on the observer's angle and speed; with low_speed = "
+                                      "'injection' 3 the angle's acquisition by injection, 4 the magnet's "
+                                      "polarity test, 5 FOC on the injection's tracking observer (only the "
+                                      "sensorless unit has modes other than 2)" + hold,
                         discrete=True, start=0.0 if observer == "sensorless" else 2.0)
         self.add_output("fault", None, "fault: 0 none, 1 a loss of synchronism (or the current limit reached "
                                        "under a load the drive cannot hold) detected and being recovered, 2 the "
@@ -139,7 +142,7 @@ class FocSlave(DriveSlave):
                         discrete=True)
         self._sensorless = observer == "sensorless"
         if self._sensorless:
-            self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams)
+            self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams, InjectionParams)
         else:
             self.add_parameters(ControllerParams, EkfParams, MotorParams)
         self.add_parameter("angle_source", "measured")  # the same interface for every controller
@@ -178,7 +181,8 @@ class FocSlave(DriveSlave):
     def _build_unit(self, dt: float) -> None:
         self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
                                  self.parameters(ControllerParams), self.parameters(EkfParams), dt,
-                                 self.parameters(StartupParams) if self._sensorless else None)
+                                 self.parameters(StartupParams) if self._sensorless else None,
+                                 self.parameters(InjectionParams) if self._sensorless else None)
         self._measured_frame = self._unit.angle_source == "measured"
         self._kernel_step = self._unit.kernel_step
         self.mark_built()

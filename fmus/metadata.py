@@ -48,6 +48,7 @@ UNITS: dict[str, dict[str, float]] = {
     "degC": {"K": 1, "offset": 273.15},  # FMI 2.0 BaseUnit: value in K = value in degC + offset
     "1/K": {"K": -1},
     "1/s": {"s": -1},
+    "Hz": {"s": -1},
     "K/W": {"K": 1, "kg": -1, "m": -2, "s": 3},
     "J/K": {"kg": 1, "m": 2, "s": -2, "K": -1},
     "J": {"kg": 1, "m": 2, "s": -2},
@@ -253,6 +254,28 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                         "realigned from standstill (an episode; a rotor turning at omega_down or faster: FOC "
                         "on the EKF); 0 = never"),
     "realign_max": (None, "realignments after a stall, without a handover up in between, before the fault latches"),
+    # InjectionParams: the sensorless unit at and near zero speed by high-frequency injection
+    "low_speed": (None, "the strategy at and near zero speed: 'if' (alignment, I-f, handover) or 'injection' "
+                        "(a square wave on the estimated d axis, the angle from the rotor's saliency, closed loop "
+                        "at zero speed; docs/sensorless.md)"),
+    "inj_voltage": ("V", "the injection's square-wave amplitude on the estimated d axis"),
+    "inj_frequency": ("Hz", "the square wave's frequency: 1 / (2 m dt), m = 1..8; 0 = half the control rate"),
+    "inj_bandwidth": ("rad/s", "the injection's tracking observer: its three poles at -inj_bandwidth"),
+    "inj_blend_low": ("rad/s", "the EKF's angle blended in from this |omega| ..."),
+    "inj_blend_high": ("rad/s", "... to this one, where the injection is off and the EKF alone drives"),
+    "inj_hysteresis": ("rad/s", "back into the injection below inj_blend_high less this"),
+    "inj_lock_time": ("s", "the angle's acquisition at enable: the time on each of its two axes"),
+    "inj_settle_time": ("s", "the tracking observer's settling after the acquisition"),
+    "pol_current": ("A", "the magnet-polarity test's d current (pulses of both signs)"),
+    "pol_ramp": ("s", "the polarity test's current ramps"),
+    "pol_hold": ("s", "the polarity test's hold at each sign"),
+    "pol_contrast": (None, "the least relative difference of the d admittances at +-pol_current that decides the "
+                           "polarity (below: unresolved; twice: the fault latches without torque)"),
+    "inj_los_angle": ("rad", "loss of synchronism under injection: the tracking observer's angle error (or, in the "
+                             "blend, its disagreement with the EKF) beyond this ..."),
+    "inj_los_time": ("s", "... for this long"),
+    "ekf_los_current": ("A", "loss of synchronism on the EKF: its current innovation (filtered) beyond this ..."),
+    "ekf_los_time": ("s", "... for this long"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),

@@ -52,13 +52,15 @@ from .params import (
     SENSORLESS_EKF,
     ControllerParams,
     EkfParams,
+    InjectionParams,
     MotorParams,
     ParameterError,
     StartupParams,
 )
 
-#: mode names of the sensorless unit, by ``pmsm_ev.kernels`` MODE_* value
-MODES = ("align", "I-f", "EKF")
+#: mode names of the sensorless unit, by ``pmsm_ev.kernels`` MODE_* value: the I-f strategy's alignment and
+#: I-f, FOC on the EKF, the injection strategy's acquisition, polarity test and FOC on the injection
+MODES = ("align", "I-f", "EKF", "acquire", "polarity", "injection")
 
 _STARTUP_SLOTS = (
     ("t_ramp", _k.C_T_RAMP), ("t_hold", _k.C_T_HOLD), ("t_sweep", _k.C_T_SWEEP), ("t_settle", _k.C_T_SETTLE),
@@ -106,12 +108,14 @@ class ControlUnit:
 
     def __init__(self, observer: str = "ekf5", angle_source: str = "measured",
                  motor: MotorParams | None = None, controller: ControllerParams | None = None,
-                 ekf: EkfParams | None = None, dt: float = 1e-4, startup: StartupParams | None = None):
+                 ekf: EkfParams | None = None, dt: float = 1e-4, startup: StartupParams | None = None,
+                 injection: InjectionParams | None = None):
         self.motor = motor or MotorParams()
         self.params = controller or ControllerParams()
         self.sensorless = observer == "sensorless"
         self.ekf_params = ekf or (SENSORLESS_EKF if self.sensorless else EkfParams())
         self.startup = startup or StartupParams()
+        self.injection = injection or InjectionParams()
         for group in (self.motor, self.params, self.ekf_params, self.startup):
             group.validate()
         if angle_source not in ANGLE_SOURCES:
@@ -119,6 +123,9 @@ class ControlUnit:
         if not dt > 0:
             raise ParameterError(f"dt must be > 0 s (got {dt})")
         self.dt = dt
+        self.injection.validate(dt, self.params.u_limit)
+        #: the sensorless unit's strategy at and near zero speed: injection (``pmsm_ev.kernels.modes``)
+        self.injecting = self.sensorless and self.injection.low_speed == "injection"
         self.observer_name = observer
         self._kernels = accel.kernels()
         self._s = accel.vector(_k.UNIT_STATE)
@@ -130,7 +137,8 @@ class ControlUnit:
         #: ``(i_alpha, i_beta, omega_ref)`` of the sensorless unit, ``(i_alpha, i_beta, omega_ref,
         #: theta_meas, omega_meas)`` of the others; returns ``step``'s outputs
         self.kernel_step = functools.partial(
-            accel.direct(self._kernels.sensorless_step if observer == "sensorless" else self._kernels.control_step),
+            accel.direct(self._kernels.injection_unit_step if self.injecting else
+                         self._kernels.sensorless_step if observer == "sensorless" else self._kernels.control_step),
             self._s, self._c)
         self.observer = make_observer(observer, self.motor, dt, self.ekf_params, state=self._s, params=self._c)
         # the sensored baseline has no angle estimate of its own: always the measured angle;
@@ -190,7 +198,38 @@ class ControlUnit:
         c[_k.C_FF_T0] = float(pr.ff_T0) if road else 0.0
         c[_k.C_FF_T1] = float(pr.ff_T1) if road else 0.0
         c[_k.C_FF_T2] = float(pr.ff_T2) if road else 0.0
+        self._set_injection()
         self.reset()
+
+    def _set_injection(self) -> None:
+        """The injection strategy's parameters (``InjectionParams``) into the parameter vector; the
+        tracking observer's gains from its bandwidth a (three poles at -a, ``pmsm_ev.kernels.injection``
+        (I3)): l1 = 3 a, l2 = 3 a^2 / N, l3 = a^3 J / N, J the EKF model's inertia."""
+        c, p, m = self._c, self.injection, self.motor
+        c[_k.C_LOW_SPEED] = _k.LOW_SPEED_CODES[p.low_speed]
+        c[_k.C_INJ_V] = float(p.inj_voltage)
+        c[_k.C_INJ_M] = float(p.half_wave(self.dt))
+        c[_k.C_INJ_Y] = 0.5 * (1.0 / m.L_d - 1.0 / m.L_q)
+        a = float(p.inj_bandwidth)
+        j = float(self.observer.J) if self.sensorless else m.J_m
+        c[_k.C_TRK_L] = 3.0 * a
+        c[_k.C_TRK_L + 1] = 3.0 * a * a / m.N
+        c[_k.C_TRK_L + 2] = a ** 3 * j / m.N
+        c[_k.C_TRK_J] = j
+        c[_k.C_BLEND_LO] = float(p.inj_blend_low)
+        c[_k.C_BLEND_HI] = float(p.inj_blend_high)
+        c[_k.C_BLEND_HYST] = float(p.inj_hysteresis)
+        c[_k.C_ACQ_TIME] = float(p.inj_lock_time)
+        c[_k.C_ACQ_SETTLE] = float(p.inj_settle_time)
+        c[_k.C_POL_I] = float(p.pol_current)
+        c[_k.C_POL_RAMP] = float(p.pol_ramp)
+        c[_k.C_POL_HOLD] = float(p.pol_hold)
+        c[_k.C_POL_CONTRAST] = float(p.pol_contrast)
+        c[_k.C_INJ_LOS_ANGLE] = float(p.inj_los_angle)
+        c[_k.C_INJ_LOS_TIME] = float(p.inj_los_time)
+        c[_k.C_EKF_LOS_I] = float(p.ekf_los_current)
+        c[_k.C_EKF_LOS_TIME] = float(p.ekf_los_time)
+        c[_k.C_LOS_FILTER] = min(3.0 * self.dt / p.inj_los_time, 1.0)
 
     def reset(self) -> None:
         self.observer.reset()
@@ -204,7 +243,14 @@ class ControlUnit:
         self.i_qref = 0.0
         for slot in _STARTUP_STATE + _DTC_STATE + _REFERENCE_STATE:
             self._s[slot] = 0.0
+        for name, offset in _k.UNIT_STATE_LAYOUT.offsets.items():  # the injection strategy's slots
+            if offset >= _k.S_MODE_TIME:
+                for i in _k.UNIT_STATE_LAYOUT.span(name):
+                    self._s[i] = 0.0
         self._s[_k.S_PSI_RATIO] = 1.0
+        if self.injecting:  # enabled: the acquisition first
+            self._s[_k.S_MODE] = _k.MODE_ACQUIRE
+            self._kernels.enter_acquire(self._s, self._c, 0.0, 0.0)
 
     @property
     def v_out(self) -> tuple[float, float]:
@@ -247,7 +293,7 @@ class ControlUnit:
     # the reference generator's outputs (docs/speed-range.md); in the paper's mode computed here from the
     # paper's references (no work on its per-step path)
     def _foc(self) -> bool:
-        return not self.sensorless or self._s[_k.S_MODE] == _k.MODE_EKF
+        return not self.sensorless or self._s[_k.S_MODE] in (_k.MODE_EKF, _k.MODE_INJECTION)
 
     @property
     def i_dref(self) -> float:
@@ -271,7 +317,8 @@ class ControlUnit:
         the motor does not give (the regen limit, the envelope) x n_g eta; 0 in the paper's mode.
         (Read at every step by the FMU: ``_foc`` written out, on ``_s_items``.)"""
         s = self._s_items
-        return (float(s[_k.S_T_BRAKE]) if self.reference and (not self.sensorless or s[_k.S_MODE] == _k.MODE_EKF)
+        return (float(s[_k.S_T_BRAKE]) if self.reference and (not self.sensorless or s[_k.S_MODE] == _k.MODE_EKF
+                                                               or s[_k.S_MODE] == _k.MODE_INJECTION)
                 else 0.0)
 
     @property

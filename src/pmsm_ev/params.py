@@ -847,6 +847,122 @@ class StartupParams:
                  f"realign_max must be a whole number (got {self.realign_max})")
 
 
+#: the sensorless unit's strategies at and near zero speed (``InjectionParams.low_speed``)
+LOW_SPEED_STRATEGIES = ("if", "injection")
+
+
+@dataclass(frozen=True)
+class InjectionParams:
+    """The sensorless unit at and near zero speed by high-frequency injection (``low_speed`` =
+    "injection"; ``pmsm_ev.kernels.injection``, the unit's modes in ``pmsm_ev.kernels.modes``;
+    docs/sensorless.md, "Closed loop at zero speed").
+
+    At a stop no back-EMF shows the angle; the rotor's saliency does (Table I: L_q / L_d =
+    1.44). A square wave of +-``inj_voltage`` on the estimated d axis changes the current by
+    dt L^-1 v per period; seen from an axis off the rotor's by e, the q current answers
+    dt v (1/L_d - 1/L_q) / 2 sin 2e (``pmsm_ev.kernels.demodulate``): an angle error signal,
+    tracked by an observer with the drive's mechanical model (``inj_bandwidth``). It sees the
+    axis, not its direction: the magnet's polarity comes from the d axis's saturation, which a
+    positive d current deepens and a negative one relieves (pulses of +-``pol_current``).
+    Above ``inj_blend_low`` the EKF's angle is blended in, and above ``inj_blend_high`` the
+    EKF alone drives (injection off), as in the I-f strategy's FOC.
+
+    Chosen values, each with its reason; where one comes from a publication it is named."""
+
+    #: the strategy at and near zero speed [chosen]: "if" (``StartupParams``: alignment, I-f, handover;
+    #: the default, as before) or "injection" (this class)
+    low_speed: str = "if"
+    #: the square wave's amplitude on the estimated d axis [V] [chosen]: 30 V, a seventh of the 208 V
+    #: voltage limit. Its error signal, 2 dt V (1/L_d - 1/L_q) / 2 = 4.5 A per unit of sin 2e an answer
+    #: with Table I, against the second difference of 1 A sensor noise (sqrt 6 x 1.15 A = 2.8 A): measured
+    #: from 24 start angles with 1 A of noise, 0.05 rad rms of angle error at a stop (20 V: 0.08 rad). The
+    #: d current's ripple is +-dt V / (2 L_d) = +-7.4 A, 4.3 A rms
+    inj_voltage: float = 30.0
+    #: the square wave's frequency [Hz]; 0 = half the control rate (5 kHz at 10 kHz) [chosen]: the
+    #: highest there is, so the second difference of three samples cancels the fundamental's slope and no
+    #: filter delays the signal (as motulator's square-wave injection, after Kim, Ha, Sul, "PWM switching
+    #: frequency signal injection sensorless method in IPMSM", IEEE Trans. Ind. Appl. 48(5), 2012); lower
+    #: ones are 1 / (2 m dt), m = 2 .. 8 control periods a half-wave. 5 kHz is audible (a tone at the
+    #: square wave's frequency, as every injection method's)
+    inj_frequency: float = 0.0
+    #: the tracking observer's bandwidth [rad/s] [chosen]: its three poles at -50 rad/s (angle, speed and
+    #: load torque with the drive's inertia and the model's torque, ``pmsm_ev.kernels.track``): it follows
+    #: a load step in ~0.1 s, 25 times the speed loop's 2 rad/s; its noise bandwidth (about a, in Hz) sets
+    #: the angle's noise (measured: 0.05 rad rms at 50 rad/s, 0.07 at 80)
+    inj_bandwidth: float = 50.0
+    #: the EKF's angle blended in from this |omega| [rad/s] ... [chosen: 15 rad/s, back-EMF 5.4 V]
+    inj_blend_low: float = 15.0
+    #: ... to this one, where the injection is off and the EKF alone drives [rad/s] [chosen: 30 rad/s,
+    #: back-EMF 10.8 V, the I-f strategy's handover speed ``omega_up``]
+    inj_blend_high: float = 30.0
+    #: back into the injection below ``inj_blend_high`` less this [rad/s] [chosen: 5 rad/s]: a speed that
+    #: hovers at the boundary does not switch the injection on and off
+    inj_hysteresis: float = 5.0
+    #: the angle's acquisition at enable, per axis [s] [chosen: 40 ms, 400 answers]: the axis is found
+    #: from the q answers to injection on two axes 45 deg apart, sin 2e and -cos 2e (no bias from the mean
+    #: inductance, no unstable point at e = 90 deg), averaged over this time (0.02 rad of noise). From
+    #: enable to torque: 2 x 40 + 30 ms here, 120 ms of polarity test, 0.23 s
+    inj_lock_time: float = 0.04
+    #: then the tracking observer settles for this long before the polarity test [s] [chosen: 30 ms]
+    inj_settle_time: float = 0.03
+    #: the polarity test's d current [A] [chosen: 100 A, a quarter of i_q_max]: the d axis's incremental
+    #: inductance differs between +-100 A by the magnet's saturation (a few to ~15 % in IPMSMs, e.g.
+    #: Jeong, Lorenz, Jahns, Sul, IEEE Trans. Ind. Appl. 41(1), 2005); on the d axis it gives no torque
+    pol_current: float = 100.0
+    #: its ramp to each sign [s] [chosen: 10 ms, 20 times the current loop's time constant]
+    pol_ramp: float = 0.01
+    #: ... and the time each sign is held and measured [s] [chosen: 40 ms, 400 samples]
+    pol_hold: float = 0.04
+    #: the least relative difference of the d axis's answers at +-``pol_current`` that decides the
+    #: polarity [-] [chosen: 0.02, ten times the averaged noise]; below it the polarity is unresolved: the
+    #: test is repeated once, then the fault latches (no torque is given on an unknown polarity)
+    pol_contrast: float = 0.02
+    #: loss of synchronism under injection: the tracking observer's angle error above this [rad] ...
+    #: [chosen: 0.5 rad, four times the error at the load's saturation]
+    inj_los_angle: float = 0.5
+    #: ... for this long [s] [chosen: 50 ms, seven time constants of the tracking observer]
+    inj_los_time: float = 0.05
+    #: loss of synchronism on the EKF (both strategies' FOC): the EKF's current innovation, low-pass
+    #: filtered (``inj_los_time``), above this [A] ... [chosen: 30 A]: healthy, the innovation is the
+    #: sensors' noise and the model's mismatch, a few A; a diverged angle leaves most of the current
+    #: unexplained
+    ekf_los_current: float = 30.0
+    #: ... for this long [s] [chosen: 0.2 s]
+    ekf_los_time: float = 0.2
+
+    def half_wave(self, dt: float) -> int:
+        """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
+        if self.inj_frequency == 0:
+            return 1
+        return round(1.0 / (2.0 * self.inj_frequency * dt))
+
+    def validate(self, dt: float | None = None, u_max: float | None = None) -> None:
+        _require(self.low_speed in LOW_SPEED_STRATEGIES,
+                 f"low_speed must be one of {LOW_SPEED_STRATEGIES} (got {self.low_speed!r})")
+        for f in fields(self):
+            if f.name == "low_speed":
+                continue
+            value = getattr(self, f.name)
+            _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")
+        for name in ("inj_voltage", "inj_bandwidth", "inj_blend_high", "inj_lock_time", "pol_current",
+                     "pol_hold", "pol_contrast", "inj_los_angle", "inj_los_time", "ekf_los_current",
+                     "ekf_los_time"):
+            _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
+        _require(self.inj_blend_low < self.inj_blend_high,
+                 f"inj_blend_low must be < inj_blend_high (got {self.inj_blend_low} >= {self.inj_blend_high} rad/s)")
+        _require(self.inj_hysteresis < self.inj_blend_high - self.inj_blend_low,
+                 f"inj_hysteresis must be < inj_blend_high - inj_blend_low (got {self.inj_hysteresis} rad/s)")
+        if u_max is not None:
+            _require(self.inj_voltage < 0.5 * u_max,
+                     f"inj_voltage must be < half the voltage limit {0.5 * u_max:.4g} V (got {self.inj_voltage})")
+        if dt is not None and self.inj_frequency != 0:
+            m = 1.0 / (2.0 * self.inj_frequency * dt)
+            allowed = ", ".join(f"{1.0 / (2.0 * k * dt):.6g}" for k in range(1, 9))
+            _require(m >= 1.0 - 1e-9 and abs(m - round(m)) < 1e-6 and round(m) <= 8,
+                     f"inj_frequency must be half the control rate or a fraction 1/(2 m dt), m = 1..8: one of "
+                     f"{allowed} Hz at dt = {dt:g} s (got {self.inj_frequency})")
+
+
 #: the EKF of the sensorless unit: the paper's covariances, the drive's whole inertia J_eq
 #: in the mechanical model (see ``EkfParams.J_model``)
 SENSORLESS_EKF = EkfParams(J_model=equivalent_inertia(MotorParams(), VehicleParams()))

@@ -14,6 +14,10 @@ each function's docstring citing its equations:
   field weakening, MTPV, the current and torque limits), the regenerative-braking limit and the friction
   brake's share;
 * ``startup``: the sensorless unit's step (alignment, I-f, handover, synchronism);
+* ``injection``: high-frequency injection at and near zero speed (the square wave, its demodulation, the
+  tracking observer, the blend with the EKF);
+* ``modes``: the sensorless unit with injection as a state machine (modes, detectors, the transition
+  table, its step);
 * ``jit``: the ``kernel`` decorator (numba or plain Python).
 
 The functions take floats and flat float vectors (a numpy float64 array when compiled, a list of
@@ -37,8 +41,10 @@ the last bit).
 from __future__ import annotations
 
 from .control import *  # noqa: F403 - the package's interface is all its kernels and constants
+from .injection import *  # noqa: F403
 from .jit import CACHE, JIT  # noqa: F401 - how this copy was loaded (pmsm_ev.accel reads it)
 from .layout import *  # noqa: F403
+from .modes import *  # noqa: F403
 from .observers import *  # noqa: F403
 from .plant import *  # noqa: F403
 from .references import *  # noqa: F403

@@ -269,7 +269,35 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
                        "or faster in I-f (or was restarted on the vector) [rad]"),
     ("S_TRUST_TL", 1, "the EKF's load at that moment [N m]"),
     ("S_ANCHOR_REL", 1, "the stand's anchor less the I-f vector's angle when the stand began [rad]"),
-), size=127)
+    # the injection strategy (``C_LOW_SPEED``, ``kernels.injection``, ``kernels.modes``)
+    ("S_MODE_TIME", 1, "time in the present mode [s]"),
+    ("S_INJ_SIGN", 1, "the square wave's sign in the present half-wave (+1 or -1)"),
+    ("S_INJ_COUNT", 1, "control periods run in the present half-wave"),
+    ("S_INJ_AMP", 1, "the square wave's amplitude in the present half-wave [V]"),
+    ("S_INJ_V1", 1, "the signed injected voltage of the last finished half-wave [V]"),
+    ("S_INJ_V2", 1, "... of the one before [V]"),
+    ("S_INJ_I1", 2, "the currents (alpha, beta) at the end of the last finished half-wave [A]"),
+    ("S_INJ_I2", 2, "... at the end of the one before [A]"),
+    ("S_INJ_AXIS", 1, "the axis the square wave was applied on in the last period [rad]"),
+    ("S_INJ_SKIP", 1, "half-waves whose answer is not used (the axis jumped) [-]"),
+    ("S_INJ_NEW", 1, "1.0 in a period that brought a new answer"),
+    ("S_INJ_ERR", 1, "the last answer's angle error signal, sin 2e [-]"),
+    ("S_INJ_ADM", 1, "the last answer's d-axis admittance, the inverse of the incremental inductance [1/H]"),
+    ("S_AVG", 32, "the last 2 m currents, alpha (16) then beta (16) [A]: the fundamental is their mean"),
+    ("S_AVG_POS", 1, "where the next current goes in S_AVG [-]"),
+    ("S_TRK", 3, "the tracking observer: electrical angle [rad], mechanical speed [rad/s], load torque [N m]"),
+    ("S_BLEND", 1, "the EKF's weight in the control frame [-] (0: the tracking observer's, 1: the EKF's)"),
+    ("S_ACQ", 4, "the angle's acquisition: sums of sin 2e on the first axis and on the axis 45 deg ahead, "
+                 "how many answers each [-]"),
+    ("S_POL", 4, "the polarity test: sums of the d admittance at +i and at -i [1/H], how many of each [-]"),
+    ("S_POL_TRIES", 1, "polarity tests unresolved since enable [-]"),
+    ("S_INJ_ERR_F", 1, "the tracking observer's angle error, low-pass filtered [rad]"),
+    ("S_INJ_LOS_T", 1, "how long the injection's angle error (or its disagreement with the EKF) has been "
+                       "beyond its bound [s]"),
+    ("S_RESID_F", 1, "the EKF's current innovation magnitude, low-pass filtered [A]"),
+    ("S_EKF_LOS_T", 1, "how long it has been beyond its bound [s]"),
+    ("S_EVENT", 1, "the event of the last period (EV_*; 0 none)"),
+), size=193)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -376,7 +404,28 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_REALIGN_MAX", 1, "realignments after a stall before the fault latches [-]"),
     ("C_ANCHOR_SPEED", 1, "in I-f at this |omega_hat| or faster the EKF's angle (relative to the vector) and load "
                           "are what a stand is anchored on [rad/s]"),
-), size=104)
+    # the injection strategy (``pmsm_ev.params.InjectionParams``)
+    ("C_LOW_SPEED", 1, "the strategy at and near zero speed: 0 I-f, 1 injection (LOW_SPEED_*)"),
+    ("C_INJ_V", 1, "the square wave's amplitude [V]"),
+    ("C_INJ_M", 1, "its half-period in control periods, m [-]"),
+    ("C_INJ_Y", 1, "the controller's model's (1/L_d - 1/L_q) / 2 [1/H]: the error signal's gain"),
+    ("C_TRK_L", 3, "the tracking observer's gains l1 [1/s], l2 [1/s^2 per electrical rad], l3 [N m/(rad s)]"),
+    ("C_TRK_J", 1, "its inertia [kg m^2]"),
+    ("C_BLEND_LO", 1, "the EKF's weight rises from 0 at this |omega| [rad/s] ..."),
+    ("C_BLEND_HI", 1, "... to 1 at this one, where the injection is off [rad/s]"),
+    ("C_BLEND_HYST", 1, "back into the injection below C_BLEND_HI less this [rad/s]"),
+    ("C_ACQ_TIME", 1, "the acquisition's time on each axis [s]"),
+    ("C_ACQ_SETTLE", 1, "the tracking observer's settling after it [s]"),
+    ("C_POL_I", 1, "the polarity test's d current [A]"),
+    ("C_POL_RAMP", 1, "its ramp [s]"),
+    ("C_POL_HOLD", 1, "its hold at each sign [s]"),
+    ("C_POL_CONTRAST", 1, "the least relative difference of the answers that decides [-]"),
+    ("C_INJ_LOS_ANGLE", 1, "the injection's loss-of-synchronism angle [rad]"),
+    ("C_INJ_LOS_TIME", 1, "... time [s]"),
+    ("C_EKF_LOS_I", 1, "the EKF's loss-of-synchronism innovation [A]"),
+    ("C_EKF_LOS_TIME", 1, "... time [s]"),
+    ("C_LOS_FILTER", 1, "dt / the detectors' filter time constant (C_INJ_LOS_TIME / 3) [-]"),
+), size=126)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())
@@ -387,8 +436,12 @@ PLANT_ENERGY = PLANT_ENERGY_LAYOUT.size  #: length of the plant's energy vector
 UNIT_STATE = UNIT_STATE_LAYOUT.size  #: length of the control unit's state vector
 UNIT_PARAMS = UNIT_PARAMS_LAYOUT.size  #: length of the control unit's parameter vector
 
-#: modes of the sensorless unit (``S_MODE``)
-MODE_ALIGN, MODE_IF, MODE_EKF = 0.0, 1.0, 2.0
+#: modes of the sensorless unit (``S_MODE``): the I-f strategy's alignment and I-f, FOC on the EKF (both
+#: strategies), and the injection strategy's angle acquisition, polarity test and FOC on the injection
+MODE_ALIGN, MODE_IF, MODE_EKF, MODE_ACQUIRE, MODE_POLARITY, MODE_INJECTION = 0.0, 1.0, 2.0, 3.0, 4.0, 5.0
+#: the strategies at and near zero speed (``C_LOW_SPEED``, ``InjectionParams.low_speed``)
+LOW_SPEED_IF, LOW_SPEED_INJECTION = 0.0, 1.0
+LOW_SPEED_CODES = {"if": LOW_SPEED_IF, "injection": LOW_SPEED_INJECTION}
 #: its fault output (``S_FAULT``): none; a loss of synchronism detected, recovery under way; the
 #: recovery failed: the safe state (stop and hold at the current limit) latched
 FAULT_NONE, FAULT_RECOVERING, FAULT_LATCHED = 0.0, 1.0, 2.0

@@ -1,0 +1,575 @@
+"""The sensorless unit with injection at and near zero speed (``InjectionParams.low_speed`` =
+"injection"): a state machine of modes, events and one transition table (docs/sensorless.md,
+"Closed loop at zero speed").
+
+Modes (``S_MODE``):
+
+* ``MODE_ACQUIRE``: the square wave on, no current: the rotor's axis from the answers on two axes 45
+  deg apart (``C_ACQ_TIME`` each), then the tracking observer settles (``C_ACQ_SETTLE``);
+* ``MODE_POLARITY``: d current pulses of +- ``C_POL_I`` (no torque on the d axis): the sign whose d
+  admittance is the larger is the magnet's direction (its saturation);
+* ``MODE_INJECTION``: FOC (eqs 14-20) on the tracking observer's angle and speed, the EKF's blended in
+  with the speed (``blend_weight``), the square wave fading out with the same weight;
+* ``MODE_EKF``: FOC on the stationary-frame EKF5 alone (eqs 23-27), no injection.
+
+Each period the detectors (small functions, each of one purpose and timer) return at most one event
+(``EV_*``, by priority); ``transition`` looks the (mode, event) pair up in ``TRANSITIONS``, the one
+ordered table, and runs the row's entry action. A pair not in the table changes nothing.
+
+The fault output, as the I-f strategy's: a loss of synchronism begins an episode (``FAULT_RECOVERING``),
+which ends after ``C_RECOVER_TIME`` without trouble, or latches the safe state after ``C_FAULT_TIME``:
+stop and hold, closed loop at zero speed (the reference taken as 0). A polarity left unresolved twice
+latches it too, without torque: no torque is given on an unknown polarity.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .control import (
+    current_step,
+    modulate,
+    speed_feedforward,
+    speed_step,
+    store_command,
+    torque_speed_step,
+)
+from .injection import (
+    angle_error,
+    blend_weight,
+    blended_frame,
+    demodulate,
+    fundamental,
+    injection_voltage,
+    seat_tracker,
+    seed_fundamental,
+    start_injection,
+    track,
+)
+from .jit import F as _F
+from .jit import V as _V
+from .jit import kernel
+from .jit import sig as _sig
+from .layout import (
+    C_ACQ_SETTLE,
+    C_ACQ_TIME,
+    C_ADVANCE,
+    C_BLEND_HI,
+    C_BLEND_HYST,
+    C_DELAYED,
+    C_DT,
+    C_EKF_LOS_I,
+    C_EKF_LOS_TIME,
+    C_FAULT_TIME,
+    C_FF,
+    C_I_D_REF,
+    C_INJ_LOS_ANGLE,
+    C_INJ_LOS_TIME,
+    C_INJ_M,
+    C_INJ_V,
+    C_K_DQN,
+    C_L_D,
+    C_L_Q,
+    C_LOS_FILTER,
+    C_P0,
+    C_P0_ALIGNED,
+    C_POL_CONTRAST,
+    C_POL_HOLD,
+    C_POL_I,
+    C_POL_RAMP,
+    C_PSI,
+    C_RECOVER_TIME,
+    C_REF_MODE,
+    FAULT_LATCHED,
+    FAULT_NONE,
+    FAULT_RECOVERING,
+    MODE_ACQUIRE,
+    MODE_EKF,
+    MODE_INJECTION,
+    MODE_POLARITY,
+    S_ACQ,
+    S_BLEND,
+    S_EKF_LOS_T,
+    S_EPISODE,
+    S_EVENT,
+    S_FAULT,
+    S_I_DL,
+    S_I_QL,
+    S_INJ_ADM,
+    S_INJ_AXIS,
+    S_INJ_ERR,
+    S_INJ_ERR_F,
+    S_INJ_LOS_T,
+    S_INJ_NEW,
+    S_INJ_SKIP,
+    S_INSYNC,
+    S_INT_D,
+    S_INT_Q,
+    S_MODE,
+    S_MODE_TIME,
+    S_OMEGA_CTRL,
+    S_P,
+    S_POL,
+    S_POL_TRIES,
+    S_RESID_F,
+    S_THETA_CTRL,
+    S_TRK,
+    S_U_PREV_0,
+    S_U_PREV_1,
+    S_V_ALPHA,
+    S_V_BETA,
+    S_W_INT,
+    S_X,
+)
+from .observers import ekf5ab_correct, ekf5ab_predict
+from .transforms import park, wrap_angle
+
+# -- events: what a detector saw this period (``S_EVENT``); 0 none -------------------------------
+EV_NONE = 0.0
+EV_ACQUIRED = 1.0  #: the acquisition and the tracking observer's settling are over
+EV_POLARITY_RIGHT = 2.0  #: the polarity test found the tracking observer's direction right
+EV_POLARITY_FLIPPED = 3.0  #: ... found it pi off
+EV_POLARITY_UNRESOLVED = 4.0  #: ... could not tell (the answers at +-i differ by less than C_POL_CONTRAST)
+EV_FAST = 5.0  #: the speed reached C_BLEND_HI: the EKF alone
+EV_SLOW = 6.0  #: the speed fell below C_BLEND_HI - C_BLEND_HYST: the injection back on
+EV_INJECTION_LOST = 7.0  #: the tracking observer's angle error stayed beyond C_INJ_LOS_ANGLE
+EV_DISAGREE = 8.0  #: in the blend, the EKF's angle stayed that far from the tracking observer's
+EV_EKF_LOST = 9.0  #: the EKF's current innovation stayed beyond C_EKF_LOS_I
+EVENT_NAMES = ("none", "acquired", "polarity right", "polarity flipped", "polarity unresolved", "fast", "slow",
+               "injection lost", "disagree", "EKF lost")
+
+# -- entry actions --------------------------------------------------------------------------------
+A_ACQUIRE = 0.0  #: start the acquisition afresh (``enter_acquire``)
+A_POLARITY = 1.0  #: start the polarity test (``enter_polarity``)
+A_TORQUE = 2.0  #: FOC on the injection, the speed loop from rest (``enter_torque``)
+A_FLIP_TORQUE = 3.0  #: the tracking observer turned by pi, then as A_TORQUE (``flip_frame``)
+A_RETRY = 4.0  #: count an unresolved test; the second latches the fault; then as A_ACQUIRE
+A_EKF_ALONE = 5.0  #: the injection off (``enter_ekf``)
+A_INJECTION_ON = 6.0  #: the injection on again, the tracking observer on the EKF (``enter_injection``)
+A_REACQUIRE = 7.0  #: an episode; then as A_ACQUIRE
+A_TRUST_INJECTION = 8.0  #: an episode; the EKF put on the tracking observer (``trust_injection``)
+A_RESTART_EKF = 9.0  #: an episode; the EKF's covariance back to an unknown start's (``restart_ekf_search``)
+
+#: the transition table: (mode, event, next mode, entry action), looked up in order, the first match
+#: taken. Each row is tested on its own (tests/test_modes.py)
+TRANSITIONS = (
+    (MODE_ACQUIRE, EV_ACQUIRED, MODE_POLARITY, A_POLARITY),
+    (MODE_POLARITY, EV_POLARITY_RIGHT, MODE_INJECTION, A_TORQUE),
+    (MODE_POLARITY, EV_POLARITY_FLIPPED, MODE_INJECTION, A_FLIP_TORQUE),
+    (MODE_POLARITY, EV_POLARITY_UNRESOLVED, MODE_ACQUIRE, A_RETRY),
+    (MODE_POLARITY, EV_INJECTION_LOST, MODE_ACQUIRE, A_REACQUIRE),
+    (MODE_INJECTION, EV_INJECTION_LOST, MODE_ACQUIRE, A_REACQUIRE),
+    (MODE_INJECTION, EV_DISAGREE, MODE_INJECTION, A_TRUST_INJECTION),
+    (MODE_INJECTION, EV_FAST, MODE_EKF, A_EKF_ALONE),
+    (MODE_EKF, EV_EKF_LOST, MODE_EKF, A_RESTART_EKF),
+    (MODE_EKF, EV_SLOW, MODE_INJECTION, A_INJECTION_ON),
+)
+
+
+# -- the schedules of the acquisition and the polarity test ----------------------------------------
+@kernel()
+def acquisition_phase(c, t):
+    """The acquisition's phase at the time ``t`` [s] in it: 0 on the first axis, 1 on the axis 45 deg
+    ahead, 2 the tracking observer settling, 3 over."""
+    if t < c[C_ACQ_TIME]:
+        return 0
+    if t < 2.0 * c[C_ACQ_TIME]:
+        return 1
+    if t < 2.0 * c[C_ACQ_TIME] + c[C_ACQ_SETTLE]:
+        return 2
+    return 3
+
+
+@kernel()
+def polarity_schedule(c, t):
+    """The polarity test at the time ``t`` [s] in it: (d current reference [A], which sign is measured
+    now: +1, -1 or 0, over: 1.0 once done). Ramp to +i, hold, ramp to -i, hold, ramp to 0; each hold
+    measured in its last three quarters (the current loop settles in its first)."""
+    i = c[C_POL_I]
+    r = c[C_POL_RAMP]
+    h = c[C_POL_HOLD]
+    if t < r:
+        return i * t / r, 0.0, 0.0
+    if t < r + h:
+        return i, 1.0 if t >= r + 0.25 * h else 0.0, 0.0
+    if t < 3.0 * r + h:
+        return i - 2.0 * i * (t - r - h) / (2.0 * r), 0.0, 0.0
+    if t < 3.0 * r + 2.0 * h:
+        return -i, -1.0 if t >= 3.0 * r + 1.25 * h else 0.0, 0.0
+    if t < 4.0 * r + 2.0 * h:
+        return -i + i * (t - 3.0 * r - 2.0 * h) / r, 0.0, 0.0
+    return 0.0, 0.0, 1.0
+
+
+# -- detectors: each returns an event or EV_NONE ---------------------------------------------------
+@kernel()
+def detect_acquired(s, c):
+    """EV_ACQUIRED once the acquisition is over (none while the fault is latched: a polarity left
+    unresolved stops the unit here)."""
+    if s[S_FAULT] == FAULT_LATCHED and s[S_POL_TRIES] >= 2.0:
+        return EV_NONE
+    return EV_ACQUIRED if acquisition_phase(c, s[S_MODE_TIME]) == 3 else EV_NONE
+
+
+@kernel()
+def detect_polarity(s, c):
+    """At the end of the polarity test: EV_POLARITY_RIGHT where the d admittance at +i exceeds that at -i
+    by at least ``C_POL_CONTRAST`` of their mean (a positive d current saturates the d axis),
+    EV_POLARITY_FLIPPED where the opposite, else EV_POLARITY_UNRESOLVED."""
+    _, _, done = polarity_schedule(c, s[S_MODE_TIME])
+    if done == 0.0:
+        return EV_NONE
+    if s[S_POL + 2] < 1.0 or s[S_POL + 3] < 1.0:
+        return EV_POLARITY_UNRESOLVED
+    y_pos = s[S_POL] / s[S_POL + 2]
+    y_neg = s[S_POL + 1] / s[S_POL + 3]
+    contrast = (y_pos - y_neg) / (0.5 * (abs(y_pos) + abs(y_neg)) + 1e-300)
+    if contrast >= c[C_POL_CONTRAST]:
+        return EV_POLARITY_RIGHT
+    if contrast <= -c[C_POL_CONTRAST]:
+        return EV_POLARITY_FLIPPED
+    return EV_POLARITY_UNRESOLVED
+
+
+@kernel()
+def detect_injection_lost(s, c):
+    """EV_INJECTION_LOST when the tracking observer's filtered angle error has stayed beyond
+    ``C_INJ_LOS_ANGLE`` for ``C_INJ_LOS_TIME`` (its timer ``S_INJ_LOS_T``): the injection no longer
+    sees the axis it tracks (the saliency gone, or the rotor slipped faster than the observer follows);
+    EV_DISAGREE when, in the blend, the EKF's angle has stayed that far from the tracking observer's."""
+    w = s[S_BLEND]
+    far = abs(s[S_INJ_ERR_F]) > c[C_INJ_LOS_ANGLE]
+    apart = 0.0 < w < 1.0 and abs(wrap_angle(s[S_X + 3] - s[S_TRK])) > c[C_INJ_LOS_ANGLE]
+    s[S_INJ_LOS_T] = s[S_INJ_LOS_T] + c[C_DT] if (far or apart) else 0.0
+    if s[S_INJ_LOS_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
+        return EV_NONE
+    s[S_INJ_LOS_T] = 0.0
+    return EV_INJECTION_LOST if far else EV_DISAGREE
+
+
+@kernel()
+def detect_ekf_lost(s, c):
+    """EV_EKF_LOST when the EKF's filtered current innovation has stayed beyond ``C_EKF_LOS_I`` for
+    ``C_EKF_LOS_TIME`` (its timer ``S_EKF_LOS_T``): its angle or speed has left the rotor's."""
+    s[S_EKF_LOS_T] = s[S_EKF_LOS_T] + c[C_DT] if s[S_RESID_F] > c[C_EKF_LOS_I] else 0.0
+    if s[S_EKF_LOS_T] < c[C_EKF_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
+        return EV_NONE
+    s[S_EKF_LOS_T] = 0.0
+    return EV_EKF_LOST
+
+
+@kernel()
+def detect_speed(s, c, mode, omega):
+    """EV_FAST in injection at |omega| >= ``C_BLEND_HI``; EV_SLOW on the EKF below ``C_BLEND_HI`` less
+    ``C_BLEND_HYST``."""
+    if mode == MODE_INJECTION and abs(omega) >= c[C_BLEND_HI]:
+        return EV_FAST
+    if mode == MODE_EKF and abs(omega) < c[C_BLEND_HI] - c[C_BLEND_HYST]:
+        return EV_SLOW
+    return EV_NONE
+
+
+@kernel()
+def detect(s, c, mode):
+    """This period's event, by priority: a loss of synchronism first, then the mode's own."""
+    if mode == MODE_ACQUIRE:
+        return detect_acquired(s, c)
+    if mode == MODE_POLARITY:
+        ev = detect_injection_lost(s, c)
+        return ev if ev == EV_INJECTION_LOST else detect_polarity(s, c)
+    if mode == MODE_INJECTION:
+        ev = detect_injection_lost(s, c)
+        return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_OMEGA_CTRL])
+    ev = detect_ekf_lost(s, c)
+    return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_X + 2])
+
+
+# -- entry actions -------------------------------------------------------------------------------
+@kernel()
+def clear_detectors(s):
+    """The detectors' timers and filters from zero."""
+    s[S_INJ_ERR_F] = 0.0
+    s[S_INJ_LOS_T] = 0.0
+    s[S_EKF_LOS_T] = 0.0
+
+
+@kernel()
+def enter_acquire(s, c, i_alpha, i_beta):
+    """The acquisition from the start: the square wave afresh, the sums cleared, no current (the PIs'
+    integrators and the speed loop's at 0), the tracking observer at rest on its angle, the EKF's weight 0."""
+    start_injection(s)
+    seed_fundamental(s, c, i_alpha, i_beta)
+    for k in range(4):
+        s[S_ACQ + k] = 0.0
+    s[S_INT_D] = 0.0
+    s[S_INT_Q] = 0.0
+    s[S_I_DL] = 0.0
+    s[S_I_QL] = 0.0
+    s[S_W_INT] = 0.0
+    seat_tracker(s, s[S_TRK], 0.0, 0.0)
+    s[S_BLEND] = 0.0
+    clear_detectors(s)
+
+
+@kernel()
+def enter_polarity(s):
+    """The polarity test's sums cleared."""
+    for k in range(4):
+        s[S_POL + k] = 0.0
+
+
+@kernel()
+def enter_torque(s, c):
+    """FOC on the injection: the speed loop's integral from 0 (the car is at rest, no torque yet), the EKF
+    put on the tracking observer."""
+    s[S_W_INT] = 0.0
+    trust_injection(s, c)
+    clear_detectors(s)
+
+
+@kernel()
+def flip_frame(s):
+    """The tracking observer's angle turned by pi; what the current PIs hold in its frame changes sign."""
+    s[S_TRK] = wrap_angle(s[S_TRK] + math.pi)
+    s[S_INT_D] = -s[S_INT_D]
+    s[S_INT_Q] = -s[S_INT_Q]
+    s[S_I_DL] = -s[S_I_DL]
+    s[S_I_QL] = -s[S_I_QL]
+
+
+@kernel()
+def restart_ekf_on(s, c, theta, omega, t_l, p0):
+    """The EKF put on an angle, speed and load, its covariance diagonal from ``p0`` (a ``C_*`` slot of 5
+    entries); its currents kept."""
+    s[S_X + 2] = omega
+    s[S_X + 3] = theta
+    s[S_X + 4] = t_l
+    for k in range(25):
+        s[S_P + k] = 0.0
+    for k in range(5):
+        s[S_P + 6 * k] = c[p0 + k]
+
+
+@kernel()
+def trust_injection(s, c):
+    """The EKF put on the tracking observer (it is the better at low speed), with the restart's
+    covariance (``C_P0_ALIGNED``)."""
+    restart_ekf_on(s, c, s[S_TRK], s[S_TRK + 1], s[S_TRK + 2], C_P0_ALIGNED)
+
+
+@kernel()
+def restart_ekf_search(s, c):
+    """The EKF's covariance back to an unknown start's (``C_P0``): it searches the rotor again from its
+    back-EMF, its estimate kept as the start."""
+    restart_ekf_on(s, c, s[S_X + 3], s[S_X + 2], s[S_X + 4], C_P0)
+    s[S_RESID_F] = 0.0
+
+
+@kernel()
+def begin_episode_now(s, c):
+    """A loss-of-synchronism episode begins (or the one running goes on, its age kept)."""
+    s[S_INSYNC] = 0.0
+    if s[S_EPISODE] == 0.0:
+        s[S_EPISODE] = c[C_DT]
+
+
+@kernel()
+def enter(s, c, action, i_alpha, i_beta):
+    """Run an entry action (``A_*``)."""
+    if action == A_ACQUIRE:
+        enter_acquire(s, c, i_alpha, i_beta)
+    elif action == A_POLARITY:
+        enter_polarity(s)
+    elif action == A_TORQUE:
+        enter_torque(s, c)
+    elif action == A_FLIP_TORQUE:
+        flip_frame(s)
+        enter_torque(s, c)
+    elif action == A_RETRY:
+        s[S_POL_TRIES] += 1.0
+        if s[S_POL_TRIES] >= 2.0:
+            s[S_FAULT] = FAULT_LATCHED
+        enter_acquire(s, c, i_alpha, i_beta)
+    elif action == A_EKF_ALONE:
+        s[S_BLEND] = 1.0
+        clear_detectors(s)
+    elif action == A_INJECTION_ON:
+        start_injection(s)
+        seed_fundamental(s, c, i_alpha, i_beta)
+        seat_tracker(s, s[S_X + 3], s[S_X + 2], s[S_X + 4])
+        clear_detectors(s)
+    elif action == A_REACQUIRE:
+        begin_episode_now(s, c)
+        enter_acquire(s, c, i_alpha, i_beta)
+    elif action == A_TRUST_INJECTION:
+        begin_episode_now(s, c)
+        trust_injection(s, c)
+        clear_detectors(s)
+    elif action == A_RESTART_EKF:
+        begin_episode_now(s, c)
+        restart_ekf_search(s, c)
+        clear_detectors(s)
+
+
+@kernel()
+def next_mode(mode, event):
+    """The table's row for (mode, event): (next mode, entry action), or (mode, -1.0) where none."""
+    for row in TRANSITIONS:
+        if row[0] == mode and row[1] == event:
+            return row[2], row[3]
+    return mode, -1.0
+
+
+@kernel()
+def transition(s, c, mode, event, i_alpha, i_beta):
+    """Take the table's transition for (mode, event), if any: the entry action run, the mode's clock
+    restarted. Returns the mode."""
+    new, action = next_mode(mode, event)
+    if action < 0.0:
+        return mode
+    enter(s, c, action, i_alpha, i_beta)
+    s[S_MODE_TIME] = 0.0
+    return new
+
+
+# -- the step ------------------------------------------------------------------------------------
+@kernel()
+def model_torque(c, i_d, i_q):
+    """Eq 12 with the controller's motor model, times k_dq [N m]."""
+    return c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
+
+
+@kernel()
+def foc_references(s, c, omega_ref, omega):
+    """The current references of FOC (eq 14, or the reference generator's) at the speed ``omega``."""
+    if c[C_REF_MODE] != 0.0:
+        return torque_speed_step(s, c, omega_ref, omega)
+    return c[C_I_D_REF], speed_step(s, c, omega_ref, omega)
+
+
+@kernel(_sig(f"UniTuple({_F}, 16)", _V, _V, _F, _F, _F))
+def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
+    """One control period of the sensorless unit with injection (observer "sensorless", ``C_LOW_SPEED`` =
+    injection; the module's doc): never reads the rotor's angle or speed. Returns ``sensorless_step``'s
+    outputs: ``control_step``'s, the mode, the fault, the control frame's angle [rad] and speed [rad/s].
+
+    1. The stationary-frame EKF5 (eqs 23-27) in every mode; its current innovation measured.
+    2. The injection's answer (``demodulate``), the fundamental currents, the tracking observer.
+    3. The detectors' event, the table's transition.
+    4. The mode's control: in acquisition and polarity the current PIs on the fundamental in the
+       tracking observer's frame with the schedule's references; in injection FOC on the blended frame;
+       on the EKF FOC on its angle and speed; the square wave added on its axis.
+    """
+    dt = c[C_DT]
+    if c[C_DELAYED] != 0.0:
+        ekf5ab_predict(s, c, s[S_U_PREV_0], s[S_U_PREV_1])
+        s[S_U_PREV_0] = s[S_V_ALPHA]
+        s[S_U_PREV_1] = s[S_V_BETA]
+    else:
+        ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
+    th = s[S_X + 3]
+    cs, sn = math.cos(th), math.sin(th)
+    y0 = i_alpha - (cs * s[S_X] - sn * s[S_X + 1])  # the innovation, before the correction
+    y1 = i_beta - (sn * s[S_X] + cs * s[S_X + 1])
+    ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
+    s[S_RESID_F] += c[C_LOS_FILTER] * (math.sqrt(y0 * y0 + y1 * y1) - s[S_RESID_F])
+    mode = s[S_MODE]
+    t = s[S_MODE_TIME]
+    # the injection's answer on the axis of the last period, the fundamental, the tracking observer
+    demodulate(s, c, i_alpha, i_beta, s[S_INJ_AXIS])
+    f_alpha, f_beta = fundamental(s, c, i_alpha, i_beta)
+    f_d, f_q = park(f_alpha, f_beta, s[S_TRK])
+    injecting = mode != MODE_EKF
+    phase = acquisition_phase(c, t) if mode == MODE_ACQUIRE else 3
+    answer = injecting and s[S_INJ_NEW] != 0.0
+    track(s, c, model_torque(c, f_d, f_q), answer and phase >= 2)
+    if answer and phase >= 2:
+        s[S_INJ_ERR_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (angle_error(s[S_INJ_ERR]) - s[S_INJ_ERR_F])
+    if mode == MODE_ACQUIRE:
+        if answer and phase < 2:  # the answers on each axis summed
+            s[S_ACQ + phase] += s[S_INJ_ERR]
+            s[S_ACQ + 2 + phase] += 1.0
+        if phase == 1 and t - dt < c[C_ACQ_TIME]:  # the axis jumps by 45 deg: two answers straddle it
+            s[S_INJ_SKIP] = 2.0
+        elif phase == 2 and t - dt < 2.0 * c[C_ACQ_TIME]:  # the axis found: sin 2e and -cos 2e
+            e = 0.0
+            if s[S_ACQ + 2] > 0.0 and s[S_ACQ + 3] > 0.0:
+                e = 0.5 * math.atan2(s[S_ACQ] / s[S_ACQ + 2], -s[S_ACQ + 1] / s[S_ACQ + 3])
+            seat_tracker(s, wrap_angle(s[S_TRK] + e), 0.0, 0.0)
+            s[S_INJ_SKIP] = 2.0
+    elif mode == MODE_POLARITY and answer:
+        _, sign, _ = polarity_schedule(c, t)
+        if sign > 0.0:
+            s[S_POL] += s[S_INJ_ADM]
+            s[S_POL + 2] += 1.0
+        elif sign < 0.0:
+            s[S_POL + 1] += s[S_INJ_ADM]
+            s[S_POL + 3] += 1.0
+    # the event and the transition
+    event = detect(s, c, mode)
+    s[S_EVENT] = event
+    if event != EV_NONE:
+        mode = transition(s, c, mode, event, i_alpha, i_beta)
+        t = s[S_MODE_TIME]
+    trouble = s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0
+    if s[S_EPISODE] > 0.0:  # a loss-of-synchronism episode: recovered, or the fault latched
+        s[S_EPISODE] += dt
+        s[S_INSYNC] = 0.0 if trouble else s[S_INSYNC] + dt
+        if s[S_INSYNC] >= c[C_RECOVER_TIME]:
+            s[S_EPISODE] = 0.0
+        elif s[S_EPISODE] >= c[C_FAULT_TIME]:
+            s[S_FAULT] = FAULT_LATCHED
+    if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
+        omega_ref = 0.0
+    if c[C_FF] != 0.0:  # the speed loop's feedforward, its slope kept up in every mode
+        speed_feedforward(s, c, omega_ref)
+    # the mode's control
+    offset = 0.0
+    amplitude = c[C_INJ_V]
+    i_qref = 0.0
+    if mode == MODE_ACQUIRE or mode == MODE_POLARITY:  # no torque: the current PIs alone, frame at rest
+        theta = s[S_TRK]
+        omega_ctrl = 0.0
+        i_dref = 0.0
+        if mode == MODE_ACQUIRE and acquisition_phase(c, t) == 1:
+            offset = 0.25 * math.pi
+        elif mode == MODE_POLARITY:
+            i_dref, _, _ = polarity_schedule(c, t)
+        i_d, i_q = park(f_alpha, f_beta, theta)
+        v_d, v_q = current_step(s, c, i_dref, 0.0, i_d, i_q, 0.0)
+    elif mode == MODE_INJECTION:  # FOC on the tracking observer, the EKF blended in with the speed
+        w = blend_weight(c, s[S_OMEGA_CTRL])
+        s[S_BLEND] = w
+        if w == 0.0:  # the EKF fed by the injection: on the tracking observer's angle, speed and load
+            s[S_X + 2] = s[S_TRK + 1]
+            s[S_X + 3] = s[S_TRK]
+            s[S_X + 4] = s[S_TRK + 2]
+        theta, omega_ctrl = blended_frame(s, s[S_X + 3], s[S_X + 2])
+        amplitude = c[C_INJ_V] * (1.0 - w)
+        i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl)
+        i_d, i_q = park(f_alpha, f_beta, theta)
+        v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
+    else:  # the EKF alone, the tracking observer kept on it
+        s[S_BLEND] = 1.0
+        theta = s[S_X + 3]
+        omega_ctrl = s[S_X + 2]
+        seat_tracker(s, theta, omega_ctrl, s[S_X + 4])
+        amplitude = 0.0
+        i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl)
+        i_d, i_q = park(i_alpha, i_beta, theta)
+        v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
+    v_alpha, v_beta = modulate(c, v_d, v_q, theta, omega_ctrl, False)
+    axis = theta + offset + c[C_ADVANCE] * omega_ctrl
+    s[S_INJ_AXIS] = axis
+    if mode != MODE_EKF:  # the square wave on its axis
+        v_h = injection_voltage(s, c, amplitude)
+        v_alpha += v_h * math.cos(axis)
+        v_beta += v_h * math.sin(axis)
+    s[S_MODE] = mode
+    s[S_MODE_TIME] = t + dt
+    s[S_THETA_CTRL] = theta
+    s[S_OMEGA_CTRL] = omega_ctrl
+    fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
+    v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
+    return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
+            s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta, omega_ctrl)

@@ -1,0 +1,262 @@
+"""The sensorless unit with injection as a state machine (``pmsm_ev.kernels.modes``): the transition table,
+each transition called on its own, each detector, and property tests over event sequences. The kernels are
+called as plain Python (``pmsm_ev.kernels`` is the source package; ``pmsm_ev.accel`` compiles a copy), on
+the vectors of a ``ControlUnit`` built with ``low_speed = "injection"``."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pmsm_ev import kernels as k
+from pmsm_ev.control_unit import ControlUnit
+from pmsm_ev.params import InjectionParams, ParameterError
+
+INJECTION_MODES = (k.MODE_ACQUIRE, k.MODE_POLARITY, k.MODE_INJECTION, k.MODE_EKF)
+EVENTS = (k.EV_ACQUIRED, k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED, k.EV_POLARITY_UNRESOLVED, k.EV_FAST,
+          k.EV_SLOW, k.EV_INJECTION_LOST, k.EV_DISAGREE, k.EV_EKF_LOST)
+
+
+def _unit(**kw):
+    """A unit with injection; its state and parameter vectors as plain lists (plain-Python kernels)."""
+    u = ControlUnit("sensorless", injection=InjectionParams(low_speed="injection", **kw))
+    return u, [float(x) for x in u._s], [float(x) for x in u._c]
+
+
+def _go(s, c, mode, event):
+    return k.transition(s, c, mode, event, 0.0, 0.0)
+
+
+# -- the table ---------------------------------------------------------------------------------------
+def test_table_has_one_row_per_pair_and_known_modes_and_actions():
+    pairs = [(row[0], row[1]) for row in k.TRANSITIONS]
+    assert len(pairs) == len(set(pairs))
+    actions = {getattr(k, n) for n in dir(k) if n.startswith("A_")}
+    for mode, event, new, action in k.TRANSITIONS:
+        assert mode in INJECTION_MODES and new in INJECTION_MODES
+        assert event in EVENTS
+        assert action in actions
+
+
+def test_every_mode_is_reachable_from_the_acquisition():
+    seen, todo = {k.MODE_ACQUIRE}, [k.MODE_ACQUIRE]
+    while todo:
+        m = todo.pop()
+        for mode, _, new, _ in k.TRANSITIONS:
+            if mode == m and new not in seen:
+                seen.add(new)
+                todo.append(new)
+    assert seen == set(INJECTION_MODES)
+
+
+def test_a_pair_not_in_the_table_changes_nothing():
+    _, s, c = _unit()
+    before = list(s)
+    assert _go(s, c, k.MODE_ACQUIRE, k.EV_FAST) == k.MODE_ACQUIRE
+    assert _go(s, c, k.MODE_EKF, k.EV_POLARITY_RIGHT) == k.MODE_EKF
+    assert s == before
+
+
+def test_the_unit_starts_in_the_acquisition_with_the_square_wave_armed():
+    u, s, _ = _unit()
+    assert u.mode == k.MODE_ACQUIRE
+    assert s[k.S_INJ_SIGN] == 1.0 and s[k.S_INJ_SKIP] == 2.0
+
+
+# -- each transition on its own ------------------------------------------------------------------------
+def test_acquired_starts_the_polarity_test_with_its_sums_cleared():
+    _, s, c = _unit()
+    s[k.S_POL:k.S_POL + 4] = [1.0, 2.0, 3.0, 4.0]
+    s[k.S_MODE_TIME] = 0.11
+    assert _go(s, c, k.MODE_ACQUIRE, k.EV_ACQUIRED) == k.MODE_POLARITY
+    assert s[k.S_POL:k.S_POL + 4] == [0.0] * 4 and s[k.S_MODE_TIME] == 0.0
+
+
+def test_polarity_right_gives_torque_on_the_tracking_observer():
+    _, s, c = _unit()
+    s[k.S_TRK:k.S_TRK + 3] = [1.2, 0.0, 0.0]
+    s[k.S_W_INT] = 7.0
+    assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_RIGHT) == k.MODE_INJECTION
+    assert s[k.S_W_INT] == 0.0
+    assert s[k.S_X + 3] == pytest.approx(1.2)  # the EKF put on the tracking observer
+
+
+def test_polarity_flipped_turns_the_frame_by_pi():
+    _, s, c = _unit()
+    s[k.S_TRK] = 0.4
+    s[k.S_INT_D], s[k.S_INT_Q] = 1.5, -0.5
+    assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_FLIPPED) == k.MODE_INJECTION
+    assert math.cos(s[k.S_TRK] - (0.4 + math.pi)) == pytest.approx(1.0)
+    assert (s[k.S_INT_D], s[k.S_INT_Q]) == (-1.5, 0.5)
+    assert s[k.S_X + 3] == pytest.approx(s[k.S_TRK])
+
+
+def test_an_unresolved_polarity_is_tried_again_once_then_latches_without_torque():
+    _, s, c = _unit()
+    assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_UNRESOLVED) == k.MODE_ACQUIRE
+    assert s[k.S_FAULT] == k.FAULT_NONE and s[k.S_POL_TRIES] == 1.0
+    assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_UNRESOLVED) == k.MODE_ACQUIRE
+    assert s[k.S_FAULT] == k.FAULT_LATCHED
+    s[k.S_MODE_TIME] = 10.0  # the acquisition is over, but no torque follows
+    assert k.detect_acquired(s, c) == k.EV_NONE
+
+
+@pytest.mark.parametrize("mode", [k.MODE_POLARITY, k.MODE_INJECTION])
+def test_a_lost_injection_reacquires_as_an_episode(mode):
+    _, s, c = _unit()
+    s[k.S_W_INT] = 3.0
+    assert _go(s, c, mode, k.EV_INJECTION_LOST) == k.MODE_ACQUIRE
+    assert s[k.S_EPISODE] > 0.0 and s[k.S_W_INT] == 0.0 and s[k.S_INJ_SKIP] == 2.0
+
+
+def test_a_disagreeing_ekf_is_put_on_the_injection_as_an_episode():
+    _, s, c = _unit()
+    s[k.S_TRK:k.S_TRK + 3] = [0.3, 20.0, 5.0]
+    s[k.S_X + 2], s[k.S_X + 3] = 19.0, 1.3
+    assert _go(s, c, k.MODE_INJECTION, k.EV_DISAGREE) == k.MODE_INJECTION
+    assert (s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4]) == (20.0, 0.3, 5.0)
+    assert s[k.S_EPISODE] > 0.0
+    assert s[k.S_P + 18] == c[k.C_P0_ALIGNED + 3]  # the angle's variance of the restart
+
+
+def test_fast_hands_over_to_the_ekf_alone():
+    _, s, c = _unit()
+    assert _go(s, c, k.MODE_INJECTION, k.EV_FAST) == k.MODE_EKF
+    assert s[k.S_BLEND] == 1.0
+
+
+def test_slow_turns_the_injection_on_with_the_tracking_observer_on_the_ekf():
+    _, s, c = _unit()
+    s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4] = 22.0, -2.0, 12.0
+    s[k.S_INJ_SIGN] = -1.0
+    assert _go(s, c, k.MODE_EKF, k.EV_SLOW) == k.MODE_INJECTION
+    assert s[k.S_TRK:k.S_TRK + 3] == [-2.0, 22.0, 12.0]
+    assert s[k.S_INJ_SIGN] == 1.0 and s[k.S_INJ_SKIP] == 2.0
+
+
+def test_a_lost_ekf_searches_again_from_an_unknown_start_as_an_episode():
+    _, s, c = _unit()
+    s[k.S_P:k.S_P + 25] = [0.0] * 25
+    assert _go(s, c, k.MODE_EKF, k.EV_EKF_LOST) == k.MODE_EKF
+    assert [s[k.S_P + 6 * i] for i in range(5)] == [c[k.C_P0 + i] for i in range(5)]
+    assert s[k.S_EPISODE] > 0.0
+
+
+# -- the detectors -------------------------------------------------------------------------------------
+def test_acquired_only_at_the_end_of_the_acquisition():
+    _, s, c = _unit()
+    end = 2 * c[k.C_ACQ_TIME] + c[k.C_ACQ_SETTLE]
+    s[k.S_MODE_TIME] = end - 1e-9
+    assert k.detect_acquired(s, c) == k.EV_NONE
+    s[k.S_MODE_TIME] = end
+    assert k.detect_acquired(s, c) == k.EV_ACQUIRED
+
+
+@pytest.mark.parametrize(("y_pos", "y_neg", "event"), [
+    (5200.0, 4800.0, k.EV_POLARITY_RIGHT),  # + i_d saturates: the larger admittance
+    (4800.0, 5200.0, k.EV_POLARITY_FLIPPED),
+    (5000.0, 5001.0, k.EV_POLARITY_UNRESOLVED),  # a linear motor: no difference
+])
+def test_polarity_decided_by_the_larger_d_admittance(y_pos, y_neg, event):
+    _, s, c = _unit()
+    s[k.S_POL:k.S_POL + 4] = [100 * y_pos, 100 * y_neg, 100.0, 100.0]
+    s[k.S_MODE_TIME] = 4 * c[k.C_POL_RAMP] + 2 * c[k.C_POL_HOLD]
+    assert k.detect_polarity(s, c) == event
+    s[k.S_MODE_TIME] -= 1e-3  # not before the test's end
+    assert k.detect_polarity(s, c) == k.EV_NONE
+
+
+def test_speed_detector_has_its_hysteresis():
+    _, s, c = _unit()
+    hi, hyst = c[k.C_BLEND_HI], c[k.C_BLEND_HYST]
+    assert k.detect_speed(s, c, k.MODE_INJECTION, hi - 0.01) == k.EV_NONE
+    assert k.detect_speed(s, c, k.MODE_INJECTION, -hi) == k.EV_FAST
+    assert k.detect_speed(s, c, k.MODE_EKF, hi - 0.5 * hyst) == k.EV_NONE
+    assert k.detect_speed(s, c, k.MODE_EKF, hi - 1.01 * hyst) == k.EV_SLOW
+
+
+def test_injection_lost_only_after_its_time():
+    _, s, c = _unit()
+    s[k.S_INJ_ERR_F] = 2.0 * c[k.C_INJ_LOS_ANGLE]
+    n = round(c[k.C_INJ_LOS_TIME] / c[k.C_DT])
+    assert all(k.detect_injection_lost(s, c) == k.EV_NONE for _ in range(n - 1))
+    assert k.detect_injection_lost(s, c) == k.EV_INJECTION_LOST
+    s[k.S_INJ_ERR_F] = 0.5 * c[k.C_INJ_LOS_ANGLE]  # back within: the timer from zero
+    assert k.detect_injection_lost(s, c) == k.EV_NONE and s[k.S_INJ_LOS_T] == 0.0
+
+
+def test_disagreement_counts_only_in_the_blend():
+    _, s, c = _unit()
+    s[k.S_X + 3], s[k.S_TRK] = 1.0, -1.0
+    n = round(c[k.C_INJ_LOS_TIME] / c[k.C_DT])
+    s[k.S_BLEND] = 0.0  # the EKF is not used: its angle is no evidence
+    assert all(k.detect_injection_lost(s, c) == k.EV_NONE for _ in range(2 * n))
+    s[k.S_BLEND] = 0.5
+    events = [k.detect_injection_lost(s, c) for _ in range(n)]
+    assert events[-1] == k.EV_DISAGREE and set(events[:-1]) == {k.EV_NONE}
+
+
+def test_ekf_lost_only_after_its_time():
+    _, s, c = _unit()
+    s[k.S_RESID_F] = 2.0 * c[k.C_EKF_LOS_I]
+    n = round(c[k.C_EKF_LOS_TIME] / c[k.C_DT])
+    events = [k.detect_ekf_lost(s, c) for _ in range(n)]
+    assert events[-1] == k.EV_EKF_LOST and set(events[:-1]) == {k.EV_NONE}
+
+
+# -- properties over event sequences ---------------------------------------------------------------------
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.sampled_from(EVENTS), max_size=40))
+def test_no_torque_before_a_polarity_test_decided(events):
+    """Whatever the events, FOC (modes injection and EKF) is reached from enable only through a decided
+    polarity test, and the mode stays one of the strategy's."""
+    _, s, c = _unit()
+    mode, decided = k.MODE_ACQUIRE, False
+    for ev in events:
+        new = _go(s, c, mode, ev)
+        assert new in INJECTION_MODES
+        if mode == k.MODE_POLARITY and ev in (k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED):
+            decided = True
+        if new == k.MODE_ACQUIRE:
+            decided = False
+        if new in (k.MODE_INJECTION, k.MODE_EKF):
+            assert decided
+        mode = new
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.sampled_from(EVENTS), max_size=40))
+def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
+    """Transitions alone latch the fault only after two unresolved polarity tests (episodes latch through
+    their age, in the step)."""
+    _, s, c = _unit()
+    mode, unresolved = k.MODE_ACQUIRE, 0
+    for ev in events:
+        if mode == k.MODE_POLARITY and ev == k.EV_POLARITY_UNRESOLVED:
+            unresolved += 1
+        mode = _go(s, c, mode, ev)
+        assert (s[k.S_FAULT] == k.FAULT_LATCHED) == (unresolved >= 2)
+
+
+# -- bad input ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("kw", "names"), [
+    ({"low_speed": "hfi"}, "low_speed"),
+    ({"low_speed": "injection", "inj_frequency": 6000.0}, "inj_frequency"),
+    ({"low_speed": "injection", "inj_frequency": 3000.0}, "inj_frequency"),
+    ({"low_speed": "injection", "inj_voltage": 0.0}, "inj_voltage"),
+    ({"low_speed": "injection", "inj_voltage": -5.0}, "inj_voltage"),
+    ({"low_speed": "injection", "inj_voltage": 150.0}, "inj_voltage"),
+    ({"low_speed": "injection", "inj_blend_low": 40.0}, "inj_blend_low"),
+])
+def test_bad_injection_parameters_are_refused_by_name(kw, names):
+    with pytest.raises(ParameterError, match=names) as err:
+        ControlUnit("sensorless", injection=InjectionParams(**kw))
+    assert "\n" not in str(err.value)
+
+
+def test_lower_frequencies_are_whole_half_waves():
+    u, _, c = _unit(inj_frequency=2500.0)
+    assert c[k.C_INJ_M] == 2.0
