@@ -186,6 +186,20 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "iron_c_e": (None, "iron losses, eddy-current coefficient c_e [W/((rad/s)^2 Wb^2)] (0 = off)"),
     "sat_i_q": ("A", "q-axis saturation current: psi_q = L_q i_q / (1 + |i_q| / sat_i_q) (0 = off, linear)"),
     "sat_i_d": ("A", "d-axis saturation current: psi_d = psi + L_d i_d / (1 + |i_d| / sat_i_d) (0 = off)"),
+    "flux_model": (None, "the plant's magnetic model: 'linear' (eqs 10-12, or per axis saturated with sat_i_q, "
+                         "sat_i_d) or 'algebraic' (flux linkages with self- and cross-saturation and the magnet's "
+                         "asymmetry, Hinkkanen et al. 2017's algebraic model; L_d, L_q, psi at zero current)"),
+    "flux_q_current": ("A", "algebraic flux model: the q current at which flux_q_ratio is given"),
+    "flux_q_ratio": (None, "algebraic flux model: incremental L_q at (0, flux_q_current) over L_q, in (0, 1]"),
+    "flux_d_current": ("A", "algebraic flux model: the d current at which flux_d_asymmetry is given"),
+    "flux_d_asymmetry": (None, "algebraic flux model: (L_dd(-flux_d_current) - L_dd(+flux_d_current)) / L_d, in "
+                               "[0, 1): the magnet's asymmetry of the d axis"),
+    "flux_cross": (None, "algebraic flux model: fall of psi_d at (0, flux_q_current) below psi, in [0, 1): "
+                         "cross-saturation"),
+    "flux_S": (None, "algebraic flux model: exponent of the d axis's self-saturation, > 0"),
+    "flux_T": (None, "algebraic flux model: exponent of the q axis's self-saturation, > 0"),
+    "flux_U": (None, "algebraic flux model: cross-saturation exponent U (of psi_d), >= 0"),
+    "flux_V": (None, "algebraic flux model: cross-saturation exponent V (of psi_q), >= 0"),
     "T_winding": ("degC", "winding temperature: R_s(T) = R_s (1 + alpha_R (T - 20 degC))"),
     "T_magnet": ("degC", "magnet temperature: psi(T) = psi (1 + alpha_psi (T - 20 degC))"),
     "thermal_R": ("K/W", "thermal resistance winding -> coolant of the first-order thermal model (0 = off: "

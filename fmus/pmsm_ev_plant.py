@@ -13,6 +13,9 @@ from pmsm_ev.plant import ENERGY_SLOTS, Plant
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, SimulationError
 
 _MOTOR = ("N", "psi", "L_d", "L_q")  # the motor parameters of eq 12
+#: the algebraic flux model's parameters (``PlantParams.flux_model``): T_e and W_magnetic depend on them
+_FLUX = ("flux_model", "flux_q_current", "flux_q_ratio", "flux_d_current", "flux_d_asymmetry", "flux_cross",
+         "flux_S", "flux_T", "flux_U", "flux_V", "T_magnet", "alpha_psi")
 _VEHICLE_LOAD = ("c_r", "g", "rho_a", "c_d", "A_f", "r_w", "eta", "n_g", "m_v", "v_a", "load_model", "v_eps")
 
 DESCRIPTION = (
@@ -101,8 +104,8 @@ class PmsmEvPlant(DriveSlave):
                         start=None, start_dependencies=("omega_m0",), display_unit="rpm")
         self.add_output("theta_e", "rad", "true electrical rotor angle, wrapped to [-pi, pi)" + at_start,
                         start=None, start_dependencies=("theta_e0",))
-        self.add_output("T_e", "N.m", "electromagnetic torque (eq 12)" + at_start,
-                        start=None, start_dependencies=("i_d0", "i_q0") + _MOTOR)
+        self.add_output("T_e", "N.m", "electromagnetic torque (eq 12; flux_model 'algebraic': its flux form)"
+                        + at_start, start=None, start_dependencies=("i_d0", "i_q0") + _MOTOR + _FLUX)
         self.add_output("T_L_mech", "N.m",
                         "road load torque on the motor shaft (eq 29) at the elevation held over the "
                         "last step; before the first step: at the initial speed on a level road",
@@ -116,9 +119,10 @@ class PmsmEvPlant(DriveSlave):
             self.add_output(name, "J", text + " (0 before the first step)", start=None, start_dependencies=(),
                             display_unit="Wh")
         self.add_output("W_magnetic", "J", "magnetic field energy of the winding, k_dq (L_d i_d^2 + L_q i_q^2) / 2 "
-                                           "(saturation: its Froehlich-Kennelly closed form)" + at_start,
+                                           "(saturation: its Froehlich-Kennelly closed form; flux_model 'algebraic': "
+                                           "the model's energy less the magnet's, zero at zero current)" + at_start,
                         start=None, start_dependencies=("i_d0", "i_q0", "L_d", "L_q", "sat_i_d", "sat_i_q",
-                                                        "dq_convention"), display_unit="Wh")
+                                                        "dq_convention", "psi") + _FLUX, display_unit="Wh")
         self.add_output("E_kinetic", "J", "kinetic energy: 1/2 J_eq omega_m^2 (gear_model 'paper', eq 9's inertia) or "
                                           "1/2 J_m omega_m^2 + 1/2 m_v v^2 ('power_flow')" + at_start,
                         start=None, start_dependencies=("omega_m0", "J_m", "m_v", "r_w", "n_g", "eta", "gear_model"),

@@ -48,11 +48,17 @@ def steady_state(motor: MotorParams | None = None, plant: PlantParams | None = N
     pp[_k.P_T_BRAKE] = 0.0
     m, p = sim.motor, sim.params
     w_e = m.N * omega_m
-    if p.sat_i_d > 0 or p.sat_i_q > 0:
+    flux = pp[_k.P_FLUX] != 0.0
+    if flux:  # the algebraic model: plant_rates takes the flux linkages
+        x_d, x_q = k.flux_linkages(i_d, i_q, pp, _k.P_FLUX_C)
+        f_d, f_q = x_d - sim.psi, x_q
+    elif p.sat_i_d > 0 or p.sat_i_q > 0:
         f_d, _ = k.saturated_flux(i_d, m.L_d, pp[_k.P_SAT_AD])
         f_q, _ = k.saturated_flux(i_q, m.L_q, pp[_k.P_SAT_AQ])
     else:
         f_d, f_q = m.L_d * i_d, m.L_q * i_q
+    if not flux:
+        x_d, x_q = i_d, i_q
     r_s = pp[_k.P_R_S]
     v_d = r_s * i_d - w_e * f_q  # (10) with di_d/dt = 0
     v_q = r_s * i_q + w_e * (sim.psi + f_d)  # (11) with di_q/dt = 0
@@ -60,11 +66,11 @@ def steady_state(motor: MotorParams | None = None, plant: PlantParams | None = N
     for j in range(PERIOD_SAMPLES):
         theta = 2.0 * math.pi * j / PERIOD_SAMPLES
         v_alpha, v_beta = k.inverse_park(v_d, v_q, theta)
-        r = k.plant_rates(i_d, i_q, omega_m, theta, v_alpha, v_beta, 0.0, pp)
+        r = k.plant_rates(x_d, x_q, omega_m, theta, v_alpha, v_beta, 0.0, pp)
         p_inv += r[13]
     p_inv /= PERIOD_SAMPLES
     # the other powers do not depend on the angle: take them at theta = 0
-    r = k.plant_rates(i_d, i_q, omega_m, 0.0, v_d, v_q, 0.0, pp)
+    r = k.plant_rates(x_d, x_q, omega_m, 0.0, v_d, v_q, 0.0, pp)
     p_term = r[4] - r[13]
     p_dc = p_term + p_inv
     p_cu, p_fric, p_em, p_iron = r[5], r[6], r[7], r[14]

@@ -16,7 +16,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields, replace
 
-from .kernels import REFERENCE_CODES
+from .kernels import (
+    FX_ADQ,
+    FX_IF,
+    FX_PSI0,
+    FX_W0,
+    REFERENCE_CODES,
+    flux_currents,
+    flux_energy,
+    flux_jacobian,
+    flux_linkages,
+)
 from .kernels import dq_torque as kernel_dq_torque
 from .kernels import mtpa_limit_current as kernel_mtpa_limit_current
 from .kernels import winding_resistance as kernel_winding_resistance
@@ -37,6 +47,8 @@ CURRENT_CONTROLS = ("paper", "high_speed")
 #: the speed loop's feedforward (``ControllerParams.speed_feedforward``; docs/cycles.md)
 SPEED_FEEDFORWARDS = ("none", "inertia", "inertia+road")
 DISCRETISATIONS = ("euler", "bilinear")
+#: the plant's magnetic model (``PlantParams.flux_model``)
+FLUX_MODELS = ("linear", "algebraic")
 
 
 class ParameterError(ValueError):
@@ -285,6 +297,55 @@ class PlantParams:
     #: self-saturation with i_d is the smaller (typical: 2-3x sat_i_q). No cross-saturation.
     sat_i_d: float = 0.0
 
+    # -- the algebraic magnetic model (off by default: flux_model "linear") ----------------------
+    #: the plant's magnetic model. "linear" (default): eqs 10-12 with Table I's constant inductances, or
+    #: with ``sat_i_q``/``sat_i_d`` the per-axis saturation above. "algebraic": flux linkages psi_d(i_d, i_q),
+    #: psi_q(i_d, i_q) with self- and cross-saturation and the magnet's asymmetry (positive i_d adds to the
+    #: magnet's flux and saturates the d path, negative i_d relieves it), the algebraic magnetic model of
+    #: Hinkkanen et al. (IEEE Trans. Ind. Appl. 53(3), 2017) with the magnet as an equivalent current
+    #: i_f on the d axis (Awan et al., IEEE Trans. Ind. Appl. 54(6), 2018), current as an explicit
+    #: function of flux (``pmsm_ev.kernels.flux_currents``), reciprocal (it derives from an energy), so
+    #: the energy balance closes. Table I's L_d, L_q are its incremental inductances at zero current
+    #: (the unloaded motor is the data sheet's), the magnet's psi (with ``T_magnet``) its flux there;
+    #: the fields below give the saturation's shape (``flux_model_coefficients``; docs/sensorless.md,
+    #: "The plant's flux model")
+    flux_model: str = "linear"
+    #: the q current at which ``flux_q_ratio`` is given [A] [chosen]: 400 A, the drive's current limit
+    #: (``ControllerParams.i_q_max``, ``i_max``): the far end of what injection must work with
+    flux_q_current: float = 400.0
+    #: the incremental q inductance at (i_d, i_q) = (0, flux_q_current) over L_q [-] [chosen]: 0.5. The q
+    #: inductance of EV interior-PM motors falls by 30-50 % from no load to rated current (apparent
+    #: inductance; the incremental one, the slope, falls further); 0.5 is the incremental fall of the
+    #: per-axis model's typical size (``sat_i_q`` = 900 A: -51 % incremental at 400 A), so both models
+    #: describe the same motor on the q axis; 1 = no q saturation
+    flux_q_ratio: float = 0.5
+    #: the d current at which ``flux_d_asymmetry`` is given [A] [chosen]: 200 A, half the current limit,
+    #: the order of the pulses of a polarity detection
+    flux_d_current: float = 200.0
+    #: the magnet's asymmetry: (L_dd(-flux_d_current, 0) - L_dd(+flux_d_current, 0)) / L_d [-] [chosen]: 0.10.
+    #: Positive i_d adds to the magnet's flux and saturates the d path (lower incremental L_d), negative i_d
+    #: relieves it (higher); the high-frequency polarity detection of IPMSMs relies on that difference,
+    #: reported as a few percent up to ~15 % between plus and minus rated d current: 10 % is its middle.
+    #: 0 = none (the d axis linear)
+    flux_d_asymmetry: float = 0.10
+    #: cross-saturation: the fall of psi_d at (i_d, i_q) = (0, flux_q_current) below the magnet's psi [-]
+    #: [chosen]: 0.05. The q current saturates the d path it shares (the teeth and the bridges), so the
+    #: magnet's flux linkage falls with load; flux maps of IPMSMs show a few to ~10 % at rated current.
+    #: 0 = no cross-saturation
+    flux_cross: float = 0.05
+    #: the exponents S (d self-saturation), T (q), U, V (cross) of the model [-]: 4, 6, 1, 1, those Lelli,
+    #: Hinkkanen and Giulii Capponi fit to the measured flux maps of a 5.5 kW PM-assisted synchronous
+    #: reluctance motor with its magnets on the d axis, as here ("A saturation model based on a simplified
+    #: equivalent magnetic circuit for permanent magnet machines", TechRxiv 2024, doi
+    #: 10.36227/techrxiv.171332345.53790692; its bridge term left out): the q axis, the iron path, keeps
+    #: its inductance up to a knee and then falls steeply (T = 6), the d axis, through the magnet, bends
+    #: gently (S = 4). (Hinkkanen et al.'s synchronous reluctance motor, no magnet, has 5, 1, 1, 0.)
+    #: S > 0, T > 0, U, V >= 0
+    flux_S: float = 4.0
+    flux_T: float = 6.0  #: see ``flux_S``
+    flux_U: float = 1.0  #: see ``flux_S``
+    flux_V: float = 1.0  #: see ``flux_S``
+
     # -- temperature (the magnet's constant over a run; the winding's too unless thermal_R > 0) --
     #: winding temperature [degC] (at the start, with the thermal model); Table I's R_s is taken at
     #: ``TEMPERATURE_REF`` (20 degC). R_s(T) = R_s (1 + alpha_R (T - 20)). Typical: 20 (cold) .. 120
@@ -354,6 +415,25 @@ class PlantParams:
         for name in ("sat_i_q", "sat_i_d"):
             value = getattr(self, name)
             _require(math.isfinite(value) and value >= 0, f"{name} must be >= 0 A, 0 = off (got {value})")
+        _require(self.flux_model in FLUX_MODELS,
+                 f"flux_model must be one of {FLUX_MODELS} (got {self.flux_model!r})")
+        _require(self.flux_model == "linear" or (self.sat_i_q == 0 and self.sat_i_d == 0),
+                 f"flux_model {self.flux_model!r} has its own saturation: set sat_i_q = sat_i_d = 0 (they are the "
+                 f"linear model's)")
+        for name in ("flux_q_current", "flux_d_current"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, f"{name} must be > 0 A (got {value})")
+        _require(math.isfinite(self.flux_q_ratio) and 0 < self.flux_q_ratio <= 1,
+                 f"flux_q_ratio must be in (0, 1]: saturation lowers the incremental L_q (got {self.flux_q_ratio})")
+        for name in ("flux_d_asymmetry", "flux_cross"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and 0 <= value < 1, f"{name} must be in [0, 1) (got {value})")
+        for name in ("flux_S", "flux_T"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, f"{name} must be > 0 (got {value})")
+        for name in ("flux_U", "flux_V"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be >= 0 (got {value})")
         _require(math.isfinite(self.thermal_R) and self.thermal_R >= 0,
                  f"thermal_R must be >= 0 K/W, 0 = off (got {self.thermal_R})")
         _require(math.isfinite(self.thermal_C) and self.thermal_C > 0,
@@ -366,6 +446,150 @@ class PlantParams:
                  f"R_s at T_winding = {self.T_winding} degC with alpha_R = {self.alpha_R} 1/K is not > 0")
         _require(1.0 + self.alpha_psi * (self.T_magnet - TEMPERATURE_REF) > 0,
                  f"psi at T_magnet = {self.T_magnet} degC with alpha_psi = {self.alpha_psi} 1/K is not > 0")
+
+
+def _bisect(f, lo: float, hi: float) -> float:
+    """The zero of f between lo and hi, where f has opposite signs, to the float's resolution."""
+    f_lo = f(lo)
+    for _ in range(300):
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            break
+        f_mid = f(mid)
+        if (f_mid < 0.0) == (f_lo < 0.0):
+            lo, f_lo = mid, f_mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def _axis_flux(i: float, a0: float, a: float, e: float, i_f: float) -> float:
+    """psi [Wb] of one axis without cross-saturation: (a0 + a |psi|^e) psi - i_f = i (increasing in psi)."""
+    def g(x):
+        return (a0 + a * abs(x) ** e) * x - i_f - i
+    lo, hi = -1.0, 1.0
+    while g(lo) > 0.0:
+        lo *= 2.0
+    while g(hi) < 0.0:
+        hi *= 2.0
+    return _bisect(g, lo, hi)
+
+
+def flux_model_coefficients(motor: MotorParams, plant: PlantParams, psi: float | None = None) -> tuple:
+    """The coefficients of the algebraic magnetic model (``PlantParams.flux_model`` 'algebraic';
+    ``pmsm_ev.kernels.flux_currents``) in the order of ``pmsm_ev.kernels.FX_AD0`` .. ``FX_W0``: (a_d0, a_dd,
+    S, a_q0, a_qq, T, a_dq, U, V, i_f, psi0, w0), from the motor's L_d, L_q (the incremental inductances at
+    zero current) and psi (at 20 degC), the exponents ``flux_S`` .. ``flux_V`` and the shape:
+
+    * d axis: 1/L_d = a_d0 + (S+1) a_dd psi^S (the slope at zero current), a_dd such that
+      L_dd(-I_d, 0) - L_dd(+I_d, 0) = ``flux_d_asymmetry`` L_d at I_d = ``flux_d_current`` (bisection);
+    * cross and q axis: psi_d at (0, I_q) is (1 - ``flux_cross``) psi, I_q = ``flux_q_current``, which
+      fixes a_dq for a given psi_q there; a_qq makes i_q = I_q there and 1/L_q = a_q0 (+ a_dq psi^(U+2)
+      / (U+2) when V = 0) the q slope at zero current; psi_q such that L_qq(0, I_q) = ``flux_q_ratio`` L_q
+      (a scan for the bracket, then bisection);
+    * the magnet: i_f = (a_d0 + a_dd psi_T^S) psi_T at the magnet's flux psi_T = ``psi`` (default: psi at
+      ``T_magnet``, ``magnet_flux``): the flux at zero current is psi_T; the iron's curve is the 20 degC
+      one (a hot magnet has less MMF, not other iron). psi0 = psi_T; w0 the field energy there.
+
+    Checks the model is physical over currents up to twice the larger of ``flux_q_current``,
+    ``flux_d_current`` in either axis and sign: psi(i) found (Newton) and the incremental inductance
+    matrix positive definite. ``ParameterError`` (one line, naming the field) where a target cannot be
+    met or the model is not physical."""
+    p = plant
+    L_d, L_q, psi20 = motor.L_d, motor.L_q, motor.psi
+    S, T, U, V = float(p.flux_S), float(p.flux_T), float(p.flux_U), float(p.flux_V)
+    I_d, I_q = float(p.flux_d_current), float(p.flux_q_current)
+    psi_T = magnet_flux(psi20, p.T_magnet, p.alpha_psi) if psi is None else float(psi)
+
+    # the d axis (psi_q = 0 wherever i_q = 0)
+    def d_axis(a_dd):
+        a_d0 = 1.0 / L_d - (S + 1.0) * a_dd * psi20 ** S
+        return a_d0, (a_d0 + a_dd * psi20 ** S) * psi20
+
+    def asymmetry(a_dd):
+        a_d0, i_f = d_axis(a_dd)
+        l_plus = 1.0 / (a_d0 + (S + 1.0) * a_dd * abs(_axis_flux(I_d, a_d0, a_dd, S, i_f)) ** S)
+        l_minus = 1.0 / (a_d0 + (S + 1.0) * a_dd * abs(_axis_flux(-I_d, a_d0, a_dd, S, i_f)) ** S)
+        return (l_minus - l_plus) / L_d
+
+    a_dd = 0.0
+    if p.flux_d_asymmetry > 0.0:
+        a_top = (1.0 - 1e-9) / (L_d * (S + 1.0) * psi20 ** S)  # a_d0 > 0: the relieved d path's slope is finite
+        top = asymmetry(a_top)
+        _require(top > p.flux_d_asymmetry,
+                 f"flux_d_asymmetry = {p.flux_d_asymmetry:g} is beyond the {top:.3g} the model reaches at "
+                 f"flux_d_current = {I_d:g} A with flux_S = {S:g}")
+        a_dd = _bisect(lambda a: asymmetry(a) - p.flux_d_asymmetry, 0.0, a_top)
+    a_d0, i_f20 = d_axis(a_dd)
+
+    # cross-saturation and the q axis
+    ratio, cross = float(p.flux_q_ratio), float(p.flux_cross)
+    unreachable = (f"flux_q_ratio = {ratio:g} at flux_q_current = {I_q:g} A is not reachable by the model with "
+                   f"flux_cross = {cross:g} (flux_T = {T:g}, flux_U = {U:g}, flux_V = {V:g})")
+    if cross == 0.0:
+        a_dq, a_q0 = 0.0, 1.0 / L_q
+
+        def q_ratio(a_qq):
+            x = abs(_axis_flux(I_q, a_q0, a_qq, T, 0.0))
+            return 1.0 / (a_q0 + (T + 1.0) * a_qq * x ** T) / L_q
+
+        a_qq = 0.0
+        if ratio < 1.0:
+            hi = a_q0
+            while q_ratio(hi) > ratio:
+                hi *= 4.0
+                _require(hi < 1e300, unreachable)
+            a_qq = _bisect(lambda a: q_ratio(a) - ratio, 0.0, hi)
+    else:
+        psi_ds = (1.0 - cross) * psi20
+        k_cross = i_f20 / psi_ds - a_d0 - a_dd * psi_ds ** S  # > 0: psi_d(0, 0) = psi20 > psi_ds
+
+        def q_coefficients(psi_qs):
+            a_dq = k_cross * (V + 2.0) / (psi_ds ** U * psi_qs ** (V + 2.0))
+            a_q0 = 1.0 / L_q - (a_dq / (U + 2.0) * psi20 ** (U + 2.0) if V == 0.0 else 0.0)
+            a_qq = (I_q / psi_qs - a_q0 - a_dq / (U + 2.0) * psi_ds ** (U + 2.0) * psi_qs ** V) / psi_qs ** T
+            return a_dq, a_q0, a_qq
+
+        def q_error(psi_qs):
+            a_dq, a_q0, a_qq = q_coefficients(psi_qs)
+            if a_q0 <= 0.0 or a_qq < 0.0:
+                return None
+            c = (a_d0, a_dd, S, a_q0, a_qq, T, a_dq, U, V, i_f20, psi20, 0.0)
+            g_dd, g_dq, g_qq = flux_jacobian(psi_ds, psi_qs, c, 0)
+            det = g_dd * g_qq - g_dq * g_dq
+            if g_dd <= 0.0 or det <= 0.0:
+                return None
+            return g_dd / det / L_q - ratio
+
+        grid = [2.0 * L_q * I_q * 0.98 ** j for j in range(400)]  # from twice the linear flux down
+        found = None
+        for hi, lo in zip(grid, grid[1:]):
+            e_hi, e_lo = q_error(hi), q_error(lo)
+            if e_hi is not None and e_lo is not None and (e_hi < 0.0) != (e_lo < 0.0):
+                found = (lo, hi)
+                break
+        _require(found is not None, unreachable)
+        a_dq, a_q0, a_qq = q_coefficients(_bisect(q_error, *found))
+
+    # the magnet at its temperature, and the energy's zero
+    i_f = (a_d0 + a_dd * psi_T ** S) * psi_T
+    c = [a_d0, a_dd, S, a_q0, a_qq, T, a_dq, U, V, i_f, psi_T, 0.0]
+    c[FX_W0] = flux_energy(psi_T, 0.0, c, 0)
+    # physical over the currents the drive can reach
+    reach = 2.0 * max(I_q, I_d)
+    n = 16
+    for j in range(-n, n + 1):
+        for m in range(-n, n + 1):
+            i_d, i_q = reach * j / n, reach * m / n
+            psi_d, psi_q = flux_linkages(i_d, i_q, c, 0)
+            f_d, f_q = flux_currents(psi_d, psi_q, c, 0)
+            g_dd, g_dq, g_qq = flux_jacobian(psi_d, psi_q, c, 0)
+            _require(abs(f_d - i_d) + abs(f_q - i_q) < 1e-6 * (1.0 + reach) and g_dd > 0.0
+                     and g_dd * g_qq - g_dq * g_dq > 0.0,
+                     f"flux_cross = {cross:g} with flux_q_ratio = {ratio:g} gives a flux model that is not physical at "
+                     f"(i_d, i_q) = ({i_d:g}, {i_q:g}) A (its incremental inductance matrix is not positive definite)")
+    assert c[FX_IF] == i_f and c[FX_PSI0] == psi_T and c[FX_ADQ] == a_dq
+    return tuple(float(x) for x in c)
 
 
 # --- Controller design ------------------------------------------------------------

@@ -44,6 +44,7 @@ from .params import (
     PlantParams,
     VehicleParams,
     equivalent_inertia,
+    flux_model_coefficients,
     magnet_flux,
     winding_resistance,
 )
@@ -110,6 +111,10 @@ class Plant:
         #: the actuation delay [s]: inverter_delay switching periods
         self.delay = p.inverter_delay * p.switching_period
         self._thermal = p.thermal_R > 0
+        if p.flux_model == "algebraic":  # the algebraic magnetic model, its coefficients at the magnet's psi
+            values[_k.P_FLUX] = 1.0
+            for j, value in enumerate(flux_model_coefficients(m, p, self.psi)):
+                values[_k.P_FLUX_C + j] = value
         self._pp = accel.vector(_k.PLANT_PARAMS)
         for slot, value in values.items():
             self._pp[slot] = float(value)
@@ -185,6 +190,29 @@ class Plant:
     def derivatives(self, i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta):
         """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage."""
         return _k.plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, self._pp)
+
+    # -- the magnetic model --------------------------------------------------------------
+    def flux_linkages(self, i_d: float, i_q: float) -> tuple[float, float]:
+        """(psi_d, psi_q) [Wb] at the currents (i_d, i_q) [A]: the algebraic model's (``flux_model``
+        'algebraic', ``pmsm_ev.kernels.flux_linkages``), else psi + L_d i_d, L_q i_q (per axis
+        saturated with ``sat_i_d``, ``sat_i_q``)."""
+        pp = self._pp
+        if pp[_k.P_FLUX] != 0.0:
+            return self._kernels.flux_linkages(float(i_d), float(i_q), pp, _k.P_FLUX_C)
+        f_d, _ = _k.saturated_flux(i_d, pp[_k.P_L_D], pp[_k.P_SAT_AD])
+        f_q, _ = _k.saturated_flux(i_q, pp[_k.P_L_Q], pp[_k.P_SAT_AQ])
+        return pp[_k.P_PSI] + f_d, f_q
+
+    def incremental_inductances(self, i_d: float, i_q: float) -> tuple[float, float, float]:
+        """The incremental inductance matrix (L_dd, L_dq, L_qq) [H] at (i_d, i_q) [A]: d psi / d i, what a
+        high-frequency voltage sees (``pmsm_ev.kernels.incremental_inductances``; the linear models: the
+        per-axis slopes, L_dq = 0)."""
+        pp = self._pp
+        if pp[_k.P_FLUX] != 0.0:
+            return self._kernels.incremental_inductances(float(i_d), float(i_q), pp, _k.P_FLUX_C)
+        _, l_d = _k.saturated_flux(i_d, pp[_k.P_L_D], pp[_k.P_SAT_AD])
+        _, l_q = _k.saturated_flux(i_q, pp[_k.P_L_Q], pp[_k.P_SAT_AQ])
+        return l_d, 0.0, l_q
 
     def step(self, v_alpha: float, v_beta: float, delta: float, dt: float, T_brake: float = 0.0) -> tuple:
         """Advance by dt with the voltage, the elevation and the friction-brake torque ``T_brake``

@@ -178,7 +178,12 @@ PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
     ("P_INV_K", 1, "inverter: the factor from the phase losses to the model's power, k_dq / (3/2) [-]"),
     ("P_FE_H", 1, "iron losses, hysteresis: c_h [W / (rad/s Wb^2)] (0 = off; ``PlantParams.iron_c_h``)"),
     ("P_FE_E", 1, "iron losses, eddy currents: c_e [W / ((rad/s)^2 Wb^2)] (0 = off; ``PlantParams.iron_c_e``)"),
-), size=39)
+    # the algebraic magnetic model (``PlantParams.flux_model`` 'algebraic', ``pmsm_ev.kernels.flux_currents``)
+    ("P_FLUX", 1, "1.0: the algebraic magnetic model (flux linkages with self- and cross-saturation; the RK4 "
+                  "integrates psi_d, psi_q); 0.0: eqs 10-12 (or the per-axis saturation, P_SAT)"),
+    ("P_FLUX_C", 12, "its coefficients in the order FX_AD0 .. FX_W0 (``pmsm_ev.kernels.plant``; "
+                     "``pmsm_ev.params.flux_model_coefficients``)"),
+), size=52)
 
 #: the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``; ``plant_step`` adds each step's
 #: RK4-integrated energies): joules since the start, in the dq convention's power scaling (``P_K_DQ``)

@@ -1,11 +1,13 @@
 """The plant's kernels: the PMSM (eqs 10-13), friction (eq 8), the road load (eqs 2-4, 29), the
 vehicle's motion (eqs 1, 6, 9 = 28) and the RK4 step over them (``plant_step``), and the
 departures of a real motor and inverter from eqs 10-12, each off by default: the inverter's
-dead time (``dead_time_error``), magnetic saturation (flux-form eqs 10-12, ``saturated_*``) and
-the winding's temperature (``winding_resistance``, ``thermal_step``); the friction brake, the gear
-model ``power_flow`` (``power_flow_gear``), the inverter's losses (``inverter_loss``) and the energy
-accounting (``plant_rates``' powers, integrated by ``plant_step`` with the RK4 weights of the state;
-``stored_energies``), docs/speed-range.md; the current sensors (``gaussian_pair``, ``measured_currents``) and
+dead time (``dead_time_error``), magnetic saturation (flux-form eqs 10-12: per axis,
+``saturated_*``, or the algebraic magnetic model with cross-saturation, ``flux_*``,
+``incremental_inductances``) and the winding's temperature (``winding_resistance``,
+``thermal_step``); the friction brake, the gear model ``power_flow`` (``power_flow_gear``), the
+inverter's losses (``inverter_loss``) and the energy accounting (``plant_rates``' powers,
+integrated by ``plant_step`` with the RK4 weights of the state; ``stored_energies``),
+docs/speed-range.md; the current sensors (``gaussian_pair``, ``measured_currents``) and
 the step with its measurement in one call (``plant_step_measured``).
 
 The parameter vector ``pp`` is laid out by ``pmsm_ev.kernels.layout.PLANT_PARAMS_LAYOUT`` (``P_*``).
@@ -43,6 +45,8 @@ from .layout import (
     P_ETA,
     P_FE_E,
     P_FE_H,
+    P_FLUX,
+    P_FLUX_C,
     P_G,
     P_GEAR_PF,
     P_INV,
@@ -223,6 +227,146 @@ def field_energy(i, L0, a):
     return L0 * i * i / (1.0 + u) - L0 / (a * a) * (u - math.log1p(u))
 
 
+# -- the algebraic magnetic model (``PlantParams.flux_model`` 'algebraic') -----------------------
+#: the offsets of the algebraic model's coefficients from the start of their slot (``P_FLUX_C`` in the
+#: plant's vector; the kernels take the vector and that start, ``c, o``): the inverse-inductance
+#: coefficients a_d0, a_dd [1/H], the exponent S [-] (d axis), a_q0, a_qq, T (q axis), a_dq, U, V
+#: (cross-saturation), the magnet's equivalent current i_f [A], the flux linkage at zero current psi0
+#: [Wb] (Newton's start) and the field energy there w0 [J] (the zero of ``flux_energy``); the units of
+#: a_dd, a_qq and a_dq are 1/H over the powers of Wb of their terms. ``pmsm_ev.params.flux_model_coefficients``
+#: derives them from the parameters.
+FX_AD0, FX_ADD, FX_S, FX_AQ0, FX_AQQ, FX_T, FX_ADQ, FX_U, FX_V, FX_IF, FX_PSI0, FX_W0 = range(12)
+#: Newton's iterations at most for psi(i) (``flux_linkages``): from the linear guess it takes 3-6 to
+#: round-off over the drive's currents; the bound keeps a step finite whatever the state
+FLUX_NEWTON_MAX = 30
+
+
+@kernel()
+def flux_currents(psi_d, psi_q, c, o):
+    """The currents (i_d, i_q) [A] of the flux linkages (psi_d, psi_q) [Wb]: the algebraic magnetic
+    model of Hinkkanen, Pescetto, Moelsae, Saarakkala, Pellegrino and Bojoi ("Sensorless
+    self-commissioning of synchronous reluctance motors at standstill without rotor locking", IEEE
+    Trans. Ind. Appl. 53(3), 2017), the magnet as a constant current i_f on the d axis in
+    series with the stator's (Awan, Song, Saarakkala and Hinkkanen, "Optimal torque control of
+    saturated synchronous motors: plug-and-play method", IEEE Trans. Ind. Appl. 54(6), 2018):
+    i_d = (a_d0 + a_dd |psi_d|^S + a_dq / (V + 2) |psi_d|^U |psi_q|^(V + 2)) psi_d - i_f,
+    i_q = (a_q0 + a_qq |psi_q|^T + a_dq / (U + 2) |psi_d|^(U + 2) |psi_q|^V) psi_q.
+    The gradient of the energy ``flux_energy`` (so reciprocal: di_d/dpsi_q = di_q/dpsi_d); the
+    coefficients from ``c[o + FX_*]``."""
+    ad = abs(psi_d)
+    aq = abs(psi_q)
+    a_dq = c[o + FX_ADQ]
+    u = c[o + FX_U]
+    v = c[o + FX_V]
+    du = ad ** u
+    qv = aq ** v
+    g_d = c[o + FX_AD0] + c[o + FX_ADD] * ad ** c[o + FX_S] + a_dq / (v + 2.0) * du * qv * aq * aq
+    g_q = c[o + FX_AQ0] + c[o + FX_AQQ] * aq ** c[o + FX_T] + a_dq / (u + 2.0) * du * ad * ad * qv
+    return g_d * psi_d - c[o + FX_IF], g_q * psi_q
+
+
+@kernel()
+def flux_jacobian(psi_d, psi_q, c, o):
+    """The Jacobian of ``flux_currents``, the incremental inverse inductances [1/H]:
+    (di_d/dpsi_d, di_d/dpsi_q = di_q/dpsi_d, di_q/dpsi_q), in closed form."""
+    ad = abs(psi_d)
+    aq = abs(psi_q)
+    a_dq = c[o + FX_ADQ]
+    s = c[o + FX_S]
+    t = c[o + FX_T]
+    u = c[o + FX_U]
+    v = c[o + FX_V]
+    du = ad ** u
+    qv = aq ** v
+    g_dd = (c[o + FX_AD0] + (s + 1.0) * c[o + FX_ADD] * ad ** s
+            + a_dq * (u + 1.0) / (v + 2.0) * du * qv * aq * aq)
+    g_qq = (c[o + FX_AQ0] + (t + 1.0) * c[o + FX_AQQ] * aq ** t
+            + a_dq * (v + 1.0) / (u + 2.0) * du * ad * ad * qv)
+    g_dq = a_dq * du * psi_d * qv * psi_q
+    return g_dd, g_dq, g_qq
+
+
+@kernel()
+def flux_linkages(i_d, i_q, c, o):
+    """(psi_d, psi_q) [Wb] of the currents (i_d, i_q) [A] in the algebraic model (``flux_currents``):
+    Newton on the 2x2 system from the linear guess psi0 + L_d0 i_d, L_q0 i_q (the incremental
+    inductances at zero current), each step shortened while it does not lower the residual (the
+    model's energy is convex: the residual has one zero), until the step is below 1e-14 of the flux
+    (then the flux is exact to round-off), ``FLUX_NEWTON_MAX`` iterations at most."""
+    psi0 = c[o + FX_PSI0]
+    g_dd, _, g_qq = flux_jacobian(psi0, 0.0, c, o)
+    psi_d = psi0 + i_d / g_dd
+    psi_q = i_q / g_qq
+    f_d, f_q = flux_currents(psi_d, psi_q, c, o)
+    r_d = f_d - i_d
+    r_q = f_q - i_q
+    res = abs(r_d) + abs(r_q)
+    for _ in range(FLUX_NEWTON_MAX):
+        g_dd, g_dq, g_qq = flux_jacobian(psi_d, psi_q, c, o)
+        det = g_dd * g_qq - g_dq * g_dq
+        s_d = (g_qq * r_d - g_dq * r_q) / det
+        s_q = (g_dd * r_q - g_dq * r_d) / det
+        h = 1.0
+        n_d = psi_d - s_d
+        n_q = psi_q - s_q
+        for _ in range(8):
+            f_d, f_q = flux_currents(n_d, n_q, c, o)
+            new = abs(f_d - i_d) + abs(f_q - i_q)
+            if new <= res or res < 1e-9:
+                break
+            h = 0.5 * h
+            n_d = psi_d - h * s_d
+            n_q = psi_q - h * s_q
+        psi_d = n_d
+        psi_q = n_q
+        r_d = f_d - i_d
+        r_q = f_q - i_q
+        res = abs(r_d) + abs(r_q)
+        if h * (abs(s_d) + abs(s_q)) <= 1e-14 * (abs(psi_d) + abs(psi_q) + psi0):
+            break
+    return psi_d, psi_q
+
+
+@kernel()
+def incremental_inductances(i_d, i_q, c, o):
+    """The incremental inductance matrix (L_dd, L_dq, L_qq) [H] at the currents (i_d, i_q) [A] of the
+    algebraic model: d psi / d i, the inverse of ``flux_jacobian`` at ``flux_linkages``' fluxes
+    (symmetric: L_dq = L_qd). What a high-frequency voltage sees: a small current ripple di answers
+    dpsi = L di."""
+    psi_d, psi_q = flux_linkages(i_d, i_q, c, o)
+    g_dd, g_dq, g_qq = flux_jacobian(psi_d, psi_q, c, o)
+    det = g_dd * g_qq - g_dq * g_dq
+    return g_qq / det, -g_dq / det, g_dd / det
+
+
+@kernel()
+def flux_energy(psi_d, psi_q, c, o):
+    """The field energy [J] the stator's current stores at (psi_d, psi_q), zero at zero current: the
+    model's energy W(psi) = a_d0 psi_d^2 / 2 + a_dd |psi_d|^(S+2) / (S+2) + a_q0 psi_q^2 / 2 +
+    a_qq |psi_q|^(T+2) / (T+2) + a_dq |psi_d|^(U+2) |psi_q|^(V+2) / ((U+2)(V+2)), whose gradient is
+    ``flux_currents`` plus i_f, less i_f psi_d (the magnet's constant current does no work on the
+    stator) and less w0: its rate is i_d dpsi_d/dt + i_q dpsi_q/dt, what the winding's power puts in
+    besides the copper losses and the shaft's work (in the model's power scaling; times k_dq in the
+    dq convention's)."""
+    ad = abs(psi_d)
+    aq = abs(psi_q)
+    s = c[o + FX_S]
+    t = c[o + FX_T]
+    u = c[o + FX_U]
+    v = c[o + FX_V]
+    w = (0.5 * c[o + FX_AD0] * psi_d * psi_d + c[o + FX_ADD] * ad ** (s + 2.0) / (s + 2.0)
+         + 0.5 * c[o + FX_AQ0] * psi_q * psi_q + c[o + FX_AQQ] * aq ** (t + 2.0) / (t + 2.0)
+         + c[o + FX_ADQ] * ad ** (u + 2.0) * aq ** (v + 2.0) / ((u + 2.0) * (v + 2.0)))
+    return w - c[o + FX_IF] * psi_d - c[o + FX_W0]
+
+
+@kernel()
+def flux_torque(i_d, i_q, psi_d, psi_q, N):
+    """T_e = N (psi_d i_q - psi_q i_d) [N m]: eq 12 in its flux form (times k_dq in the dq
+    convention's scaling); with a reciprocal model it is the co-energy's derivative in the angle."""
+    return N * (psi_d * i_q - psi_q * i_d)
+
+
 # -- road load, eqs 2-4 and 29 ---------------------------------------------------------------
 @kernel()
 def gradient_force(delta, m_v, g):
@@ -316,15 +460,20 @@ def shaft_load(i_d, i_q, omega_m, delta, t_e, pp):
     y = pp[P_R_W] / pp[P_N_G] * forces + brake_torque(omega_m, pp)
     x = t_e - friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)
     if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
-        f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
-        f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
-        x = x - iron_torque(omega_m, pp[P_PSI] + f_d, f_q, pp[P_N], pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+        if pp[P_FLUX] != 0.0:  # the algebraic model's flux linkages
+            psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+            x = x - iron_torque(omega_m, psi_d, psi_q, pp[P_N], pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+        else:
+            f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
+            f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
+            x = x - iron_torque(omega_m, pp[P_PSI] + f_d, f_q, pp[P_N], pp[P_FE_H], pp[P_FE_E],
+                                pp[P_OMEGA_EPS])
     _, _, e = power_flow_gear(x, y, pp[P_J_M], pp[P_M_R], pp[P_ETA], omega_m)
     return y / e
 
 
 @kernel()
-def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
+def plant_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage and the powers [W] at that
     state: eqs 10-11 (or their flux form with saturation) at the true angle, eq 12 (times k_dq), the
     friction (eq 8), the road forces (eqs 2-4), the friction brake, the gear (eq 9 = 28, or
@@ -338,7 +487,20 @@ def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     the brake's omega_w T_brake tanh(v / v_eps), the inverter's losses (``inverter_loss``, times
     k_dq / (3/2)) and the iron losses (``iron_torque``, a drag on the shaft beside the friction). With
     eqs 10-12 they balance: p_dc = p_cu + p_inv + d/dt W_mag + p_shaft, p_shaft = p_fric + p_iron +
-    p_gear + p_aero + p_roll + p_grade + p_brake + d/dt E_kin (``stored_energies``)."""
+    p_gear + p_aero + p_roll + p_grade + p_brake + d/dt E_kin (``stored_energies``).
+
+    With the algebraic magnetic model (``P_FLUX``) the state's first two entries (x_d, x_q) are the
+    flux linkages (psi_d, psi_q) [Wb] and the first two rates d psi_d/dt, d psi_q/dt [V] (eqs 10-11 in
+    flux form: v_d - R_s i_d + w_e psi_q, v_q - R_s i_q - w_e psi_d), the currents ``flux_currents``
+    of them, the torque k_dq N (psi_d i_q - psi_q i_d) (eq 12's flux form); otherwise they are the
+    currents (i_d, i_q)."""
+    flux = pp[P_FLUX] != 0.0
+    if flux:  # the algebraic model: the state holds the flux linkages, the currents follow
+        psi_d, psi_q = x_d, x_q
+        i_d, i_q = flux_currents(psi_d, psi_q, pp, P_FLUX_C)
+    else:
+        i_d, i_q = x_d, x_q
+        psi_d = psi_q = 0.0
     c = math.cos(theta_e)
     s = math.sin(theta_e)
     if pp[P_DT_V] != 0.0:  # the inverter's dead time: the applied voltage loses its error
@@ -349,7 +511,12 @@ def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     v_q = -s * v_alpha + c * v_beta
     N = pp[P_N]
     k = pp[P_K_DQ]
-    if pp[P_SAT] != 0.0:  # saturated inductances
+    if flux:  # (10), (11) in flux form; (12) in flux form x k_dq
+        w_e = N * omega_m
+        did = v_d - pp[P_R_S] * i_d + w_e * psi_q
+        diq = v_q - pp[P_R_S] * i_q - w_e * psi_d
+        t_e = k * flux_torque(i_d, i_q, psi_d, psi_q, N)
+    elif pp[P_SAT] != 0.0:  # saturated inductances
         did, diq = saturated_current_derivatives(i_d, i_q, omega_m, v_d, v_q, pp[P_R_S], pp[P_L_D], pp[P_L_Q],
                                                  pp[P_PSI], N, pp[P_SAT_AD], pp[P_SAT_AQ])
         t_e = k * saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N, pp[P_SAT_AD], pp[P_SAT_AQ])
@@ -362,9 +529,12 @@ def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     t_drag = t_f  # the shaft's drag: friction, and the iron losses when on
     p_iron = 0.0
     if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
-        f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
-        f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
-        t_fe = iron_torque(omega_m, pp[P_PSI] + f_d, f_q, N, pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+        if flux:
+            t_fe = iron_torque(omega_m, psi_d, psi_q, N, pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+        else:
+            f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
+            f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
+            t_fe = iron_torque(omega_m, pp[P_PSI] + f_d, f_q, N, pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
         t_drag = t_f + t_fe
         p_iron = omega_m * t_fe
     # the road forces at the wheel (eqs 2-4) and the brake
@@ -398,17 +568,26 @@ def plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
 
 @kernel()
 def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
-    """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage (``plant_rates``' first four)."""
+    """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage (``plant_rates``' first four;
+    with the algebraic magnetic model di/dt = (di/dpsi) dpsi/dt at the fluxes of the currents)."""
+    if pp[P_FLUX] != 0.0:
+        psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+        r = plant_rates(psi_d, psi_q, omega_m, theta_e, v_alpha, v_beta, delta, pp)
+        g_dd, g_dq, g_qq = flux_jacobian(psi_d, psi_q, pp, P_FLUX_C)
+        return g_dd * r[0] + g_dq * r[1], g_dq * r[0] + g_qq * r[1], r[2], r[3]
     r = plant_rates(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp)
     return r[0], r[1], r[2], r[3]
 
 
 @kernel(_sig(f"UniTuple({_F}, 5)", _F, _F, _F, _F, _F, _V))
 def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
-    """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state: inverse Park, eq 12, eq 29 (or
+    """(i_alpha, i_beta, T_e, T_L_mech, v_vehicle) of a plant state: inverse Park, eq 12 (or its flux form), eq 29 (or
     ``shaft_load`` with the brake or the power_flow gear), eqs 1, 6."""
     i_alpha, i_beta = inverse_park(i_d, i_q, theta_e)
-    if pp[P_SAT] != 0.0:
+    if pp[P_FLUX] != 0.0:  # the algebraic model: eq 12's flux form x k_dq
+        psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+        t_e = pp[P_K_DQ] * flux_torque(i_d, i_q, psi_d, psi_q, pp[P_N])
+    elif pp[P_SAT] != 0.0:
         t_e = pp[P_K_DQ] * saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N], pp[P_SAT_AD],
                                             pp[P_SAT_AQ])
     else:
@@ -425,9 +604,13 @@ def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
 def stored_energies(i_d, i_q, omega_m, pp):
     """(W_mag, E_kin) [J] of a plant state: the field energy k_dq (L_d i_d^2 + L_q i_q^2) / 2 (with
     saturation, ``field_energy`` of each axis; the magnet's own flux is constant and stores nothing
-    that changes) and the kinetic energy, 1/2 J_eq omega^2 with the paper's gear (eq 9's inertia, the
-    vehicle's mass over eta) or 1/2 J_m omega^2 + 1/2 m_v v^2 with the power_flow gear."""
-    if pp[P_SAT] != 0.0:
+    that changes; with the algebraic model ``flux_energy``) and the kinetic energy, 1/2 J_eq omega^2
+    with the paper's gear (eq 9's inertia, the vehicle's mass over eta) or 1/2 J_m omega^2 + 1/2 m_v v^2
+    with the power_flow gear."""
+    if pp[P_FLUX] != 0.0:
+        psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+        w = flux_energy(psi_d, psi_q, pp, P_FLUX_C)
+    elif pp[P_SAT] != 0.0:
         w = field_energy(i_d, pp[P_L_D], pp[P_SAT_AD]) + field_energy(i_q, pp[P_L_Q], pp[P_SAT_AQ])
     else:
         w = 0.5 * (pp[P_L_D] * i_d * i_d + pp[P_L_Q] * i_q * i_q)
@@ -463,7 +646,12 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     ``plant_rates``' powers, taken at the RK4 stages with the RK4 weights h/6, h/3, h/3, h/6: the
     RK4 step of the state extended by the energies, so that the balance closes to RK4's truncation
     error (the state's arithmetic is the same as without them); ``E_P_DC`` gets the step's mean DC
-    power."""
+    power.
+
+    With the algebraic magnetic model (``P_FLUX``) the RK4 integrates the flux linkages: the step
+    starts from ``flux_linkages`` of the state's currents (Newton, to round-off) and returns the
+    currents ``flux_currents`` of the fluxes it ends with; the state and the outputs stay the
+    currents."""
     n = int(pp[P_SUBSTEPS])
     if pp[P_SUBSTEP_ANGLE] > 0.0:  # at most that angle per sub-step: accurate at top speed
         m = abs(pp[P_N] * omega_m) * dt / pp[P_SUBSTEP_ANGLE]
@@ -472,6 +660,9 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     h = dt / n
     s_dc = s_abs = s_reg = s_cu = s_fr = s_sh = s_gear = s_aero = s_roll = s_grade = s_brake = s_inv = s_fe = 0.0
     x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
+    flux = pp[P_FLUX] != 0.0
+    if flux:  # the algebraic model: RK4 on the flux linkages (``plant_rates``), from the state's currents
+        x0, x1 = flux_linkages(i_d, i_q, pp, P_FLUX_C)
     for _ in range(n):
         ra = plant_rates(x0, x1, x2, x3, v_alpha, v_beta, delta, pp)
         a0, a1, a2, a3 = ra[0], ra[1], ra[2], ra[3]
@@ -519,6 +710,8 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     ee[E_P_DC] = w * s_dc / dt
     dx = pp[P_R_W] / (pp[P_N_G] * pp[P_N]) * (x3 - theta_e)
     x3 = wrap_angle(x3)
+    if flux:  # the currents of the new fluxes
+        x0, x1 = flux_currents(x0, x1, pp, P_FLUX_C)
     i_alpha, i_beta, t_e, t_l, v_v = plant_outputs(x0, x1, x2, x3, delta, pp)
     return x0, x1, x2, x3, i_alpha, i_beta, t_e, t_l, v_v, dx
 
