@@ -55,7 +55,9 @@ from .params import (
     InjectionParams,
     MotorParams,
     ParameterError,
+    PlantParams,
     StartupParams,
+    flux_model_coefficients,
 )
 
 #: mode names of the sensorless unit, by ``pmsm_ev.kernels`` MODE_* value: the I-f strategy's alignment and
@@ -93,6 +95,22 @@ def _slot(index: int, doc: str) -> property:
         self._s[index] = float(value)
 
     return property(get, set_, doc=doc)
+
+
+def cross_saturation_offsets(motor: MotorParams, step: float = 50.0, n: int = 9) -> list[float]:
+    """The injection's axis less the rotor's d axis [rad] at i_d = 0, i_q = 0, step, .. (n - 1) step [A]:
+    the angle from d of the incremental inductance's least axis (the injection's error signal is 0 there,
+    ``pmsm_ev.kernels.injection``) in the algebraic flux model with its default shape (``PlantParams``) on
+    this motor's L_d, L_q and psi: the controller's model of the saturation."""
+    coeffs = [float(x) for x in flux_model_coefficients(motor, PlantParams(flux_model="algebraic"))]
+    out = []
+    for j in range(n):
+        l_dd, l_dq, l_qq = _k.incremental_inductances(0.0, j * step, coeffs, 0)
+        # the eigenvector (l_dq, lam - l_dd) of the least eigenvalue lam, its angle from d in (-pi/2, pi/2]
+        lam = 0.5 * (l_dd + l_qq) - math.sqrt(0.25 * (l_dd - l_qq) ** 2 + l_dq * l_dq)
+        phi = math.atan2(lam - l_dd, l_dq) if l_dq != 0.0 else 0.0
+        out.append(phi - math.pi * math.ceil(phi / math.pi - 0.5))
+    return out
 
 
 class ControlUnit:
@@ -230,6 +248,8 @@ class ControlUnit:
         c[_k.C_EKF_LOS_I] = float(p.ekf_los_current)
         c[_k.C_EKF_LOS_TIME] = float(p.ekf_los_time)
         c[_k.C_LOS_FILTER] = min(3.0 * self.dt / p.inj_los_time, 1.0)
+        for j, phi in enumerate(cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * 9):
+            c[_k.C_CROSS + j] = phi
 
     def reset(self) -> None:
         self.observer.reset()

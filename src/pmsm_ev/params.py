@@ -1141,6 +1141,12 @@ class InjectionParams:
     #: polarity [-] [chosen: 0.02, ten times the averaged noise]; below it the polarity is unresolved: the
     #: test is repeated once, then the fault latches (no torque is given on an unknown polarity)
     pol_contrast: float = 0.02
+    #: cross-saturation compensated [chosen: True]: under load the incremental inductance's axes tilt (the
+    #: plant's algebraic flux model: 15 deg at 233 A, 31 deg at 300 A), and the injection locks onto the axis
+    #: nearest d, not onto d; the controller takes that offset from its model of the saturation (the
+    #: algebraic model's defaults, ``PlantParams``, on its own motor's L_d, L_q, psi) against i_q (at
+    #: i_d = 0), as a table every 50 A (``pmsm_ev.kernels.cross_offset``). False: no compensation
+    inj_cross_comp: bool = True
     #: loss of synchronism under injection: the tracking observer's angle error above this [rad] ...
     #: [chosen: 0.5 rad, four times the error at the load's saturation]
     inj_los_angle: float = 0.5
@@ -1164,7 +1170,7 @@ class InjectionParams:
         _require(self.low_speed in LOW_SPEED_STRATEGIES,
                  f"low_speed must be one of {LOW_SPEED_STRATEGIES} (got {self.low_speed!r})")
         for f in fields(self):
-            if f.name == "low_speed":
+            if f.name in ("low_speed", "inj_cross_comp"):
                 continue
             value = getattr(self, f.name)
             _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")

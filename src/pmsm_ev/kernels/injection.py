@@ -42,6 +42,7 @@ from .jit import kernel
 from .layout import (
     C_BLEND_HI,
     C_BLEND_LO,
+    C_CROSS,
     C_DT,
     C_INJ_M,
     C_INJ_V,
@@ -187,6 +188,21 @@ def seat_tracker(s, theta, omega, t_l):
     s[S_TRK + 2] = t_l
 
 
+#: the current step of the cross-saturation table ``C_CROSS`` [A]
+CROSS_STEP = 50.0
+
+
+@kernel()
+def cross_offset(c, i_q):
+    """The injection's axis less the rotor's d axis [rad] at the q current ``i_q`` [A]: cross-saturation tilts
+    the incremental inductance's axes, and the injection locks onto the one nearest d (no q answer there),
+    not onto d. Linear in the table ``C_CROSS`` (the controller's model), odd in i_q, held beyond 400 A."""
+    x = min(abs(i_q) / CROSS_STEP, 8.0)
+    j = min(int(x), 7)
+    phi = c[C_CROSS + j] + (x - j) * (c[C_CROSS + j + 1] - c[C_CROSS + j])
+    return phi if i_q >= 0.0 else -phi
+
+
 @kernel()
 def blend_weight(c, omega):
     """The EKF's weight in the control frame at the speed |omega| [rad/s]: 0 below ``C_BLEND_LO``, 1 from
@@ -196,9 +212,10 @@ def blend_weight(c, omega):
 
 
 @kernel()
-def blended_frame(s, theta_ekf, omega_ekf):
-    """The control frame's angle [rad] and speed [rad/s]: the tracking observer's, moved towards the EKF's
-    by the weight ``S_BLEND``."""
+def blended_frame(s, theta_ekf, omega_ekf, phi):
+    """The control frame's angle [rad] and speed [rad/s]: the tracking observer's less the cross-saturation's
+    offset ``phi`` (``cross_offset``), moved towards the EKF's by the weight ``S_BLEND``."""
     w = s[S_BLEND]
-    theta = wrap_angle(s[S_TRK] + w * wrap_angle(theta_ekf - s[S_TRK]))
+    theta_inj = s[S_TRK] - phi
+    theta = wrap_angle(theta_inj + w * wrap_angle(theta_ekf - theta_inj))
     return theta, s[S_TRK + 1] + w * (omega_ekf - s[S_TRK + 1])

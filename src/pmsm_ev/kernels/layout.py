@@ -302,7 +302,8 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_RESID_F", 1, "the EKF's current innovation magnitude, low-pass filtered [A]"),
     ("S_EKF_LOS_T", 1, "how long it has been beyond its bound [s]"),
     ("S_EVENT", 1, "the event of the last period (EV_*; 0 none)"),
-), size=193)
+    ("S_CROSS", 1, "the injection's axis less the estimated d axis in the last period [rad]: cross-saturation's offset"),
+), size=194)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -430,7 +431,9 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_EKF_LOS_I", 1, "the EKF's loss-of-synchronism innovation [A]"),
     ("C_EKF_LOS_TIME", 1, "... time [s]"),
     ("C_LOS_FILTER", 1, "dt / the detectors' filter time constant (C_INJ_LOS_TIME / 3) [-]"),
-), size=126)
+    ("C_CROSS", 9, "the injection's axis less the rotor's d axis at i_q = 0, 50, .. 400 A [rad]: cross-saturation's "
+                   "offset in the controller's model of the saturation (0: not compensated)"),
+), size=135)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())

@@ -38,6 +38,7 @@ from .injection import (
     angle_error,
     blend_weight,
     blended_frame,
+    cross_offset,
     demodulate,
     fundamental,
     injection_voltage,
@@ -89,6 +90,7 @@ from .layout import (
     MODE_POLARITY,
     S_ACQ,
     S_BLEND,
+    S_CROSS,
     S_EKF_LOS_T,
     S_EPISODE,
     S_EVENT,
@@ -147,7 +149,7 @@ A_RETRY = 4.0  #: count an unresolved test; the second latches the fault; then a
 A_EKF_ALONE = 5.0  #: the injection off (``enter_ekf``)
 A_INJECTION_ON = 6.0  #: the injection on again, the tracking observer on the EKF (``enter_injection``)
 A_REACQUIRE = 7.0  #: an episode; then as A_ACQUIRE
-A_TRUST_INJECTION = 8.0  #: an episode; the EKF put on the tracking observer (``trust_injection``)
+A_RESEAT = 8.0  #: an episode; the less trusted of the two observers put on the other (``reseat``)
 A_RESTART_EKF = 9.0  #: an episode; the EKF's covariance back to an unknown start's (``restart_ekf_search``)
 
 #: the transition table: (mode, event, next mode, entry action), looked up in order, the first match
@@ -159,7 +161,7 @@ TRANSITIONS = (
     (MODE_POLARITY, EV_POLARITY_UNRESOLVED, MODE_ACQUIRE, A_RETRY),
     (MODE_POLARITY, EV_INJECTION_LOST, MODE_ACQUIRE, A_REACQUIRE),
     (MODE_INJECTION, EV_INJECTION_LOST, MODE_ACQUIRE, A_REACQUIRE),
-    (MODE_INJECTION, EV_DISAGREE, MODE_INJECTION, A_TRUST_INJECTION),
+    (MODE_INJECTION, EV_DISAGREE, MODE_INJECTION, A_RESEAT),
     (MODE_INJECTION, EV_FAST, MODE_EKF, A_EKF_ALONE),
     (MODE_EKF, EV_EKF_LOST, MODE_EKF, A_RESTART_EKF),
     (MODE_EKF, EV_SLOW, MODE_INJECTION, A_INJECTION_ON),
@@ -261,7 +263,10 @@ def detect_ekf_lost(s, c):
 @kernel()
 def detect_speed(s, c, mode, omega):
     """EV_FAST in injection at |omega| >= ``C_BLEND_HI``; EV_SLOW on the EKF below ``C_BLEND_HI`` less
-    ``C_BLEND_HYST``."""
+    ``C_BLEND_HYST``; neither within ``C_INJ_LOS_TIME`` of the mode's start (a speed that jumps, as an
+    observer's after a restart, does not switch the injection on and off every period)."""
+    if s[S_MODE_TIME] < c[C_INJ_LOS_TIME]:
+        return EV_NONE
     if mode == MODE_INJECTION and abs(omega) >= c[C_BLEND_HI]:
         return EV_FAST
     if mode == MODE_EKF and abs(omega) < c[C_BLEND_HI] - c[C_BLEND_HYST]:
@@ -352,9 +357,26 @@ def restart_ekf_on(s, c, theta, omega, t_l, p0):
 
 @kernel()
 def trust_injection(s, c):
-    """The EKF put on the tracking observer (it is the better at low speed), with the restart's
-    covariance (``C_P0_ALIGNED``)."""
-    restart_ekf_on(s, c, s[S_TRK], s[S_TRK + 1], s[S_TRK + 2], C_P0_ALIGNED)
+    """The EKF put on the tracking observer (its angle less the cross-saturation's offset), with the
+    restart's covariance (``C_P0_ALIGNED``)."""
+    restart_ekf_on(s, c, wrap_angle(s[S_TRK] - s[S_CROSS]), s[S_TRK + 1], s[S_TRK + 2], C_P0_ALIGNED)
+
+
+@kernel()
+def trust_ekf(s):
+    """The tracking observer put on the EKF (its angle plus the cross-saturation's offset)."""
+    seat_tracker(s, wrap_angle(s[S_X + 3] + s[S_CROSS]), s[S_X + 2], s[S_X + 4])
+
+
+@kernel()
+def reseat(s, c):
+    """The two observers disagree in the blend: the one with the lesser weight is put on the other (the EKF
+    on the injection in the blend's lower half, where the back-EMF is the weaker evidence; else the
+    tracking observer on the EKF)."""
+    if s[S_BLEND] < 0.5:
+        trust_injection(s, c)
+    else:
+        trust_ekf(s)
 
 
 @kernel()
@@ -396,14 +418,14 @@ def enter(s, c, action, i_alpha, i_beta):
     elif action == A_INJECTION_ON:
         start_injection(s)
         seed_fundamental(s, c, i_alpha, i_beta)
-        seat_tracker(s, s[S_X + 3], s[S_X + 2], s[S_X + 4])
+        trust_ekf(s)
         clear_detectors(s)
     elif action == A_REACQUIRE:
         begin_episode_now(s, c)
         enter_acquire(s, c, i_alpha, i_beta)
-    elif action == A_TRUST_INJECTION:
+    elif action == A_RESEAT:
         begin_episode_now(s, c)
-        trust_injection(s, c)
+        reseat(s, c)
         clear_detectors(s)
     elif action == A_RESTART_EKF:
         begin_episode_now(s, c)
@@ -535,16 +557,20 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             offset = 0.25 * math.pi
         elif mode == MODE_POLARITY:
             i_dref, _, _ = polarity_schedule(c, t)
+        s[S_CROSS] = 0.0
         i_d, i_q = park(f_alpha, f_beta, theta)
         v_d, v_q = current_step(s, c, i_dref, 0.0, i_d, i_q, 0.0)
     elif mode == MODE_INJECTION:  # FOC on the tracking observer, the EKF blended in with the speed
         w = blend_weight(c, s[S_OMEGA_CTRL])
         s[S_BLEND] = w
+        phi = cross_offset(c, f_q)  # the injection's axis less the d axis (f_q: in the injection's frame)
+        s[S_CROSS] = phi
         if w == 0.0:  # the EKF fed by the injection: on the tracking observer's angle, speed and load
             s[S_X + 2] = s[S_TRK + 1]
-            s[S_X + 3] = s[S_TRK]
+            s[S_X + 3] = wrap_angle(s[S_TRK] - phi)
             s[S_X + 4] = s[S_TRK + 2]
-        theta, omega_ctrl = blended_frame(s, s[S_X + 3], s[S_X + 2])
+        theta, omega_ctrl = blended_frame(s, s[S_X + 3], s[S_X + 2], phi)
+        offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the injection's axis
         amplitude = c[C_INJ_V] * (1.0 - w)
         i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl)
         i_d, i_q = park(f_alpha, f_beta, theta)
@@ -553,10 +579,11 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         s[S_BLEND] = 1.0
         theta = s[S_X + 3]
         omega_ctrl = s[S_X + 2]
-        seat_tracker(s, theta, omega_ctrl, s[S_X + 4])
+        i_d, i_q = park(i_alpha, i_beta, theta)
+        s[S_CROSS] = cross_offset(c, i_q)
+        trust_ekf(s)
         amplitude = 0.0
         i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl)
-        i_d, i_q = park(i_alpha, i_beta, theta)
         v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
     v_alpha, v_beta = modulate(c, v_d, v_q, theta, omega_ctrl, False)
     axis = theta + offset + c[C_ADVANCE] * omega_ctrl
