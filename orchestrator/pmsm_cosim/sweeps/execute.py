@@ -13,7 +13,9 @@ resolved: signal tables loaded, paths fixed) and the bytes of its FMUs, writes t
 once into its local directory (keyed by content hash), runs the engine's
 :class:`~pmsm_cosim.engine.master.Master` into a scratch directory and returns the files,
 which the client writes. Workers need this package installed (for the engine and the
-application's hooks); the physics travels inside the FMUs.
+application's hooks); the physics travels inside the FMUs. Each task measures its own wall
+time (``sample_s``, in metrics.json and summary.csv); the client's line for a finished run
+gives that cost and the time left for the rest at the pace so far.
 
 Dask (``distributed``) is heavy: it is imported inside the functions that use it, when a
 sweep runs, not when the package is imported.
