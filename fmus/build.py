@@ -62,7 +62,7 @@ from pythonfmu import FmuBuilder
 from pmsm_ev.cycles import load_road
 from pmsm_ev.scenarios import route_from_json, route_to_json, scenario_route
 
-from .slave_support import START_VALUES_FILE  # the packaged defaults a slave reads
+from .slave_support import START_VALUES_FILE, WRAPPER_CHECKED, version_tuple
 
 HERE = Path(__file__).resolve().parent
 BUILD_INFO = "build_info.json"
@@ -203,6 +203,18 @@ def physics_dir() -> Path:
 
 def _pythonfmu_version() -> str:
     return pythonfmu.__version__
+
+
+def check_pythonfmu(version: str | None = None) -> None:
+    """Refuse a pythonfmu other than the versions the FMUs are checked against (``WRAPPER_CHECKED``, the
+    range pyproject.toml allows): the lean binding and the slaves' lifetime code rely on its C++ wrapper's
+    behaviour (its log queue, its fmi2DoStep, what it releases), which another version may change."""
+    version = version or _pythonfmu_version()
+    low, high = WRAPPER_CHECKED
+    if not version_tuple(low) <= version_tuple(version) <= version_tuple(high):
+        raise BuildError(f"pythonfmu {version} is not a version the FMUs are checked against ({low} to {high}: "
+                         f"the lean binding and the slaves rely on its wrapper); install one, e.g. "
+                         f"pip install 'pythonfmu=={high}'")
 
 
 # -- sources and their hash ------------------------------------------------------------
@@ -502,6 +514,7 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
     """Build one FMU (of ``FMUS`` or ``BENCH_FMUS``) into ``out_dir``; return (path, whether
     it was (re)built)."""
     _recipe(name)
+    check_pythonfmu()
     out = Path(out_dir or default_out_dir())
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"{name}.fmu"

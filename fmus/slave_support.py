@@ -93,16 +93,19 @@ _READS_KEPT = 64
 START_VALUES_FILE = "start_values.json"
 
 
-#: the pythonfmu versions whose C++ wrapper the lifetime code below was checked against;
-#: ``_fail`` and ``release_at_exit`` rely on its behaviour (see the module doc)
+#: the pythonfmu versions whose C++ wrapper the lifetime code below and the lean binding
+#: (``fmus/lean_binding.c``) were checked against, the first and the last; ``_fail`` and
+#: ``release_at_exit`` rely on its behaviour (see the module doc); the build refuses another
+#: version (``build.check_pythonfmu``), pyproject.toml pins this range
 WRAPPER_CHECKED = ("0.6.5", "0.7.0")
 
 
-def _version(text: str) -> tuple[int, ...]:
+def version_tuple(text: str) -> tuple[int, ...]:
+    """(major, minor, micro) of a version string: "0.7.0" -> (0, 7, 0)."""
     return tuple(int(part) for part in re.findall(r"\d+", text)[:3])
 
 
-if _version(PYTHONFMU_VERSION) < _version(WRAPPER_CHECKED[0]):
+if version_tuple(PYTHONFMU_VERSION) < version_tuple(WRAPPER_CHECKED[0]):
     raise ImportError(f"pythonfmu {PYTHONFMU_VERSION}: the project's FMUs need pythonfmu >= {WRAPPER_CHECKED[0]}")
 
 #: the wrapper libraries (paths) of this process whose interpreter guard is reset at exit

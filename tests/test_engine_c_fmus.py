@@ -102,8 +102,8 @@ def test_a_string_is_copied_before_the_source_is_called_again(tmp_path, c_fmus):
     connections = (TYPED[3], *TYPED[:3])
     path = system(tmp_path, c_fmus, [("counter", "Counter", 'prefix = "c"'), ("consumer", "Consumer", "")],
                   connections, CONSUMER_COLUMNS, stop_time=0.05)
-    for loop in ("generated", "plain"):
-        _, r = run(path, tmp_path / loop, loop)
+    for loop in (None, "plain"):  # (the default: the plain loop, the compiled one does not step Strings)
+        _, r = run(path, tmp_path / str(loop), loop)
         assert list(r["text_number"]) == [-1, 0, 1, 2, 3, 4], loop
         assert list(r["text_len"]) == [0, 2, 2, 2, 2, 2], loop
 
@@ -114,30 +114,25 @@ def test_gauss_seidel_passes_the_freshest_typed_values(tmp_path, c_fmus):
     assert list(r["text_number"][1:]) == list(r["count"][1:])
 
 
-def test_plain_loop_equals_the_generated_one_with_typed_connections(tmp_path, c_fmus):
-    for algorithm in ("jacobi", "gauss-seidel"):
-        path = typed_system(tmp_path, c_fmus, algorithm=algorithm, order=("consumer", "counter"))
-        run(path, tmp_path / f"gen_{algorithm}", "generated")
-        run(path, tmp_path / f"plain_{algorithm}", "plain")
-        assert (tmp_path / f"gen_{algorithm}" / "results.csv").read_bytes() == \
-            (tmp_path / f"plain_{algorithm}" / "results.csv").read_bytes()
-
-
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
 def test_compiled_loop_with_integer_enumeration_and_boolean_connections(tmp_path, c_fmus, algorithm):
     """The compiled loop calls fmi2GetInteger/fmi2SetInteger/fmi2GetBoolean/... by address like
-    fmi2GetReal: the same rows as the generated loop. With the String connection as well it is not
-    the default (the strings are copied between the calls, in Python) and refused by name."""
+    fmi2GetReal: the same rows as the plain loop. With the String connection as well the plain loop
+    runs it by default (the strings are copied between the calls, in Python), with a line saying so,
+    and the compiled one is refused by name."""
     comps = [("counter", "Counter", 'step_by = 3, prefix = "c"'), ("consumer", "Consumer", "invert = true")]
     columns = {**COUNTER_COLUMNS, **{k: v for k, v in CONSUMER_COLUMNS.items() if not k.startswith("text")}}
     path = system(tmp_path, c_fmus, comps, TYPED[:3], columns, algorithm=algorithm, name="typed3")
     m_comp, r_comp = run(path, tmp_path / "comp", "compiled")
-    m_gen, r_gen = run(path, tmp_path / "gen", "generated")
-    assert (m_comp["loop"], m_gen["loop"]) == ("compiled", "generated")
-    assert (tmp_path / "comp" / "results.csv").read_bytes() == (tmp_path / "gen" / "results.csv").read_bytes()
+    m_plain, r_plain = run(path, tmp_path / "plain", "plain")
+    assert (m_comp["loop"], m_plain["loop"]) == ("compiled", "plain")
+    assert (tmp_path / "comp" / "results.csv").read_bytes() == (tmp_path / "plain" / "results.csv").read_bytes()
     assert list(r_comp["k_seen"][1:]) != [0] * (len(r_comp["k_seen"]) - 1)  # the Integer values went across
     with_strings = typed_system(tmp_path, c_fmus, algorithm=algorithm)
-    assert run(with_strings, tmp_path / "default")[0]["loop"] == "generated"
+    m_default = run(with_strings, tmp_path / "default")[0]
+    assert m_default["loop"] == "plain"
+    assert m_default["loop_note"] == ("the plain loop steps typed: consumer has String connections "
+                                      "(copied between the calls)")
     with pytest.raises(CosimError, match=r"^the compiled loop cannot step typed: consumer has String connections"):
         run(with_strings, tmp_path / "named", "compiled")
 
@@ -220,7 +215,7 @@ def test_a_string_cannot_be_recorded(tmp_path, c_fmus):
 
 # --- termination ----------------------------------------------------------------------------
 
-@pytest.mark.parametrize("loop", ["compiled", "generated", "plain"])
+@pytest.mark.parametrize("loop", ["compiled", "plain"])
 def test_a_termination_request_ends_the_run_as_completed(tmp_path, c_fmus, loop):
     path = system(tmp_path, c_fmus, [("stopper", "Stopper", ""), ("counter", "Counter", "")],
                   record={"y": "stopper.y", "steps": "stopper.steps", "count": "counter.count"}, stop_time=1.0,

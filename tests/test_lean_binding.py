@@ -164,3 +164,158 @@ def test_another_master_sees_the_same_values_statuses_and_states(builds, name, c
     if case != "plant":  # fmi2Fatal, as pythonfmu reports any exception, with the reason logged
         assert lean[-1][1:] == ["status", 4]
         assert any("Fatal py exception encountered" in line for line in lean_log), lean_log
+
+
+# --- the fast path's contract: a counter the binding keeps per instance (pmsm_fmu_fast_calls) ----------------------
+# A closed loop of FocEkf5 and PmsmEvPlant instances driven by fmpy's FMU2Slave, call by call (Gauss-Seidel: the
+# controller reads the plant, steps, the plant takes its voltage and steps). Each pair: 3 calls per FMU per step,
+# every one of them after the initialisation, so every one is the binding's to serve directly. Printed as JSON: each
+# pair's outputs at every step, the calls made and the binding's count of each instance.
+_PAIRS_SCRIPT = r"""
+import ctypes, json, sys, threading
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+plant_path, ctrl_path, mode, steps = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+refs = [float(x) for x in sys.argv[5:]]
+H = 1e-4
+unpacked = {}
+
+def load(path, name):
+    if path not in unpacked:
+        md = read_model_description(path)
+        unpacked[path] = (md, extract(path))
+    md, folder = unpacked[path]
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName=name)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    return fmu, vr
+
+def fast_calls(fmu):
+    fn = getattr(fmu.dll, "pmsm_fmu_fast_calls")  # AttributeError: not the lean binding
+    fn.argtypes, fn.restype = [ctypes.c_void_p], ctypes.c_ulonglong
+    return fn(fmu.component)
+
+class Pair:
+    def __init__(self, k, ref):
+        self.ctrl, cv = load(ctrl_path, f"ctrl{k}")
+        self.plant, pv = load(plant_path, f"plant{k}")
+        self.c_in = [cv[n] for n in ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")]
+        self.c_out = [cv[n] for n in ("v_alpha", "v_beta", "omega_hat", "theta_hat")]
+        self.p_in = [pv["v_alpha"], pv["v_beta"]]
+        self.p_out = [pv[n] for n in ("i_alpha", "i_beta", "theta_e", "omega_m")]
+        self.ref, self.y, self.trace = ref, [0.0, 0.0, 0.0, 0.0], []
+        self.calls = {"ctrl": 0, "plant": 0}
+        for fmu in (self.ctrl, self.plant):
+            fmu.instantiate()
+            fmu.setupExperiment(startTime=0.0, stopTime=1.0)
+            fmu.enterInitializationMode()
+            fmu.exitInitializationMode()
+        self.start = {"ctrl": fast_calls(self.ctrl), "plant": fast_calls(self.plant)}
+
+    def step(self, k):
+        t = k * H
+        ia, ib, theta, omega = self.y
+        self.ctrl.setReal(self.c_in, [ia, ib, self.ref, theta, omega])
+        self.ctrl.doStep(t, H)
+        u = self.ctrl.getReal(self.c_out)
+        self.plant.setReal(self.p_in, u[:2])
+        self.plant.doStep(t, H)
+        self.y = self.plant.getReal(self.p_out)
+        self.calls["ctrl"] += 3
+        self.calls["plant"] += 3
+        self.trace.append(u + self.y)
+
+    def run(self):
+        for k in range(steps):
+            self.step(k)
+
+    def report(self):
+        return {"trace": self.trace, "calls": self.calls, "start": self.start,
+                "fast": {"ctrl": fast_calls(self.ctrl), "plant": fast_calls(self.plant)}}
+
+pairs = [Pair(k, ref) for k, ref in enumerate(refs)]
+if mode == "interleaved":
+    for k in range(steps):
+        for pair in pairs:
+            pair.step(k)
+elif mode == "threads":
+    threads = [threading.Thread(target=pair.run) for pair in pairs]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+else:
+    for pair in pairs:
+        pair.run()
+print(json.dumps([pair.report() for pair in pairs]))
+"""
+STEPS = 300
+
+
+def _pairs(builds, binding: str, mode: str, *refs: float) -> list[dict]:
+    folder = builds[binding]
+    done = subprocess.run([sys.executable, "-c", _PAIRS_SCRIPT, str(folder / "PmsmEvPlant.fmu"),
+                           str(folder / "FocEkf5.fmu"), mode, str(STEPS), *map(str, refs)],
+                          env=_env(binding, folder), capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _all_fast(pair: dict) -> None:
+    """Every fmi2SetReal, fmi2DoStep and fmi2GetReal made after the initialisation served by the binding itself."""
+    assert pair["start"] == {"ctrl": 0, "plant": 0}  # nothing before (initialisation: pythonfmu's path)
+    assert pair["calls"] == {"ctrl": 3 * STEPS, "plant": 3 * STEPS}
+    assert pair["fast"] == pair["calls"]
+
+
+def test_every_per_step_call_takes_the_fast_path(builds):
+    """The counter the binding exposes equals the calls made: a binding that falls back to pythonfmu's path (or
+    an FMU whose library is pythonfmu's alone) fails here, not only in a benchmark. The same numbers either way."""
+    (pair,) = _pairs(builds, "lean", "serial", 80.0)
+    _all_fast(pair)
+    assert len(pair["trace"]) == STEPS and pair["trace"][-1] != pair["trace"][0]
+    assert all(math.isfinite(x) for row in pair["trace"] for x in row)
+    # pythonfmu's own library has no such counter (this test would fail on it), and computes the same numbers
+    done = subprocess.run([sys.executable, "-c", _PAIRS_SCRIPT, str(builds["pythonfmu"] / "PmsmEvPlant.fmu"),
+                           str(builds["pythonfmu"] / "FocEkf5.fmu"), "serial", "20", "80.0"],
+                          env=_env("pythonfmu", builds["pythonfmu"]), capture_output=True, text=True, timeout=600)
+    assert done.returncode != 0 and "pmsm_fmu_fast_calls" in done.stderr
+
+
+def test_several_instances_in_one_process_each_count_their_own(builds):
+    """Two plants and two controllers stepping interleaved, call by call: each pair's outputs equal those of a
+    process with that pair alone, bit for bit; each instance's counter is its own calls."""
+    alone = [_pairs(builds, "lean", "serial", ref)[0] for ref in (80.0, -60.0)]
+    together = _pairs(builds, "lean", "interleaved", 80.0, -60.0)
+    for one, other in zip(alone, together):
+        _all_fast(other)
+        assert other["trace"] == one["trace"]
+    assert together[0]["trace"] != together[1]["trace"]  # two different runs, not one seen twice
+
+
+def test_a_threaded_host(builds):
+    """Two threads of the host, each stepping its own pair of instances: the results of the serial run, bit for
+    bit, and every call on the fast path."""
+    serial = _pairs(builds, "lean", "serial", 80.0, -60.0)
+    threaded = _pairs(builds, "lean", "threads", 80.0, -60.0)
+    for one, other in zip(serial, threaded):
+        _all_fast(other)
+        assert other["trace"] == one["trace"]
+
+
+def test_another_pythonfmu_is_refused_by_the_build(tmp_path, monkeypatch, capsys):
+    """pythonfmu outside the versions the binding and the slaves are checked against: one line, no FMU."""
+    from pmsm_ev_fmus import build
+
+    assert build.WRAPPER_CHECKED == ("0.6.5", "0.7.0")
+    build.check_pythonfmu("0.7.0")
+    build.check_pythonfmu("0.6.5")
+    monkeypatch.setattr(build, "_pythonfmu_version", lambda: "0.7.1")
+    assert build.main(["--out", str(tmp_path), "RouteProfile"]) == 1
+    err = capsys.readouterr().err
+    assert err == ("error: RouteProfile: pythonfmu 0.7.1 is not a version the FMUs are checked against (0.6.5 to "
+                   "0.7.0: the lean binding and the slaves rely on its wrapper); install one, e.g. "
+                   "pip install 'pythonfmu==0.7.0'\n")
+    assert not list(tmp_path.iterdir())
+    with pytest.raises(build.BuildError, match=r"^pythonfmu 0\.6\.4 is not a version"):
+        build.check_pythonfmu("0.6.4")

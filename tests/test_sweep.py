@@ -338,3 +338,36 @@ def test_run_signature_follows_values_not_spelling(tmp_path):
     assert a[0].signature == c[0].signature and a[1].signature != c[1].signature
     assert a[0].spec.component("ctrl").start["q_i"] == 1.0 and isinstance(a[0].spec.component("ctrl").start["q_i"],
                                                                            float)
+
+
+def test_each_sample_reports_its_cost_and_an_eta(tmp_path, client):
+    """As each run finishes: its cost (wall seconds on the worker, the loop's us/step) and the time left for
+    the rest; summary.csv and metrics.json carry the cost (``sample_s``). Sane values, not exact timings."""
+    import io
+    import re
+
+    path = write_sweep(tmp_path, '[grid]\n"ctrl.q_TL" = [1e-4, 1e-3, 1e-2]\n', name="cost",
+                       header='system = "scenario2"\nstop_time = 0.05\nfigures = false\n')
+    stream = io.StringIO()
+    outcome = run_sweep(load_sweep(path), tmp_path / "out", client=client, stream=stream)
+    assert (outcome.ran, outcome.failed) == (3, 0)
+    lines = [line for line in stream.getvalue().splitlines() if line.startswith("[")]
+    assert len(lines) == 3
+    pattern = (r"^\[(\d)/3\] (\S+): completed, \S+ = \S+; (\d+\.\d) s, (\d+\.\d\d) us/step"
+               r"(?:; (\d) left, ETA (\d+\.\d) (s|min|h))?$")
+    rows = {r["run"]: r for r in read_summary(tmp_path / "out" / "summary.csv")}
+    for k, line in enumerate(lines, start=1):
+        m = re.match(pattern, line)
+        assert m, line
+        assert int(m[1]) == k
+        assert (m[5] is None) == (k == 3)  # an ETA while samples are left, none after the last
+        if k < 3:
+            assert int(m[5]) == 3 - k and float(m[6]) >= 0  # (two workers: a sample may finish with another)
+        row = rows[m[2]]
+        sample_s, wall, us = float(row["sample_s"]), float(row["wall_time_s"]), float(row["us_per_step"])
+        assert 0 < wall <= sample_s < 600 and us > 0
+        assert float(m[3]) == round(sample_s, 1) and float(m[4]) == round(us, 2)
+        metrics = json.loads((tmp_path / "out" / "runs" / m[2] / "metrics.json").read_text())
+        assert metrics["sample_s"] == sample_s
+    assert list(read_summary(tmp_path / "out" / "summary.csv")[0])[-3:] == ["wall_time_s", "us_per_step",
+                                                                            "sample_s"]

@@ -87,7 +87,7 @@ def cmd_run(a) -> int:
     spec = _load_with_overrides(a)
     out = Path(a.out) if a.out else Path("runs") / spec.name
     ensure_fmus(spec, a.quiet)
-    master = Master(spec, loop=a.loop)
+    master = Master(spec, loop=a.loop, note=lambda line: _note(line, a.quiet))
     if not a.quiet:
         for w in master.warnings:
             _note(w)
@@ -346,9 +346,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", metavar="DIR", help="output directory (default: runs/<scenario name>)")
     r.add_argument("--no-figures", action="store_true", help="do not draw figures")
     r.add_argument("--loop", choices=LOOPS, default=None,
-                   help="the stepping loop (same results): compiled (machine code, the default where numba "
-                        "is), generated (unrolled Python) or plain (Python for a debugger; also: "
-                        "PMSM_COSIM_LOOP=...)")
+                   help="the stepping loop (same results): compiled (machine code, the default; a system it "
+                        "cannot step runs the plain one, with a note saying why) or plain (Python for a "
+                        "debugger); also: PMSM_COSIM_LOOP=...")
     r.add_argument("--plain-loop", action="store_const", const="plain", dest="loop",
                    help="the same as --loop plain")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes")

@@ -383,8 +383,8 @@ class LeanCalls:
     array, a ``c_size_t`` count (:meth:`count`) and a value array. ``do_step`` keeps
     ``argtypes`` (its time arguments are Python floats); ``do_step_typed`` is the same
     fmi2DoStep without them, for arguments that have their C types already (the handle,
-    ``c_double`` time and step size, a ``c_int`` flag: the loop sets one ``c_double`` to the
-    time of each step rather than have ctypes convert two floats and an int per call).
+    ``c_double`` time and step size, a ``c_int`` flag); the compiled loop
+    (:mod:`pmsm_cosim.engine.native`) calls it by its address.
 
     For a Python FMU (``python_fmu``: pythonfmu) they come from a ``ctypes.PyDLL`` handle on
     the same library: the GIL is not released around the call, which the FMU would take back

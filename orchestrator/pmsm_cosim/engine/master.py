@@ -45,17 +45,15 @@ whose ``do_step`` returns False asks to terminate: with an error logged, that is
 or if it discards the step without asking to terminate (this master does not retry a step
 with a smaller size).
 
-Three loops step the system, the same FMI calls in the same order (so bit-identical
-results): the *compiled* one (default where numba is installed), machine code that calls the
-FMUs' C functions by address (:mod:`pmsm_cosim.engine.native`), the fastest; the *generated*
-one, source text unrolled over the components and compiled once per run (the default
-without numba, and for a system the compiled one cannot step: String connections, a
-multi-rate component with signal inputs); and the *plain* one (:meth:`Master._plain_steps`),
-ordinary Python over the components a debugger can step through. ``Master(spec,
-loop=...)`` or the environment variable ``PMSM_COSIM_LOOP`` selects one (``pmsm-cosim run
---loop``, ``--plain-loop``); a loop asked for by name that cannot step the system is an
-error. The generated source is registered in :mod:`linecache` under ``<generated steps of
-SYSTEM>``, so tracebacks show its lines (``Master.step_source`` holds it).
+Two loops step the system, the same FMI calls in the same order (so bit-identical results):
+the *compiled* one (the default), machine code that calls the FMUs' C functions by address
+(:mod:`pmsm_cosim.engine.native`), and the *plain* one (:meth:`Master._plain_steps`), ordinary
+Python over the components that a debugger can step through. ``Master(spec, loop=...)`` or the
+environment variable ``PMSM_COSIM_LOOP`` selects one (``pmsm-cosim run --loop``,
+``--plain-loop``). A system the compiled loop cannot step (String connections), or a Python
+without numba, runs the plain loop, with one line (``note``) saying so and why; a loop asked for
+by name that cannot step the system is an error naming why, and so is any other failure while
+the compiled loop is set up (the cause chained).
 """
 
 from __future__ import annotations
@@ -64,7 +62,6 @@ import array
 import bisect
 import ctypes
 import functools
-import linecache
 import math
 import os
 import signal
@@ -85,11 +82,8 @@ MAX_CHUNK = 2000
 #: signals that stop a run at its next check (a second one stops it at once)
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _NEVER = sys.maxsize
-#: connections per transfer up to which the finiteness check is an unrolled sum
-_UNROLL = 8
-#: the stepping loops: "compiled" (machine code, numba), "generated" (unrolled source, compiled per
-#: run), "plain" (for debugging)
-LOOPS = ("compiled", "generated", "plain")
+#: the stepping loops: "compiled" (machine code, numba), "plain" (Python, for debugging)
+LOOPS = ("compiled", "plain")
 #: the environment variable that selects the loop when ``Master(loop=None)``
 LOOP_ENV = "PMSM_COSIM_LOOP"
 #: ctypes type of a value of each FMI type in fmi2Get*/fmi2Set* (Enumeration: Integer calls)
@@ -98,7 +92,7 @@ _CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c
 
 def loop_choice(loop: str | None = None) -> tuple[str, bool]:
     """(the stepping loop to use, whether it was asked for by name): ``loop`` if given, else
-    $PMSM_COSIM_LOOP, else "compiled" (which falls back to "generated" where it cannot run)."""
+    $PMSM_COSIM_LOOP, else "compiled" (which falls back to "plain" where it cannot run)."""
     where = "loop"
     if loop is None:
         loop, where = os.environ.get(LOOP_ENV, "").strip(), LOOP_ENV
@@ -107,6 +101,10 @@ def loop_choice(loop: str | None = None) -> tuple[str, bool]:
     if loop not in LOOPS:
         raise CosimError(f"{where}: {loop!r} is not a stepping loop; choose one of {', '.join(LOOPS)}")
     return loop, True
+
+
+def _stderr_note(line: str) -> None:
+    print(f"note: {line}", file=sys.stderr)
 
 
 def hold_strings(buf) -> None:
@@ -203,10 +201,13 @@ class _Stepper:
 class Master:
     """Check a :class:`SystemSpec` against its FMUs and run it."""
 
-    def __init__(self, spec: SystemSpec, loop: str | None = None):
-        #: "compiled", "generated" or "plain" (see the module's docstring); after the set-up, the one that runs
+    def __init__(self, spec: SystemSpec, loop: str | None = None, note=None):
+        """``note(line)``: where the line goes that says the plain loop runs instead of the compiled one,
+        and why (default: ``note: ...`` on stderr)."""
+        #: "compiled" or "plain" (see the module's docstring); after the set-up, the one that runs
         self.loop, self._loop_named = loop_choice(loop)
-        self.step_source = ""  #: the generated loop's source (after the set-up of a generated run)
+        self._note = note if note is not None else _stderr_note
+        self.loop_note = ""  #: after the set-up: why the plain loop runs where the compiled one was the default
         self.spec = spec
         self.h = spec.step_size
         self.n_steps, self.every = time_grid(spec)
@@ -287,28 +288,39 @@ class Master:
         self._build_recorder()
         if self.loop == "compiled":
             self._steps = self._native_steps()
-        if self.loop == "generated":
-            self._steps = self._compile_steps()
-        elif self.loop == "plain":
+        if self.loop == "plain":
             self._steps = self._plain_steps
 
     def _native_steps(self):
         """The compiled loop of this system (``pmsm_cosim.engine.native``), compiled (or loaded from
-        numba's cache) now; None, and ``self.loop`` "generated", if it cannot step this system and was
-        not asked for by name (then: CosimError, with the reason)."""
+        numba's cache) now. Where it cannot step this system (String connections) or numba is not
+        installed: None, ``self.loop`` "plain" and a line saying why, or a CosimError with the reason if
+        it was asked for by name. Any other failure of the set-up is a CosimError naming it (chained)."""
         try:
             from . import native  # noqa: PLC0415 - numba (LLVM) is heavy and optional: imported for this loop only
-            reason = native.unsupported(self)
-            if not reason:
-                steps = native.NativeSteps(self, _Interrupted)
-                steps.compile()
-                return steps
-        except Exception as exc:  # numba missing, or an LLVM that cannot compile
-            reason = f"numba is not available ({type(exc).__name__}: {one_line(exc)})"
+        except ImportError as exc:
+            if exc.name != "numba":  # not a missing numba: one that cannot be imported, or something else
+                raise self._setup_failed(exc) from exc
+            reason = f"numba is not installed ({one_line(exc)})"
+        else:
+            try:
+                reason = native.unsupported(self)
+                if not reason:
+                    steps = native.NativeSteps(self, _Interrupted)
+                    steps.compile()
+                    return steps
+            except Exception as exc:
+                raise self._setup_failed(exc) from exc
         if self._loop_named:
             raise CosimError(f"the compiled loop cannot step {self.spec.name}: {reason}")
-        self.loop = "generated"
+        self.loop = "plain"
+        self.loop_note = f"the plain loop steps {self.spec.name}: {reason}"
+        self._note(self.loop_note)
         return None
+
+    def _setup_failed(self, exc: BaseException) -> CosimError:
+        return CosimError(f"setting up the compiled loop of {self.spec.name} failed: "
+                          f"{type(exc).__name__}: {one_line(exc)}")
 
     def _merge_ramp_inputs(self) -> None:
         """Give each input of a linear table (set at once by the initialisation) a slot in the buffer of
@@ -480,8 +492,10 @@ class Master:
         return _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
 
     def _plain_steps(self, n0: int, n1: int, sig_next: int) -> int:
-        """The stepping loop as ordinary Python: the same calls, in the same order, as the
-        generated one (:meth:`_compile_steps`), for reading and debugging."""
+        """The stepping loop as ordinary Python, for reading and debugging: the same calls, in the same
+        order, as the compiled one (:mod:`pmsm_cosim.engine.native`). ``steps(n0, n1, sig_next)`` takes the
+        base steps n0 .. n1-1 and returns the next step at which a signal must be evaluated; a failing
+        call raises ``_StepFailed`` carrying the step it failed at."""
         h = self.h
         jacobi = self.spec.algorithm == "jacobi"
         n = n0
@@ -534,82 +548,6 @@ class Master:
         status = st.do_step(st.handle, t, st.step_size, 1)
         if status > 1:
             raise self._step_failed(st, t, status)
-
-    def _compile_steps(self):
-        """The stepping loop of this system, generated once, unrolled over its components.
-
-        ``steps(n0, n1, sig_next)`` takes the base steps n0 .. n1-1 and returns the next
-        step at which a signal must be evaluated. Every FMI call in it is a prebuilt
-        ``functools.partial`` of the raw ctypes entry point with its value-reference and
-        value arrays: no look-ups, no allocation, no loop over components per step.
-        A failing call raises ``_StepFailed`` carrying the step it failed at.
-        """
-        ns = {"_StepFailed": _StepFailed, "_Interrupted": _Interrupted, "update": self._update_signals,
-              "h": self.h, "fail_get": self._get_failed, "fail_set": self._put_failed,
-              "fail_step": self._step_failed, "check_finite": self._check_finite, "flush": self._flush_pending,
-              "vsum": sum, "t_c": ctypes.c_double(0.0), "true_c": ctypes.c_int(1)}
-        jacobi = self.spec.algorithm == "jacobi"
-        reads, writes, steps = [], [], []
-        for i, st in enumerate(self.steppers):
-            ns[f"st{i}"], ns[f"pend{i}"] = st, st.pending
-            ns[f"do{i}"], ns[f"h{i}_c"] = functools.partial(st.do_step_typed, st.handle), ctypes.c_double(st.step_size)
-            guard = f"if n % {st.multiple} == 0:" if st.multiple > 1 else None
-            ind = "    " if guard else ""
-
-            def block(lines, guard=guard):
-                return ([guard] if guard and lines else []) + lines
-
-            read, write = [], []
-            for j, tr in enumerate(st.transfers):
-                ns[f"get{i}_{j}"], ns[f"set{i}_{j}"] = tr.get, tr.set
-                read += [f"{ind}if (s := get{i}_{j}()) > 1: raise fail_get(st{i}, {j}, t, s)"]
-                if tr.kind == "Real":
-                    ns[f"buf{i}_{j}"] = tr.values
-                    if len(tr.values) <= _UNROLL:  # (signal inputs after the connections: finite)
-                        total = " + ".join(f"buf{i}_{j}[{k}]" for k in range(len(tr.values)))
-                    else:
-                        total = f"vsum(buf{i}_{j})"
-                    # NaN or inf in the values read: x - x is 0.0 for a finite sum, NaN otherwise
-                    read += [f"{ind}x = {total}",
-                             f"{ind}if x - x: check_finite(st{i}, {j}, t)"]
-                elif tr.kind == "String":
-                    ns[f"hold{i}_{j}"] = functools.partial(hold_strings, tr.buf)
-                    read += [f"{ind}hold{i}_{j}()"]
-                write += [f"{ind}if (s := set{i}_{j}()) > 1: raise fail_set(st{i}, {j}, t, s)"]
-            flush = []
-            if st.multiple > 1 and any(tg.stepper is st for sig in self.signals for tg in sig.targets):
-                flush = [f"{ind}if pend{i}: flush(st{i}, t)"]  # queued signal inputs
-            step = [f"{ind}if (s := do{i}(t_c, h{i}_c, true_c)) > 1: raise fail_step(st{i}, t, s)"]
-            if jacobi:  # all reads at t_n, then all writes, then all steps
-                reads += block(read)
-                writes += block(write + flush)
-                steps += block(step)
-            else:  # Gauss-Seidel: read the freshest values, write, step; component by component
-                steps += block(read + write + flush + step)
-        body = reads + writes + steps
-        src = "\n".join([
-            "def steps(n0, n1, sig_next):",
-            "    n = n0",
-            "    try:",
-            "        for n in range(n0, n1):",
-            "            if n >= sig_next:",
-            "                sig_next = update(n)",
-            "            t = n * h",
-            "            t_c.value = t  # the time of fmi2DoStep, as a C double (do_step_typed)",
-            *("            " + line for line in body),
-            "    except _StepFailed as exc:",
-            "        exc.n = n",
-            "        raise",
-            "    except KeyboardInterrupt:",
-            "        raise _Interrupted(n) from None",
-            "    return sig_next",
-        ])
-        self.step_source = src
-        # registered in linecache (as doctest does) so that tracebacks show the generated lines
-        filename = f"<generated steps of {self.spec.name}>"
-        linecache.cache[filename] = (len(src), None, [line + "\n" for line in src.splitlines()], filename)
-        exec(compile(src, filename, "exec"), ns)
-        return ns["steps"]
 
     # -- recording -------------------------------------------------------------------
     def _row(self, n: int) -> list:
@@ -767,6 +705,7 @@ class Master:
             "stop_time": s.stop_time,
             "output_interval": s.output_interval,
             "loop": self.loop,
+            **({"loop_note": self.loop_note} if self.loop_note else {}),
             "settings": {**s.settings(), **(extra or {})},
         })
         return out

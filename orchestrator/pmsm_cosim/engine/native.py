@@ -1,5 +1,5 @@
-"""The stepping loop in machine code: the generated loop's FMI calls, in the same order, made by
-a numba-compiled function through the FMUs' C entry points (``Master(loop="compiled")``).
+"""The stepping loop in machine code: the plain loop's FMI calls (``Master._plain_steps``), in the
+same order, made by a numba-compiled function through the FMUs' C entry points (``Master(loop="compiled")``).
 
 Why: per macro step a system of two FMUs makes six FMI calls. From Python each goes through
 ctypes (argument conversion, libffi) and the loop's own bytecode; together with the scenario
@@ -14,11 +14,14 @@ same doubles and results.csv is the same, byte for byte (``tests/test_engine_loo
 What stays in Python (``NativeSteps.__call__``, once per chunk): every other signal evaluation
 (the chunk ends at the step where one is due), the error reports (a status above fmi2Warning
 or a value that is not finite ends the chunk at that step with its code; the wrapper raises
-the exception the generated loop would), and a Ctrl-C (the slaves' Python sees it; the
-master's checks run between chunks, at most ``MAX_CHUNK`` steps apart).
+the exception the plain loop would), a Ctrl-C (the slaves' Python sees it; the master's
+checks run between chunks, at most ``MAX_CHUNK`` steps apart), and the steps of a multi-rate
+component's queued signal input: from the step the signal changed to that component's next
+step, the plain loop's own steps (``Master._plain_steps``, which set the input before that
+component's fmi2DoStep), then machine code again.
 
-A system it cannot step (String connections, a multi-rate component with queued signal
-inputs) has ``unsupported(master)``; ``Master`` then falls back to the generated loop unless
+A system it cannot step (String connections: the strings are copied between the calls) has
+``unsupported(master)``; ``Master`` then runs the plain loop, with a line saying so, unless
 this one was asked for by name. numba is imported only here, when this loop is used (the
 physics kernels' FMUs load it anyway); its compiled code is cached on disk like any numba
 function (numba's cache locator: next to this file, or the user's cache directory).
@@ -29,9 +32,11 @@ from __future__ import annotations
 import ctypes
 
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
+from numba import njit, types  # before llvmlite: without numba, the ImportError names numba (Master's fallback)
 from numba.extending import intrinsic
+
+# isort: split
+from llvmlite import ir
 
 #: codes of the first step that did not complete, as returned by ``_steps``
 OK, GET_FAILED, NOT_FINITE, SET_FAILED, STEP_FAILED = 0, 1, 2, 3, 4
@@ -144,8 +149,6 @@ def unsupported(master) -> str:
         for tr in st.transfers:
             if tr.kind == "String":
                 return f"{st.inst.name} has String connections (copied between the calls)"
-        if st.multiple > 1 and any(tg.stepper is st for sig in master.signals for tg in sig.targets if not tg.merged):
-            return f"{st.inst.name} is stepped every {st.multiple} steps and has signal inputs"
     return ""
 
 
@@ -200,6 +203,9 @@ class NativeSteps:
             if sig.targets and all(tg.merged for tg in sig.targets):
                 self.inline.append((sig, [slot_of[id(tg)] for tg in sig.targets]))
         self._no_ramp = (np.zeros(0, dtype=np.intp), np.zeros((0, 4)))
+        #: multi-rate components with signal inputs queued until their step (stepped by the plain loop then)
+        self.queued = [st for st in steppers if st.multiple > 1
+                       and any(tg.stepper is st and not tg.merged for sig in master.signals for tg in sig.targets)]
 
     def compile(self) -> None:
         """Compile the loop for this system's argument types (or load it from numba's cache): no step taken."""
@@ -234,6 +240,13 @@ class NativeSteps:
             while n < n1:
                 if n >= sig_next:
                     sig_next = m._update_signals(n)
+                if self.queued and any(st.pending for st in self.queued):
+                    # a queued signal input: the plain loop's steps up to its component's next step
+                    due = min(-(-n // st.multiple) * st.multiple for st in self.queued if st.pending)
+                    end = min(n1, due + 1)
+                    sig_next = m._plain_steps(n, end, sig_next)
+                    n = end
+                    continue
                 # the chunk: up to n1 or the next step at which Python must evaluate a signal; a merged
                 # linear table on its ramp (evaluated at n + 1 .. ramp_end - 1 by the formula) in the loop
                 lim, ramping, slots, consts = n1, [], [], []
@@ -264,7 +277,7 @@ class NativeSteps:
         return sig_next
 
     def _failure(self, code: int, index: int, status: int, n: int):
-        """The exception the generated loop raises for the failure ``code`` at base step n."""
+        """The exception the plain loop raises for the failure ``code`` at base step n."""
         m, t = self.master, n * self.h
         if code == STEP_FAILED:
             exc = m._step_failed(m.steppers[index], t, status)

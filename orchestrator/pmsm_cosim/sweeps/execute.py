@@ -13,7 +13,9 @@ resolved: signal tables loaded, paths fixed) and the bytes of its FMUs, writes t
 once into its local directory (keyed by content hash), runs the engine's
 :class:`~pmsm_cosim.engine.master.Master` into a scratch directory and returns the files,
 which the client writes. Workers need this package installed (for the engine and the
-application's hooks); the physics travels inside the FMUs.
+application's hooks); the physics travels inside the FMUs. Each task measures its own wall
+time (``sample_s``, in metrics.json and summary.csv); the client's line for a finished run
+gives that cost and the time left for the rest at the pace so far.
 
 Dask (``distributed``) is heavy: it is imported inside the functions that use it, when a
 sweep runs, not when the package is imported.
@@ -26,6 +28,7 @@ import copy
 import hashlib
 import json
 import logging
+import math
 import os
 import shutil
 import signal
@@ -246,7 +249,9 @@ def _local_fmu(sha: str, filename: str, blob: bytes) -> Path:
 def execute_run(task: dict, blobs: dict[str, bytes]) -> dict:
     """Run one co-simulation (a Dask task): returns {"id", "status", "error", "files"}, where
     ``files`` maps the run directory's relative paths to their bytes. Never raises for a
-    failed run: a refusal at load or initialization is a failed status with its reason."""
+    failed run: a refusal at load or initialization is a failed status with its reason.
+    ``sample_s``: the task's wall time [s] from its start to its files read (also in metrics.json)."""
+    t0 = time.perf_counter()
     spec: SystemSpec = task["spec"]
     hooks: SweepHooks = task["hooks"]
     client_paths = {c.name: str(c.fmu) for c in spec.components}
@@ -280,11 +285,14 @@ def execute_run(task: dict, blobs: dict[str, bytes]) -> dict:
             result["status"], _, result["error"] = status.partition(": ")
             if task["figures"] and hooks.figures is not None and metrics.get("rows", 0) >= 2:
                 hooks.figures(out, spec.name, True)
+            metrics["sample_s"] = time.perf_counter() - t0  # the sample's cost, the figures included
+            write_metrics(out, metrics)
         for p in sorted(out.rglob("*")):
             if p.is_file():
                 result["files"][p.relative_to(out).as_posix()] = p.read_bytes()
     finally:
         shutil.rmtree(out, ignore_errors=True)
+    result["sample_s"] = time.perf_counter() - t0
     return result
 
 
@@ -415,6 +423,34 @@ def _raise_interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+def duration(seconds: float) -> str:
+    """A duration for the console: 12.3 s, 4.5 min, 2.1 h."""
+    if seconds < 120:
+        return f"{seconds:.1f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def cost_text(row: dict) -> str:
+    """A sample's cost as the console line gives it: its wall time on the worker and the stepping loop's cost
+    a step, each if known ("" if neither)."""
+    parts = []
+    if math.isfinite(row.get("sample_s", math.nan)):
+        parts.append(duration(row["sample_s"]))
+    if math.isfinite(row.get("us_per_step", math.nan)) and row["us_per_step"] > 0:
+        parts.append(f"{row['us_per_step']:.2f} us/step")
+    return "; " + ", ".join(parts) if parts else ""
+
+
+def eta_text(left: int, finished: int, elapsed: float) -> str:
+    """The time left for ``left`` samples at the pace so far (``finished`` samples in ``elapsed`` seconds of
+    the sweep, whatever the number of workers), "" when nothing is left or nothing finished yet."""
+    if left <= 0 or finished <= 0:
+        return ""
+    return f"; {left} left, ETA {duration(elapsed / finished * left)}"
+
+
 def run_sweep(sweep: SweepSpec, out, *, scheduler: str | None = None, workers: int | None = None,
               client=None, quiet: bool = False, stream=None) -> SweepOutcome:
     """Run the sweep's runs that are not done yet into ``out``; write summary.csv and summary.png.
@@ -462,6 +498,8 @@ def run_sweep(sweep: SweepSpec, out, *, scheduler: str | None = None, workers: i
                 shutil.rmtree(run_dir)
             os.replace(staging, run_dir)
         row = _row(sweep, run.plan, res["status"], res["error"], _read_metrics(run_dir) if res["files"] else None)
+        if not math.isfinite(row["sample_s"]) and "sample_s" in res:  # a run refused before its metrics.json
+            row["sample_s"] = float(res["sample_s"])
         rows[run.plan.index] = row
         done += 1
         write_summary(sweep, list(rows.values()), out)
@@ -471,11 +509,13 @@ def run_sweep(sweep: SweepSpec, out, *, scheduler: str | None = None, workers: i
             tail = f": {res['error']}" if res["error"] else ""
         if bar:
             bar.close()
-        say(f"[{done}/{total}] {run.plan.id}: {res['status']}{tail}")
+        eta = eta_text(total - done, done - skipped, time.perf_counter() - started)
+        say(f"[{done}/{total}] {run.plan.id}: {res['status']}{tail}{cost_text(row)}{eta}")
         if bar:
             bar.update(done, force=True)
 
     bar = CountBar(total) if todo and CountBar.wanted(quiet) else None
+    started = time.perf_counter()  # the pace of the samples run now: their ETA
     old_term = None
     if todo and threading.current_thread() is threading.main_thread():  # SIGTERM stops the sweep like Ctrl-C
         old_term = signal.signal(signal.SIGTERM, _raise_interrupt)
@@ -485,6 +525,7 @@ def run_sweep(sweep: SweepSpec, out, *, scheduler: str | None = None, workers: i
             ctx = contextlib.nullcontext(client) if client is not None else dask_client(scheduler, n_workers)
             with ctx as cl:
                 futures = _submit(cl, sweep, todo)
+                started = time.perf_counter()  # (the cluster up, the FMUs shipped)
                 if bar:
                     bar.update(done, force=True)
                 try:

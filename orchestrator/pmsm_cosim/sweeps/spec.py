@@ -32,8 +32,10 @@ GRID_KEYS = ("values", "from", "to", "num", "scale")
 SCALES = ("linear", "log")
 RANDOM_KEYS = ("uniform", "log_uniform", "choice", "integers")
 RANDOM_SETTINGS = ("samples", "seed")
-#: numbers in summary.csv besides the figures of merit
-BOOKKEEPING = ("wall_time_s", "us_per_step")
+#: numbers in summary.csv besides the figures of merit: the stepping loop's wall time and cost a step (the
+#: master's), and the sample's whole cost on its worker (``sample_s``: loading, initialising, stepping, metrics,
+#: figures; what a study's throughput is made of)
+BOOKKEEPING = ("wall_time_s", "us_per_step", "sample_s")
 #: run directories live in OUT/runs/
 RUNS_DIR = "runs"
 MAX_ID_LENGTH = 80
