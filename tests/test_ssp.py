@@ -163,9 +163,12 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     """What OMSimulator needs (its annotation first in the system, no String in an .ssv, no
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
     now in the system), and still valid SSP 1.0."""
-    assert len(SCENARIOS) == 21  # the paper's 2, their 4 variants, 3 sensorless, 3 acceleration, 9 drive-cycle runs
+    # the paper's 2, their 4 variants, 4 sensorless (one with injection), 3 acceleration, 9 drive-cycle runs
+    assert len(SCENARIOS) == 22
+    # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit
+    ctrl = "FocSensorless" if scenario.endswith("-injection") else "FocEkf5"
     args = ["export-ssp", scenario, "-o", str(tmp_path / "p.ssp"), "--plant", str(fmus["PmsmEvPlant"]),
-            "--controller", str(fmus["FocEkf5"])]
+            "--controller", str(fmus[ctrl])]
     if angle_source:
         args += ["--set", f"ctrl.angle_source={angle_source}"]
     assert main(args) == 0
@@ -187,11 +190,12 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     # a String start value that is not the FMU's default rides in a copy of the FMU: the acceleration and cycle
     # runs' set the reference generator and the plant's gear model (strings), the others only angle_source; the
     # hilly road's RouteProfile in position mode carries its road name
+    # hill-start-injection's: the plant's flux model and the unit's low_speed
     cycle = scenario.split("-")[0] in ("wltc3b", "udds", "hwfet", "us06")
-    strings = scenario.startswith("acceleration") or cycle
+    strings = scenario.startswith("acceleration") or cycle or scenario.endswith("-injection")
     assert fmu_names == sorted(["resources/PmsmEvPlant_plant.fmu" if strings else "resources/PmsmEvPlant.fmu",
                                 "resources/RouteProfile.fmu",
-                                "resources/FocEkf5_ctrl.fmu" if angle_source or strings else "resources/FocEkf5.fmu"]
+                                f"resources/{ctrl}_ctrl.fmu" if angle_source or strings else f"resources/{ctrl}.fmu"]
                                + (["resources/RouteProfile_road.fmu"] if scenario.endswith("-hilly") else []))
     spec = load_ssp(tmp_path / "p.ssp")
     assert spec.algorithm == "gauss-seidel"  # the run record is read
