@@ -285,6 +285,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "pol_hold": ("s", "the polarity test's hold at each sign"),
     "pol_contrast": (None, "the least relative difference of the d admittances at +-pol_current that decides the "
                            "polarity (below: unresolved; twice: the fault latches without torque)"),
+    "inj_cross_comp": (None, "cross-saturation's offset of the injection's axis compensated with the controller's "
+                             "model of the saturation (the algebraic flux model's defaults on its L_d, L_q, psi)"),
     "inj_los_angle": ("rad", "loss of synchronism under injection: the tracking observer's angle error (or, in the "
                              "blend, its disagreement with the EKF) beyond this ..."),
     "inj_los_time": ("s", "... for this long"),

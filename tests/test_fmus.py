@@ -42,6 +42,7 @@ from pmsm_ev.params import (
     ControllerParams,
     DriveParams,
     EkfParams,
+    InjectionParams,
     MotorParams,
     ParameterError,
     PlantParams,
@@ -395,7 +396,7 @@ def test_model_description_is_complete(fmus, name):
         if v.unit is not None:
             assert v.unit in units
     groups = (MotorParams, VehicleParams, PlantParams) if name == "PmsmEvPlant" else \
-        (ControllerParams, EkfParams, MotorParams, StartupParams) if name == "FocSensorless" else \
+        (ControllerParams, EkfParams, MotorParams, StartupParams, InjectionParams) if name == "FocSensorless" else \
         (ControllerParams, EkfParams, MotorParams)
     expected = {f.name for cls in groups for f in dataclasses.fields(cls)}
     if name != "PmsmEvPlant":

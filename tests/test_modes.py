@@ -117,7 +117,7 @@ def test_a_disagreeing_ekf_is_put_on_the_injection_as_an_episode():
     s[k.S_TRK:k.S_TRK + 3] = [0.3, 20.0, 5.0]
     s[k.S_X + 2], s[k.S_X + 3] = 19.0, 1.3
     assert _go(s, c, k.MODE_INJECTION, k.EV_DISAGREE) == k.MODE_INJECTION
-    assert (s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4]) == (20.0, 0.3, 5.0)
+    assert (s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4]) == pytest.approx((20.0, 0.3, 5.0))
     assert s[k.S_EPISODE] > 0.0
     assert s[k.S_P + 18] == c[k.C_P0_ALIGNED + 3]  # the angle's variance of the restart
 
@@ -169,9 +169,11 @@ def test_polarity_decided_by_the_larger_d_admittance(y_pos, y_neg, event):
     assert k.detect_polarity(s, c) == k.EV_NONE
 
 
-def test_speed_detector_has_its_hysteresis():
+def test_speed_detector_has_its_hysteresis_and_no_transition_at_a_modes_start():
     _, s, c = _unit()
     hi, hyst = c[k.C_BLEND_HI], c[k.C_BLEND_HYST]
+    assert k.detect_speed(s, c, k.MODE_INJECTION, 2 * hi) == k.EV_NONE  # the mode just began
+    s[k.S_MODE_TIME] = c[k.C_INJ_LOS_TIME]
     assert k.detect_speed(s, c, k.MODE_INJECTION, hi - 0.01) == k.EV_NONE
     assert k.detect_speed(s, c, k.MODE_INJECTION, -hi) == k.EV_FAST
     assert k.detect_speed(s, c, k.MODE_EKF, hi - 0.5 * hyst) == k.EV_NONE
@@ -194,7 +196,9 @@ def test_disagreement_counts_only_in_the_blend():
     n = round(c[k.C_INJ_LOS_TIME] / c[k.C_DT])
     s[k.S_BLEND] = 0.0  # the EKF is not used: its angle is no evidence
     assert all(k.detect_injection_lost(s, c) == k.EV_NONE for _ in range(2 * n))
-    s[k.S_BLEND] = 0.5
+    s[k.S_BLEND] = 0.6  # the square wave off: the tracking observer follows the EKF, no evidence either
+    assert all(k.detect_injection_lost(s, c) == k.EV_NONE for _ in range(2 * n))
+    s[k.S_BLEND] = 0.3
     events = [k.detect_injection_lost(s, c) for _ in range(n)]
     assert events[-1] == k.EV_DISAGREE and set(events[:-1]) == {k.EV_NONE}
 

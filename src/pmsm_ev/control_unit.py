@@ -141,9 +141,10 @@ class ControlUnit:
         if not dt > 0:
             raise ParameterError(f"dt must be > 0 s (got {dt})")
         self.dt = dt
-        self.injection.validate(dt, self.params.u_limit)
         #: the sensorless unit's strategy at and near zero speed: injection (``pmsm_ev.kernels.modes``)
         self.injecting = self.sensorless and self.injection.low_speed == "injection"
+        if self.sensorless:  # the injection's voltage and frequency checked where it runs
+            self.injection.validate(dt if self.injecting else None, self.params.u_limit if self.injecting else None)
         self.observer_name = observer
         self._kernels = accel.kernels()
         self._s = accel.vector(_k.UNIT_STATE)

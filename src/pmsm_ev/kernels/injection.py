@@ -165,16 +165,18 @@ def angle_error(signal):
 
 
 @kernel()
-def track(s, c, t_e, correct):
+def track(s, c, t_e, gain):
     """One control period of the tracking observer (I3): the prediction with the torque ``t_e`` [N m]
-    (the model's, from the fundamental currents), then, where ``correct``, the correction by the angle
-    error of the last answer over the m periods it stands for."""
+    (the model's, from the fundamental currents), then, where ``gain`` > 0, the correction by the angle
+    error of the last answer over the m periods it stands for, times ``gain`` (1 at the square wave's full
+    amplitude; the square of its share where it fades: the answer's noise grows as the amplitude falls,
+    and its weight falls as its information)."""
     dt = c[C_DT]
     s[S_TRK] = wrap_angle(s[S_TRK] + c[C_N] * s[S_TRK + 1] * dt)
     s[S_TRK + 1] += (t_e - s[S_TRK + 2]) / c[C_TRK_J] * dt
-    if correct:
+    if gain > 0.0:
         e = angle_error(s[S_INJ_ERR])
-        h = c[C_INJ_M] * dt
+        h = gain * c[C_INJ_M] * dt
         s[S_TRK] = wrap_angle(s[S_TRK] + c[C_TRK_L] * e * h)
         s[S_TRK + 1] += c[C_TRK_L + 1] * e * h
         s[S_TRK + 2] -= c[C_TRK_L + 2] * e * h
@@ -201,6 +203,13 @@ def cross_offset(c, i_q):
     j = min(int(x), 7)
     phi = c[C_CROSS + j] + (x - j) * (c[C_CROSS + j + 1] - c[C_CROSS + j])
     return phi if i_q >= 0.0 else -phi
+
+
+@kernel()
+def injection_share(w):
+    """The square wave's amplitude as a share of ``C_INJ_V`` at the EKF's weight ``w``: 1 at 0, falling to 0
+    at w = 1/2 (the EKF then carries at least half the frame, and the tracking observer follows it)."""
+    return max(1.0 - 2.0 * w, 0.0)
 
 
 @kernel()

@@ -302,7 +302,8 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_RESID_F", 1, "the EKF's current innovation magnitude, low-pass filtered [A]"),
     ("S_EKF_LOS_T", 1, "how long it has been beyond its bound [s]"),
     ("S_EVENT", 1, "the event of the last period (EV_*; 0 none)"),
-    ("S_CROSS", 1, "the injection's axis less the estimated d axis in the last period [rad]: cross-saturation's offset"),
+    ("S_CROSS", 1, "the injection's axis less the estimated d axis in the last period [rad]: "
+                   "cross-saturation's offset"),
 ), size=194)
 
 #: the control unit's parameter vector

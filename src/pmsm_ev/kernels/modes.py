@@ -41,6 +41,7 @@ from .injection import (
     cross_offset,
     demodulate,
     fundamental,
+    injection_share,
     injection_voltage,
     seat_tracker,
     seed_fundamental,
@@ -149,7 +150,7 @@ A_RETRY = 4.0  #: count an unresolved test; the second latches the fault; then a
 A_EKF_ALONE = 5.0  #: the injection off (``enter_ekf``)
 A_INJECTION_ON = 6.0  #: the injection on again, the tracking observer on the EKF (``enter_injection``)
 A_REACQUIRE = 7.0  #: an episode; then as A_ACQUIRE
-A_RESEAT = 8.0  #: an episode; the less trusted of the two observers put on the other (``reseat``)
+A_RESEAT = 8.0  #: an episode; the EKF put on the tracking observer (``reseat``)
 A_RESTART_EKF = 9.0  #: an episode; the EKF's covariance back to an unknown start's (``restart_ekf_search``)
 
 #: the transition table: (mode, event, next mode, entry action), looked up in order, the first match
@@ -238,10 +239,11 @@ def detect_injection_lost(s, c):
     """EV_INJECTION_LOST when the tracking observer's filtered angle error has stayed beyond
     ``C_INJ_LOS_ANGLE`` for ``C_INJ_LOS_TIME`` (its timer ``S_INJ_LOS_T``): the injection no longer
     sees the axis it tracks (the saliency gone, or the rotor slipped faster than the observer follows);
-    EV_DISAGREE when, in the blend, the EKF's angle has stayed that far from the tracking observer's."""
+    EV_DISAGREE when, in the blend's lower half (where both observers are evidence: ``injection_share``),
+    the EKF's angle has stayed that far from the tracking observer's (less the cross-saturation's offset)."""
     w = s[S_BLEND]
     far = abs(s[S_INJ_ERR_F]) > c[C_INJ_LOS_ANGLE]
-    apart = 0.0 < w < 1.0 and abs(wrap_angle(s[S_X + 3] - s[S_TRK])) > c[C_INJ_LOS_ANGLE]
+    apart = 0.0 < w < 0.5 and abs(wrap_angle(s[S_X + 3] + s[S_CROSS] - s[S_TRK])) > c[C_INJ_LOS_ANGLE]
     s[S_INJ_LOS_T] = s[S_INJ_LOS_T] + c[C_DT] if (far or apart) else 0.0
     if s[S_INJ_LOS_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
         return EV_NONE
@@ -370,13 +372,10 @@ def trust_ekf(s):
 
 @kernel()
 def reseat(s, c):
-    """The two observers disagree in the blend: the one with the lesser weight is put on the other (the EKF
-    on the injection in the blend's lower half, where the back-EMF is the weaker evidence; else the
-    tracking observer on the EKF)."""
-    if s[S_BLEND] < 0.5:
-        trust_injection(s, c)
-    else:
-        trust_ekf(s)
+    """The two observers disagree in the blend's lower half, where the injection's answer is the stronger
+    evidence (the back-EMF is at most half the frame's, and weak at that speed against a mismatched
+    resistance): the EKF put on the tracking observer (``trust_injection``)."""
+    trust_injection(s, c)
 
 
 @kernel()
@@ -504,8 +503,9 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     injecting = mode != MODE_EKF
     phase = acquisition_phase(c, t) if mode == MODE_ACQUIRE else 3
     answer = injecting and s[S_INJ_NEW] != 0.0
-    track(s, c, model_torque(c, f_d, f_q), answer and phase >= 2)
-    if answer and phase >= 2:
+    share = injection_share(s[S_BLEND]) if mode == MODE_INJECTION else 1.0
+    track(s, c, model_torque(c, f_d, f_q), share * share if answer and phase >= 2 else 0.0)
+    if answer and phase >= 2 and share > 0.0:
         s[S_INJ_ERR_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (angle_error(s[S_INJ_ERR]) - s[S_INJ_ERR_F])
     if mode == MODE_ACQUIRE:
         if answer and phase < 2:  # the answers on each axis summed
@@ -569,9 +569,11 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             s[S_X + 2] = s[S_TRK + 1]
             s[S_X + 3] = wrap_angle(s[S_TRK] - phi)
             s[S_X + 4] = s[S_TRK + 2]
+        if w >= 0.5:  # the square wave is off: the tracking observer follows the EKF
+            trust_ekf(s)
         theta, omega_ctrl = blended_frame(s, s[S_X + 3], s[S_X + 2], phi)
         offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the injection's axis
-        amplitude = c[C_INJ_V] * (1.0 - w)
+        amplitude = c[C_INJ_V] * injection_share(w)
         i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl)
         i_d, i_q = park(f_alpha, f_beta, theta)
         v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
