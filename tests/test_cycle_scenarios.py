@@ -20,7 +20,8 @@ from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import cycles
 
 CYCLES = ("wltc3b", "udds", "hwfet", "us06")
-SCENARIOS = [c for c in CYCLES] + [f"{c}-sensorless" for c in CYCLES] + ["wltc3b-hilly"]
+SCENARIOS = ([c for c in CYCLES] + [f"{c}-sensorless" for c in CYCLES] + [f"{c}-injection" for c in CYCLES]
+             + ["wltc3b-hilly"])
 
 
 @pytest.fixture(scope="module")
@@ -45,13 +46,33 @@ def test_a_shipped_cycle_scenario_lasts_its_cycle_with_the_drive_of_the_speed_ra
     assert ("ctrl", "omega_ref") in [tuple(d) for d in sig.drives]
     ctrl = next(c for c in spec.components if c.name == "ctrl")
     plant = next(c for c in spec.components if c.name == "plant")
-    assert ctrl.fmu.name == ("FocSensorless.fmu" if name.endswith("-sensorless") else "FocSensored.fmu")
+    sensorless = name.endswith(("-sensorless", "-injection"))
+    assert ctrl.fmu.name == ("FocSensorless.fmu" if sensorless else "FocSensored.fmu")
+    assert (ctrl.start.get("low_speed"), plant.start.get("flux_model")) == (
+        ("injection", "algebraic") if name.endswith("-injection") else (None, None))
     assert ctrl.start["reference"] == "fw" and ctrl.start["speed_feedforward"] == "inertia+road"
     assert plant.start["sensor_noise"] == 1.0
     roads = [c for c in spec.components if c.name == "road"]
     assert len(roads) == (1 if name.endswith("-hilly") else 0)
     # the reference's top speed is the cycle's at the motor: v n_g / r_w, Table II
     assert max(sig.profile.values) == pytest.approx(cycle.top_speed * 12.5 / 0.2933, rel=1e-3)
+
+
+@pytest.mark.parametrize("theta0", [0.9, -2.6])
+def test_us06_with_injection_through_a_stop_and_restart_from_an_angle_it_was_not_told(fmus, tmp_path, theta0):
+    """The first 60 s of US06 with injection at and near zero speed, the rotor parked at theta_e0, 1 A of
+    noise, the plant's algebraic flux model: inside the +-2 km/h band all the way, no turn slipped, no
+    episode, the car standing at the stop, and the unit went acquire -> polarity -> injection -> EKF ->
+    injection (the stop) -> EKF."""
+    r, m = _run(tmp_path, "us06i", 60, "us06-injection", "--set", f"plant.theta_e0={theta0}")
+    trace, sync = m["trace"], m["synchronism"]
+    assert m["status"] == "completed"
+    assert trace["inside_share"] == 1.0 and trace["rmse_kmh"] < 0.6
+    assert sync["slipped_turns"] == 0 and sync["episodes"] == 0 and not sync["fault_latched"]
+    modes = [int(to) for _, _, to in m["sensorless"]["mode_changes"]]
+    assert modes[:5] == [4, 5, 2, 5, 2]
+    stop = (r["time"] > 42.0) & (r["time"] < 47.5)
+    assert np.all(np.abs(r["v_vehicle"][stop]) < 0.05)
 
 
 @pytest.mark.parametrize("theta0", [2.2, -1.9])

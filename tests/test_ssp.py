@@ -163,8 +163,9 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     """What OMSimulator needs (its annotation first in the system, no String in an .ssv, no
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
     now in the system), and still valid SSP 1.0."""
-    # the paper's 2, their 4 variants, 4 sensorless (one with injection), 3 acceleration, 9 drive-cycle runs
-    assert len(SCENARIOS) == 22
+    # the paper's 2, their 4 variants, 4 sensorless (one with injection), 3 acceleration, 13 drive-cycle runs (4
+    # with injection)
+    assert len(SCENARIOS) == 26
     # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit
     ctrl = "FocSensorless" if scenario.endswith("-injection") else "FocEkf5"
     args = ["export-ssp", scenario, "-o", str(tmp_path / "p.ssp"), "--plant", str(fmus["PmsmEvPlant"]),

@@ -1152,11 +1152,12 @@ class InjectionParams:
     inj_los_angle: float = 0.5
     #: ... for this long [s] [chosen: 50 ms, seven time constants of the tracking observer]
     inj_los_time: float = 0.05
-    #: loss of synchronism on the EKF (both strategies' FOC): the EKF's current innovation, low-pass
-    #: filtered (``inj_los_time``), above this [A] ... [chosen: 30 A]: healthy, the innovation is the
-    #: sensors' noise and the model's mismatch, a few A; a diverged angle leaves most of the current
-    #: unexplained
-    ekf_los_current: float = 30.0
+    #: loss of synchronism on the EKF (the injection strategy's FOC on the EKF alone): the EKF's current
+    #: innovation, low-pass filtered (``inj_los_time`` / 3), above this [A] ... [chosen: 60 A]: healthy, the
+    #: innovation is the sensors' noise and the model's mismatch: 2-8 A on the nominal motor, 25 A at 200
+    #: rad/s on a hot one (R_s +50 %, psi -12 %: the back-EMF's error the EKF cannot place); an EKF whose
+    #: angle has left the rotor's leaves most of the current unexplained (hundreds of A)
+    ekf_los_current: float = 60.0
     #: ... for this long [s] [chosen: 0.2 s]
     ekf_los_time: float = 0.2
 

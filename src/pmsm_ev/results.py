@@ -210,19 +210,19 @@ def roll_back(x: np.ndarray) -> float:
 
 def sensorless_metrics(r: dict[str, np.ndarray], t_from: float = 20.0) -> dict:
     """Figures of a run with the sensorless columns (``SENSORLESS_COLUMNS``): the mode changes
-    (time, from, to; 0 alignment, 1 I-f, 2 closed loop), the first handover to the closed
-    loop, the largest |omega_m - omega_ref| from ``STARTUP_FROM`` on, the roll-back [m] before
-    ``t_from`` (start-up) and after it (stops and restarts), and the time spent in I-f after
-    ``t_from`` [s]."""
+    (time, from, to; 0 alignment, 1 I-f, 2 closed loop on the EKF; with injection 3 acquisition,
+    4 polarity, 5 closed loop on the injection), the first handover to the closed loop (mode 2 or 5),
+    the largest |omega_m - omega_ref| from ``STARTUP_FROM`` on, the roll-back [m] before ``t_from``
+    (start-up) and after it (stops and restarts), and the time spent in I-f after ``t_from`` [s]."""
     t, mode = r["time"], r["mode"]
     changes = [(float(t[i + 1]), float(mode[i]), float(mode[i + 1])) for i in np.nonzero(np.diff(mode))[0]]
-    closed = [c[0] for c in changes if c[2] == 2.0]
+    closed = [c[0] for c in changes if c[2] in (2.0, 5.0)]
     late = t >= STARTUP_FROM
     early = t <= t_from
     dt_row = float(t[1] - t[0]) if len(t) > 1 else 0.0
     return {
         "mode_changes": changes,
-        "t_closed_loop": closed[0] if closed else (0.0 if len(mode) and mode[0] == 2.0 else None),
+        "t_closed_loop": closed[0] if closed else (0.0 if len(mode) and mode[0] in (2.0, 5.0) else None),
         "startup_speed_error_max": float(np.max(np.abs(r["omega_m"][late] - r["omega_ref"][late])))
         if np.any(late) else None,
         "roll_back_start": roll_back(r["x_vehicle"][early]),
