@@ -190,15 +190,16 @@ def test_injection_lost_only_after_its_time():
     assert k.detect_injection_lost(s, c) == k.EV_NONE and s[k.S_INJ_LOS_T] == 0.0
 
 
-def test_disagreement_counts_only_in_the_blend():
+def test_disagreement_counts_only_where_both_observers_are_evidence():
+    """The injection's angle against the EKF's, filtered (``S_DISAGREE_F``), counts only in the blend's first
+    quarter: at rest the EKF is no evidence, past it the square wave is at less than half its amplitude."""
     _, s, c = _unit()
-    s[k.S_X + 3], s[k.S_TRK] = 1.0, -1.0
+    s[k.S_DISAGREE_F] = 2.0 * c[k.C_INJ_LOS_ANGLE]
     n = round(c[k.C_INJ_LOS_TIME] / c[k.C_DT])
-    s[k.S_BLEND] = 0.0  # the EKF is not used: its angle is no evidence
-    assert all(k.detect_injection_lost(s, c) == k.EV_NONE for _ in range(2 * n))
-    s[k.S_BLEND] = 0.6  # the square wave off: the tracking observer follows the EKF, no evidence either
-    assert all(k.detect_injection_lost(s, c) == k.EV_NONE for _ in range(2 * n))
-    s[k.S_BLEND] = 0.3
+    for w in (0.0, 0.3, 0.6):
+        s[k.S_BLEND] = w
+        assert all(k.detect_injection_lost(s, c) == k.EV_NONE for _ in range(2 * n))
+    s[k.S_BLEND] = 0.2
     events = [k.detect_injection_lost(s, c) for _ in range(n)]
     assert events[-1] == k.EV_DISAGREE and set(events[:-1]) == {k.EV_NONE}
 

@@ -165,21 +165,26 @@ def angle_error(signal):
 
 
 @kernel()
-def track(s, c, t_e, gain):
+def track(s, c, t_e, share, answer, e_ekf):
     """One control period of the tracking observer (I3): the prediction with the torque ``t_e`` [N m]
-    (the model's, from the fundamental currents), then, where ``gain`` > 0, the correction by the angle
-    error of the last answer over the m periods it stands for, times ``gain`` (1 at the square wave's full
-    amplitude; the square of its share where it fades: the answer's noise grows as the amplitude falls,
-    and its weight falls as its information)."""
+    (the model's, from the fundamental currents), then the correction by the error
+
+        e = share e_inj + (1 - share) e_ekf,
+
+    e_inj the angle error of the injection's last answer (where ``answer``), e_ekf [rad] the EKF's angle
+    (plus the cross-saturation's offset) less the observer's, ``share`` the square wave's amplitude as a
+    share of its full one (``injection_share``: 1 at rest, 0 from the blend's middle). The observer keeps
+    its poles; what it follows moves from the injection to the EKF with the speed."""
     dt = c[C_DT]
     s[S_TRK] = wrap_angle(s[S_TRK] + c[C_N] * s[S_TRK + 1] * dt)
     s[S_TRK + 1] += (t_e - s[S_TRK + 2]) / c[C_TRK_J] * dt
-    if gain > 0.0:
-        e = angle_error(s[S_INJ_ERR])
-        h = gain * c[C_INJ_M] * dt
-        s[S_TRK] = wrap_angle(s[S_TRK] + c[C_TRK_L] * e * h)
-        s[S_TRK + 1] += c[C_TRK_L + 1] * e * h
-        s[S_TRK + 2] -= c[C_TRK_L + 2] * e * h
+    e = (1.0 - share) * e_ekf
+    if answer:
+        e += share * angle_error(s[S_INJ_ERR])
+    if e != 0.0:
+        s[S_TRK] = wrap_angle(s[S_TRK] + c[C_TRK_L] * e * dt)
+        s[S_TRK + 1] += c[C_TRK_L + 1] * e * dt
+        s[S_TRK + 2] -= c[C_TRK_L + 2] * e * dt
 
 
 @kernel()
@@ -208,7 +213,7 @@ def cross_offset(c, i_q):
 @kernel()
 def injection_share(w):
     """The square wave's amplitude as a share of ``C_INJ_V`` at the EKF's weight ``w``: 1 at 0, falling to 0
-    at w = 1/2 (the EKF then carries at least half the frame, and the tracking observer follows it)."""
+    at w = 1/2 (the EKF then carries at least half the frame, and the tracking observer follows it, ``track``)."""
     return max(1.0 - 2.0 * w, 0.0)
 
 

@@ -297,6 +297,8 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_POL", 4, "the polarity test: sums of the d admittance at +i and at -i [1/H], how many of each [-]"),
     ("S_POL_TRIES", 1, "polarity tests unresolved since enable [-]"),
     ("S_INJ_ERR_F", 1, "the tracking observer's angle error, low-pass filtered [rad]"),
+    ("S_DISAGREE_F", 1, "the injection's angle error less the EKF's (both against the tracking observer), low-pass "
+                        "filtered [rad]"),
     ("S_INJ_LOS_T", 1, "how long the injection's angle error (or its disagreement with the EKF) has been "
                        "beyond its bound [s]"),
     ("S_RESID_F", 1, "the EKF's current innovation magnitude, low-pass filtered [A]"),
@@ -304,7 +306,7 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_EVENT", 1, "the event of the last period (EV_*; 0 none)"),
     ("S_CROSS", 1, "the injection's axis less the estimated d axis in the last period [rad]: "
                    "cross-saturation's offset"),
-), size=194)
+), size=195)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (

@@ -92,6 +92,7 @@ from .layout import (
     S_ACQ,
     S_BLEND,
     S_CROSS,
+    S_DISAGREE_F,
     S_EKF_LOS_T,
     S_EPISODE,
     S_EVENT,
@@ -239,11 +240,12 @@ def detect_injection_lost(s, c):
     """EV_INJECTION_LOST when the tracking observer's filtered angle error has stayed beyond
     ``C_INJ_LOS_ANGLE`` for ``C_INJ_LOS_TIME`` (its timer ``S_INJ_LOS_T``): the injection no longer
     sees the axis it tracks (the saliency gone, or the rotor slipped faster than the observer follows);
-    EV_DISAGREE when, in the blend's lower half (where both observers are evidence: ``injection_share``),
-    the EKF's angle has stayed that far from the tracking observer's (less the cross-saturation's offset)."""
+    EV_DISAGREE when, in the blend's first quarter (the square wave at half its amplitude or more:
+    ``injection_share``), the injection's angle and the EKF's (plus the cross-saturation's offset), both
+    against the tracking observer, filtered, have stayed that far apart."""
     w = s[S_BLEND]
     far = abs(s[S_INJ_ERR_F]) > c[C_INJ_LOS_ANGLE]
-    apart = 0.0 < w < 0.5 and abs(wrap_angle(s[S_X + 3] + s[S_CROSS] - s[S_TRK])) > c[C_INJ_LOS_ANGLE]
+    apart = 0.0 < w <= 0.25 and abs(s[S_DISAGREE_F]) > c[C_INJ_LOS_ANGLE]
     s[S_INJ_LOS_T] = s[S_INJ_LOS_T] + c[C_DT] if (far or apart) else 0.0
     if s[S_INJ_LOS_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
         return EV_NONE
@@ -296,6 +298,7 @@ def detect(s, c, mode):
 def clear_detectors(s):
     """The detectors' timers and filters from zero."""
     s[S_INJ_ERR_F] = 0.0
+    s[S_DISAGREE_F] = 0.0
     s[S_INJ_LOS_T] = 0.0
     s[S_EKF_LOS_T] = 0.0
 
@@ -504,9 +507,12 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     phase = acquisition_phase(c, t) if mode == MODE_ACQUIRE else 3
     answer = injecting and s[S_INJ_NEW] != 0.0
     share = injection_share(s[S_BLEND]) if mode == MODE_INJECTION else 1.0
-    track(s, c, model_torque(c, f_d, f_q), share * share if answer and phase >= 2 else 0.0)
+    e_ekf = wrap_angle(s[S_X + 3] + s[S_CROSS] - s[S_TRK]) if share < 1.0 else 0.0
+    track(s, c, model_torque(c, f_d, f_q), share, answer and phase >= 2, e_ekf)
     if answer and phase >= 2 and share > 0.0:
-        s[S_INJ_ERR_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (angle_error(s[S_INJ_ERR]) - s[S_INJ_ERR_F])
+        e_inj = angle_error(s[S_INJ_ERR])
+        s[S_INJ_ERR_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (e_inj - s[S_INJ_ERR_F])
+        s[S_DISAGREE_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (e_inj - e_ekf - s[S_DISAGREE_F])
     if mode == MODE_ACQUIRE:
         if answer and phase < 2:  # the answers on each axis summed
             s[S_ACQ + phase] += s[S_INJ_ERR]
@@ -569,8 +575,6 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             s[S_X + 2] = s[S_TRK + 1]
             s[S_X + 3] = wrap_angle(s[S_TRK] - phi)
             s[S_X + 4] = s[S_TRK + 2]
-        if w >= 0.5:  # the square wave is off: the tracking observer follows the EKF
-            trust_ekf(s)
         theta, omega_ctrl = blended_frame(s, s[S_X + 3], s[S_X + 2], phi)
         offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the injection's axis
         amplitude = c[C_INJ_V] * injection_share(w)
