@@ -1225,10 +1225,13 @@ class DriveParams:
     ekf: EkfParams = field(default_factory=EkfParams)
     scenario: ScenarioParams = field(default_factory=ScenarioParams)
     startup: StartupParams = field(default_factory=StartupParams)  #: the sensorless unit only
+    #: the sensorless unit's injection at and near zero speed (``low_speed``; off by default)
+    injection: InjectionParams = field(default_factory=InjectionParams)
     dt: float = DT_DEFAULT  #: control period = communication step [s]
 
     def validate(self) -> "DriveParams":
-        for group in (self.motor, self.vehicle, self.plant, self.controller, self.ekf, self.scenario, self.startup):
+        for group in (self.motor, self.vehicle, self.plant, self.controller, self.ekf, self.scenario, self.startup,
+                      self.injection):
             group.validate()
         self.controller.validate_limits(self.motor)
         _require(math.isfinite(self.dt) and self.dt > 0, f"dt must be > 0 s (got {self.dt})")

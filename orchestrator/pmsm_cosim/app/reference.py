@@ -56,7 +56,7 @@ def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_
     delta_of = elevation or elevation_profile(scenario)
     omega_ref_of = omega_ref or speed_reference(p.scenario)
     plant = Plant(p.motor, p.vehicle, p.plant)
-    ctrl = ControlUnit(observer, angle_source, p.motor, p.controller, p.ekf, dt, p.startup)
+    ctrl = ControlUnit(observer, angle_source, p.motor, p.controller, p.ekf, dt, p.startup, p.injection)
     startup_columns = sensorless if startup_columns is None else startup_columns
     columns = ALL_COLUMNS + SENSORLESS_COLUMNS if startup_columns else ALL_COLUMNS
     theta_meas = plant.theta_e  # the angle the unit was last given (the row's theta_ctrl when it uses it)
