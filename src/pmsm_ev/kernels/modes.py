@@ -458,6 +458,48 @@ def transition(s, c, mode, event, i_alpha, i_beta):
 
 # -- the step ------------------------------------------------------------------------------------
 @kernel()
+def collect(s, c, mode, t, phase, answer):
+    """The measurements of the acquisition and of the polarity test: the answers' sin 2e summed on each of
+    the acquisition's axes (and, as it ends, the tracking observer put on the axis they give: 2e =
+    atan2(sin 2e, -(-cos 2e))), the d admittances summed at each sign of the polarity test."""
+    dt = c[C_DT]
+    if mode == MODE_ACQUIRE:
+        if answer and phase < 2:
+            s[S_ACQ + phase] += s[S_INJ_ERR]
+            s[S_ACQ + 2 + phase] += 1.0
+        if phase == 1 and t - dt < c[C_ACQ_TIME]:  # the axis jumps by 45 deg: two answers straddle it
+            s[S_INJ_SKIP] = 2.0
+        elif phase == 2 and t - dt < 2.0 * c[C_ACQ_TIME]:  # the axis found: sin 2e and -cos 2e
+            e = 0.0
+            if s[S_ACQ + 2] > 0.0 and s[S_ACQ + 3] > 0.0:
+                e = 0.5 * math.atan2(s[S_ACQ] / s[S_ACQ + 2], -s[S_ACQ + 1] / s[S_ACQ + 3])
+            seat_tracker(s, wrap_angle(s[S_TRK] + e), 0.0, 0.0)
+            s[S_INJ_SKIP] = 2.0
+    elif mode == MODE_POLARITY and answer:
+        _, sign, _ = polarity_schedule(c, t)
+        if sign > 0.0:
+            s[S_POL] += s[S_INJ_ADM]
+            s[S_POL + 2] += 1.0
+        elif sign < 0.0:
+            s[S_POL + 1] += s[S_INJ_ADM]
+            s[S_POL + 3] += 1.0
+
+
+@kernel()
+def age_episode(s, c, trouble):
+    """A loss-of-synchronism episode's clock: it ends after ``C_RECOVER_TIME`` without ``trouble`` (a
+    detector's timer running), or latches the fault at ``C_FAULT_TIME``."""
+    if s[S_EPISODE] > 0.0:
+        dt = c[C_DT]
+        s[S_EPISODE] += dt
+        s[S_INSYNC] = 0.0 if trouble else s[S_INSYNC] + dt
+        if s[S_INSYNC] >= c[C_RECOVER_TIME]:
+            s[S_EPISODE] = 0.0
+        elif s[S_EPISODE] >= c[C_FAULT_TIME]:
+            s[S_FAULT] = FAULT_LATCHED
+
+
+@kernel()
 def model_torque(c, i_d, i_q):
     """Eq 12 with the controller's motor model, times k_dq [N m]."""
     return c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
@@ -513,40 +555,14 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         e_inj = angle_error(s[S_INJ_ERR])
         s[S_INJ_ERR_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (e_inj - s[S_INJ_ERR_F])
         s[S_DISAGREE_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (e_inj - e_ekf - s[S_DISAGREE_F])
-    if mode == MODE_ACQUIRE:
-        if answer and phase < 2:  # the answers on each axis summed
-            s[S_ACQ + phase] += s[S_INJ_ERR]
-            s[S_ACQ + 2 + phase] += 1.0
-        if phase == 1 and t - dt < c[C_ACQ_TIME]:  # the axis jumps by 45 deg: two answers straddle it
-            s[S_INJ_SKIP] = 2.0
-        elif phase == 2 and t - dt < 2.0 * c[C_ACQ_TIME]:  # the axis found: sin 2e and -cos 2e
-            e = 0.0
-            if s[S_ACQ + 2] > 0.0 and s[S_ACQ + 3] > 0.0:
-                e = 0.5 * math.atan2(s[S_ACQ] / s[S_ACQ + 2], -s[S_ACQ + 1] / s[S_ACQ + 3])
-            seat_tracker(s, wrap_angle(s[S_TRK] + e), 0.0, 0.0)
-            s[S_INJ_SKIP] = 2.0
-    elif mode == MODE_POLARITY and answer:
-        _, sign, _ = polarity_schedule(c, t)
-        if sign > 0.0:
-            s[S_POL] += s[S_INJ_ADM]
-            s[S_POL + 2] += 1.0
-        elif sign < 0.0:
-            s[S_POL + 1] += s[S_INJ_ADM]
-            s[S_POL + 3] += 1.0
+    collect(s, c, mode, t, phase, answer)
     # the event and the transition
     event = detect(s, c, mode)
     s[S_EVENT] = event
     if event != EV_NONE:
         mode = transition(s, c, mode, event, i_alpha, i_beta)
         t = s[S_MODE_TIME]
-    trouble = s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0
-    if s[S_EPISODE] > 0.0:  # a loss-of-synchronism episode: recovered, or the fault latched
-        s[S_EPISODE] += dt
-        s[S_INSYNC] = 0.0 if trouble else s[S_INSYNC] + dt
-        if s[S_INSYNC] >= c[C_RECOVER_TIME]:
-            s[S_EPISODE] = 0.0
-        elif s[S_EPISODE] >= c[C_FAULT_TIME]:
-            s[S_FAULT] = FAULT_LATCHED
+    age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
         omega_ref = 0.0
     if c[C_FF] != 0.0:  # the speed loop's feedforward, its slope kept up in every mode
