@@ -68,3 +68,15 @@ def test_the_cycle_case_is_the_sensorless_drive_on_wltc(passthrough, tmp_path):
     assert read_results(tmp_path / "real")["mode"][-1] == 0.0  # aligning: the sensorless unit
     dummy = bench.cycle_spec(0.05, passthrough["PassThroughPlant"], passthrough["PassThroughFoc"])
     assert Master(dummy).run(tmp_path / "dummy", catch_sigint=False)["status"] == "completed"
+
+
+def test_the_injection_case_is_the_same_drive_with_injection(tmp_path):
+    """(g): wltc3b-injection, the drive of (e) with low_speed = "injection" on the plant's algebraic flux
+    model: acquiring the angle in its first 0.05 s."""
+    real = project_fmus()
+    spec = bench.cycle_spec(0.05, real["PmsmEvPlant"], real["FocSensorless"], bench.INJECTION_SYSTEM)
+    ctrl, plant = spec.component("ctrl", "test"), spec.component("plant", "test")
+    assert (ctrl.start["low_speed"], ctrl.start["reference"]) == ("injection", "fw")
+    assert plant.start["flux_model"] == "algebraic"
+    assert Master(spec).run(tmp_path / "g", catch_sigint=False)["status"] == "completed"
+    assert read_results(tmp_path / "g")["mode"][-1] == 3.0  # acquiring the angle by injection

@@ -23,6 +23,8 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     and 1 A of current noise; a row every 50 ms), the cycle's omega_ref a linear table that
     changes every step;
 (f) the same system, signals and cycle with the pass-through FMUs: the FMI floor of (e);
+(g) the cycle drive with injection at and near zero speed: the shipped scenario ``wltc3b-injection`` (as
+    (e), the unit with ``low_speed = "injection"``, the plant's algebraic flux model);
 
 and prints one table with the ratios a/b, d/a and e/f, in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
@@ -64,6 +66,7 @@ SCENARIO = "scenario1"
 DEFAULT_SLICE = 20.0  #: [s] of simulated time per case
 MEMORY_STOP_TIMES = (100.0, 350.0)
 CYCLE_SYSTEM = "wltc3b-sensorless"  #: cases (e), (f): the shipped sensorless cycle scenario
+INJECTION_SYSTEM = "wltc3b-injection"  #: case (g): the same with injection
 CYCLE = "wltc3b"
 DEFAULT_CYCLE_SLICE = 60.0  #: [s] of the cycle in cases (e), (f)
 CYCLE_MEMORY_STOP_TIMES = (900.0, 1800.0)  #: half the WLTC, the whole
@@ -94,9 +97,10 @@ def _spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None)
     return spec
 
 
-def cycle_spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None):
-    """The system of (e) and (f): ``wltc3b-sensorless --cycle wltc3b --stop-time stop_time``."""
-    spec = apply_overrides(CYCLE_SYSTEM, cycle=CYCLE, stop_time=stop_time)
+def cycle_spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None, system: str = CYCLE_SYSTEM):
+    """The system of (e) and (f): ``wltc3b-sensorless --cycle wltc3b --stop-time stop_time`` (of (g):
+    ``system`` = ``INJECTION_SYSTEM``)."""
+    spec = apply_overrides(system, cycle=CYCLE, stop_time=stop_time)
     if plant is not None:
         spec.set_fmu("plant", plant)
     if ctrl is not None:
@@ -253,6 +257,8 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
                                          spec=cycle_spec(cycle_slice, plant, real["FocSensorless"]))
         results["f"] = cosim_us_per_step(cycle_slice, work, spec=cycle_spec(
             cycle_slice, dummy["PassThroughPlant"], dummy["PassThroughFoc"]))
+        results["g"] = cosim_us_per_step(cycle_slice, work, spec=cycle_spec(
+            cycle_slice, plant, real["FocSensorless"], INJECTION_SYSTEM))
         rows = [
             ("(a) orchestrator + PmsmEvPlant/FocEkf5 FMUs", results["a"]),
             ("(b) orchestrator + pass-through FMUs", results["b"]),
@@ -260,6 +266,7 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
             ("(d) libcosim + PmsmEvPlant/FocEkf5 FMUs", results["d"]),
             ("(e) sensorless cycle drive: FocSensorless FMUs", results["e"]),
             ("(f) the same with pass-through FMUs", results["f"]),
+            ("(g) (e) with injection (wltc3b-injection)", results["g"]),
         ]
         say(f"{'case':<50}{'us/step wall':>14}{'us/step CPU':>13}")
         for label, value in rows:
