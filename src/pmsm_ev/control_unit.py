@@ -75,6 +75,13 @@ _STARTUP_SLOTS = (
     ("align_slip", _k.C_ALIGN_SLIP), ("align_slip_time", _k.C_ALIGN_SLIP_TIME),
     ("still_speed", _k.C_STILL), ("if_deadline", _k.C_IF_DEADLINE), ("stall_time", _k.C_STALL_TIME),
     ("realign_max", _k.C_REALIGN_MAX), ("anchor_speed", _k.C_ANCHOR_SPEED))
+#: the injection's parameters (``InjectionParams``) that go into the parameter vector as they are
+_INJECTION_SLOTS = (
+    ("inj_blend_low", _k.C_BLEND_LO), ("inj_blend_high", _k.C_BLEND_HI), ("inj_hysteresis", _k.C_BLEND_HYST),
+    ("inj_lock_time", _k.C_ACQ_TIME), ("inj_settle_time", _k.C_ACQ_SETTLE), ("pol_current", _k.C_POL_I),
+    ("pol_ramp", _k.C_POL_RAMP), ("pol_hold", _k.C_POL_HOLD), ("pol_contrast", _k.C_POL_CONTRAST),
+    ("inj_los_angle", _k.C_INJ_LOS_ANGLE), ("inj_los_time", _k.C_INJ_LOS_TIME),
+    ("ekf_los_current", _k.C_EKF_LOS_I), ("ekf_los_time", _k.C_EKF_LOS_TIME))
 #: state slots of the sensorless start-up, zeroed by ``reset``
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
@@ -235,19 +242,8 @@ class ControlUnit:
         c[_k.C_TRK_L + 1] = 3.0 * a * a / m.N
         c[_k.C_TRK_L + 2] = a ** 3 * j / m.N
         c[_k.C_TRK_J] = j
-        c[_k.C_BLEND_LO] = float(p.inj_blend_low)
-        c[_k.C_BLEND_HI] = float(p.inj_blend_high)
-        c[_k.C_BLEND_HYST] = float(p.inj_hysteresis)
-        c[_k.C_ACQ_TIME] = float(p.inj_lock_time)
-        c[_k.C_ACQ_SETTLE] = float(p.inj_settle_time)
-        c[_k.C_POL_I] = float(p.pol_current)
-        c[_k.C_POL_RAMP] = float(p.pol_ramp)
-        c[_k.C_POL_HOLD] = float(p.pol_hold)
-        c[_k.C_POL_CONTRAST] = float(p.pol_contrast)
-        c[_k.C_INJ_LOS_ANGLE] = float(p.inj_los_angle)
-        c[_k.C_INJ_LOS_TIME] = float(p.inj_los_time)
-        c[_k.C_EKF_LOS_I] = float(p.ekf_los_current)
-        c[_k.C_EKF_LOS_TIME] = float(p.ekf_los_time)
+        for name, slot in _INJECTION_SLOTS:
+            c[slot] = float(getattr(p, name))
         c[_k.C_LOS_FILTER] = min(3.0 * self.dt / p.inj_los_time, 1.0)
         for j, phi in enumerate(cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * 9):
             c[_k.C_CROSS + j] = phi

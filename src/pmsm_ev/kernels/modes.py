@@ -58,7 +58,6 @@ from .layout import (
     C_ADVANCE,
     C_BLEND_HI,
     C_BLEND_HYST,
-    C_DELAYED,
     C_DT,
     C_EKF_LOS_I,
     C_EKF_LOS_TIME,
@@ -118,14 +117,10 @@ from .layout import (
     S_RESID_F,
     S_THETA_CTRL,
     S_TRK,
-    S_U_PREV_0,
-    S_U_PREV_1,
-    S_V_ALPHA,
-    S_V_BETA,
     S_W_INT,
     S_X,
 )
-from .observers import ekf5ab_correct, ekf5ab_predict
+from .observers import ekf5ab_period
 from .transforms import park, wrap_angle
 
 # -- events: what a detector saw this period (``S_EVENT``); 0 none -------------------------------
@@ -527,18 +522,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
        on the EKF FOC on its angle and speed; the square wave added on its axis.
     """
     dt = c[C_DT]
-    if c[C_DELAYED] != 0.0:
-        ekf5ab_predict(s, c, s[S_U_PREV_0], s[S_U_PREV_1])
-        s[S_U_PREV_0] = s[S_V_ALPHA]
-        s[S_U_PREV_1] = s[S_V_BETA]
-    else:
-        ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
-    th = s[S_X + 3]
-    cs, sn = math.cos(th), math.sin(th)
-    y0 = i_alpha - (cs * s[S_X] - sn * s[S_X + 1])  # the innovation, before the correction
-    y1 = i_beta - (sn * s[S_X] + cs * s[S_X + 1])
-    ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
-    s[S_RESID_F] += c[C_LOS_FILTER] * (math.sqrt(y0 * y0 + y1 * y1) - s[S_RESID_F])
+    innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
+    s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
     mode = s[S_MODE]
     t = s[S_MODE_TIME]
     # the injection's answer on the axis of the last period, the fundamental, the tracking observer

@@ -28,6 +28,7 @@ from .layout import (
     C_C_WD,
     C_C_WPSI,
     C_C_WQ,
+    C_DELAYED,
     C_DT,
     C_EKF_BILINEAR,
     C_N,
@@ -47,6 +48,10 @@ from .layout import (
     S_PSI_RATIO,
     S_STARTED,
     S_THETA_PRIOR,
+    S_U_PREV_0,
+    S_U_PREV_1,
+    S_V_ALPHA,
+    S_V_BETA,
     S_X,
 )
 from .transforms import park, wrap_angle
@@ -351,3 +356,24 @@ def observer_correct(s, c, i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas):
         s[S_X + 2] = omega_meas
         s[S_X + 3] = theta_meas
         s[S_THETA_PRIOR] = theta_meas
+
+
+@kernel()
+def ekf5ab_period(s, c, i_alpha, i_beta):
+    """The stationary-frame EKF5's control period in the sensorless unit: the time update (eqs 23-24) with
+    the vector held over the last period (with ``C_DELAYED``, the one of a period earlier, the held one
+    kept for the next), the measurement update (eqs 25-27) with the measured currents. Returns the
+    magnitude of the innovation, the currents less the predicted ones before the update [A]."""
+    if c[C_DELAYED] != 0.0:
+        ekf5ab_predict(s, c, s[S_U_PREV_0], s[S_U_PREV_1])
+        s[S_U_PREV_0] = s[S_V_ALPHA]
+        s[S_U_PREV_1] = s[S_V_BETA]
+    else:
+        ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
+    th = s[S_X + 3]
+    cs, sn = math.cos(th), math.sin(th)
+    y0 = i_alpha - (cs * s[S_X] - sn * s[S_X + 1])
+    y1 = i_beta - (sn * s[S_X] + cs * s[S_X + 1])
+    ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
+    return math.sqrt(y0 * y0 + y1 * y1)
+

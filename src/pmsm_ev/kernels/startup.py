@@ -33,7 +33,6 @@ from .layout import (
     C_ANCHOR_SPEED,
     C_CC_HS,
     C_CC_PRED,
-    C_DELAYED,
     C_DT,
     C_E_GUARD,
     C_E_MAX,
@@ -116,15 +115,13 @@ from .layout import (
     S_THETA_PRIOR,
     S_TRUST_OFF,
     S_TRUST_TL,
-    S_U_PREV_0,
-    S_U_PREV_1,
     S_V_ALPHA,
     S_V_BETA,
     S_V_Q,
     S_W_INT,
     S_X,
 )
-from .observers import adapt_psi, ekf5ab_correct, ekf5ab_predict
+from .observers import adapt_psi, ekf5ab_period
 from .transforms import park, wrap_angle
 
 # -- the sensorless unit: alignment, I-f, handover to and from the stationary-frame EKF5 --------
@@ -379,13 +376,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     axis, no decoupling: the back-EMF is small there and the integrators carry it).
     """
     dt = c[C_DT]
-    if c[C_DELAYED] != 0.0:
-        ekf5ab_predict(s, c, s[S_U_PREV_0], s[S_U_PREV_1])
-        s[S_U_PREV_0] = s[S_V_ALPHA]
-        s[S_U_PREV_1] = s[S_V_BETA]
-    else:
-        ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
-    ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
+    ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
     # the rotor's speed above C_STILL counts only once it lasts (the EKF's speed noise at a stand with
     # 1 A of sensor noise crosses 0.5 rad/s for a few periods at a time)
     s[S_STILL_OUT] = s[S_STILL_OUT] + c[C_DT] if abs(s[S_X + 2]) >= c[C_STILL] else 0.0
