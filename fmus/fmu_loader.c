@@ -388,6 +388,49 @@ static int start(const Python* py, char* why, size_t size)
 /* -- the binding ----------------------------------------------------------------------------------------- */
 static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 static void* binding = NULL;
+static int embedded = 0;        /* the process's Python is not a Python program's (started here, or by pythonfmu) */
+static int release_planned = 0; /* release_wrapper registered with atexit */
+
+typedef int (*gil_ensure_t)(void);
+typedef void (*gil_release_t)(int);
+typedef void* (*sys_get_t)(const char*);
+typedef long (*length_t)(void*);
+
+/* whether the process's Python is not a Python program's: none yet, not initialised, or sys.orig_argv empty
+ * (an interpreter embedded in a host, as slave_support.release_at_exit tells it) */
+static int python_is_embedded(void)
+{
+    is_initialized_t is_initialized = (is_initialized_t)dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (is_initialized == NULL || !is_initialized()) return 1;
+    gil_ensure_t ensure = (gil_ensure_t)dlsym(RTLD_DEFAULT, "PyGILState_Ensure");
+    gil_release_t release = (gil_release_t)dlsym(RTLD_DEFAULT, "PyGILState_Release");
+    sys_get_t sys_get = (sys_get_t)dlsym(RTLD_DEFAULT, "PySys_GetObject");
+    length_t length = (length_t)dlsym(RTLD_DEFAULT, "PyObject_Length");
+    void (*clear)(void) = (void (*)(void))dlsym(RTLD_DEFAULT, "PyErr_Clear");
+    if (!ensure || !release || !sys_get || !length || !clear) return 0;
+    int gil = ensure();
+    void* argv = sys_get("orig_argv");
+    long n = argv ? length(argv) : 0;
+    if (n < 0) clear();
+    release(gil);
+    return n <= 0;
+}
+
+/* at exit (or when this library is unloaded), before pythonfmu's C++ static destructors: reset pythonfmu's
+ * interpreter guard through its own finalizePythonInterpreter, as slave_support.release_at_exit does in a Python
+ * program; left alone, the guard is released by a static destructor and reset again by the library's ELF
+ * destructor, a write into freed heap memory that aborts the process at exit ("free(): corrupted ...") */
+static void release_wrapper(void)
+{
+    char dir[PATH_MAX], path[PATH_MAX + 64];
+    own_directory(dir, sizeof dir);
+    snprintf(path, sizeof path, "%s%s", dir, BINDINGS[1]);
+    void* wrapper = dlopen(path, RTLD_LAZY | RTLD_NOLOAD);
+    if (wrapper == NULL) return;
+    void (*finalize)(void) = (void (*)(void))dlsym(wrapper, "finalizePythonInterpreter");
+    if (finalize != NULL) finalize();
+    dlclose(wrapper);
+}
 
 /* bring a Python into a process that has none; 0, or -1 with what was looked for in `why` */
 static int bring_up_python(const char* resources, char* why, size_t size)
@@ -444,6 +487,7 @@ static int bring_up_python(const char* resources, char* why, size_t size)
 static int load_binding(const char* resources, char* why, size_t size)
 {
     if (binding != NULL) return 0;
+    embedded = python_is_embedded();
     if (bring_up_python(resources, why, size) != 0) return -1;
     char dir[PATH_MAX], path[PATH_MAX + 64];
     own_directory(dir, sizeof dir);
@@ -506,7 +550,14 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         }
         return NULL;
     }
-    return f(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible, loggingOn);
+    fmi2Component c = f(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible, loggingOn);
+    pthread_mutex_lock(&lock);
+    if (c != NULL && embedded && !release_planned) { /* pythonfmu's library is loaded now: its statics made */
+        release_planned = 1;
+        atexit(release_wrapper);
+    }
+    pthread_mutex_unlock(&lock);
+    return c;
 }
 
 typedef void (*free_t)(fmi2Component);

@@ -96,6 +96,7 @@ static int run(const Spec* s)
     printf("terminate %d\n", (int)Terminate(c));
     FreeInstance(c);
     fflush(stdout);
+    dlclose(h); /* as FMI Library's hosts (fmuCheck) unload an FMU */
     return 0;
 }
 
