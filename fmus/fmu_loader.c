@@ -364,6 +364,7 @@ static int start(const Python* py, char* why, size_t size)
     /* kept for the interpreter's lifetime, as Py_SetProgramName and Py_SetPythonHome require */
     if (py->executable[0] && set_program) set_program(decode(py->executable, NULL));
     if (py->home[0] && set_home) set_home(decode(py->home, NULL));
+    else if (py->home[0]) setenv("PYTHONHOME", py->home, 0); /* a Python without Py_SetPythonHome (3.15 on) */
     initialize(0); /* no signal handlers: the host's stay */
     if (!is_initialized()) {
         snprintf(why, size, "%s did not start", py->library);

@@ -117,7 +117,13 @@ def run(fmu: Path, case: str) -> tuple[list, list[str], dict]:
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     lines = done.stdout.strip().splitlines()
     out = json.loads(lines[-1])
-    return out["calls"], [line for line in lines[:-1] if line.startswith("[")], out["values"]
+    log = []
+    for line in lines[:-1]:  # a message of several lines (pythonfmu's, with the exception's repr): one entry
+        if line.startswith("[") or not log:
+            log.append(line)
+        else:
+            log[-1] += "\n" + line
+    return out["calls"], log, out["values"]
 
 
 ERROR, DISCARD = 3, 2
@@ -188,3 +194,21 @@ def test_a_plant_step_longer_than_it_integrates_is_discarded(fmus):
     assert values["last"] == pytest.approx(1e-4) and values["terminated"] is False
     assert all(abs(v) < 1e3 for v in values["after"] + values["then"])
     assert values["then"] != values["after"]
+
+
+def test_through_pythonfmus_library_alone_the_same_calls_are_refused_as_fatal(tmp_path):
+    """An FMU built with pythonfmu's library alone (``PMSM_EV_FMU_BINDING=pythonfmu``: no C compiler, another
+    platform) refuses the same calls, as fmi2Fatal (pythonfmu gives a slave no other status), the reason in
+    pythonfmu's log line; a step too long is discarded there too (with the terminated status, pythonfmu's)."""
+    import os
+
+    env = dict(os.environ, PMSM_EV_FMU_BINDING="pythonfmu", PMSM_COSIM_FMU_DIR=str(tmp_path))
+    subprocess.run([sys.executable, "-m", "pmsm_ev_fmus", "--out", str(tmp_path), "PmsmEvPlant"], env=env,
+                   check=True, capture_output=True, text=True, timeout=600)
+    plant = tmp_path / "PmsmEvPlant.fmu"
+    calls, log, _ = run(plant, "step-after-terminate")
+    assert calls[-1] == ["doStep", 4]
+    assert len(log) == 1 and log[0].startswith("[FATAL] ") and "fmi2DoStep after fmi2Terminate" in log[0]
+    calls, log, values = run(plant, "long-step")
+    assert calls[5] == ["doStep", DISCARD] and values["terminated"] is True
+    assert any("longer than the plant integrates to its accuracy" in line for line in log)
