@@ -7,6 +7,7 @@ fmi2Instantiate returns NULL with one log line saying what was looked for and ho
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -221,3 +222,60 @@ def test_the_loader_references_no_python_symbol(unzipped):
     assert names["binding"] == "lean"
     assert (unzipped["PmsmEvPlant"] / "resources" / fmu_build.BUILT_PYTHON_FILE).read_text().strip() == sys.executable
     assert os.path.isfile(unzipped["PmsmEvPlant"] / "binaries" / "linux64" / fmu_build.BINDING_LIBRARY)
+
+
+def test_the_exported_package_runs_in_a_c_jacobi_master_as_in_the_orchestrator(fmus, unzipped, host, tmp_path):
+    """What OMSimulator does with ``export-ssp scenario2`` (all FMUs loaded at once in one process that is not
+    Python, stepped Jacobi, the package's start values set), done by tests/c_host.c with no Python set up: every
+    recorded column equals the orchestrator's Jacobi run of the system, bit for bit (the kernels run as plain
+    Python there, compiled here: the same numbers; the route comes from the packaged RouteProfile)."""
+    from pmsm_cosim.app.drive import export_ssp, load_system
+    from pmsm_cosim.engine.master import Master
+    from pmsm_cosim.engine.recording import read_results
+    from pmsm_cosim.engine.ssp import load_ssp
+    from pmsm_ev.results import ALL_COLUMNS
+
+    steps, stop = 500, 0.05
+    spec = load_system("scenario2")
+    spec.set_fmu("ctrl", fmus["FocEkf5"])
+    spec.set_fmu("plant", fmus["PmsmEvPlant"])
+    spec.set_start("plant.m_v=1700.0")  # an .ssv value, applied by the host
+    package = tmp_path / "s2.ssp"
+    export_ssp(spec, package, route_fmu=fmus["RouteProfile"], quiet=True)
+    system = load_ssp(package)
+    index, lines, md_of = {}, [], {}
+    for i, comp in enumerate(system.components):
+        root = Path(fmpy.extract(str(comp.fmu), str(tmp_path / "members" / comp.name)))
+        md = fmpy.read_model_description(str(root))
+        md_of[comp.name] = {v.name: v for v in md.modelVariables}
+        index[comp.name] = i
+        lines.append(f"member {comp.name} {root / 'binaries' / 'linux64' / (md.coSimulation.modelIdentifier + '.so')} "
+                     f"{(root / 'resources').as_uri()} {md.guid}")
+        for name, value in comp.start.items():
+            var = md_of[comp.name][name]
+            kind = {"Real": "R", "Integer": "I", "Boolean": "B"}[var.type]
+            lines.append(f"start {i} {var.valueReference} {kind} {float(value)!r}")
+    assert any(line.startswith("start ") for line in lines)
+    for c in system.connections:
+        src, dst = md_of[c.src][c.src_var], md_of[c.dst][c.dst_var]
+        assert src.type == dst.type == "Real"
+        lines.append(f"connect {index[c.src]} {src.valueReference} {index[c.dst]} {dst.valueReference}")
+    columns = [next(col for col in system.columns if col.name == name) for name in ALL_COLUMNS[1:]]
+    lines += [f"record {index[col.instance]} {md_of[col.instance][col.variable].valueReference}" for col in columns]
+    lines += [f"steps {steps} {H!r}", "run_system", ""]
+    spec_file = tmp_path / "system.txt"
+    spec_file.write_text("\n".join(lines))
+    done = subprocess.run([str(host), str(spec_file)], capture_output=True, text=True, env=_clean_env(tmp_path),
+                          timeout=300)
+    assert done.returncode == 0 and "system initialised 0" in done.stdout, done.stdout[-3000:] + done.stderr[-2000:]
+    rows = [line.split() for line in done.stdout.splitlines() if line.split(" ", 1)[0].isdigit()]
+    assert len(rows) == steps and all(row[1] == "0" for row in rows)
+    values = [[float(v) for v in row[2:]] for row in rows]
+    spec.algorithm, spec.stop_time, spec.output_interval = "jacobi", stop, H
+    Master(spec).run(tmp_path / "jacobi", catch_sigint=False)
+    jacobi = read_results(tmp_path / "jacobi")
+    for j, col in enumerate(columns):  # row k of the C host: after the step from t_k, the orchestrator's row k + 1
+        got = [math.degrees(row[j]) if col.unit == "deg" else row[j] for row in values]
+        expected = list(jacobi[col.name][1:steps + 1])
+        assert got == expected, col.name
+    assert jacobi["omega_m"][-1] != 0.0
