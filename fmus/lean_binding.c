@@ -383,6 +383,7 @@ EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
 
 typedef fmi2Component (*instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions*,
                                        fmi2Boolean, fmi2Boolean);
+typedef void (*free_t)(fmi2Component);
 
 EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
@@ -398,6 +399,14 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     Instance* w = calloc(1, sizeof(Instance));
     if (w == NULL) return NULL;
     w->inner = fn(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible, loggingOn);
+    if (!Py_IsInitialized()) { /* pythonfmu could not start an interpreter */
+        if (w->inner != NULL) {
+            free_t release = (free_t)inner("fmi2FreeInstance");
+            if (release != NULL) release(w->inner);
+        }
+        free(w);
+        return NULL;
+    }
     PyGILState_STATE gil = PyGILState_Ensure();
     if (w->inner == NULL) {
         Py_CLEAR(pending_offer);
@@ -417,7 +426,6 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
 
 #define W ((Instance*)c)
 
-typedef void (*free_t)(fmi2Component);
 EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     if (c == NULL) return;
