@@ -106,6 +106,12 @@ LEAN_SOURCE = HERE / "lean_binding.c"
 INNER_LIBRARY = "pythonfmu-export.so"
 ENV_BINDING = "PMSM_EV_FMU_BINDING"
 BINDINGS = ("lean", "pythonfmu")
+#: the FMU's loader (fmus/README.md, "Hosts that are not Python"): its C source, and the name the lean binding
+#: takes behind it in binaries/linux64/ (the loader is binaries/linux64/<model>.so)
+LOADER_SOURCE = HERE / "fmu_loader.c"
+BINDING_LIBRARY = "pmsm-binding.so"
+#: resources/ file naming the interpreter the FMU was built with (the loader's third choice of a Python)
+BUILT_PYTHON_FILE = "build_python.txt"
 
 
 def binding_requested() -> str:
@@ -119,24 +125,25 @@ def binding_requested() -> str:
     return choice
 
 
-def lean_library() -> tuple[Path | None, str]:
-    """The lean binding compiled for this Python (``cc``, or ``$CC``; the limited API, no libpython linked),
-    kept in the user's cache (``user_cache_dir()/binding/``) under the hash of its source and of the Python
-    headers: (path, "") or (None, why it cannot be built)."""
-    source = LEAN_SOURCE.read_bytes()
-    key = hashlib.sha256(source + sysconfig.get_paths()["include"].encode()).hexdigest()[:16]
+def _compiled(source_path: Path, prefix: str, python_headers: bool) -> tuple[Path | None, str]:
+    """``source_path`` compiled into a shared library (``cc``, or ``$CC``; no libpython linked), kept in the
+    user's cache (``user_cache_dir()/binding/``) under the hash of its source (and of the Python headers, if it
+    uses them): (path, "") or (None, why it cannot be built)."""
+    source = source_path.read_bytes()
+    include = sysconfig.get_paths()["include"] if python_headers else ""
+    key = hashlib.sha256(source + include.encode()).hexdigest()[:16]
     folder = user_cache_dir() / "binding"
-    target = folder / f"lean-{key}.so"
+    target = folder / f"{prefix}-{key}.so"
     if target.is_file():
         return target, ""
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".lean-", suffix=".so", dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=f".{prefix}-", suffix=".so", dir=folder)
         os.close(fd)
     except OSError as exc:
         return None, f"cannot write {folder} ({exc.strerror or exc})"
     command = [os.environ.get("CC", "cc"), "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall",
-               f"-I{sysconfig.get_paths()['include']}", str(LEAN_SOURCE), "-o", tmp, "-ldl"]
+               *([f"-I{include}"] if include else []), str(source_path), "-o", tmp, "-ldl", "-lpthread"]
     try:
         done = subprocess.run(command, capture_output=True, text=True, timeout=120)
         if done.returncode != 0:
@@ -151,16 +158,30 @@ def lean_library() -> tuple[Path | None, str]:
             os.unlink(tmp)
 
 
-def _bind(fmu: Path, name: str, library: Path) -> None:
-    """Put the lean binding ``library`` in front of pythonfmu's in ``fmu``: pythonfmu's
-    ``binaries/linux64/<name>.so`` becomes ``binaries/linux64/pythonfmu-export.so``, the binding takes its name."""
+def lean_library() -> tuple[Path | None, str]:
+    """The lean binding compiled for this Python (the limited API, no libpython linked), kept in the user's
+    cache under the hash of its source and of the Python headers: (path, "") or (None, why it cannot be built)."""
+    return _compiled(LEAN_SOURCE, "lean", True)
+
+
+def loader_library() -> tuple[Path | None, str]:
+    """The FMU's loader compiled (no Python headers, no Python symbol), kept in the user's cache under the hash of
+    its source: (path, "") or (None, why it cannot be built)."""
+    return _compiled(LOADER_SOURCE, "loader", False)
+
+
+def _bind(fmu: Path, name: str, library: Path, loader: Path) -> None:
+    """Put the loader and the lean binding ``library`` in front of pythonfmu's in ``fmu``: the loader takes
+    pythonfmu's ``binaries/linux64/<name>.so``, the binding is ``binaries/linux64/pmsm-binding.so`` and pythonfmu's
+    library ``binaries/linux64/pythonfmu-export.so``."""
     member, inner = f"binaries/linux64/{name}.so", f"binaries/linux64/{INNER_LIBRARY}"
 
     def change(names):
         if member not in names:
             raise BuildError(f"{fmu}: pythonfmu wrote no {member}")
         with zipfile.ZipFile(fmu) as z:
-            return {member: library.read_bytes(), inner: z.read(member)}
+            return {member: loader.read_bytes(), f"binaries/linux64/{BINDING_LIBRARY}": library.read_bytes(),
+                    inner: z.read(member)}
 
     _copy_fmu(fmu, fmu, change)
 
@@ -344,6 +365,7 @@ def source_hash(name: str) -> str:
     add("binding", binding.encode())
     if binding == "lean":
         add("lean_binding.c", LEAN_SOURCE.read_bytes())
+        add("fmu_loader.c", LOADER_SOURCE.read_bytes())
     for module in sorted(_fmus_modules(script)):
         add(f"fmus/{module}", (HERE / module).read_bytes())
     root = physics_dir()
@@ -368,8 +390,9 @@ def _source_signature() -> tuple:
             except OSError:
                 continue
             files.append((str(path), st.st_size, st.st_mtime_ns))
-    st = LEAN_SOURCE.stat()
-    files.append((str(LEAN_SOURCE), st.st_size, st.st_mtime_ns))
+    for source in (LEAN_SOURCE, LOADER_SOURCE):
+        st = source.stat()
+        files.append((str(source), st.st_size, st.st_mtime_ns))
     return (_pythonfmu_version(), os.environ.get(ENV_BINDING, ""), tuple(files))
 
 
@@ -495,6 +518,9 @@ def _stage(name: str, digest: str, stage: Path, binding: str = "pythonfmu") -> t
         route = stage / ROUTE_FILE
         route.write_text(route_to_json(scenario_route(DEFAULT_ROUTE), DEFAULT_ROUTE), encoding="utf-8")
         project_files.append(route)
+    built_python = stage / BUILT_PYTHON_FILE  # the loader's third choice of a Python (fmus/fmu_loader.c)
+    built_python.write_text(f"{sys.executable}\n", encoding="utf-8")
+    project_files.append(built_python)
     info_path = stage / BUILD_INFO
     info_path.write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
     project_files.append(info_path)
@@ -529,6 +555,10 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
                          "(an FMU's bundled copy?): build FMUs before loading any in this process")
 
     library, why = lean_library() if binding_requested() == "lean" else (None, "")
+    loader = None
+    if library is not None:
+        loader, why = loader_library()
+        library = library if loader is not None else None
     if why:
         print(f"warning: {name}.fmu gets pythonfmu's binding, not the lean one: {why}", file=sys.stderr)
     stage = _make_stage(out, name)
@@ -540,7 +570,7 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
             canGetAndSetFMUstate=True, canSerializeFMUstate=True,
             canHandleVariableCommunicationStepSize=_recipe(name)[1])
         if library is not None:
-            _bind(built, name, library)
+            _bind(built, name, library, loader)
         _check(built, name)
         os.replace(built, target)
     finally:

@@ -4,14 +4,23 @@
  * docs/performance.md.
  *
  * Every FMI function is pythonfmu's, forwarded, except the three of the per-step path once the slave has
- * offered itself (DriveSlave.enter_initialization_mode calls pmsm_fmu_offer, on this thread, inside the
- * forwarded fmi2EnterInitializationMode) and fmi2ExitInitializationMode has succeeded:
+ * offered itself (DriveSlave._offer calls pmsm_fmu_offer, on this thread, when the slave is made: inside the
+ * forwarded fmi2Instantiate or fmi2Reset) and fmi2ExitInitializationMode has succeeded:
  *
  *   fmi2GetReal    the slave's attributes read directly (what DriveSlave.get_real returns: the same objects,
  *                  the same doubles), when every value reference names a Real and the slave is not stale;
  *   fmi2SetReal    the Real inputs written into the instance dict (what DriveSlave.set_real does), when every
  *                  value reference names a Real input;
- *   fmi2DoStep     the slave's do_step called directly.
+ *   fmi2DoStep     the slave's do_step (unchecked) called directly, when the communication point continues the
+ *                  last step, the step is no longer than the slave's _max_step and the FMU is in step mode.
+ *
+ * FMI 2.0's checks (DriveSlave.refusal: the state machine, non-finite Real inputs, a communication point that
+ * does not continue the last step, a step too long): before it forwards fmi2SetupExperiment,
+ * fmi2EnterInitializationMode, fmi2ExitInitializationMode, fmi2DoStep or fmi2SetReal, and where a check of the
+ * direct path above fails (a non-finite value, a time that does not continue, a step too long, not in step
+ * mode), the binding asks the slave's refusal; a call refused is not made: its line goes to the host's logger
+ * and its status (fmi2Error; fmi2Discard for a step too long) is returned. The direct path keeps where the
+ * last step ended in C and writes it into the slave (_next_time) before it asks, and when it stops.
  *
  * Anything else, or anything that fails on the way, goes to pythonfmu's function with the same arguments, so
  * that the errors, their log messages and their statuses are pythonfmu's: a get or set that would fail is
@@ -115,27 +124,36 @@ typedef struct {
     PyObject** names;           /* by value reference: the attribute of a Real variable, or NULL */
     unsigned char* inputs;      /* by value reference: 1 for a Real input */
     PyObject* offer;            /* the tuple offered (keeps the names alive) */
+    PyObject* refusal;          /* its refusal(call, *args): None or (status, message) */
+    double next_time;           /* where the last direct step ended (NAN: any communication point) */
+    double last_step;           /* its size */
+    double max_step;            /* the slave's _max_step (read at fmi2ExitInitializationMode) */
+    fmi2CallbackFunctions callbacks; /* the host's (a copy), for the refusals' log lines */
+    char* name;                 /* the instance name */
 } Instance;
 
 /* the offer made on this thread during the forwarded fmi2EnterInitializationMode */
 static __thread PyObject* pending_offer = NULL;
 
-/* pmsm_fmu_offer((slave, attributes, do_step, defer, log_queue, names, inputs)), called by the slave
+/* pmsm_fmu_offer((slave, attributes, do_step, defer, log_queue, names, inputs, refusal)), called by the slave
  * through ctypes.PyDLL (the GIL held): names and inputs are sequences by value reference (a str or None;
  * a truth value). Returns 0, or -1 if the offer is malformed (then nothing is kept). */
 EXPORT int pmsm_fmu_offer(PyObject* offer)
 {
-    if (!PyTuple_Check(offer) || PyTuple_Size(offer) != 7) return -1;
+    if (!PyTuple_Check(offer) || PyTuple_Size(offer) != 8) return -1;
     Py_XDECREF(pending_offer);
     Py_INCREF(offer);
     pending_offer = offer;
     return 0;
 }
 
+static void sync_time(Instance* w);
+
 static void drop_offer(Instance* w)
 {
     w->ready = 0;
     if (w->offer == NULL) return;
+    sync_time(w);
     free(w->names);
     free(w->inputs);
     w->names = NULL;
@@ -147,6 +165,7 @@ static void drop_offer(Instance* w)
     Py_CLEAR(w->defer);
     Py_CLEAR(w->log_queue);
     Py_CLEAR(w->stale_name);
+    Py_CLEAR(w->refusal);
     w->n = 0;
 }
 
@@ -199,6 +218,8 @@ static void take_offer(Instance* w)
     w->do_step = PyTuple_GetItem(offer, 2);
     w->defer = PyTuple_GetItem(offer, 3);
     w->log_queue = PyTuple_GetItem(offer, 4);
+    w->refusal = PyTuple_GetItem(offer, 7);
+    Py_XINCREF(w->refusal);
     Py_XINCREF(w->slave);
     Py_XINCREF(w->attributes);
     Py_XINCREF(w->do_step);
@@ -206,7 +227,7 @@ static void take_offer(Instance* w)
     Py_XINCREF(w->log_queue);
     w->stale_name = PyUnicode_FromString("_stale");
     if (!w->slave || !w->attributes || !PyDict_Check(w->attributes) || !w->do_step || !w->defer || !w->log_queue
-        || !PyList_Check(w->log_queue) || !w->stale_name)
+        || !PyList_Check(w->log_queue) || !w->stale_name || !w->refusal)
         goto bad;
     return;
 bad:
@@ -230,12 +251,139 @@ EXPORT unsigned long long pmsm_fmu_fast_calls(fmi2Component c)
     return c == NULL ? 0 : ((Instance*)c)->fast_calls;
 }
 
+/* -- FMI 2.0's checks (DriveSlave.refusal) ------------------------------------------------------------- */
+/* write where the last direct step ended into the slave (_next_time, _last_step), GIL held */
+static void sync_time(Instance* w)
+{
+    if (w->slave == NULL) return;
+    PyObject* next = isnan(w->next_time) ? (Py_INCREF(Py_None), Py_None) : PyFloat_FromDouble(w->next_time);
+    PyObject* last = PyFloat_FromDouble(w->last_step);
+    if (next == NULL || last == NULL || PyObject_SetAttrString(w->slave, "_next_time", next) != 0
+        || PyObject_SetAttrString(w->slave, "_last_step", last) != 0)
+        PyErr_Clear();
+    Py_XDECREF(next);
+    Py_XDECREF(last);
+}
+
+/* the slave's number attribute `name`, or `otherwise` (GIL held) */
+static double slave_number(Instance* w, const char* name, double otherwise)
+{
+    PyObject* v = w->slave ? PyObject_GetAttrString(w->slave, name) : NULL;
+    double x = v ? PyFloat_AsDouble(v) : otherwise;
+    Py_XDECREF(v);
+    if (PyErr_Occurred()) {
+        PyErr_Clear();
+        x = otherwise;
+    }
+    return x;
+}
+
+/* ask the slave's refusal(call, *args) (args: a new tuple, stolen; GIL held): -1 when the call is allowed (or
+ * nothing can be asked), else the status to return, its line logged through the host's logger */
+static int refused(Instance* w, const char* call, PyObject* args)
+{
+    int status = -1;
+    if (w->refusal == NULL || args == NULL) {
+        Py_XDECREF(args);
+        PyErr_Clear();
+        return -1;
+    }
+    sync_time(w);
+    PyObject* name = PyUnicode_FromString(call);
+    PyObject* full = name ? PyTuple_New(PyTuple_Size(args) + 1) : NULL;
+    if (full != NULL) {
+        PyTuple_SetItem(full, 0, name);
+        name = NULL;
+        for (Py_ssize_t i = 0; i < PyTuple_Size(args); i++) {
+            PyObject* item = PyTuple_GetItem(args, i);
+            Py_INCREF(item);
+            PyTuple_SetItem(full, i + 1, item);
+        }
+    }
+    Py_XDECREF(name);
+    Py_DECREF(args);
+    PyObject* answer = full ? PyObject_Call(w->refusal, full, NULL) : NULL;
+    Py_XDECREF(full);
+    if (answer != NULL && PyTuple_Check(answer) && PyTuple_Size(answer) == 2) {
+        long code = PyLong_AsLong(PyTuple_GetItem(answer, 0));
+        PyObject* text = PyUnicode_AsUTF8String(PyTuple_GetItem(answer, 1));
+        if (!PyErr_Occurred() && text != NULL) {
+            status = (int)code;
+            if (w->callbacks.logger != NULL)
+                w->callbacks.logger(w->callbacks.componentEnvironment, w->name ? w->name : "", (fmi2Status)status,
+                                    status == fmi2Discard ? "logStatusDiscard" : "logStatusError", "%s",
+                                    PyBytes_AsString(text));
+        }
+        Py_XDECREF(text);
+    }
+    Py_XDECREF(answer);
+    PyErr_Clear();
+    return status;
+}
+
+/* refused() for a call of no argument, with the GIL taken here */
+static int refused_plain(Instance* w, const char* call)
+{
+    if (w->refusal == NULL) return -1;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    int status = refused(w, call, PyTuple_New(0));
+    PyGILState_Release(gil);
+    return status;
+}
+
+static int refused_step(Instance* w, double t, double h)
+{
+    if (w->refusal == NULL) return -1;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    int status = refused(w, "fmi2DoStep", Py_BuildValue("(dd)", t, h));
+    PyGILState_Release(gil);
+    return status;
+}
+
+static int refused_set(Instance* w, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    if (w->refusal == NULL) return -1;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    PyObject* refs = PyList_New((Py_ssize_t)nvr);
+    PyObject* values = PyList_New((Py_ssize_t)nvr);
+    for (size_t i = 0; refs && values && i < nvr; i++) {
+        PyList_SetItem(refs, (Py_ssize_t)i, PyLong_FromUnsignedLong(vr[i]));
+        PyList_SetItem(values, (Py_ssize_t)i, PyFloat_FromDouble(value[i]));
+    }
+    PyObject* args = (refs && values && !PyErr_Occurred()) ? PyTuple_Pack(2, refs, values) : NULL;
+    Py_XDECREF(refs);
+    Py_XDECREF(values);
+    int status = refused(w, "fmi2SetReal", args);
+    PyGILState_Release(gil);
+    return status;
+}
+
+/* the direct path on, after fmi2ExitInitializationMode or fmi2SetFMUstate succeeded: when the slave is in step
+ * mode; a step from any time; the slave's longest step (GIL taken here) */
+static void direct_path(Instance* w)
+{
+    w->ready = 0;
+    w->next_time = NAN;
+    w->last_step = 0.0;
+    if (w->offer == NULL) return;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    PyObject* mode = PyObject_GetAttrString(w->slave, "_in_step_mode");
+    int in_step_mode = mode ? PyObject_IsTrue(mode) : 0;
+    Py_XDECREF(mode);
+    PyErr_Clear();
+    w->max_step = slave_number(w, "_max_step", INFINITY);
+    if (isnan(w->max_step)) w->max_step = INFINITY;
+    w->ready = in_step_mode > 0;
+    PyGILState_Release(gil);
+}
+
 /* -- the FMI functions ---------------------------------------------------------------------------------- */
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
 
 typedef fmi2Component (*instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions*,
                                        fmi2Boolean, fmi2Boolean);
+typedef void (*free_t)(fmi2Component);
 
 EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
@@ -251,23 +399,40 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     Instance* w = calloc(1, sizeof(Instance));
     if (w == NULL) return NULL;
     w->inner = fn(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible, loggingOn);
-    if (w->inner == NULL) {
+    if (!Py_IsInitialized()) { /* pythonfmu could not start an interpreter */
+        if (w->inner != NULL) {
+            free_t release = (free_t)inner("fmi2FreeInstance");
+            if (release != NULL) release(w->inner);
+        }
         free(w);
         return NULL;
     }
+    PyGILState_STATE gil = PyGILState_Ensure();
+    if (w->inner == NULL) {
+        Py_CLEAR(pending_offer);
+        PyGILState_Release(gil);
+        free(w);
+        return NULL;
+    }
+    take_offer(w); /* the slave made in this call offered itself */
+    PyGILState_Release(gil);
     w->last_successful_time = NAN;
+    w->next_time = NAN;
+    w->max_step = INFINITY;
+    if (functions != NULL) w->callbacks = *functions;
+    w->name = strdup(instanceName ? instanceName : "");
     return w;
 }
 
 #define W ((Instance*)c)
 
-typedef void (*free_t)(fmi2Component);
 EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     if (c == NULL) return;
     drop_offer_gil(W);
     free_t fn = (free_t)inner("fmi2FreeInstance");
     if (fn != NULL) fn(W->inner);
+    free(W->name);
     free(W);
 }
 
@@ -281,6 +446,8 @@ typedef fmi2Status (*setup_t)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fm
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol, fmi2Real start,
                                       fmi2Boolean stopDefined, fmi2Real stop)
 {
+    int status = refused_plain(W, "fmi2SetupExperiment");
+    if (status >= 0) return (fmi2Status)status;
     FORWARD(fmi2SetupExperiment, setup_t, W->inner, tolDefined, tol, start, stopDefined, stop);
 }
 
@@ -290,16 +457,10 @@ EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
     static plain_t fn = NULL;
     if (fn == NULL) fn = (plain_t)inner("fmi2EnterInitializationMode");
     if (fn == NULL) return fmi2Error;
-    drop_offer_gil(W);
-    fmi2Status status = fn(W->inner);
-    PyGILState_STATE gil = PyGILState_Ensure();
-    if (status == fmi2OK || status == fmi2Warning) {
-        take_offer(W);
-    } else {
-        Py_CLEAR(pending_offer);
-    }
-    PyGILState_Release(gil);
-    return status;
+    int refusal = refused_plain(W, "fmi2EnterInitializationMode");
+    if (refusal >= 0) return (fmi2Status)refusal;
+    W->ready = 0;
+    return fn(W->inner);
 }
 
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
@@ -307,22 +468,38 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     static plain_t fn = NULL;
     if (fn == NULL) fn = (plain_t)inner("fmi2ExitInitializationMode");
     if (fn == NULL) return fmi2Error;
+    int refusal = refused_plain(W, "fmi2ExitInitializationMode");
+    if (refusal >= 0) return (fmi2Status)refusal;
     fmi2Status status = fn(W->inner);
-    W->ready = W->offer != NULL && (status == fmi2OK || status == fmi2Warning);
+    if (status == fmi2OK || status == fmi2Warning) direct_path(W);
+    else W->ready = 0;
     return status;
 }
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
+    if (W->ready) { /* the direct path stops: the slave learns where the last step ended */
+        PyGILState_STATE gil = PyGILState_Ensure();
+        sync_time(W);
+        PyGILState_Release(gil);
+        W->ready = 0;
+    }
     FORWARD(fmi2Terminate, plain_t, W->inner);
 }
 
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
-    drop_offer_gil(W); /* pythonfmu makes a new slave: it offers itself at the next initialisation */
+    static plain_t fn = NULL;
+    if (fn == NULL) fn = (plain_t)inner("fmi2Reset");
+    if (fn == NULL) return fmi2Error;
+    drop_offer_gil(W); /* pythonfmu makes a new slave: it offers itself, in this call */
     W->last_successful_time = NAN;
     W->terminated = 0;
-    FORWARD(fmi2Reset, plain_t, W->inner);
+    fmi2Status status = fn(W->inner);
+    PyGILState_STATE gil = PyGILState_Ensure();
+    take_offer(W);
+    PyGILState_Release(gil);
+    return status;
 }
 
 typedef fmi2Status (*get_real_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
@@ -366,12 +543,20 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
     return ok ? fmi2OK : forward_get_real(c, vr, nvr, value);
 }
 
+static fmi2Status checked_set_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                   const fmi2Real value[])
+{
+    int status = refused_set(W, vr, nvr, value);
+    return status >= 0 ? (fmi2Status)status : forward_set_real(c, vr, nvr, value);
+}
+
 EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
 {
     Instance* w = W;
-    if (!w->ready || nvr == 0) return forward_set_real(c, vr, nvr, value);
+    if (!w->ready || nvr == 0) return checked_set_real(c, vr, nvr, value);
     for (size_t i = 0; i < nvr; i++)
-        if ((Py_ssize_t)vr[i] >= w->n || !w->inputs[vr[i]]) return forward_set_real(c, vr, nvr, value);
+        if ((Py_ssize_t)vr[i] >= w->n || !w->inputs[vr[i]] || !isfinite(value[i]))
+            return checked_set_real(c, vr, nvr, value);
     PyGILState_STATE gil = PyGILState_Ensure();
     int ok = 1;
     for (size_t i = 0; ok && i < nvr; i++) {
@@ -433,7 +618,12 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state)
 }
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
-    FORWARD(fmi2SetFMUstate, set_state_t, W->inner, state);
+    static set_state_t fn = NULL;
+    if (fn == NULL) fn = (set_state_t)inner("fmi2SetFMUstate");
+    if (fn == NULL) return fmi2Error;
+    fmi2Status status = fn(W->inner, state);
+    if (status == fmi2OK || status == fmi2Warning) direct_path(W); /* in step mode if the state is; any time */
+    return status;
 }
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state)
 {
@@ -492,10 +682,25 @@ static fmi2Status forward_do_step(Instance* w, fmi2Real t, fmi2Real h, fmi2Boole
     return status;
 }
 
+/* a step the slave refuses: its status (a step discarded ends at t, the run is not terminated) */
+static fmi2Status refuse_step(Instance* w, double t, int status)
+{
+    if (status == fmi2Discard) w->last_successful_time = t;
+    return (fmi2Status)status;
+}
+
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean flag)
 {
     Instance* w = W;
-    if (!w->ready) return forward_do_step(w, t, h, flag);
+    if (!w->ready) {
+        int status = refused_step(w, t, h);
+        return status >= 0 ? refuse_step(w, t, status) : forward_do_step(w, t, h, flag);
+    }
+    if (!(h <= w->max_step) || !isfinite(t)
+        || (!isnan(w->next_time) && fabs(t - w->next_time) > 1e-3 * w->last_step + 16 * 2.220446049250313e-16 * fabs(t))) {
+        int status = refused_step(w, t, h);
+        if (status >= 0) return refuse_step(w, t, status);
+    }
     PyGILState_STATE gil = PyGILState_Ensure();
     PyObject* pt = PyFloat_FromDouble(t);
     PyObject* ph = PyFloat_FromDouble(h);
@@ -525,6 +730,8 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
     PyGILState_Release(gil);
     if (ok > 0) {
         w->last_successful_time = t + h;
+        w->next_time = t + h;
+        w->last_step = h;
     } else {
         w->last_successful_time = t;
         w->terminated = 1;

@@ -153,6 +153,20 @@ class PmsmEvPlant(DriveSlave):
     def forget_physics(self) -> None:
         self._plant = None
 
+    def max_step(self) -> tuple[float, str]:
+        """The longest communication step integrated to the plant's stated accuracy: each of its ``rk4_substeps``
+        RK4 sub-steps may cover at most ``substep_angle`` (0.1, or 2 where that bound is off: RK4's stability) of
+        the stator's time constant min(L_d, L_q) / R_s, as it may turn at most that electrical angle
+        (``PlantParams.substep_angle``); 2.3 ms with the defaults. A longer step is discarded, not integrated
+        into a state of 1e20."""
+        motor, plant = self.parameters(MotorParams), self.parameters(PlantParams)
+        share = plant.substep_angle if plant.substep_angle > 0 else 2.0
+        tau = min(motor.L_d, motor.L_q) / motor.R_s
+        limit = plant.rk4_substeps * share * tau
+        return limit, (f"longer than the plant integrates to its accuracy ({limit!r} s: rk4_substeps = "
+                       f"{plant.rk4_substeps} RK4 sub-steps of at most {share!r} of the stator's time constant "
+                       f"{tau!r} s); take shorter steps or raise rk4_substeps")
+
     def _copy_outputs(self) -> None:
         p = self._plant
         self.i_alpha = p.i_alpha

@@ -136,6 +136,7 @@ class RouteProfile(DriveSlave):
 
     # -- FMI -------------------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        super().setup_experiment(start_time, stop_time, tolerance)
         self._t0 = float(start_time)
 
     def do_step(self, current_time, step_size):

@@ -20,6 +20,11 @@ top of pythonfmu 0.7.0:
   written by ``pmsm_ev_fmus.write_fmu_with_starts``) replaces the coded default of those
   parameters, so that a host that cannot set String parameters runs a chosen value;
 * ``fmi2SetupExperiment`` with a stop time before the start time is refused;
+* FMI 2.0's state machine and arguments (``DriveSlave.refusal``): a call in the wrong state, a
+  non-finite Real input, a communication point that does not continue the last step (without an FMU
+  state restored) are refused, a step longer than the slave integrates to its accuracy (``max_step``)
+  discarded; the lean binding returns fmi2Error (fmi2Discard) with the line logged, pythonfmu's own
+  path fmi2Fatal (fmus/README.md, "Misuse");
 * the FMU state (``fmi2GetFMUstate``/``fmi2SetFMUstate``, JSON-serialisable) holds every
   variable plus the full state of the wrapped physics (subclass hooks), all as named fields:
   a state whose fields are not this FMU's (another FMU's, another version's) is refused with
@@ -58,6 +63,7 @@ import ctypes
 import dataclasses
 import functools
 import json
+import math
 import operator
 import os
 import re
@@ -77,6 +83,7 @@ from pythonfmu import (
     String,
 )
 from pythonfmu import __version__ as PYTHONFMU_VERSION
+from pythonfmu.enums import Fmi2Status
 
 from pmsm_ev_fmus.metadata import DISPLAY_UNITS, PARAMETERS, UNITS
 
@@ -171,6 +178,21 @@ class FmuUsageError(RuntimeError):
     """An FMI call that the FMU cannot honour (illegal value or call sequence)."""
 
 
+class FmiCallError(FmuUsageError):
+    """A call FMI 2.0 does not allow (wrong state, non-finite input, a communication point that does not continue
+    the last one): ``DriveSlave.refusal`` says which; the lean binding returns its status (fmi2Error)."""
+
+
+#: the FMI 2.0 co-simulation states of a slave (``DriveSlave.refusal``)
+INSTANTIATED, INITIALIZATION, STEP_MODE, TERMINATED = "instantiated", "initialization mode", "step mode", "terminated"
+#: the statuses a refusal returns
+FMI2_DISCARD, FMI2_ERROR = 2, 3
+#: a communication point continues the last step when within this share of the last step size of where it ended
+#: (plus a few ulps of the time): a master's own rounding of t + h, never a step back or forward
+CONTINUITY_TOLERANCE = 1e-3
+_TIME_ULPS = 16 * sys.float_info.epsilon
+
+
 class FmuStateError(ValueError):
     """A state given to ``fmi2SetFMUstate`` that is not one of this FMU's (its fields differ)."""
 
@@ -217,13 +239,55 @@ def _wrong_access(name: str, what: str, *_args):
     raise FmuUsageError(f"variable {name!r} {what}")
 
 
+def _checked_step(method):
+    """``do_step`` of a subclass behind the FMI 2.0 checks (``DriveSlave.refusal``): a call in the wrong state or
+    at a communication point that does not continue the last step raises ``FmiCallError`` (pythonfmu: fmi2Fatal);
+    a step longer than the slave integrates to its accuracy is logged and returns False (fmi2Discard). The lean
+    binding calls the unchecked method (``__wrapped__``) after the same checks of its own."""
+    @functools.wraps(method)
+    def do_step(self, current_time, step_size):
+        refused = self.refusal("fmi2DoStep", current_time, step_size)
+        if refused is not None:
+            status, message = refused
+            if status == FMI2_DISCARD:
+                self.log(message, Fmi2Status.discard)
+                return False
+            self._fail("fmi2DoStep", FmiCallError(message))
+            raise FmiCallError(message)
+        done = method(self, current_time, step_size)
+        if done:
+            self._next_time, self._last_step = current_time + step_size, step_size
+        return done
+
+    return do_step
+
+
 class DriveSlave(Fmi2Slave):
     """Base of the project's slaves (abstract: subclasses give the physics hooks).
 
     Subclasses declare their variables in ``__init__`` and implement ``build`` (make the
     physics object from the parameters, copy its outputs), ``do_step``,
     ``physics_state`` and ``restore_physics``.
+
+    FMI 2.0's state machine and arguments are checked here, for every slave (``refusal``): a call in the wrong
+    state, a non-finite Real input, a communication point that does not continue the last step (without an FMU
+    state restored) are refused, a step longer than ``max_step`` discarded.
     """
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        step = cls.__dict__.get("do_step")
+        if step is not None and not hasattr(step, "__wrapped__"):
+            cls.do_step = _checked_step(step)
+        init = cls.__init__
+
+        @functools.wraps(init)
+        def __init__(self, *args, **kw):
+            init(self, *args, **kw)
+            if type(self) is cls:  # the most derived class is done: every variable declared
+                self._offer()
+
+        cls.__init__ = __init__
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -250,6 +314,11 @@ class DriveSlave(Fmi2Slave):
         self._built_with = None  # parameter values the physics was built with
         self._packaged_starts = packaged_starts(self.resources)
         release_at_exit(self.resources)
+        self._fmi_state = INSTANTIATED
+        self._in_step_mode = False  # read by the lean binding
+        self._next_time = None  # where the last step ended (None: any communication point)
+        self._last_step = 0.0
+        self._max_step = math.inf  # the longest step the slave integrates to its accuracy (``max_step``)
 
     # -- declaring variables ---------------------------------------------------------
     def _declare(self, var, value, unit=None, display_unit=None):
@@ -368,6 +437,54 @@ class DriveSlave(Fmi2Slave):
     def needs_rebuild(self) -> bool:
         return self._built_with != self.parameter_values()
 
+    def max_step(self) -> tuple[float, str]:
+        """The longest communication step this slave integrates to its stated accuracy, with the parameters it
+        was initialised with, and why (a step longer is discarded): none by default (inf)."""
+        return math.inf, ""
+
+    # -- FMI 2.0's state machine and arguments ----------------------------------------
+    def refusal(self, call: str, *args) -> tuple[int, str] | None:
+        """None when FMI 2.0 allows ``call`` (an FMI function's name) with ``args`` now, else (status, the log
+        line): fmi2Error for a call in the wrong state, a non-finite Real input, a communication point that does
+        not continue the last step; fmi2Discard for a step longer than ``max_step``. The lean binding asks this
+        before it forwards a checked call, and where its own checks of the direct path fail."""
+        state = self._fmi_state
+        if call == "fmi2SetupExperiment" and state != INSTANTIATED:
+            return FMI2_ERROR, f"fmi2SetupExperiment in {state}: allowed only before fmi2EnterInitializationMode"
+        if call == "fmi2EnterInitializationMode" and state != INSTANTIATED:
+            return FMI2_ERROR, (f"fmi2EnterInitializationMode in {state}: allowed once, after fmi2Instantiate or "
+                                f"fmi2Reset")
+        if call == "fmi2ExitInitializationMode" and state != INITIALIZATION:
+            return FMI2_ERROR, f"fmi2ExitInitializationMode in {state}: allowed only after fmi2EnterInitializationMode"
+        if call == "fmi2DoStep":
+            t, h = args
+            if state != STEP_MODE:
+                when = "after fmi2Terminate" if state == TERMINATED else "before fmi2ExitInitializationMode"
+                return FMI2_ERROR, f"fmi2DoStep {when} (the FMU is in {state})"
+            if not math.isfinite(t):
+                return FMI2_ERROR, f"fmi2DoStep: the communication point {t!r} is not finite"
+            last = self._next_time
+            if last is not None and abs(t - last) > CONTINUITY_TOLERANCE * self._last_step + _TIME_ULPS * abs(t):
+                return FMI2_ERROR, (f"fmi2DoStep at t = {t!r} s does not continue the last step, which ended at "
+                                    f"{last!r} s (restore an FMU state to step from another time)")
+            if h > self._max_step:
+                return FMI2_DISCARD, f"fmi2DoStep of {h!r} s discarded: {self.max_step()[1]}"
+        if call == "fmi2SetReal":
+            vrs, values = args
+            inputs = self._real_inputs
+            for vr, value in zip(vrs, values):
+                if 0 <= vr < len(inputs) and inputs[vr] is not None and not math.isfinite(value):
+                    return FMI2_ERROR, f"fmi2SetReal: input {inputs[vr]!r} = {value!r} is not finite; not set"
+        return None
+
+    def _refuse(self, call: str, *args) -> None:
+        """Raise ``FmiCallError`` if ``refusal`` refuses ``call`` (pythonfmu's path: fmi2Fatal, the line logged)."""
+        refused = self.refusal(call, *args)
+        if refused is not None:
+            exc = FmiCallError(refused[1])
+            self._fail(call, exc)
+            raise exc
+
     # -- FMI calls -------------------------------------------------------------------
     def _fail(self, where: str, exc: Exception) -> None:
         """An FMI call fails with ``exc`` (re-raised by the caller; the wrapper logs its repr):
@@ -378,6 +495,7 @@ class DriveSlave(Fmi2Slave):
             ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        self._refuse("fmi2SetupExperiment")
         try:
             if stop_time is not None and not stop_time >= start_time:
                 raise FmuUsageError(f"stop time {stop_time!r} s is before the start time {start_time!r} s")
@@ -385,14 +503,24 @@ class DriveSlave(Fmi2Slave):
             self._fail("fmi2SetupExperiment", exc)
             raise
 
-    def enter_initialization_mode(self):
-        """Offer this slave to the lean binding, if the FMU's library is it (``fmus/lean_binding.c``:
-        once initialised, the binding reads the Real variables, writes the Real inputs and calls
-        ``do_step`` itself; everything else, and anything that would fail, goes through pythonfmu)."""
+    def _offer(self) -> None:
+        """Offer this slave to the lean binding, if the FMU's library is it (``fmus/lean_binding.c``), when it is
+        made (in fmi2Instantiate or fmi2Reset): once initialised, the binding reads the Real variables, writes
+        the Real inputs and calls ``do_step`` (unchecked) itself after its own checks; it asks ``refusal``
+        before it forwards a checked call; everything else, and anything that would fail, goes through
+        pythonfmu."""
         offer = lean_offer(self.resources)
         if offer is not None:
-            offer((self, self.__dict__, self.do_step, self._defer_step, self.log_queue, tuple(self._real_names),
-                   tuple(name is not None for name in self._real_inputs)))
+            step = self.do_step
+            raw = getattr(type(self).do_step, "__wrapped__", None)
+            offer((self, self.__dict__, raw.__get__(self) if raw is not None else step, self._defer_step,
+                   self.log_queue, tuple(self._real_names), tuple(name is not None for name in self._real_inputs),
+                   self.refusal))
+
+    def enter_initialization_mode(self):
+        self._refuse("fmi2EnterInitializationMode")
+        self._fmi_state = INITIALIZATION
+        self._next_time, self._last_step = None, 0.0
 
     def _defer_step(self, exc: BaseException) -> None:
         """The lean binding's ``do_step`` raised ``exc``: raise it again from pythonfmu's fmi2DoStep,
@@ -403,12 +531,18 @@ class DriveSlave(Fmi2Slave):
         self.do_step = raise_again
 
     def exit_initialization_mode(self):
+        self._refuse("fmi2ExitInitializationMode")
         try:
             self.build()  # validates the parameters
             self._initialized = True
+            self._max_step = self.max_step()[0]
         except Exception as exc:
             self._fail("fmi2ExitInitializationMode", exc)
             raise
+        self._fmi_state, self._in_step_mode = STEP_MODE, True
+
+    def terminate(self):
+        self._fmi_state, self._in_step_mode = TERMINATED, False
 
     def get_real(self, vrs):
         try:
@@ -436,6 +570,8 @@ class DriveSlave(Fmi2Slave):
                 name = inputs[vr]
                 if name is None:  # a parameter (fixed after initialisation) or an error
                     self._real_setters[vr](value)
+                elif not math.isfinite(value):
+                    raise FmiCallError(self.refusal("fmi2SetReal", [vr], [value])[1])
                 else:
                     attributes[name] = value
         except Exception as exc:
@@ -503,10 +639,16 @@ class DriveSlave(Fmi2Slave):
             self._initialized = bool(state["initialized"])
             if self._initialized:
                 self.restore_physics(state["physics"])
+                self._max_step = self.max_step()[0]
+                self._fmi_state = STEP_MODE
             else:
                 self.forget_physics()
                 self._built_with = None
                 self._stale = True
+                if self._fmi_state not in (INSTANTIATED, INITIALIZATION):
+                    self._fmi_state = INSTANTIATED
+            self._in_step_mode = self._fmi_state == STEP_MODE
+            self._next_time, self._last_step = None, 0.0  # a restored state steps from any time
         except Exception as exc:
             self._fail("fmi2SetFMUstate", exc)
             raise

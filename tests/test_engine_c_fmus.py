@@ -234,6 +234,22 @@ def test_a_termination_request_ends_the_run_as_completed(tmp_path, c_fmus, loop)
     assert np.allclose(ref["y"][:-1], r["y"], rtol=1e-15, atol=0)  # t_n + h (fmpy: t_n + ((n + 1) h - n h))
 
 
+@pytest.mark.parametrize("loop", ["compiled", "plain"])
+def test_a_termination_inside_a_step_records_the_row_where_the_fmu_ended(tmp_path, c_fmus, loop):
+    """The FMU ends the simulation inside its step (Stair: at 9.0 s in its step from 8.8 s): one more row at
+    fmi2LastSuccessfulTime with the outputs there, as fmpy records it; terminated_at is that time."""
+    path = system(tmp_path, c_fmus, [("stopper", "Stopper", "stop_at = 0.504, inside = true")],
+                  record={"y": "stopper.y", "steps": "stopper.steps"}, stop_time=1.0, name="stop")
+    m, r = run(path, tmp_path / "out", loop)
+    assert (m["status"], m["terminated_by"], m["terminated_at"], m["macro_steps"]) == ("completed", "stopper",
+                                                                                       0.504, 50)
+    assert m["rows"] == 52 and list(r["time"][-2:]) == [0.5, 0.504]
+    assert (r["y"][-1], r["steps"][-1], r["steps"][-2]) == (0.504, 51, 50)
+    ref = simulate_fmu(str(c_fmus["Stopper"]), stop_time=1.0, step_size=H, output_interval=H,
+                       output=["y", "steps"], start_values={"stop_at": 0.504, "inside": True})
+    assert (ref["time"][-1], ref["y"][-1], ref["steps"][-1]) == (0.504, r["y"][-1], r["steps"][-1])
+
+
 def test_a_termination_keeps_the_rows_recorded_before_it(tmp_path, c_fmus):
     path = system(tmp_path, c_fmus, [("stopper", "Stopper", "stop_at = 0.55")], record={"y": "stopper.y"},
                   stop_time=1.2, output_interval=0.04, name="stop")

@@ -234,6 +234,7 @@ def test_the_plant_fmu_takes_the_flux_model():
     ref = {v.name: vr for vr, v in slave.vars.items()}
     slave.set_string([ref["flux_model"]], ["algebraic"])
     slave.set_real([ref["flux_q_ratio"], ref["flux_cross"], ref["i_q0"]], [0.6, 0.08, 233.0])
+    slave.enter_initialization_mode()
     slave.exit_initialization_mode()
     plant = slave._plant
     assert plant._pp[k.P_FLUX] == 1.0

@@ -46,10 +46,13 @@ def builds(tmp_path_factory):
 
 
 def test_the_default_build_puts_the_lean_binding_in_front_of_pythonfmus_library(builds):
+    """binaries/linux64/: the FMU's loader as <model>.so (fmus/fmu_loader.c), the lean binding behind it as
+    pmsm-binding.so, pythonfmu's library behind that as pythonfmu-export.so."""
     for name in NAMES:
         with zipfile.ZipFile(builds["lean"] / f"{name}.fmu") as z:
             info = json.loads(z.read("resources/build_info.json"))
-            lean = z.read(f"binaries/linux64/{name}.so")
+            loader = z.read(f"binaries/linux64/{name}.so")
+            lean = z.read("binaries/linux64/pmsm-binding.so")
             inner = z.read("binaries/linux64/pythonfmu-export.so")
         with zipfile.ZipFile(builds["pythonfmu"] / f"{name}.fmu") as z:
             stock_info = json.loads(z.read("resources/build_info.json"))
@@ -58,6 +61,7 @@ def test_the_default_build_puts_the_lean_binding_in_front_of_pythonfmus_library(
         assert (info["binding"], stock_info["binding"]) == ("lean", "pythonfmu")
         assert inner == stock  # pythonfmu's library, unchanged, under another name
         assert b"pmsm_fmu_offer" in lean and lean != stock
+        assert b"pmsm_fmu_offer" not in loader and b"PMSM_FMU_PYTHON" in loader and b"_Py_NoneStruct" not in loader
 
 
 @pytest.mark.parametrize("scenario, stop", [("wltc3b-sensorless", "12"), ("scenario2", "2")])

@@ -45,6 +45,7 @@ from pmsm_cosim.engine.master import Master
 from pmsm_cosim.engine.recording import read_results
 from pmsm_cosim.engine.ssp import NS, load_ssp, schema_errors
 from pmsm_ev.results import ALL_COLUMNS
+from pmsm_ev_fmus import build as fmu_build
 
 RTOL = ATOL = 1e-9
 STEP = 1e-4
@@ -333,11 +334,15 @@ def test_fmpy_simulate_ssp_cannot_set_a_string_parameter(package):
 
 # -- OMSimulator -----------------------------------------------------------------------------------------
 def omsimulator_env() -> dict:
-    """The environment a C host needs for these Python FMUs (README): this interpreter's
-    libpython preloaded, its home, and its site-packages (numpy) on the path."""
-    libpython = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("LDLIBRARY")
-    env = dict(os.environ, LD_PRELOAD=str(libpython), PYTHONHOME=sys.base_prefix,
-               PYTHONPATH=os.pathsep.join(p for p in sys.path if p.endswith("site-packages")))
+    """The environment of a user who runs OMSimulator, with no set-up for these Python FMUs (README: the FMUs
+    bring up their own Python): this one without any PYTHON* variable or preload. An FMU built without the
+    loader (no C compiler) still needs the set-up of fmus/README.md: this interpreter's libpython preloaded,
+    its home, and its site-packages (numpy) on the path."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON") and k != "LD_PRELOAD"}
+    if fmu_build.binding_requested() != "lean":
+        libpython = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("LDLIBRARY")
+        env.update(LD_PRELOAD=str(libpython), PYTHONHOME=sys.base_prefix,
+                   PYTHONPATH=os.pathsep.join(p for p in sys.path if p.endswith("site-packages")))
     return env
 
 

@@ -34,6 +34,7 @@ from fmpy.fmi2 import (
     fmi2CallbackFreeMemoryTYPE,
     fmi2CallbackFunctions,
     fmi2CallbackLoggerTYPE,
+    fmi2LastSuccessfulTime,
     fmi2Terminated,
     free,
 )
@@ -244,6 +245,16 @@ class FmuInstance:
             return self.fmu.getBooleanStatus(fmi2Terminated)
         except Exception:  # FMICallException, or a slave without the status
             return False
+
+    def last_successful_time(self) -> float | None:
+        """fmi2GetRealStatus(fmi2LastSuccessfulTime): where the FMU's last step ended (FMI 2.0: asked after an
+        fmi2DoStep returned fmi2Discard; a step that ends the simulation may end inside it). None if the FMU
+        cannot say, or says something that is not a finite number."""
+        try:
+            value = float(self.fmu.getRealStatus(fmi2LastSuccessfulTime))
+        except Exception:  # FMICallException, or a slave without the status
+            return None
+        return value if math.isfinite(value) else None
 
     def logged_error(self) -> bool:
         """Whether a message of status fmi2Error or worse was logged since ``mark``."""

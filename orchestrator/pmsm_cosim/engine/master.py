@@ -38,8 +38,12 @@ model.
 
 Termination: an FMU whose fmi2DoStep from t_n returns fmi2Discard with
 fmi2GetBooleanStatus(fmi2Terminated) true ends the run there as "completed", with
-``terminated_by`` (the instance) and ``terminated_at`` (t_n) in metrics.json; the rows
-recorded up to t_n are kept. It is a failed step, like any other status above fmi2Warning,
+``terminated_by`` (the instance) and ``terminated_at`` in metrics.json; the rows
+recorded up to t_n are kept. Where the FMU's fmi2GetRealStatus(fmi2LastSuccessfulTime) says its
+step got further (t_n < t_end <= t_n + h: it ended the simulation inside the step, as the Modelica
+Reference FMU Stair does at 9.0 s in its step from 8.8 s), one more row is recorded at t_end, as
+fmpy does (the FMUs' variables as they are, the signals as at t_n), and ``terminated_at`` is
+t_end; otherwise ``terminated_at`` is t_n. It is a failed step, like any other status above fmi2Warning,
 if the FMU logged a message of status fmi2Error or worse during the run (a pythonfmu FMU
 whose ``do_step`` returns False asks to terminate: with an error logged, that is a failure),
 or if it discards the step without asking to terminate (this master does not retry a step
@@ -550,8 +554,9 @@ class Master:
             raise self._step_failed(st, t, status)
 
     # -- recording -------------------------------------------------------------------
-    def _row(self, n: int) -> list:
-        t = n * self.h
+    def _row(self, n: int, t: float | None = None) -> list:
+        """The row of t_n (``t``: of that time instead, the variables and signals as they are)."""
+        t = n * self.h if t is None else t
         for fn, handle, vrs, cnt, buf, name in self.record_reads:
             status = fn(handle, vrs, cnt, buf)
             if status > 1:
@@ -661,6 +666,7 @@ class Master:
                 n = n1
         except _Terminated as exc:
             n, self.terminated = exc.n, (exc.instance, exc.t)
+            self._record_termination(writer, exc)
         except _StepFailed as exc:
             n = exc.n if exc.n is not None else n
             status = f"failed: {exc}"
@@ -673,6 +679,20 @@ class Master:
         if status.startswith("failed") and self._stop_requested:
             status = "interrupted"  # an FMU that saw the Ctrl-C itself
         return status, n, wall
+
+    def _record_termination(self, writer: ResultWriter, exc: _Terminated) -> None:
+        """The row at the terminating FMU's last successful time, where its step ended the simulation beyond
+        t_n (module doc, "Termination"), and that time as ``terminated_at``."""
+        inst = self.instances[exc.instance]
+        step = next((st.step_size for st in self.steppers if st.inst is inst), self.h)
+        t_end = inst.last_successful_time()
+        if t_end is None or not exc.t < t_end <= exc.t + step * (1.0 + 1e-9):
+            return
+        try:
+            writer.write(self._row(exc.n, t_end))
+        except _StepFailed:  # a variable that cannot be read there: the run ends at t_n, as it would have
+            return
+        self.terminated = (exc.instance, t_end)
 
     def _metrics(self, out: Path, status: str, n: int, wall: float, init_time: float, rows: int,
                  extra: dict | None, metrics_of) -> dict:

@@ -1,0 +1,214 @@
+"""FMI 2.0's behaviour under misuse (fmus/README.md, "Errors"): a master that calls the FMUs in the wrong state,
+gives them non-finite inputs, steps from a communication point that does not continue the last one, or steps the
+plant further than it integrates to its accuracy, is refused with the standard's status (fmi2Error; fmi2Discard
+for the step too long) and one log line, and the FMU stays usable. Each call sequence runs in a Python process
+of its own (fmpy's low-level FMU2Slave, as another master would call it; a crash is one failed test), on the
+default build (the lean binding: ``DriveSlave.refusal`` asked by ``fmus/lean_binding.c``)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import pmsm_ev_fmus
+from pmsm_ev_fmus import build as fmu_build
+
+pytestmark = pytest.mark.skipif(fmu_build.binding_requested() != "lean",
+                                reason="fmi2Error needs the lean binding (pythonfmu's alone returns fmi2Fatal)")
+
+H = 1e-4
+
+# one call sequence: the statuses of the calls (0 for one that returned fmi2OK), the FMU's log lines, values read
+_SCRIPT = r"""
+import json, math, sys
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+path, case = sys.argv[1], sys.argv[2]
+md = read_model_description(path)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                instanceName="m")
+fmu.instantiate(loggingOn=True)  # fmpy's default logger prints "[ERROR] message": read back from stdout
+out = {"calls": [], "values": {}}
+def call(name, *args):
+    try:
+        getattr(fmu, name)(*args)
+        out["calls"].append([name, 0])
+        return 0
+    except FMICallException as exc:
+        out["calls"].append([name, exc.status])
+        return exc.status
+def init():
+    call("setupExperiment", None, 0.0)
+    call("enterInitializationMode")
+    call("exitInitializationMode")
+def read(label, names):
+    out["values"][label] = [v if math.isfinite(v) else repr(v) for v in fmu.getReal([vr[n] for n in names])]
+if case == "step-before-init":
+    call("setupExperiment", None, 0.0)
+    call("doStep", 0.0, 1e-4)
+    call("enterInitializationMode")
+    call("doStep", 0.0, 1e-4)
+    call("exitInitializationMode")
+    call("doStep", 0.0, 1e-4)
+elif case == "step-after-terminate":
+    init()
+    call("doStep", 0.0, 1e-4)
+    call("terminate")
+    call("doStep", 1e-4, 1e-4)
+elif case == "enter-twice":
+    call("setupExperiment", None, 0.0)
+    call("enterInitializationMode")
+    call("enterInitializationMode")
+    call("exitInitializationMode")
+    call("exitInitializationMode")
+    call("setupExperiment", None, 0.0)
+    call("doStep", 0.0, 1e-4)
+elif case == "non-finite":
+    init()
+    inputs = [v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
+    call("setReal", [vr[inputs[0]]], [float("inf")])
+    call("setReal", [vr[n] for n in inputs], [1.0] * (len(inputs) - 1) + [float("nan")])
+    call("doStep", 0.0, 1e-4)
+    read("after", [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"])
+elif case == "time":
+    init()
+    call("doStep", 0.0, 1e-4)
+    call("doStep", 1e-4, 1e-4)
+    call("doStep", 0.0, 1e-4)       # back in time
+    call("doStep", 5e-4, 1e-4)      # a gap
+    state = fmu.getFMUstate()       # at 2e-4
+    call("doStep", 2e-4, 1e-4)
+    fmu.setFMUstate(state)
+    call("doStep", 2e-4, 1e-4)      # from the restored state: the same point again
+    call("doStep", 3e-4 + 1e-19, 1e-4)  # a master's rounding: continues
+elif case == "long-step":
+    init()
+    call("setReal", [vr["v_alpha"], vr["v_beta"]], [20.0, 5.0])
+    call("doStep", 0.0, 1e-4)
+    call("doStep", 1e-4, 5.0)
+    read("after", ["omega_m", "i_d", "i_q"])
+    out["values"]["last"] = fmu.getRealStatus(2)
+    out["values"]["terminated"] = fmu.getBooleanStatus(3)
+    call("doStep", 1e-4, 1e-4)
+    read("then", ["omega_m", "i_d", "i_q"])
+fmu.terminate()
+fmu.freeInstance()
+print(json.dumps(out))
+"""
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory) -> dict[str, Path]:
+    return pmsm_ev_fmus.build_all(tmp_path_factory.mktemp("fmus"), names=["PmsmEvPlant", "FocSensorless",
+                                                                           "RouteProfile"])
+
+
+def run(fmu: Path, case: str) -> tuple[list, list[str], dict]:
+    """(the calls with their statuses, the FMU's log lines, the values read) of ``case`` in a process of its own."""
+    done = subprocess.run([sys.executable, "-c", _SCRIPT, str(fmu), case], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    lines = done.stdout.strip().splitlines()
+    out = json.loads(lines[-1])
+    log = []
+    for line in lines[:-1]:  # a message of several lines (pythonfmu's, with the exception's repr): one entry
+        if line.startswith("[") or not log:
+            log.append(line)
+        else:
+            log[-1] += "\n" + line
+    return out["calls"], log, out["values"]
+
+
+ERROR, DISCARD = 3, 2
+
+
+@pytest.mark.parametrize("name", ["PmsmEvPlant", "FocSensorless", "RouteProfile"])
+def test_a_step_before_initialisation_is_an_error(fmus, name):
+    calls, log, _ = run(fmus[name], "step-before-init")
+    assert calls == [["setupExperiment", 0], ["doStep", ERROR], ["enterInitializationMode", 0], ["doStep", ERROR],
+                     ["exitInitializationMode", 0], ["doStep", 0]]
+    assert log == ["[ERROR] fmi2DoStep before fmi2ExitInitializationMode (the FMU is in instantiated)",
+                   "[ERROR] fmi2DoStep before fmi2ExitInitializationMode (the FMU is in initialization mode)"]
+
+
+@pytest.mark.parametrize("name", ["PmsmEvPlant", "FocSensorless"])
+def test_a_step_after_terminate_is_an_error(fmus, name):
+    calls, log, _ = run(fmus[name], "step-after-terminate")
+    assert calls == [["setupExperiment", 0], ["enterInitializationMode", 0], ["exitInitializationMode", 0],
+                     ["doStep", 0], ["terminate", 0], ["doStep", ERROR]]
+    assert log == ["[ERROR] fmi2DoStep after fmi2Terminate (the FMU is in terminated)"]
+
+
+def test_calls_of_the_initialisation_out_of_order_are_errors(fmus):
+    calls, log, _ = run(fmus["FocSensorless"], "enter-twice")
+    assert calls == [["setupExperiment", 0], ["enterInitializationMode", 0], ["enterInitializationMode", ERROR],
+                     ["exitInitializationMode", 0], ["exitInitializationMode", ERROR], ["setupExperiment", ERROR],
+                     ["doStep", 0]]
+    assert log == [
+        "[ERROR] fmi2EnterInitializationMode in initialization mode: allowed once, after fmi2Instantiate or "
+        "fmi2Reset",
+        "[ERROR] fmi2ExitInitializationMode in step mode: allowed only after fmi2EnterInitializationMode",
+        "[ERROR] fmi2SetupExperiment in step mode: allowed only before fmi2EnterInitializationMode"]
+
+
+@pytest.mark.parametrize("name, first", [("FocSensorless", "i_alpha"), ("PmsmEvPlant", "v_alpha")])
+def test_non_finite_inputs_are_refused_naming_the_variable(fmus, name, first):
+    """inf, or a NaN among finite values, is not set (the whole call refused): the step after runs on the inputs
+    held before and every output stays finite."""
+    calls, log, values = run(fmus[name], "non-finite")
+    assert calls[-3:] == [["setReal", ERROR], ["setReal", ERROR], ["doStep", 0]]
+    assert log[0] == f"[ERROR] fmi2SetReal: input {first!r} = inf is not finite; not set"
+    assert log[1].startswith("[ERROR] fmi2SetReal: input '") and log[1].endswith("' = nan is not finite; not set")
+    assert len(log) == 2
+    assert all(isinstance(v, float) and math.isfinite(v) for v in values["after"])
+
+
+@pytest.mark.parametrize("name", ["PmsmEvPlant", "FocSensorless"])
+def test_a_communication_point_that_does_not_continue_the_last_is_refused(fmus, name):
+    """Back in time or past a gap: fmi2Error; from a restored FMU state the same point again is fine, and so is a
+    master's rounding of t + h."""
+    calls, log, _ = run(fmus[name], "time")
+    assert [status for _, status in calls[3:]] == [0, 0, ERROR, ERROR, 0, 0, 0]
+    assert log == [
+        "[ERROR] fmi2DoStep at t = 0.0 s does not continue the last step, which ended at 0.0002 s (restore an FMU "
+        "state to step from another time)",
+        "[ERROR] fmi2DoStep at t = 0.0005 s does not continue the last step, which ended at 0.0002 s (restore an "
+        "FMU state to step from another time)"]
+
+
+def test_a_plant_step_longer_than_it_integrates_is_discarded(fmus):
+    """5 s at once (the plant integrates 2.3 ms to its accuracy): fmi2Discard with the reason, the state left as it
+    was (no 1e20), the last successful time where the step began, the run not terminated: a shorter step goes on."""
+    calls, log, values = run(fmus["PmsmEvPlant"], "long-step")
+    assert [status for _, status in calls[3:]] == [0, 0, DISCARD, 0]
+    assert len(log) == 1 and log[0].startswith("[DISCARD] fmi2DoStep of 5.0 s discarded: longer than the plant "
+                                               "integrates to its accuracy (0.0023")
+    assert "take shorter steps or raise rk4_substeps" in log[0]
+    assert values["last"] == pytest.approx(1e-4) and values["terminated"] is False
+    assert all(abs(v) < 1e3 for v in values["after"] + values["then"])
+    assert values["then"] != values["after"]
+
+
+def test_through_pythonfmus_library_alone_the_same_calls_are_refused_as_fatal(tmp_path):
+    """An FMU built with pythonfmu's library alone (``PMSM_EV_FMU_BINDING=pythonfmu``: no C compiler, another
+    platform) refuses the same calls, as fmi2Fatal (pythonfmu gives a slave no other status), the reason in
+    pythonfmu's log line; a step too long is discarded there too (with the terminated status, pythonfmu's)."""
+    import os
+
+    env = dict(os.environ, PMSM_EV_FMU_BINDING="pythonfmu", PMSM_COSIM_FMU_DIR=str(tmp_path))
+    subprocess.run([sys.executable, "-m", "pmsm_ev_fmus", "--out", str(tmp_path), "PmsmEvPlant"], env=env,
+                   check=True, capture_output=True, text=True, timeout=600)
+    plant = tmp_path / "PmsmEvPlant.fmu"
+    calls, log, _ = run(plant, "step-after-terminate")
+    assert calls[-1] == ["doStep", 4]
+    assert len(log) == 1 and log[0].startswith("[FATAL] ") and "fmi2DoStep after fmi2Terminate" in log[0]
+    calls, log, values = run(plant, "long-step")
+    assert calls[5] == ["doStep", DISCARD] and values["terminated"] is True
+    assert any("longer than the plant integrates to its accuracy" in line for line in log)
