@@ -139,3 +139,22 @@ def test_hill_stand_on_the_current_the_slope_needs_and_restart_without_roll_back
     x0 = rows[np.searchsorted(t, 18.0), 3]
     assert rows[t >= 18.0, 3].min() > x0 - 5e-3
     assert np.abs(rows[stand, 8]).max() < 0.35  # the angle held at a stop under load
+
+
+@pytest.mark.parametrize(("setting", "names"), [
+    ("ctrl.inj_frequency=6000", "inj_frequency must be half the control rate"),
+    ("ctrl.inj_voltage=0", "inj_voltage must be > 0"),
+    ("ctrl.inj_voltage=150", "inj_voltage must be < half the voltage limit"),
+    ("ctrl.low_speed=hfi", "low_speed must be one of"),
+])
+def test_bad_injection_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, setting, names):
+    from orchestrator_support import project_fmus
+    from pmsm_cosim.app.cli import main
+
+    project_fmus()
+    out = tmp_path / "out"
+    code = main(["run", "hill-start-injection", "--set", setting, "--stop-time", "0.01", "--no-figures", "--quiet",
+                 "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and not out.exists()
+    assert len(err) == 1 and err[0].startswith("error: ") and names in err[0]
