@@ -41,7 +41,8 @@ NOMINAL = {"plant.R_s": ("R_s", _M.R_s), "plant.psi": ("ψ", _M.psi), "plant.L_q
 
 
 #: the sensorless unit's modes (``pmsm_ev.kernels`` MODE_*: metrics.json ``sensorless`` ``mode_changes``)
-MODE_NAMES = {0.0: "alignment", 1.0: "I-f", 2.0: "FOC on the EKF"}
+MODE_NAMES = {0.0: "alignment", 1.0: "I-f", 2.0: "FOC on the EKF", 3.0: "the injection's acquisition",
+              4.0: "the polarity test", 5.0: "FOC on the injection"}
 
 
 def _num(x) -> float:
