@@ -158,3 +158,21 @@ def test_bad_injection_input_is_one_line_exit_2_nothing_written(tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and not out.exists()
     assert len(err) == 1 and err[0].startswith("error: ") and names in err[0]
+
+
+def test_the_acquisitions_jumps_are_not_slipped_turns_but_a_slip_after_it_is():
+    """``results.slipped_turns`` counts from the closed loop on: the frame's jumps onto the axis and by pi
+    (modes 3 and 4) are the angle being found; a turn lost in mode 5 is a slip."""
+    from pmsm_ev.results import slipped_turns
+
+    t = np.arange(0.0, 1.0, 0.01)
+    mode = np.where(t < 0.25, np.where(t < 0.12, 3.0, 4.0), 5.0)
+    theta_e = np.full_like(t, -2.6)
+    theta_ctrl = np.where(t < 0.12, 0.0, np.where(t < 0.25, -2.6 - math.pi, -2.6))  # found, then flipped
+    r = {"time": t, "mode": mode, "theta_e": theta_e, "theta_ctrl": theta_ctrl,
+         "omega_ctrl": np.zeros_like(t), "omega_m": np.zeros_like(t)}
+    assert slipped_turns(r, 4) == 0
+    slip = t >= 0.5  # the frame a whole turn ahead in 0.1 s, the rotor standing
+    r["theta_ctrl"] = np.where(slip, -2.6 + 2 * math.pi * np.clip((t - 0.5) / 0.1, 0, 1), theta_ctrl)
+    r["omega_ctrl"] = np.where(slip & (t < 0.6), 2 * math.pi / 0.1 / 4, 0.0)
+    assert slipped_turns(r, 4) == 1

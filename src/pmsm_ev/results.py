@@ -486,11 +486,13 @@ def wrong_way_travel(x: np.ndarray, omega_ref: np.ndarray) -> float:
 
 def slipped_turns(r: dict[str, np.ndarray], pole_pairs: int) -> int:
     """Largest number of electrical turns the control frame got ahead of (or behind) the rotor
-    after the alignment: the lead theta_ctrl - theta_e unwrapped row by row with the rotation the
+    after the angle was found (not in the alignment, mode 0, nor in the injection's acquisition and
+    polarity test, modes 3 and 4, where the frame jumps onto the rotor's axis and turns by pi when the
+    polarity says so): the lead theta_ctrl - theta_e unwrapped row by row with the rotation the
     recorded speeds predict (N (omega_ctrl - omega_m) per second), so that a frame spinning
     past a standing rotor is counted even when it turns more than pi between rows."""
     t, lead = r["time"], r["theta_ctrl"] - r["theta_e"]
-    keep = r["mode"] != 0.0
+    keep = (r["mode"] != 0.0) & (r["mode"] != 3.0) & (r["mode"] != 4.0)
     if np.count_nonzero(keep) < 2:
         return 0
     t, lead = t[keep], lead[keep]
