@@ -12,15 +12,33 @@ import argparse
 import math
 from pathlib import Path
 
+from pmsm_ev.params import MotorParams
+from pmsm_ev.results import slipped_turns
+
+from ....engine.recording import read_results
 from ...studies import load_sweep
-from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, findings, where_text
+from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, failure_reasons, findings, where_text
 
 SWEEP = "cycle_montecarlo_wltc3b_injection"
 BEGIN, END = "<!-- injection-mc: generated -->", "<!-- /injection-mc -->"
 
 
-def section(out: Path, machine: str) -> list[str]:
+def judged_rows(out: Path) -> list[dict]:
+    """``cycle_rows``, each completed sample's slipped turns counted again from its results.csv by
+    ``pmsm_ev.results.slipped_turns`` as it is now (a sample's metrics.json keeps the count of the code that
+    ran it), its failure reasons with them."""
     rows = cycle_rows(out)
+    for r in rows:
+        path = Path(out) / "runs" / r["run"]
+        if r["status"] == "completed" and (path / "results.csv").is_file():
+            r["slipped_turns"] = float(slipped_turns(read_results(path), MotorParams().N))
+            r["reasons"] = failure_reasons(r["status"], r["inside_share"], r["slipped_turns"], r["fault_latched"])
+            r["failed"] = bool(r["reasons"])
+    return rows
+
+
+def section(out: Path, machine: str) -> list[str]:
+    rows = judged_rows(out)
     design = load_sweep(SWEEP)
     planned = design.samples
     f = findings(rows, cycle_duration_of(rows))
