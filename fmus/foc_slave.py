@@ -141,7 +141,8 @@ class FocSlave(DriveSlave):
                                             "MTPA, 5 no torque within the limits (0 with reference 'paper')" + hold,
                         discrete=True)
         self._sensorless = observer == "sensorless"
-        if self._sensorless:
+        if self._sensorless:  # it never reads the measured angle and speed: any value there, NaN included
+            self.unread_inputs = frozenset(("theta_meas", "omega_meas"))
             self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams, InjectionParams)
         else:
             self.add_parameters(ControllerParams, EkfParams, MotorParams)

@@ -443,6 +443,10 @@ class DriveSlave(Fmi2Slave):
         return math.inf, ""
 
     # -- FMI 2.0's state machine and arguments ----------------------------------------
+    #: inputs the slave never reads (declared by it, e.g. the sensorless unit's theta_meas, omega_meas): any
+    #: value is accepted there, NaN included, since none can reach its physics
+    unread_inputs: frozenset = frozenset()
+
     def refusal(self, call: str, *args) -> tuple[int, str] | None:
         """None when FMI 2.0 allows ``call`` (an FMI function's name) with ``args`` now, else (status, the log
         line): fmi2Error for a call in the wrong state, a non-finite Real input, a communication point that does
@@ -473,7 +477,8 @@ class DriveSlave(Fmi2Slave):
             vrs, values = args
             inputs = self._real_inputs
             for vr, value in zip(vrs, values):
-                if 0 <= vr < len(inputs) and inputs[vr] is not None and not math.isfinite(value):
+                if (0 <= vr < len(inputs) and inputs[vr] is not None and inputs[vr] not in self.unread_inputs
+                        and not math.isfinite(value)):
                     return FMI2_ERROR, f"fmi2SetReal: input {inputs[vr]!r} = {value!r} is not finite; not set"
         return None
 
@@ -570,7 +575,7 @@ class DriveSlave(Fmi2Slave):
                 name = inputs[vr]
                 if name is None:  # a parameter (fixed after initialisation) or an error
                     self._real_setters[vr](value)
-                elif not math.isfinite(value):
+                elif not math.isfinite(value) and name not in self.unread_inputs:
                     raise FmiCallError(self.refusal("fmi2SetReal", [vr], [value])[1])
                 else:
                     attributes[name] = value
