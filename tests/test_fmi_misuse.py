@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-import pmsm_ev_fmus
+from orchestrator_support import project_fmus
 from pmsm_ev_fmus import build as fmu_build
 
 pytestmark = pytest.mark.skipif(fmu_build.binding_requested() != "lean",
@@ -105,9 +105,8 @@ print(json.dumps(out))
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory) -> dict[str, Path]:
-    return pmsm_ev_fmus.build_all(tmp_path_factory.mktemp("fmus"), names=["PmsmEvPlant", "FocSensorless", "FocEkf5",
-                                                                           "RouteProfile"])
+def fmus() -> dict[str, Path]:
+    return project_fmus()  # the user's cache: each call sequence runs in a process of its own
 
 
 def run(fmu: Path, case: str) -> tuple[list, list[str], dict]:
