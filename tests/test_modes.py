@@ -204,6 +204,18 @@ def test_disagreement_counts_only_where_both_observers_are_evidence():
     assert events[-1] == k.EV_DISAGREE and set(events[:-1]) == {k.EV_NONE}
 
 
+def test_the_ekf_bound_grows_with_the_back_emf():
+    """At speed a motor that is not the model's leaves a share of the back-EMF unexplained: the bound is
+    C_EKF_LOS_I plus the current the back-EMF drives in a period."""
+    _, s, c = _unit()
+    n = round(c[k.C_EKF_LOS_TIME] / c[k.C_DT])
+    s[k.S_X + 2] = 1000.0
+    s[k.S_RESID_F] = 0.99 * (c[k.C_EKF_LOS_I] + c[k.C_EKF_LOS_EMF] * 1000.0)
+    assert all(k.detect_ekf_lost(s, c) == k.EV_NONE for _ in range(2 * n))
+    s[k.S_RESID_F] = 1.01 * (c[k.C_EKF_LOS_I] + c[k.C_EKF_LOS_EMF] * 1000.0)
+    assert [k.detect_ekf_lost(s, c) for _ in range(n)][-1] == k.EV_EKF_LOST
+
+
 def test_ekf_lost_only_after_its_time():
     _, s, c = _unit()
     s[k.S_RESID_F] = 2.0 * c[k.C_EKF_LOS_I]

@@ -245,6 +245,7 @@ class ControlUnit:
         for name, slot in _INJECTION_SLOTS:
             c[slot] = float(getattr(p, name))
         c[_k.C_LOS_FILTER] = min(3.0 * self.dt / p.inj_los_time, 1.0)
+        c[_k.C_EKF_LOS_EMF] = self.dt * m.N * m.psi / m.L_q
         for j, phi in enumerate(cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * 9):
             c[_k.C_CROSS + j] = phi
 

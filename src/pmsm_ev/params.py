@@ -1153,10 +1153,13 @@ class InjectionParams:
     #: ... for this long [s] [chosen: 50 ms, seven time constants of the tracking observer]
     inj_los_time: float = 0.05
     #: loss of synchronism on the EKF (the injection strategy's FOC on the EKF alone): the EKF's current
-    #: innovation, low-pass filtered (``inj_los_time`` / 3), above this [A] ... [chosen: 60 A]: healthy, the
-    #: innovation is the sensors' noise and the model's mismatch: 2-8 A on the nominal motor, 25 A at 200
-    #: rad/s on a hot one (R_s +50 %, psi -12 %: the back-EMF's error the EKF cannot place); an EKF whose
-    #: angle has left the rotor's leaves most of the current unexplained (hundreds of A)
+    #: innovation, low-pass filtered (``inj_los_time`` / 3), above this [A] plus the current the back-EMF
+    #: drives in a period, dt N |omega_hat| psi / L_q (25 A at 200 rad/s, 139 A at 1120 rad/s) ... [chosen:
+    #: 60 A]. Healthy, the innovation is the sensors' noise and the share of the back-EMF a motor that is not
+    #: the model's leaves unexplained: 2-8 A on the nominal motor, 25 A at 200 rad/s on a hot one (R_s +50 %,
+    #: psi -12 %), more than 60 A at 1120 rad/s in field weakening on R_s +44 %, psi -10 % (a fixed bound there
+    #: latched the safe state on a healthy drive); an EKF whose angle has left the rotor's leaves more than the
+    #: whole back-EMF's current unexplained
     ekf_los_current: float = 60.0
     #: ... for this long [s] [chosen: 0.2 s]
     ekf_los_time: float = 0.2

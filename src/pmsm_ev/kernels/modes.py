@@ -59,6 +59,7 @@ from .layout import (
     C_BLEND_HI,
     C_BLEND_HYST,
     C_DT,
+    C_EKF_LOS_EMF,
     C_EKF_LOS_I,
     C_EKF_LOS_TIME,
     C_FAULT_TIME,
@@ -250,9 +251,13 @@ def detect_injection_lost(s, c):
 
 @kernel()
 def detect_ekf_lost(s, c):
-    """EV_EKF_LOST when the EKF's filtered current innovation has stayed beyond ``C_EKF_LOS_I`` for
-    ``C_EKF_LOS_TIME`` (its timer ``S_EKF_LOS_T``): its angle or speed has left the rotor's."""
-    s[S_EKF_LOS_T] = s[S_EKF_LOS_T] + c[C_DT] if s[S_RESID_F] > c[C_EKF_LOS_I] else 0.0
+    """EV_EKF_LOST when the EKF's filtered current innovation has stayed beyond ``C_EKF_LOS_I`` plus the
+    current the back-EMF drives in a period (``C_EKF_LOS_EMF`` |omega_hat|) for ``C_EKF_LOS_TIME`` (its timer
+    ``S_EKF_LOS_T``): its angle or speed has left the rotor's. A motor that is not the model's (hot: R_s up,
+    psi down) leaves a share of the back-EMF unexplained that grows with the speed; an EKF that has lost the
+    angle leaves more than all of it."""
+    bound = c[C_EKF_LOS_I] + c[C_EKF_LOS_EMF] * abs(s[S_X + 2])
+    s[S_EKF_LOS_T] = s[S_EKF_LOS_T] + c[C_DT] if s[S_RESID_F] > bound else 0.0
     if s[S_EKF_LOS_T] < c[C_EKF_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
         return EV_NONE
     s[S_EKF_LOS_T] = 0.0
