@@ -23,7 +23,8 @@ def test_the_design_is_the_physically_consistent_one():
 def test_the_section_counts_failures_by_the_rule_and_stays_between_its_markers(tmp_path):
     rows = [("0000_a", "completed", 900, 0.1, 1.0, 0, 0, 120.0, 75.0, 4.0),
             ("0001_b", "completed", 975, -0.3, 0.985, 0, 0, 130.0, 76.0, 4.1),  # left the band
-            ("0002_c", "completed", 1050, 0.0, 1.0, 2, 0, 125.0, 74.0, 4.0)]  # slipped
+            ("0002_c", "completed", 1050, 0.0, 1.0, 2, 0, 125.0, 74.0, 4.0),  # slipped
+            ("0003_d", "not run", 900, 0.0, "", "", "", "", "", "")]  # a sweep stopped before it
     (tmp_path / "summary.csv").write_text(
         ",".join(COLUMNS) + "\n" + "\n".join(",".join(str(x) for x in r) for r in rows) + "\n", encoding="utf-8")
     page = tmp_path / "robustness.md"

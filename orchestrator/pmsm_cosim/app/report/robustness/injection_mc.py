@@ -20,14 +20,15 @@ from ...studies import load_sweep
 from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, failure_reasons, findings, where_text
 
 SWEEP = "cycle_montecarlo_wltc3b_injection"
+NOT_RUN = "not run"  #: summary.csv's status of a sample a stopped sweep has not run
 BEGIN, END = "<!-- injection-mc: generated -->", "<!-- /injection-mc -->"
 
 
 def judged_rows(out: Path) -> list[dict]:
     """``cycle_rows``, each completed sample's slipped turns counted again from its results.csv by
     ``pmsm_ev.results.slipped_turns`` as it is now (a sample's metrics.json keeps the count of the code that
-    ran it), its failure reasons with them."""
-    rows = cycle_rows(out)
+    ran it), its failure reasons with them; the samples not run yet (a sweep stopped and to be resumed) left out."""
+    rows = [r for r in cycle_rows(out) if r["status"] != NOT_RUN]
     for r in rows:
         path = Path(out) / "runs" / r["run"]
         if r["status"] == "completed" and (path / "results.csv").is_file():
@@ -55,9 +56,9 @@ def section(out: Path, machine: str) -> list[str]:
         return lines + ["No sample has run yet.", "", END]
     total = f" of the design's {planned}" if planned else ""
     lines += [f"**{f.n} samples run{total}: {f.failures} failed** (95 % interval of the failure rate "
-              f"{100 * lo:.1f} … {100 * hi:.1f} %, Wilson)."]
+              f"{100 * lo:.1f} … {100 * hi:.1f} %, Wilson).", ""]
     if f.failures:
-        lines += ["", "| sample | why | where |", "|---|---|---|"]
+        lines += ["| sample | why | where |", "|---|---|---|"]
         for r in rows:
             if r["failed"]:
                 lines.append(f"| {r['run']} | {', '.join(r['reasons'])} | {where_text(r)} |")
@@ -66,16 +67,20 @@ def section(out: Path, machine: str) -> list[str]:
     inside = [r["inside_share"] for r in rows if math.isfinite(r["inside_share"])]
     episodes = [r["episodes"] for r in rows if math.isfinite(r.get("episodes", math.nan))]
     wh = f.wh
-    lines += ["", f"Inside the band: the least {100 * min(inside):.2f} % of the cycle." if inside else "",
-              f"Loss-of-synchronism episodes: {sum(episodes):g} over {len(episodes)} samples "
-              f"(in {sum(e > 0 for e in episodes)} of them)." if episodes else "",
-              f"Energy at the DC link: {wh['mean']:.1f} Wh/km mean, {wh['median']:.1f} median, {wh['min']:.1f} … "
-              f"{wh['max']:.1f} over {wh['count']} samples." if wh["count"] else ""]
+    facts = []
+    if inside:
+        facts.append(f"Inside the band: the least {100 * min(inside):.2f} % of the cycle.")
+    if episodes:
+        facts.append(f"Loss-of-synchronism episodes: {sum(episodes):g} over {len(episodes)} samples (in "
+                     f"{sum(e > 0 for e in episodes)} of them).")
+    if wh["count"]:
+        facts.append(f"Energy at the DC link: {wh['mean']:.1f} Wh/km mean, {wh['median']:.1f} median, "
+                     f"{wh['min']:.1f} … {wh['max']:.1f} over {wh['count']} samples.")
     cost = f.cost
     if cost:
-        lines.append(f"A sample cost {cost['wall_time_s']:.0f} s of wall time ({cost['us_per_step']:.1f} us/step, "
+        facts.append(f"A sample cost {cost['wall_time_s']:.0f} s of wall time ({cost['us_per_step']:.1f} us/step, "
                      f"median) on {machine}, two samples at a time.")
-    return [x for x in lines if x != ""] + ["", END]
+    return lines + [""] + [x for fact in facts for x in (fact, "")] + [END]
 
 
 def write(page: Path, out: Path, machine: str) -> None:
