@@ -62,7 +62,6 @@ from .layout import (
     C_EKF_LOS_EMF,
     C_EKF_LOS_I,
     C_EKF_LOS_TIME,
-    C_FAULT_TIME,
     C_FF,
     C_I_D_REF,
     C_INJ_LOS_ANGLE,
@@ -80,7 +79,6 @@ from .layout import (
     C_POL_I,
     C_POL_RAMP,
     C_PSI,
-    C_RECOVER_TIME,
     C_REF_MODE,
     FAULT_LATCHED,
     FAULT_NONE,
@@ -122,6 +120,7 @@ from .layout import (
     S_X,
 )
 from .observers import ekf5ab_period
+from .startup import age_episode
 from .transforms import park, wrap_angle
 
 # -- events: what a detector saw this period (``S_EVENT``); 0 none -------------------------------
@@ -483,20 +482,6 @@ def collect(s, c, mode, t, phase, answer):
         elif sign < 0.0:
             s[S_POL + 1] += s[S_INJ_ADM]
             s[S_POL + 3] += 1.0
-
-
-@kernel()
-def age_episode(s, c, trouble):
-    """A loss-of-synchronism episode's clock: it ends after ``C_RECOVER_TIME`` without ``trouble`` (a
-    detector's timer running), or latches the fault at ``C_FAULT_TIME``."""
-    if s[S_EPISODE] > 0.0:
-        dt = c[C_DT]
-        s[S_EPISODE] += dt
-        s[S_INSYNC] = 0.0 if trouble else s[S_INSYNC] + dt
-        if s[S_INSYNC] >= c[C_RECOVER_TIME]:
-            s[S_EPISODE] = 0.0
-        elif s[S_EPISODE] >= c[C_FAULT_TIME]:
-            s[S_FAULT] = FAULT_LATCHED
 
 
 @kernel()

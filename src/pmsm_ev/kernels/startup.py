@@ -339,6 +339,20 @@ def begin_episode(s, c):
         s[S_EPISODE] = c[C_DT]
 
 
+@kernel()
+def age_episode(s, c, trouble):
+    """A loss-of-synchronism episode's clock: it ends after ``C_RECOVER_TIME`` without ``trouble`` (a
+    detector's timer running), or latches the fault at ``C_FAULT_TIME``."""
+    if s[S_EPISODE] > 0.0:
+        dt = c[C_DT]
+        s[S_EPISODE] += dt
+        s[S_INSYNC] = 0.0 if trouble else s[S_INSYNC] + dt
+        if s[S_INSYNC] >= c[C_RECOVER_TIME]:
+            s[S_EPISODE] = 0.0
+        elif s[S_EPISODE] >= c[C_FAULT_TIME]:
+            s[S_FAULT] = FAULT_LATCHED
+
+
 #: the time in which a relocked vector's torque is meant to bring the speed to the reference [s]
 _RELOCK_TIME = 0.5
 
@@ -555,13 +569,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
                 mode = MODE_ALIGN
             else:
                 s[S_FAULT] = FAULT_LATCHED
-    if s[S_EPISODE] > 0.0:  # a loss-of-synchronism episode: recovered, or the fault latched
-        s[S_EPISODE] += dt
-        s[S_INSYNC] = 0.0 if trouble else s[S_INSYNC] + dt
-        if s[S_INSYNC] >= c[C_RECOVER_TIME]:
-            s[S_EPISODE] = 0.0
-        elif s[S_EPISODE] >= c[C_FAULT_TIME]:
-            s[S_FAULT] = FAULT_LATCHED
+    age_episode(s, c, trouble)  # a loss-of-synchronism episode: recovered, or the fault latched
     s[S_MODE] = mode
     if mode == MODE_EKF:
         theta_ctrl = s[S_X + 3]
