@@ -287,6 +287,10 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                            "polarity (below: unresolved; twice: the fault latches without torque)"),
     "inj_cross_comp": (None, "cross-saturation's offset of the injection's axis compensated with the controller's "
                              "model of the saturation (the algebraic flux model's defaults on its L_d, L_q, psi)"),
+    "inj_current_limit": ("A", "the q current limit while the injection carries the angle (cross-saturation tilts "
+                          "the axes it sees), rising to the drive's own with the EKF's weight in the blend"),
+    "pol_frame_band": ("rad", "the polarity test's frame holds while the tracking observer stays within this of "
+                       "it, and follows it this far behind beyond"),
     "inj_los_angle": ("rad", "loss of synchronism under injection: the tracking observer's angle error (or, in the "
                              "blend, its disagreement with the EKF) beyond this ..."),
     "inj_los_time": ("s", "... for this long"),

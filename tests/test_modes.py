@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
-from pmsm_ev.params import InjectionParams, ParameterError
+from pmsm_ev.params import ControllerParams, InjectionParams, ParameterError
 
 INJECTION_MODES = (k.MODE_ACQUIRE, k.MODE_POLARITY, k.MODE_INJECTION, k.MODE_EKF)
 EVENTS = (k.EV_ACQUIRED, k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED, k.EV_POLARITY_UNRESOLVED, k.EV_FAST,
@@ -163,10 +163,69 @@ def test_acquired_only_at_the_end_of_the_acquisition():
 def test_polarity_decided_by_the_larger_d_admittance(y_pos, y_neg, event):
     _, s, c = _unit()
     s[k.S_POL:k.S_POL + 4] = [100 * y_pos, 100 * y_neg, 100.0, 100.0]
-    s[k.S_MODE_TIME] = 4 * c[k.C_POL_RAMP] + 2 * c[k.C_POL_HOLD]
+    s[k.S_MODE_TIME] = 5 * c[k.C_POL_RAMP] + 2 * c[k.C_POL_HOLD]
     assert k.detect_polarity(s, c) == event
     s[k.S_MODE_TIME] -= 1e-3  # not before the test's end
     assert k.detect_polarity(s, c) == k.EV_NONE
+
+
+def test_polarity_schedule_is_a_palindrome_whose_current_integrates_to_zero():
+    """+i, -i, +i: the d current's integral and its first moment about the middle vanish (the torque an angle
+    error leaks from it leaves the car's speed and displacement at zero); each sign measured only on its
+    hold, after the current loop settled."""
+    _, _, c = _unit()
+    i, r, h = c[k.C_POL_I], c[k.C_POL_RAMP], c[k.C_POL_HOLD]
+    end = 5 * r + 2 * h
+    dt = 1e-6
+    ts = [(j + 0.5) * dt for j in range(round(end / dt))]
+    rows = [k.polarity_schedule(c, t) for t in ts]
+    assert k.polarity_schedule(c, end - 1e-9)[2] == 0.0 and k.polarity_schedule(c, end)[2] == 1.0
+    impulse = sum(row[0] for row in rows) * dt
+    moment = sum((t - 0.5 * end) * row[0] for t, row in zip(ts, rows)) * dt
+    assert abs(impulse) < 1e-6 * i * h and abs(moment) < 1e-6 * i * h * end
+    for sign in (1.0, -1.0):
+        measured = [row[0] for row in rows if row[1] == sign]
+        assert measured and all(x == sign * i for x in measured)
+    assert min(t for t, row in zip(ts, rows) if row[1] != 0.0) >= r + 0.25 * 0.5 * (h - r) - dt
+
+
+def test_polarity_frame_holds_within_its_band_and_follows_beyond_it():
+    _, s, c = _unit()
+    band = c[k.C_POL_BAND]
+    s[k.S_POL_AXIS] = math.pi - 0.5 * band  # next to the wrap
+    s[k.S_TRK] = math.pi - 0.1 * band  # within the band: held
+    assert k.polarity_frame(s, c) == math.pi - 0.5 * band
+    s[k.S_TRK] = -math.pi + 2.0 * band  # 2.5 bands ahead, across the wrap: followed a band behind
+    assert k.polarity_frame(s, c) == pytest.approx(-math.pi + band)
+    s[k.S_TRK] = -math.pi + 1.5 * band  # within the band of where it is now: held there
+    assert k.polarity_frame(s, c) == pytest.approx(-math.pi + band)
+
+
+@pytest.mark.parametrize("limited", [1.0, 0.5, 0.0])
+def test_the_injections_current_limit_rises_to_the_drives_with_the_blend(limited):
+    """The speed PI's q current within C_INJ_I_MAX at rest (``limited`` 1), the drive's own limit with the EKF
+    alone (0, bit for bit the plain speed loop's), in between in the blend."""
+    _, s, c = _unit()
+    c[k.C_REF_MODE] = 0.0
+    lo, hi = c[k.C_INJ_I_MAX], c[k.C_I_Q_MAX]
+    assert lo < hi
+    s2 = list(s)
+    _, i_q = k.foc_references(s, c, 1000.0, 0.0, limited)
+    assert i_q == pytest.approx(hi - limited * (hi - lo))
+    if limited == 0.0:
+        assert i_q == k.speed_step(s2, c, 1000.0, 0.0) and s == s2
+
+
+def test_the_injections_torque_limit_in_the_reference_generators_modes():
+    """With the reference generator (the cycles' "fw"), the torque at rest within k_t C_INJ_I_MAX."""
+    u = ControlUnit("sensorless", controller=ControllerParams(reference="fw", v_dc=360.0),
+                    injection=InjectionParams(low_speed="injection"))
+    s, c = [float(x) for x in u._s], [float(x) for x in u._c]
+    assert c[k.C_REF_MODE] != 0.0
+    i_d, i_q = k.foc_references(s, c, 1000.0, 0.0, 1.0)
+    torque = k.model_torque(c, i_d, i_q)
+    assert torque == pytest.approx(c[k.C_K_DQN] * c[k.C_PSI] * c[k.C_INJ_I_MAX], rel=1e-9)
+    assert math.hypot(i_d, i_q) < c[k.C_INJ_I_MAX]
 
 
 def test_speed_detector_has_its_hysteresis_and_no_transition_at_a_modes_start():

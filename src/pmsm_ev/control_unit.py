@@ -81,7 +81,8 @@ _INJECTION_SLOTS = (
     ("inj_lock_time", _k.C_ACQ_TIME), ("inj_settle_time", _k.C_ACQ_SETTLE), ("pol_current", _k.C_POL_I),
     ("pol_ramp", _k.C_POL_RAMP), ("pol_hold", _k.C_POL_HOLD), ("pol_contrast", _k.C_POL_CONTRAST),
     ("inj_los_angle", _k.C_INJ_LOS_ANGLE), ("inj_los_time", _k.C_INJ_LOS_TIME),
-    ("ekf_los_current", _k.C_EKF_LOS_I), ("ekf_los_time", _k.C_EKF_LOS_TIME))
+    ("ekf_los_current", _k.C_EKF_LOS_I), ("ekf_los_time", _k.C_EKF_LOS_TIME),
+    ("inj_current_limit", _k.C_INJ_I_MAX), ("pol_frame_band", _k.C_POL_BAND))
 #: state slots of the sensorless start-up, zeroed by ``reset``
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,

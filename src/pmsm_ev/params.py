@@ -1129,17 +1129,25 @@ class InjectionParams:
     inj_lock_time: float = 0.04
     #: then the tracking observer settles for this long before the polarity test [s] [chosen: 30 ms]
     inj_settle_time: float = 0.03
-    #: the polarity test's d current [A] [chosen: 100 A, a quarter of i_q_max]: the d axis's incremental
-    #: inductance differs between +-100 A by the magnet's saturation (a few to ~15 % in IPMSMs, e.g.
-    #: Jeong, Lorenz, Jahns, Sul, IEEE Trans. Ind. Appl. 41(1), 2005); on the d axis it gives no torque
-    pol_current: float = 100.0
+    #: the polarity test's d current [A] [chosen: 200 A, half of i_q_max]: the d axis's incremental
+    #: inductance differs between +-i by the magnet's saturation (a few to ~15 % in IPMSMs, e.g. Jeong,
+    #: Lorenz, Jahns, Sul, IEEE Trans. Ind. Appl. 41(1), 2005), more the larger i is; on the d axis it gives
+    #: no torque. The test's contrast (``pol_contrast``) with the plant's default flux model is 0.047 at
+    #: 100 A and 0.103 at 200 A (``pmsm_ev.kernels.incremental_inductances``), against a noise of its own of
+    #: 0.013-0.016 rms with 1 A of sensor noise (measured over 30 start angles and motors each: L_d, L_q
+    #: +-10 %, the d knee +-20 %). At 100 A one test in 13 ended unresolved (0.23 s more to torque; two in
+    #: a row latch the fault); at 200 A the least of 30 was 0.071, 3.4 noise rms above ``pol_contrast``.
+    #: 200 A for 2 x 40 ms heats the winding by far less than a second of the slope's current
+    pol_current: float = 200.0
     #: its ramp to each sign [s] [chosen: 10 ms, 20 times the current loop's time constant]
     pol_ramp: float = 0.01
     #: ... and the time each sign is held and measured [s] [chosen: 40 ms, 400 samples]
     pol_hold: float = 0.04
     #: the least relative difference of the d axis's answers at +-``pol_current`` that decides the
-    #: polarity [-] [chosen: 0.02, ten times the averaged noise]; below it the polarity is unresolved: the
-    #: test is repeated once, then the fault latches (no torque is given on an unknown polarity)
+    #: polarity [-] [chosen: 0.02]: the test's own noise is 0.013-0.016 rms (1 A of sensor noise), so a
+    #: wrong decision needs the noise beyond the signal plus this (> 5 rms at 200 A), and an unresolved one
+    #: below the signal less it. Below it the polarity is unresolved: the test is repeated once, then the
+    #: fault latches (no torque is given on an unknown polarity)
     pol_contrast: float = 0.02
     #: cross-saturation compensated [chosen: True]: under load the incremental inductance's axes tilt (the
     #: plant's algebraic flux model: 15 deg at 233 A, 31 deg at 300 A), and the injection locks onto the axis
@@ -1163,6 +1171,25 @@ class InjectionParams:
     ekf_los_current: float = 60.0
     #: ... for this long [s] [chosen: 0.2 s]
     ekf_los_time: float = 0.2
+    #: the q current while the injection carries the angle (mode 5) [A], rising to the drive's own limit with
+    #: the EKF's weight in the blend (no step when the EKF takes over) [chosen: 300 A]. Load tilts the
+    #: incremental inductance's axes (cross-saturation: the controller's model of the plant's defaults, 18 deg
+    #: at 250 A, 31 deg at 300 A, 69 deg at 400 A), and the injection locks onto the axis nearest d; the
+    #: offset is compensated from the controller's model, but where the tilt nears 45 deg the axis nearest d
+    #: becomes the one nearest q, and on a motor that saturates earlier than the model the compensation turns
+    #: into an error that feeds itself. Measured on the synchronism matrix's step to 200 rad/s at enable (8
+    #: angles, 1 A of noise): with the full 393 A 1-6 turns slipped on the default motor; with 350 A none
+    #: there, but 11 on a motor whose q knee is 20 % below the model's (the Monte-Carlo's range); with 300 A
+    #: none on either. 250 A would cost 1-2.7 cm more roll-back when a creeping car meets 22 deg (the slope
+    #: needs 227 A at a stop). Beyond it the car is held with 300 A: about 30 deg
+    inj_current_limit: float = 300.0
+    #: the polarity test's frame [rad] [chosen: 0.15 rad, three times the tracking observer's angle noise at
+    #: a stop, 0.05 rad rms]: the frame stays on the axis the acquisition found (its average over 80 ms: 0.025
+    #: rad rms with 1 A of noise, 0.05 with 2 us of dead time compensated) while the observer moves less than
+    #: this from it (the rotor stands: the observer's noise would leak pol_current sin e onto q, torque that
+    #: moves the car: 0.95 mm at 200 A when the frame followed it), and follows the observer this far behind
+    #: when the rotor turns (a car that rolls while the test runs)
+    pol_frame_band: float = 0.15
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
@@ -1180,7 +1207,7 @@ class InjectionParams:
             _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")
         for name in ("inj_voltage", "inj_bandwidth", "inj_blend_high", "inj_lock_time", "pol_current",
                      "pol_hold", "pol_contrast", "inj_los_angle", "inj_los_time", "ekf_los_current",
-                     "ekf_los_time"):
+                     "ekf_los_time", "inj_current_limit", "pol_frame_band"):
             _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
         _require(self.inj_blend_low < self.inj_blend_high,
                  f"inj_blend_low must be < inj_blend_high (got {self.inj_blend_low} >= {self.inj_blend_high} rad/s)")

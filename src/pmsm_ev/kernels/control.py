@@ -257,10 +257,17 @@ def torque_speed_step(s, c, omega_ref, omega_est):
     and conditional integration at the torque available at the present speed (``envelope``, within T_max:
     no windup where field weakening gives less than asked); the generator turns T into (i_dref, i_qref)
     (``generate_references``)."""
+    return torque_speed_step_within(s, c, omega_ref, omega_est, c[C_T_MAX])
+
+
+@kernel()
+def torque_speed_step_within(s, c, omega_ref, omega_est, t_limit):
+    """``torque_speed_step`` with its torque held within ``t_limit`` [N m] too (below T_max: a mode whose
+    observer cannot carry the drive's whole current)."""
     k_t = c[C_K_T]
     t_env, lam, d_top, region_top = envelope(omega_est, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_N],
                                              c[C_I_MAX], c[C_U_FW])
-    t_cap = min(t_env, c[C_T_MAX])
+    t_cap = min(t_env, c[C_T_MAX], t_limit)
     if c[C_FF] != 0.0:  # the feedforward (``speed_feedforward``, this period's) plus the PI on what is left
         t_ff = min(max(s[S_T_FF], -t_cap), t_cap)
         u = speed_pi_between(s, c, omega_ref, omega_est, (-t_cap - t_ff) / k_t, (t_cap - t_ff) / k_t)  # (14)

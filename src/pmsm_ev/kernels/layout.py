@@ -306,7 +306,9 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_EVENT", 1, "the event of the last period (EV_*; 0 none)"),
     ("S_CROSS", 1, "the injection's axis less the estimated d axis in the last period [rad]: "
                    "cross-saturation's offset"),
-), size=195)
+    ("S_POL_AXIS", 1, "the polarity test's frame [rad]: the axis the acquisition found, moved only where the "
+                      "tracking observer gets more than C_POL_BAND from it"),
+), size=196)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -438,7 +440,10 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_LOS_FILTER", 1, "dt / the detectors' filter time constant (C_INJ_LOS_TIME / 3) [-]"),
     ("C_CROSS", 9, "the injection's axis less the rotor's d axis at i_q = 0, 50, .. 400 A [rad]: cross-saturation's "
                    "offset in the controller's model of the saturation (0: not compensated)"),
-), size=136)
+    ("C_INJ_I_MAX", 1, "the q current limit while the injection carries the angle [A]"),
+    ("C_POL_BAND", 1, "the polarity test's frame: how far the tracking observer may move from it before it follows "
+                      "[rad]"),
+), size=138)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())

@@ -30,9 +30,9 @@ from .control import (
     current_step,
     modulate,
     speed_feedforward,
-    speed_step,
+    speed_pi,
     store_command,
-    torque_speed_step,
+    torque_speed_step_within,
 )
 from .injection import (
     angle_error,
@@ -64,22 +64,27 @@ from .layout import (
     C_EKF_LOS_TIME,
     C_FF,
     C_I_D_REF,
+    C_I_Q_MAX,
+    C_INJ_I_MAX,
     C_INJ_LOS_ANGLE,
     C_INJ_LOS_TIME,
     C_INJ_M,
     C_INJ_V,
     C_K_DQN,
+    C_K_T,
     C_L_D,
     C_L_Q,
     C_LOS_FILTER,
     C_P0,
     C_P0_ALIGNED,
+    C_POL_BAND,
     C_POL_CONTRAST,
     C_POL_HOLD,
     C_POL_I,
     C_POL_RAMP,
     C_PSI,
     C_REF_MODE,
+    C_T_MAX,
     FAULT_LATCHED,
     FAULT_NONE,
     FAULT_RECOVERING,
@@ -112,6 +117,7 @@ from .layout import (
     S_OMEGA_CTRL,
     S_P,
     S_POL,
+    S_POL_AXIS,
     S_POL_TRIES,
     S_RESID_F,
     S_THETA_CTRL,
@@ -182,21 +188,35 @@ def acquisition_phase(c, t):
 @kernel()
 def polarity_schedule(c, t):
     """The polarity test at the time ``t`` [s] in it: (d current reference [A], which sign is measured
-    now: +1, -1 or 0, over: 1.0 once done). Ramp to +i, hold, ramp to -i, hold, ramp to 0; each hold
-    measured in its last three quarters (the current loop settles in its first)."""
+    now: +1, -1 or 0, over: 1.0 once done). +i, -i, +i joined by ramps, a palindrome whose current integrates
+    to zero (each hold at +i (h - r) / 2, the one at -i h, h = ``C_POL_HOLD``, r = ``C_POL_RAMP``): the
+    torque that an angle error e leaks from the d current (i sin e on q, times the magnet's flux) pushes the
+    car forth, back and forth, so that its speed and its displacement both come back to zero (a plain +i, -i
+    pair leaves a displacement of the order of i sin e h^2 / J). Each hold is measured in its last three
+    quarters (the current loop settles in its first)."""
     i = c[C_POL_I]
     r = c[C_POL_RAMP]
     h = c[C_POL_HOLD]
+    h_plus = 0.5 * (h - r)  # each hold at +i
+    t1 = r + h_plus  # the first hold at +i ends
+    t2 = t1 + 2.0 * r  # the ramp to -i ends
+    t3 = t2 + h  # the hold at -i ends
+    t4 = t3 + 2.0 * r  # the ramp back to +i ends
+    t5 = t4 + h_plus  # the second hold at +i ends
     if t < r:
         return i * t / r, 0.0, 0.0
-    if t < r + h:
-        return i, 1.0 if t >= r + 0.25 * h else 0.0, 0.0
-    if t < 3.0 * r + h:
-        return i - 2.0 * i * (t - r - h) / (2.0 * r), 0.0, 0.0
-    if t < 3.0 * r + 2.0 * h:
-        return -i, -1.0 if t >= 3.0 * r + 1.25 * h else 0.0, 0.0
-    if t < 4.0 * r + 2.0 * h:
-        return -i + i * (t - 3.0 * r - 2.0 * h) / r, 0.0, 0.0
+    if t < t1:
+        return i, 1.0 if t >= r + 0.25 * h_plus else 0.0, 0.0
+    if t < t2:
+        return i - i * (t - t1) / r, 0.0, 0.0
+    if t < t3:
+        return -i, -1.0 if t >= t2 + 0.25 * h else 0.0, 0.0
+    if t < t4:
+        return -i + i * (t - t3) / r, 0.0, 0.0
+    if t < t5:
+        return i, 1.0 if t >= t4 + 0.25 * h_plus else 0.0, 0.0
+    if t < t5 + r:
+        return i - i * (t - t5) / r, 0.0, 0.0
     return 0.0, 0.0, 1.0
 
 
@@ -322,9 +342,23 @@ def enter_acquire(s, c, i_alpha, i_beta):
 
 @kernel()
 def enter_polarity(s):
-    """The polarity test's sums cleared."""
+    """The polarity test's sums cleared (its frame is the acquisition's, ``collect``)."""
     for k in range(4):
         s[S_POL + k] = 0.0
+
+
+@kernel()
+def polarity_frame(s, c):
+    """The polarity test's frame [rad]: held while the tracking observer stays within ``C_POL_BAND`` of it (a
+    standing rotor: the observer's noise is not followed, so the d current leaks no torque from it), else
+    moved to that far behind the observer (a rotor that turns)."""
+    d = wrap_angle(s[S_TRK] - s[S_POL_AXIS])
+    band = c[C_POL_BAND]
+    if d > band:
+        s[S_POL_AXIS] = wrap_angle(s[S_TRK] - band)
+    elif d < -band:
+        s[S_POL_AXIS] = wrap_angle(s[S_TRK] + band)
+    return s[S_POL_AXIS]
 
 
 @kernel()
@@ -460,7 +494,8 @@ def transition(s, c, mode, event, i_alpha, i_beta):
 def collect(s, c, mode, t, phase, answer):
     """The measurements of the acquisition and of the polarity test: the answers' sin 2e summed on each of
     the acquisition's axes (and, as it ends, the tracking observer put on the axis they give: 2e =
-    atan2(sin 2e, -(-cos 2e))), the d admittances summed at each sign of the polarity test."""
+    atan2(sin 2e, -(-cos 2e)), and the polarity test's frame with it), the d admittances summed at each sign of
+    the polarity test."""
     dt = c[C_DT]
     if mode == MODE_ACQUIRE:
         if answer and phase < 2:
@@ -473,6 +508,7 @@ def collect(s, c, mode, t, phase, answer):
             if s[S_ACQ + 2] > 0.0 and s[S_ACQ + 3] > 0.0:
                 e = 0.5 * math.atan2(s[S_ACQ] / s[S_ACQ + 2], -s[S_ACQ + 1] / s[S_ACQ + 3])
             seat_tracker(s, wrap_angle(s[S_TRK] + e), 0.0, 0.0)
+            s[S_POL_AXIS] = s[S_TRK]  # the polarity test's frame: the acquisition's average, not the settling's
             s[S_INJ_SKIP] = 2.0
     elif mode == MODE_POLARITY and answer:
         _, sign, _ = polarity_schedule(c, t)
@@ -491,11 +527,16 @@ def model_torque(c, i_d, i_q):
 
 
 @kernel()
-def foc_references(s, c, omega_ref, omega):
-    """The current references of FOC (eq 14, or the reference generator's) at the speed ``omega``."""
+def foc_references(s, c, omega_ref, omega, limited):
+    """The current references of FOC (eq 14, or the reference generator's) at the speed ``omega``; with
+    ``limited`` (0 .. 1) of the way from the drive's own limit down to the injection's ``C_INJ_I_MAX`` (its
+    torque k_t C_INJ_I_MAX in the reference generator's modes)."""
     if c[C_REF_MODE] != 0.0:
-        return torque_speed_step(s, c, omega_ref, omega)
-    return c[C_I_D_REF], speed_step(s, c, omega_ref, omega)
+        t_max = c[C_T_MAX]
+        return torque_speed_step_within(s, c, omega_ref, omega,
+                                        t_max - limited * max(0.0, t_max - c[C_K_T] * c[C_INJ_I_MAX]))
+    i_max = c[C_I_Q_MAX]
+    return c[C_I_D_REF], speed_pi(s, c, omega_ref, omega, i_max - limited * max(0.0, i_max - c[C_INJ_I_MAX]))
 
 
 @kernel(_sig(f"UniTuple({_F}, 16)", _V, _V, _F, _F, _F))
@@ -525,7 +566,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     answer = injecting and s[S_INJ_NEW] != 0.0
     share = injection_share(s[S_BLEND]) if mode == MODE_INJECTION else 1.0
     e_ekf = wrap_angle(s[S_X + 3] + s[S_CROSS] - s[S_TRK]) if share < 1.0 else 0.0
-    track(s, c, model_torque(c, f_d, f_q), share, answer and phase >= 2, e_ekf)
+    if True:  # the polarity test's frame held where the acquisition put it
+        track(s, c, model_torque(c, f_d, f_q), share, answer and phase >= 2, e_ekf)
     if answer and phase >= 2 and share > 0.0:
         e_inj = angle_error(s[S_INJ_ERR])
         s[S_INJ_ERR_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (e_inj - s[S_INJ_ERR_F])
@@ -554,6 +596,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             offset = 0.25 * math.pi
         elif mode == MODE_POLARITY:
             i_dref, _, _ = polarity_schedule(c, t)
+            theta = polarity_frame(s, c)
+            offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the tracking observer's axis
         s[S_CROSS] = 0.0
         i_d, i_q = park(f_alpha, f_beta, theta)
         v_d, v_q = current_step(s, c, i_dref, 0.0, i_d, i_q, 0.0)
@@ -569,7 +613,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         theta, omega_ctrl = blended_frame(s, s[S_X + 3], s[S_X + 2], phi)
         offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the injection's axis
         amplitude = c[C_INJ_V] * injection_share(w)
-        i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl)
+        i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl, 1.0 - w)  # within the injection's limit
         i_d, i_q = park(f_alpha, f_beta, theta)
         v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
     else:  # the EKF alone, the tracking observer kept on it
@@ -580,7 +624,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         s[S_CROSS] = cross_offset(c, i_q)
         trust_ekf(s)
         amplitude = 0.0
-        i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl)
+        i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl, 0.0)
         v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
     v_alpha, v_beta = modulate(c, v_d, v_q, theta, omega_ctrl, False)
     axis = theta + offset + c[C_ADVANCE] * omega_ctrl

@@ -17,7 +17,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
-from pmsm_ev.params import SENSORLESS_EKF, DriveParams, PlantParams
+from pmsm_ev.params import LOW_SPEED_STRATEGIES, SENSORLESS_EKF, DriveParams, InjectionParams, PlantParams
 from pmsm_ev.results import synchronism_metrics
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase
 
@@ -35,11 +35,23 @@ RECOVERY_LIMIT = 5.0  #: [s] back within RECOVERY_BAND of the reference after th
 CASES = {c.name: c for c in SYNC_MATRIX}
 
 
-def run_one(case: SyncCase, controller: str, k: int, out_dir: Path) -> dict:
-    """One run of the matrix: ``case`` from angle ``SYNC_ANGLES[k]``, noise seed k + 1; its
-    ``synchronism_metrics`` (also written into the run's metrics.json as "synchronism")."""
+def drive_params(controller: str, k: int, strategy: str = "if") -> DriveParams:
+    """The parameters of a run of the matrix: angle ``SYNC_ANGLES[k]``, noise seed k + 1. ``strategy``: the
+    sensorless unit's at and near zero speed (``InjectionParams.low_speed``); with "injection" both
+    controllers drive the plant with the algebraic flux model (the magnet's asymmetry the polarity test
+    needs), so that the sensored reference is on the same motor."""
+    if strategy not in LOW_SPEED_STRATEGIES:
+        raise ValueError(f"unknown low-speed strategy {strategy!r}: one of {', '.join(LOW_SPEED_STRATEGIES)}")
     base = DriveParams(ekf=SENSORLESS_EKF) if controller == "sensorless" else DriveParams()
-    params = replace(base, plant=PlantParams(theta_e0=SYNC_ANGLES[k], sensor_noise=NOISE, sensor_seed=k + 1))
+    flux = "algebraic" if strategy == "injection" else "linear"
+    plant = PlantParams(theta_e0=SYNC_ANGLES[k], sensor_noise=NOISE, sensor_seed=k + 1, flux_model=flux)
+    return replace(base, plant=plant, injection=InjectionParams(low_speed=strategy))
+
+
+def run_one(case: SyncCase, controller: str, k: int, out_dir: Path, strategy: str = "if") -> dict:
+    """One run of the matrix: ``case`` from angle ``SYNC_ANGLES[k]``, noise seed k + 1 (``drive_params``); its
+    ``synchronism_metrics`` (also written into the run's metrics.json as "synchronism")."""
+    params = drive_params(controller, k, strategy)
     route = case.route()
     m = run_reference(out_dir, case.name, case.stop_time, controller, params=params, elevation=route["delta"],
                       omega_ref=route["omega_ref"], startup_columns=True)
@@ -54,14 +66,16 @@ def run_one(case: SyncCase, controller: str, k: int, out_dir: Path) -> dict:
 
 
 def _run(args) -> dict:
-    name, controller, k, out = args
-    return run_one(CASES[name], controller, k, Path(out))
+    name, controller, k, out, strategy = args
+    return run_one(CASES[name], controller, k, Path(out), strategy)
 
 
-def run_matrix(runs_dir, jobs: int = 2, cases=SYNC_MATRIX, angles: int = len(SYNC_ANGLES), log=print) -> list[dict]:
-    """Every case x controller x angle, ``jobs`` at a time; the list of their figures."""
+def run_matrix(runs_dir, jobs: int = 2, cases=SYNC_MATRIX, angles: int = len(SYNC_ANGLES), log=print,
+               strategy: str = "if") -> list[dict]:
+    """Every case x controller x angle, ``jobs`` at a time (``strategy``: ``drive_params``); the list of their
+    figures."""
     runs_dir = Path(runs_dir)
-    todo = [(c.name, ctrl, k, str(runs_dir / f"{c.name}-{ctrl}-{k}"))
+    todo = [(c.name, ctrl, k, str(runs_dir / f"{c.name}-{ctrl}-{k}"), strategy)
             for c in cases for ctrl in CONTROLLERS for k in range(angles)]
     log(f"synchronism matrix: {len(todo)} runs ({len(cases)} cases x {len(CONTROLLERS)} controllers x {angles} "
         f"angles), {jobs} at a time, in {runs_dir}")
