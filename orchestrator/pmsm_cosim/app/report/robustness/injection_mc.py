@@ -18,6 +18,7 @@ from pmsm_ev.results import slipped_turns
 from ....engine.recording import read_results
 from ...studies import load_sweep
 from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, failure_reasons, findings, where_text
+from .pages import write_between
 
 SWEEP = "cycle_montecarlo_wltc3b_injection"
 NOT_RUN = "not run"  #: summary.csv's status of a sample a stopped sweep has not run
@@ -84,14 +85,7 @@ def section(out: Path, machine: str) -> list[str]:
 
 
 def write(page: Path, out: Path, machine: str) -> None:
-    text = page.read_text(encoding="utf-8") if page.exists() else ""
-    block = "\n".join(section(out, machine))
-    if BEGIN in text and END in text:
-        head, rest = text.split(BEGIN, 1)
-        text = head + block + rest.split(END, 1)[1]
-    else:
-        text = text.rstrip("\n") + "\n\n" + block + "\n"
-    page.write_text(text, encoding="utf-8")
+    write_between(page, section(out, machine), BEGIN, END)
 
 
 def main(argv=None) -> int:
