@@ -36,3 +36,25 @@ def test_the_section_counts_failures_by_the_rule_and_stays_between_its_markers(t
     assert "**3 samples run of the design's 100: 2 failed**" in text
     assert "| 0001_b | left the band |" in text and "| 0002_c | slipped a turn |" in text
     assert "0000_a" not in text.split("| sample |")[1]
+
+
+def _summary(path, rows):
+    path.mkdir(parents=True, exist_ok=True)
+    (path / "summary.csv").write_text(
+        ",".join(COLUMNS) + "\n" + "\n".join(",".join(str(x) for x in r) for r in rows) + "\n", encoding="utf-8")
+
+
+def test_the_if_strategy_beside_on_the_samples_both_ran(tmp_path):
+    """The I-f sweep is the same design with ``low_speed = "if"`` (the same draws); the section compares the
+    samples both have run, by the same rule."""
+    d, d_if = load_sweep(im.SWEEP), load_sweep(im.SWEEP_IF)
+    assert d_if.random == d.random and d_if.system == d.system and d_if.fixed["ctrl.low_speed"] == "if"
+    _summary(tmp_path / "inj", [("0000_a", "completed", 900, 0.1, 1.0, 0, 0, 120.0, 75.0, 4.0),
+                                ("0001_b", "completed", 975, -0.3, 1.0, 0, 0, 130.0, 76.0, 4.1)])
+    _summary(tmp_path / "if", [("0000_a", "completed", 900, 0.1, 1.0, 0, 0, 122.5, 75.0, 4.0),
+                               ("0001_b", "completed", 975, -0.3, 1.0, 3, 0, 131.0, 76.0, 4.1),  # slipped
+                               ("0002_c", "not run", 900, 0.0, "", "", "", "", "", "")])
+    text = "\n".join(im.section(tmp_path / "inj", "a test machine", tmp_path / "if"))
+    assert "**2 samples run with both: injection 0 failed, I-f 1 failed**" in text
+    assert "| 0001_b | passed | slipped a turn |" in text
+    assert "I-f minus injection +1.0 … +2.5 Wh/km" in text

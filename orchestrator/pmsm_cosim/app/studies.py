@@ -22,7 +22,8 @@ PACKAGED_SWEEPS = ("ekf5_load_noise",
                    "robust_lq_load_sensorless", "robust_lq_load_ekf5ab", "robust_lq_load_ekf5paper",
                    "robust_rs_psi_sensorless_adapt", "robust_lq_load_sensorless_adapt",
                    "robust_montecarlo_sensorless", "robust_montecarlo_sensorless_adapt", "robust_deadtime_hill",
-                   "cycle_montecarlo_wltc3b", "cycle_montecarlo_wltc3b_injection")
+                   "cycle_montecarlo_wltc3b", "cycle_montecarlo_wltc3b_injection",
+                   "cycle_montecarlo_wltc3b_injection_if")
 #: the metric a sweep file without ``metric`` plots
 DEFAULT_METRIC = "speed_rms_error"
 

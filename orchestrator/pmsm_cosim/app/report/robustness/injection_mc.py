@@ -18,9 +18,11 @@ from pmsm_ev.results import slipped_turns
 from ....engine.recording import read_results
 from ...studies import load_sweep
 from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, failure_reasons, findings, where_text
+from .interval import wilson
 from .pages import write_between
 
 SWEEP = "cycle_montecarlo_wltc3b_injection"
+SWEEP_IF = "cycle_montecarlo_wltc3b_injection_if"  #: the same samples with the I-f strategy
 NOT_RUN = "not run"  #: summary.csv's status of a sample a stopped sweep has not run
 BEGIN, END = "<!-- injection-mc: generated -->", "<!-- /injection-mc -->"
 
@@ -39,7 +41,38 @@ def judged_rows(out: Path) -> list[dict]:
     return rows
 
 
-def section(out: Path, machine: str) -> list[str]:
+def beside_lines(rows: list[dict], beside: Path) -> list[str]:
+    """The I-f strategy on the same samples (``SWEEP_IF``'s runs in ``beside``): the samples both have run,
+    the failures of each by the same rule, the samples where they differ, the Wh/km of each."""
+    other = {r["run"]: r for r in judged_rows(beside)}
+    both = [(r, other[r["run"]]) for r in rows if r["run"] in other]
+    lines = ["### The I-f strategy on the same samples", "",
+             f"`pmsm-cosim sweep {SWEEP_IF}` (the same system and draws, `low_speed = \"if\"`: alignment, I-f, "
+             "handover), judged by the same rule."]
+    if not both:
+        return lines + ["", "No sample has run in both yet."]
+    f_inj = sum(a["failed"] for a, _ in both)
+    f_if = sum(b["failed"] for _, b in both)
+    lo, hi = wilson(f_if, len(both))
+    lines += ["", f"**{len(both)} samples run with both: injection {f_inj} failed, I-f {f_if} failed** (I-f's 95 % "
+              f"interval {100 * lo:.1f} … {100 * hi:.1f} %, Wilson)."]
+    differ = [(a, b) for a, b in both if a["failed"] != b["failed"]]
+    if differ:
+        lines += ["", "| sample | injection | I-f | I-f: where |", "|---|---|---|---|"]
+        for a, b in differ:
+            inj, i_f = ", ".join(a["reasons"]) or "passed", ", ".join(b["reasons"]) or "passed"
+            lines.append(f"| {a['run']} | {inj} | {i_f} | {where_text(b) if b['failed'] else ''} |")
+    wh = [(a["dc_Wh_per_km"], b["dc_Wh_per_km"]) for a, b in both
+          if a["status"] == b["status"] == "completed" and math.isfinite(a["dc_Wh_per_km"] + b["dc_Wh_per_km"])]
+    if wh:
+        d = [y - x for x, y in wh]
+        lines += ["", f"Energy at the DC link on the samples both completed ({len(wh)}): injection "
+                  f"{sum(x for x, _ in wh) / len(wh):.1f} Wh/km mean, I-f {sum(y for _, y in wh) / len(wh):.1f}; I-f "
+                  f"minus injection {min(d):+.1f} … {max(d):+.1f} Wh/km."]
+    return lines
+
+
+def section(out: Path, machine: str, beside: Path | None = None) -> list[str]:
     rows = judged_rows(out)
     design = load_sweep(SWEEP)
     planned = design.samples
@@ -81,11 +114,14 @@ def section(out: Path, machine: str) -> list[str]:
     if cost:
         facts.append(f"A sample cost {cost['wall_time_s']:.0f} s of wall time ({cost['us_per_step']:.1f} us/step, "
                      f"median) on {machine}, two samples at a time.")
-    return lines + [""] + [x for fact in facts for x in (fact, "")] + [END]
+    lines += [""] + [x for fact in facts for x in (fact, "")]
+    if beside is not None:
+        lines += beside_lines(rows, beside) + [""]
+    return lines + [END]
 
 
-def write(page: Path, out: Path, machine: str) -> None:
-    write_between(page, section(out, machine), BEGIN, END)
+def write(page: Path, out: Path, machine: str, beside: Path | None = None) -> None:
+    write_between(page, section(out, machine, beside), BEGIN, END)
 
 
 def main(argv=None) -> int:
@@ -94,9 +130,12 @@ def main(argv=None) -> int:
     p.add_argument("runs", help="the sweep's output directory")
     p.add_argument("--page", default="docs/robustness.md", help="the page to write the section into")
     p.add_argument("--machine", default="this machine", help="the machine the samples ran on, for the page")
+    p.add_argument("--beside", metavar="RUNS_IF", help=f"the output directory of {SWEEP_IF}: the I-f strategy on "
+                                                       "the same samples, reported beside")
     a = p.parse_args(argv)
-    write(Path(a.page), Path(a.runs), a.machine)
-    print("\n".join(section(Path(a.runs), a.machine)))
+    beside = Path(a.beside) if a.beside else None
+    write(Path(a.page), Path(a.runs), a.machine, beside)
+    print("\n".join(section(Path(a.runs), a.machine, beside)))
     return 0
 
 
