@@ -22,8 +22,8 @@
  * Where no Python is found, fmi2Instantiate logs one line through the host's logger (what was looked for, and
  * how to point at a Python) and returns NULL.
  *
- * Every other fmi2 function, and pmsm_fmu_fast_calls, is the binding's, called with the same arguments: the
- * instance is the binding's own. Python's C API is reached through dlsym only.
+ * Every other fmi2 function, and pmsm_fmu_fast_calls and pmsm_fmu_compiled_calls, are the binding's, called with
+ * the same arguments: the instance is the binding's own. Python's C API is reached through dlsym only.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -573,6 +573,13 @@ typedef unsigned long long (*fast_calls_t)(fmi2Component);
 EXPORT unsigned long long pmsm_fmu_fast_calls(fmi2Component c)
 {
     fast_calls_t f = (fast_calls_t)fn("pmsm_fmu_fast_calls");
+    return f ? f(c) : 0;
+}
+
+/* pmsm_fmu_compiled_calls(instance): the lean binding's count of the calls served with no Python, 0 without one */
+EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi2Component c)
+{
+    fast_calls_t f = (fast_calls_t)fn("pmsm_fmu_compiled_calls");
     return f ? f(c) : 0;
 }
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 
 from pmsm_ev import __version__
+from pmsm_ev import kernels as _k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import (
     DT_DEFAULT,
@@ -38,6 +39,12 @@ from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, check_fields
 #: far above the drift of time accumulated as t += h (1.6e-4 dt after 350 s at h = dt,
 #: 7e-4 dt at h = dt/3), far below any step size that makes sense
 SAMPLE_TOLERANCE = 1.0e-2
+
+#: the slave's inputs and the outputs its step writes, in the compiled step's buffer
+#: (``pmsm_ev.kernels.UNIT_IO_LAYOUT``)
+_IO_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
+_IO_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d", "i_q", "i_qref", "i_d_hat", "i_q_hat", "omega_hat",
+               "theta_hat", "T_L_hat", "mode", "fault", "theta_ctrl", "omega_ctrl")
 
 DESCRIPTION = (
     "Speed and current control of a sensorless EV drive (Wicaksono, Harini, Yusivar, "
@@ -231,6 +238,46 @@ class FocSlave(DriveSlave):
                 self._build_unit(step_size)
             self._dt = step_size
         self._k_next = math.ceil((current_time - self._t0) / self._dt - SAMPLE_TOLERANCE)
+
+    # -- the compiled step (``pmsm_ev.kernels.fmu``: ``unit_fmu_step`` on these buffers) -------------------------
+    def compiled_slots(self) -> dict[str, int]:
+        return {name: getattr(_k, "UIO_" + name.upper()) for name in _IO_INPUTS + _IO_OUTPUTS + ("T_brake",)}
+
+    def compiled_step(self):
+        """(the controllers' C step, the buffer, the unit's state and parameter vectors), filled from the slave
+        and its unit; None where the kernels run as plain Python."""
+        u = self._unit
+        if u is None or not getattr(u._kernels, "JIT", False):
+            return None
+        io = self.__dict__.get("_io")
+        if io is None:
+            import numpy as np  # noqa: PLC0415 - numpy is there: the kernels are compiled
+
+            io = self._io = np.zeros(_k.UNIT_IO)
+            self._io_address = io.ctypes.data
+            self._step_address = u._kernels.fmu_step_address("unit")
+        for name in _IO_INPUTS + _IO_OUTPUTS:
+            io[getattr(_k, "UIO_" + name.upper())] = getattr(self, name)
+        io[_k.UIO_T_BRAKE] = u.T_brake
+        io[_k.UIO_DT] = self._dt or 0.0
+        io[_k.UIO_T0] = self._t0
+        io[_k.UIO_CLOCK] = 0.0 if self._k_next is None else 1.0
+        io[_k.UIO_K_NEXT] = self._k_next or 0
+        io[_k.UIO_UNIT_DT] = u.dt
+        io[_k.UIO_TOLERANCE] = SAMPLE_TOLERANCE
+        io[_k.UIO_KIND] = (_k.UNIT_KIND_INJECTION if u.injecting else _k.UNIT_KIND_SENSORLESS if self._sensorless
+                           else _k.UNIT_KIND_CONTROL)
+        io[_k.UIO_MEASURED] = 1.0 if self._measured_frame else 0.0
+        io[_k.UIO_REFERENCE] = u.reference
+        return self._step_address, self._io_address, u._s.ctypes.data, u._c.ctypes.data
+
+    def compiled_pull(self) -> None:
+        values = self._io.tolist()
+        for name in _IO_INPUTS + _IO_OUTPUTS:
+            setattr(self, name, values[getattr(_k, "UIO_" + name.upper())])
+        if values[_k.UIO_CLOCK]:
+            self._dt = values[_k.UIO_DT]
+            self._k_next = int(values[_k.UIO_K_NEXT])
 
     # -- FMI -------------------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):

@@ -14,6 +14,16 @@
  *   fmi2DoStep     the slave's do_step (unchecked) called directly, when the communication point continues the
  *                  last step, the step is no longer than the slave's _max_step and the FMU is in step mode.
  *
+ * The compiled step (fmus/README.md, "The compiled step"): where the slave has one (its compiled_step returns the
+ * address of a C function, a numba cfunc of pmsm_ev.kernels.fmu, and of its three buffers), the three calls above
+ * run no Python: fmi2SetReal writes the inputs into the buffers, fmi2DoStep calls the C function, fmi2GetReal reads
+ * the buffers (every value reference in a buffer: compiled_slots). The buffers then hold the slave's values
+ * (c_owned); before any Python runs on the slave (a forwarded call, a refusal asked, a value not in a buffer, a step
+ * the C function declines) the binding calls its compiled_pull, which copies them back into its attributes, and
+ * asks compiled_step again (which fills the buffers from them) at the next compiled call. A step the C function
+ * declines (0) or fails (-1: a kernel raised, the vectors restored) is the slave's Python do_step, below.
+ * pmsm_fmu_compiled_calls(instance) counts the calls served so (a part of pmsm_fmu_fast_calls).
+ *
  * FMI 2.0's checks (DriveSlave.refusal: the state machine, non-finite Real inputs, a communication point that
  * does not continue the last step, a step too long): before it forwards fmi2SetupExperiment,
  * fmi2EnterInitializationMode, fmi2ExitInitializationMode, fmi2DoStep or fmi2SetReal, and where a check of the
@@ -101,12 +111,18 @@ static void* inner(const char* name)
 #define FORWARD(name, type, ...)                                                                             \
     do {                                                                                                     \
         static type fn = NULL;                                                                               \
+        to_python_gil((Instance*)c);                                                                         \
         if (fn == NULL) fn = (type)inner(#name);                                                             \
         if (fn == NULL) return fmi2Error;                                                                    \
         return fn(__VA_ARGS__);                                                                              \
     } while (0)
 
 /* -- an instance ------------------------------------------------------------------------------------------ */
+/* the compiled step: int step(double* io, double* a, double* b, double t, double h), pmsm_ev.kernels.fmu:
+ * 1 taken, 0 declined (nothing changed), -1 a kernel raised (nothing changed) */
+typedef int (*c_step_t)(double*, double*, double*, double, double);
+#define COMPILED_BUFFER (1L << 20)
+
 typedef struct {
     fmi2Component inner;        /* pythonfmu's instance */
     int ready;                  /* the direct path is on (offered, initialised, no failure handed over) */
@@ -130,17 +146,27 @@ typedef struct {
     double max_step;            /* the slave's _max_step (read at fmi2ExitInitializationMode) */
     fmi2CallbackFunctions callbacks; /* the host's (a copy), for the refusals' log lines */
     char* name;                 /* the instance name */
+    /* the compiled step (the slave's compiled_step, compiled_pull, compiled_slots) */
+    PyObject* compiled;         /* compiled_step(): None, or (step, io, a, b) addresses, the buffers filled */
+    PyObject* pull;             /* compiled_pull(): the slave's attributes from the buffers */
+    long* slots;                /* by value reference: COMPILED_BUFFER * buffer + index, or -1 (read in Python) */
+    c_step_t c_step;            /* the C function */
+    double* buffers[3];         /* io, a, b */
+    int c_owned;                /* the buffers hold the slave's inputs, outputs and state; its attributes are behind */
+    int c_off;                  /* compiled_step said None: not asked again until re-armed (direct_path) */
+    unsigned long long compiled_calls; /* calls served with no Python (pmsm_fmu_compiled_calls) */
 } Instance;
 
 /* the offer made on this thread during the forwarded fmi2EnterInitializationMode */
 static __thread PyObject* pending_offer = NULL;
 
-/* pmsm_fmu_offer((slave, attributes, do_step, defer, log_queue, names, inputs, refusal)), called by the slave
- * through ctypes.PyDLL (the GIL held): names and inputs are sequences by value reference (a str or None;
- * a truth value). Returns 0, or -1 if the offer is malformed (then nothing is kept). */
+/* pmsm_fmu_offer((slave, attributes, do_step, defer, log_queue, names, inputs, refusal[, compiled_step,
+ * compiled_pull, slots])), called by the slave through ctypes.PyDLL (the GIL held): names, inputs and slots are
+ * sequences by value reference (a str or None; a truth value; an int, -1 for none). Returns 0, or -1 if the offer
+ * is malformed (then nothing is kept). */
 EXPORT int pmsm_fmu_offer(PyObject* offer)
 {
-    if (!PyTuple_Check(offer) || PyTuple_Size(offer) != 8) return -1;
+    if (!PyTuple_Check(offer) || (PyTuple_Size(offer) != 8 && PyTuple_Size(offer) != 11)) return -1;
     Py_XDECREF(pending_offer);
     Py_INCREF(offer);
     pending_offer = offer;
@@ -149,15 +175,24 @@ EXPORT int pmsm_fmu_offer(PyObject* offer)
 
 static void sync_time(Instance* w);
 
+static void to_python(Instance* w);
+
 static void drop_offer(Instance* w)
 {
     w->ready = 0;
     if (w->offer == NULL) return;
+    to_python(w);
     sync_time(w);
     free(w->names);
     free(w->inputs);
+    free(w->slots);
     w->names = NULL;
     w->inputs = NULL;
+    w->slots = NULL;
+    w->c_owned = 0;
+    w->c_step = NULL;
+    Py_CLEAR(w->compiled);
+    Py_CLEAR(w->pull);
     Py_CLEAR(w->offer);
     Py_CLEAR(w->slave);
     Py_CLEAR(w->attributes);
@@ -225,6 +260,24 @@ static void take_offer(Instance* w)
     Py_XINCREF(w->do_step);
     Py_XINCREF(w->defer);
     Py_XINCREF(w->log_queue);
+    if (PyTuple_Size(offer) == 11 && PyTuple_GetItem(offer, 8) != Py_None) {
+        PyObject* slots = PyTuple_GetItem(offer, 10);
+        if (slots == NULL || PySequence_Size(slots) != n) goto bad;
+        w->slots = calloc((size_t)n + 1, sizeof(long));
+        if (w->slots == NULL) goto bad;
+        for (Py_ssize_t i = 0; i < n; i++) {
+            PyObject* item = PySequence_GetItem(slots, i);
+            long slot = item ? PyLong_AsLong(item) : -1;
+            Py_XDECREF(item);
+            if (PyErr_Occurred()) goto bad;
+            w->slots[i] = w->names[i] != NULL ? slot : -1;
+        }
+        w->compiled = PyTuple_GetItem(offer, 8);
+        w->pull = PyTuple_GetItem(offer, 9);
+        Py_XINCREF(w->compiled);
+        Py_XINCREF(w->pull);
+        if (w->compiled == NULL || w->pull == NULL) goto bad;
+    }
     w->stale_name = PyUnicode_FromString("_stale");
     if (!w->slave || !w->attributes || !PyDict_Check(w->attributes) || !w->do_step || !w->defer || !w->log_queue
         || !PyList_Check(w->log_queue) || !w->stale_name || !w->refusal)
@@ -235,8 +288,10 @@ bad:
     if (w->offer == NULL) {
         free(w->names);
         free(w->inputs);
+        free(w->slots);
         w->names = NULL;
         w->inputs = NULL;
+        w->slots = NULL;
         w->n = 0;
         Py_DECREF(offer);
     } else {
@@ -249,6 +304,64 @@ bad:
 EXPORT unsigned long long pmsm_fmu_fast_calls(fmi2Component c)
 {
     return c == NULL ? 0 : ((Instance*)c)->fast_calls;
+}
+
+/* pmsm_fmu_compiled_calls(instance): the fmi2GetReal, fmi2SetReal and fmi2DoStep calls of this instance served
+ * with no Python at all (the compiled step on the slave's buffers), a part of pmsm_fmu_fast_calls (0 for NULL) */
+EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi2Component c)
+{
+    return c == NULL ? 0 : ((Instance*)c)->compiled_calls;
+}
+
+/* -- the compiled step: who holds the slave's values ------------------------------------------------------ */
+/* the slave's attributes from the buffers, before any Python runs on it (GIL held) */
+static void to_python(Instance* w)
+{
+    if (!w->c_owned) return;
+    w->c_owned = 0;
+    PyObject* done = w->pull ? PyObject_CallObject(w->pull, NULL) : NULL;
+    if (done == NULL) { /* cannot happen with the project's slaves; the compiled path stays off */
+        PyErr_Clear();
+        w->c_off = 1;
+    }
+    Py_XDECREF(done);
+}
+
+static void to_python_gil(Instance* w)
+{
+    if (!w->c_owned) return;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    to_python(w);
+    PyGILState_Release(gil);
+}
+
+/* the buffers filled from the slave (its compiled_step), if it has a compiled step now: 1, else 0 */
+static int to_compiled(Instance* w)
+{
+    if (w->c_owned) return 1;
+    if (w->compiled == NULL || w->c_off) return 0;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    PyObject* answer = PyObject_CallObject(w->compiled, NULL);
+    int ok = 0;
+    if (answer != NULL && PyTuple_Check(answer) && PyTuple_Size(answer) == 4) {
+        void* step = PyLong_AsVoidPtr(PyTuple_GetItem(answer, 0));
+        for (int i = 0; i < 3; i++) w->buffers[i] = (double*)PyLong_AsVoidPtr(PyTuple_GetItem(answer, i + 1));
+        ok = !PyErr_Occurred() && step != NULL && w->buffers[0] && w->buffers[1] && w->buffers[2];
+        if (ok) w->c_step = (c_step_t)step;
+    }
+    Py_XDECREF(answer);
+    PyErr_Clear();
+    w->c_owned = ok;
+    w->c_off = !ok;
+    PyGILState_Release(gil);
+    return ok;
+}
+
+/* the double of value reference vr in the buffers (slot >= 0) */
+static inline double* slot_of(Instance* w, fmi2ValueReference vr)
+{
+    long slot = w->slots[vr];
+    return w->buffers[slot / COMPILED_BUFFER] + slot % COMPILED_BUFFER;
 }
 
 /* -- FMI 2.0's checks (DriveSlave.refusal) ------------------------------------------------------------- */
@@ -288,6 +401,7 @@ static int refused(Instance* w, const char* call, PyObject* args)
         PyErr_Clear();
         return -1;
     }
+    to_python(w);
     sync_time(w);
     PyObject* name = PyUnicode_FromString(call);
     PyObject* full = name ? PyTuple_New(PyTuple_Size(args) + 1) : NULL;
@@ -365,8 +479,10 @@ static void direct_path(Instance* w)
     w->ready = 0;
     w->next_time = NAN;
     w->last_step = 0.0;
+    w->c_off = 0; /* the slave is asked again for its compiled step */
     if (w->offer == NULL) return;
     PyGILState_STATE gil = PyGILState_Ensure();
+    to_python(w);
     PyObject* mode = PyObject_GetAttrString(w->slave, "_in_step_mode");
     int in_step_mode = mode ? PyObject_IsTrue(mode) : 0;
     Py_XDECREF(mode);
@@ -478,6 +594,7 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
+    to_python_gil(W);
     if (W->ready) { /* the direct path stops: the slave learns where the last step ended */
         PyGILState_STATE gil = PyGILState_Ensure();
         sync_time(W);
@@ -522,7 +639,18 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
     if (!w->ready || nvr == 0) return forward_get_real(c, vr, nvr, value);
     for (size_t i = 0; i < nvr; i++)
         if ((Py_ssize_t)vr[i] >= w->n || w->names[vr[i]] == NULL) return forward_get_real(c, vr, nvr, value);
+    if (w->c_owned) { /* the buffers hold the values: read there, if every one is there */
+        size_t i = 0;
+        while (i < nvr && w->slots[vr[i]] >= 0) i++;
+        if (i == nvr) {
+            for (i = 0; i < nvr; i++) value[i] = *slot_of(w, vr[i]);
+            w->fast_calls++;
+            w->compiled_calls++;
+            return fmi2OK;
+        }
+    }
     PyGILState_STATE gil = PyGILState_Ensure();
+    to_python(w);
     PyObject* stale = PyObject_GetAttr(w->slave, w->stale_name);
     int is_stale = stale ? PyObject_IsTrue(stale) : -1;
     Py_XDECREF(stale);
@@ -557,7 +685,18 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
     for (size_t i = 0; i < nvr; i++)
         if ((Py_ssize_t)vr[i] >= w->n || !w->inputs[vr[i]] || !isfinite(value[i]))
             return checked_set_real(c, vr, nvr, value);
+    if (w->slots != NULL) { /* into the buffers, if every input is there and the slave has its compiled step */
+        size_t i = 0;
+        while (i < nvr && w->slots[vr[i]] >= 0) i++;
+        if (i == nvr && to_compiled(w)) {
+            for (i = 0; i < nvr; i++) *slot_of(w, vr[i]) = value[i];
+            w->fast_calls++;
+            w->compiled_calls++;
+            return fmi2OK;
+        }
+    }
     PyGILState_STATE gil = PyGILState_Ensure();
+    to_python(w);
     int ok = 1;
     for (size_t i = 0; ok && i < nvr; i++) {
         PyObject* v = PyFloat_FromDouble(value[i]);
@@ -621,6 +760,7 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
     static set_state_t fn = NULL;
     if (fn == NULL) fn = (set_state_t)inner("fmi2SetFMUstate");
     if (fn == NULL) return fmi2Error;
+    to_python_gil(W);
     fmi2Status status = fn(W->inner, state);
     if (status == fmi2OK || status == fmi2Warning) direct_path(W); /* in step mode if the state is; any time */
     return status;
@@ -673,6 +813,7 @@ static fmi2Status forward_do_step(Instance* w, fmi2Real t, fmi2Real h, fmi2Boole
     static do_step_t fn = NULL;
     if (fn == NULL) fn = (do_step_t)inner("fmi2DoStep");
     if (fn == NULL) return fmi2Error;
+    to_python_gil(w);
     fmi2Status status = fn(w->inner, t, h, flag);
     if (status == fmi2OK) w->last_successful_time = t + h;
     if (status == fmi2Discard) {
@@ -701,7 +842,20 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         int status = refused_step(w, t, h);
         if (status >= 0) return refuse_step(w, t, status);
     }
+    if (w->slots != NULL && to_compiled(w)) { /* the compiled step, unless it declines */
+        int done = w->c_step(w->buffers[0], w->buffers[1], w->buffers[2], t, h);
+        if (done == 1) {
+            w->fast_calls++;
+            w->compiled_calls++;
+            w->last_successful_time = t + h;
+            w->next_time = t + h;
+            w->last_step = h;
+            return fmi2OK;
+        }
+        if (done < 0) w->c_off = 1; /* a kernel raised: the Python step raises it; not compiled again until re-armed */
+    }
     PyGILState_STATE gil = PyGILState_Ensure();
+    to_python(w);
     PyObject* pt = PyFloat_FromDouble(t);
     PyObject* ph = PyFloat_FromDouble(h);
     PyObject* result = (pt && ph) ? PyObject_CallFunctionObjArgs(w->do_step, pt, ph, NULL) : NULL;

@@ -8,9 +8,10 @@ from __future__ import annotations
 import math
 
 from pmsm_ev import __version__
+from pmsm_ev import kernels as _k
 from pmsm_ev.params import MotorParams, PlantParams, VehicleParams
 from pmsm_ev.plant import ENERGY_SLOTS, Plant
-from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, SimulationError
+from pmsm_ev_fmus.slave_support import COMPILED_BUFFER, DriveSlave, FmuUsageError, SimulationError
 
 _MOTOR = ("N", "psi", "L_d", "L_q")  # the motor parameters of eq 12
 #: the algebraic flux model's parameters (``PlantParams.flux_model``): T_e and W_magnetic depend on them
@@ -53,6 +54,16 @@ _ENERGY_OUTPUTS = {
     "E_inverter": "inverter conduction and switching losses since the start (inverter_losses)",
     "E_iron": "iron losses since the start (iron_c_h, iron_c_e), a drag on the shaft",
 }
+
+
+#: the slave's inputs and outputs in the compiled step's buffer (``pmsm_ev.kernels.PLANT_IO_LAYOUT``); the
+#: outputs are also the plant's attributes of the same names (x_vehicle last)
+_IO_INPUTS = ("v_alpha", "v_beta", "delta", "T_brake")
+_IO_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle", "x_vehicle")
+_IO_VARIABLES = _IO_INPUTS + _IO_OUTPUTS
+#: the plant's other attributes there
+_IO_PLANT = ("delta", "T_brake", "clock", "samples", "v_alpha_applied", "v_beta_applied", "i_alpha_true",
+             "i_beta_true")
 
 
 class _Energy:
@@ -179,6 +190,52 @@ class PmsmEvPlant(DriveSlave):
         self.T_L_mech = p.T_L_mech
         self.v_vehicle = p.v_vehicle
         self.x_vehicle = p.x_vehicle
+
+    # -- the compiled step (``pmsm_ev.kernels.fmu``: ``plant_fmu_step`` on these buffers) ------------------------
+    def compiled_slots(self) -> dict[str, int]:
+        slots = {name: getattr(_k, "PIO_" + name.upper()) for name in _IO_VARIABLES}
+        slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in ENERGY_SLOTS.items()})
+        slots["P_dc"] = 2 * COMPILED_BUFFER + _k.E_P_DC
+        return slots
+
+    def compiled_step(self):
+        """(the plant's C step, the buffer, the plant's parameter and energy vectors), filled from the slave and
+        its plant; None where the kernels run as plain Python or the plant has an inverter delay or the thermal
+        model (their state is Python's)."""
+        p = self._plant
+        if p is None or not getattr(p._kernels, "JIT", False) or p.delay or p._thermal:
+            return None
+        io = self.__dict__.get("_io")
+        if io is None:
+            import numpy as np  # noqa: PLC0415 - numpy is there: the kernels are compiled
+
+            io = self._io = np.zeros(_k.PLANT_IO)
+            self._io_address = io.ctypes.data
+            self._step_address = p._kernels.fmu_step_address("plant")
+        for name in _IO_INPUTS + _IO_OUTPUTS:
+            io[getattr(_k, "PIO_" + name.upper())] = getattr(self, name)
+        for name in _IO_PLANT:
+            io[getattr(_k, "PIO_PLANT_" + name.upper()) if name in ("delta", "T_brake")
+               else getattr(_k, "PIO_" + name.upper())] = getattr(p, name)
+        io[_k.PIO_U_LIM] = p._u_lim
+        io[_k.PIO_SENSORS] = 1.0 if p._sensors else 0.0
+        io[_k.PIO_SEED] = p._seed64 >> 32
+        io[_k.PIO_SEED + 1] = p._seed64 & 0xFFFFFFFF
+        for i, value in enumerate(p._sensor_args):
+            io[_k.PIO_SENSOR_ARGS + i] = value
+        return self._step_address, self._io_address, p._pp.ctypes.data, p.energy.ctypes.data
+
+    def compiled_pull(self) -> None:
+        values, p = self._io.tolist(), self._plant
+        for name in _IO_INPUTS + _IO_OUTPUTS:
+            setattr(self, name, values[getattr(_k, "PIO_" + name.upper())])
+        for name in _IO_PLANT:
+            setattr(p, name, values[getattr(_k, "PIO_PLANT_" + name.upper()) if name in ("delta", "T_brake")
+                                    else getattr(_k, "PIO_" + name.upper())])
+        p.samples = int(p.samples)
+        p.x_vehicle = self.x_vehicle
+        for name in _IO_OUTPUTS[:-1]:
+            setattr(p, name, getattr(self, name))
 
     # -- FMI -------------------------------------------------------------------------
     def do_step(self, current_time, step_size):

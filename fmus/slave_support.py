@@ -148,6 +148,8 @@ def _release_wrapper_libraries() -> None:
 
 #: the lean binding's entry point (``fmus/lean_binding.c``): where a slave offers itself
 LEAN_OFFER = "pmsm_fmu_offer"
+#: the slots of ``DriveSlave.compiled_slots``: buffer b's element i is ``COMPILED_BUFFER * b + i``
+COMPILED_BUFFER = 1 << 20
 #: the lean binding's offer function of each FMU library folder of this process (None: pythonfmu's own binary)
 _LEAN_OFFERS: dict[str, object] = {}
 
@@ -518,9 +520,31 @@ class DriveSlave(Fmi2Slave):
         if offer is not None:
             step = self.do_step
             raw = getattr(type(self).do_step, "__wrapped__", None)
+            names = {name: vr for vr, name in enumerate(self._real_names) if name is not None}
+            slots = [-1] * len(self._real_names)
+            for name, slot in self.compiled_slots().items():
+                slots[names[name]] = slot
             offer((self, self.__dict__, raw.__get__(self) if raw is not None else step, self._defer_step,
                    self.log_queue, tuple(self._real_names), tuple(name is not None for name in self._real_inputs),
-                   self.refusal))
+                   self.refusal, self.compiled_step, self.compiled_pull, tuple(slots)))
+
+    # -- the compiled step (fmus/README.md, "The compiled step"; ``pmsm_ev.kernels.fmu``) -----------------------
+    def compiled_slots(self) -> dict[str, int]:
+        """The Real variables the lean binding reads and writes in the compiled step's buffers, by name: their
+        slot, ``COMPILED_BUFFER * b + i`` for element i of buffer b (0 the slave's buffer, 1 and 2 the vectors
+        ``compiled_step`` names); the others are read through Python. None by default."""
+        return {}
+
+    def compiled_step(self):
+        """Called by the lean binding (the GIL held) before it steps in compiled code: None where this slave has
+        no compiled step now (the binding runs its Python ``do_step``), else (the C function's address, the
+        addresses of its three buffers), the buffers filled from the slave's attributes: from then on they hold
+        the slave's inputs, outputs and state until ``compiled_pull``. None by default."""
+        return None
+
+    def compiled_pull(self) -> None:
+        """Called by the lean binding (the GIL held) before any Python runs on this slave after a compiled step:
+        the slave's attributes (and its physics object's) from the buffers of ``compiled_step``."""
 
     def enter_initialization_mode(self):
         self._refuse("fmi2EnterInitializationMode")

@@ -64,11 +64,15 @@ def test_the_default_build_puts_the_lean_binding_in_front_of_pythonfmus_library(
         assert b"pmsm_fmu_offer" not in loader and b"PMSM_FMU_PYTHON" in loader and b"_Py_NoneStruct" not in loader
 
 
-@pytest.mark.parametrize("scenario, stop", [("wltc3b-sensorless", "12"), ("scenario2", "2")])
+@pytest.mark.parametrize("scenario, stop", [("wltc3b-sensorless", "12"), ("scenario2", "2"),
+                                            ("hill-start-injection", "3")])
 def test_a_run_gives_the_same_bytes_with_either_binding(builds, tmp_path, scenario, stop):
     """The whole co-simulation (plant, controller, route FMU; the compiled loop) through each binding:
-    ``results.csv`` identical. wltc3b-sensorless to 12 s covers the alignment, I-f and the handover to the
-    EKF; scenario2 the paper's FocEkf5 with the route FMU's elevation."""
+    ``results.csv`` identical. With the lean binding the FMUs step in compiled code (``pmsm_ev.kernels.fmu``),
+    with pythonfmu's their Python ``do_step``. wltc3b-sensorless to 12 s covers the alignment, I-f and the
+    handover to the EKF, with the plant's voltage limit, inverter losses and current noise; scenario2 the paper's
+    FocEkf5 with the route FMU's elevation; hill-start-injection the injection's acquisition and polarity test
+    (``injection_unit_step``)."""
     outputs = []
     for binding, folder in builds.items():
         out = tmp_path / binding
@@ -176,7 +180,7 @@ def test_another_master_sees_the_same_values_statuses_and_states(builds, name, c
 # every one of them after the initialisation, so every one is the binding's to serve directly. Printed as JSON: each
 # pair's outputs at every step, the calls made and the binding's count of each instance.
 _PAIRS_SCRIPT = r"""
-import ctypes, json, sys, threading
+import ctypes, json, os, sys, threading
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 plant_path, ctrl_path, mode, steps = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
@@ -194,10 +198,19 @@ def load(path, name):
     vr = {v.name: v.valueReference for v in md.modelVariables}
     return fmu, vr
 
-def fast_calls(fmu):
-    fn = getattr(fmu.dll, "pmsm_fmu_fast_calls")  # AttributeError: not the lean binding
+def counter(fmu, name):
+    fn = getattr(fmu.dll, name)  # AttributeError: not the lean binding
     fn.argtypes, fn.restype = [ctypes.c_void_p], ctypes.c_ulonglong
     return fn(fmu.component)
+
+def fast_calls(fmu):
+    return counter(fmu, "pmsm_fmu_fast_calls")
+
+def compiled_calls(fmu):
+    return counter(fmu, "pmsm_fmu_compiled_calls")
+
+COUNTERS = os.environ.get("PAIR_COUNTERS", "1") == "1"
+V_DC = float(os.environ.get("PAIR_V_DC", "0"))  # the plant's DC link (0: no voltage limit)
 
 class Pair:
     def __init__(self, k, ref):
@@ -213,8 +226,16 @@ class Pair:
             fmu.instantiate()
             fmu.setupExperiment(startTime=0.0, stopTime=1.0)
             fmu.enterInitializationMode()
+            if fmu is self.plant and V_DC:
+                fmu.setReal([pv["v_dc"]], [V_DC])
             fmu.exitInitializationMode()
-        self.start = {"ctrl": fast_calls(self.ctrl), "plant": fast_calls(self.plant)}
+        self.start = self.counters()
+
+    def counters(self):
+        if not COUNTERS:
+            return {}
+        return {"fast": {"ctrl": fast_calls(self.ctrl), "plant": fast_calls(self.plant)},
+                "compiled": {"ctrl": compiled_calls(self.ctrl), "plant": compiled_calls(self.plant)}}
 
     def step(self, k):
         t = k * H
@@ -234,8 +255,7 @@ class Pair:
             self.step(k)
 
     def report(self):
-        return {"trace": self.trace, "calls": self.calls, "start": self.start,
-                "fast": {"ctrl": fast_calls(self.ctrl), "plant": fast_calls(self.plant)}}
+        return {"trace": self.trace, "calls": self.calls, "start": self.start, **self.counters()}
 
 pairs = [Pair(k, ref) for k, ref in enumerate(refs)]
 if mode == "interleaved":
@@ -256,20 +276,23 @@ print(json.dumps([pair.report() for pair in pairs]))
 STEPS = 300
 
 
-def _pairs(builds, binding: str, mode: str, *refs: float) -> list[dict]:
+def _pairs(builds, binding: str, mode: str, *refs: float, **env) -> list[dict]:
     folder = builds[binding]
     done = subprocess.run([sys.executable, "-c", _PAIRS_SCRIPT, str(folder / "PmsmEvPlant.fmu"),
                            str(folder / "FocEkf5.fmu"), mode, str(STEPS), *map(str, refs)],
-                          env=_env(binding, folder), capture_output=True, text=True, timeout=600)
+                          env={**_env(binding, folder), **env}, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def _all_fast(pair: dict) -> None:
-    """Every fmi2SetReal, fmi2DoStep and fmi2GetReal made after the initialisation served by the binding itself."""
-    assert pair["start"] == {"ctrl": 0, "plant": 0}  # nothing before (initialisation: pythonfmu's path)
+    """Every fmi2SetReal, fmi2DoStep and fmi2GetReal made after the initialisation served by the binding itself,
+    in compiled code: no Python on the way (``pmsm_fmu_compiled_calls``)."""
+    none = {"ctrl": 0, "plant": 0}
+    assert pair["start"] == {"fast": none, "compiled": none}  # nothing before (initialisation: pythonfmu's path)
     assert pair["calls"] == {"ctrl": 3 * STEPS, "plant": 3 * STEPS}
     assert pair["fast"] == pair["calls"]
+    assert pair["compiled"] == pair["calls"]
 
 
 def test_every_per_step_call_takes_the_fast_path(builds):
@@ -284,6 +307,34 @@ def test_every_per_step_call_takes_the_fast_path(builds):
                            str(builds["pythonfmu"] / "FocEkf5.fmu"), "serial", "20", "80.0"],
                           env=_env("pythonfmu", builds["pythonfmu"]), capture_output=True, text=True, timeout=600)
     assert done.returncode != 0 and "pmsm_fmu_fast_calls" in done.stderr
+
+
+def test_every_per_step_call_runs_compiled_code_with_the_python_step_still_there(builds):
+    """The compiled step's contract (``pmsm_fmu_compiled_calls``): with the kernels compiled, every fmi2SetReal,
+    fmi2DoStep and fmi2GetReal of the loop is served with no Python (a binding or a slave that falls back to the
+    Python step fails here); the numbers are those of pythonfmu's own binding, which runs the slaves' Python
+    ``do_step``, bit for bit."""
+    (pair,) = _pairs(builds, "lean", "serial", 80.0)
+    _all_fast(pair)
+    (stock,) = _pairs(builds, "pythonfmu", "serial", 80.0, PAIR_COUNTERS="0")
+    assert pair["trace"] == stock["trace"]
+    # with the kernels as plain Python there is no compiled step: the binding's direct path calls the Python one
+    (plain,) = _pairs(builds, "lean", "serial", 80.0, PMSM_EV_JIT="0")
+    assert plain["fast"] == plain["calls"] and plain["compiled"] == {"ctrl": 0, "plant": 0}
+    assert plain["trace"] == pair["trace"]
+
+
+def test_a_step_the_compiled_code_declines_is_pythons(builds):
+    """A plant voltage at the DC link's limit (v_dc = 60 V: the controller asks for more from the first steps on):
+    the limit is CPython's math.hypot's to the last bit, so the compiled step declines those steps and the binding
+    runs the slave's Python step on the same values; the others stay compiled. The numbers are pythonfmu's, bit
+    for bit."""
+    (pair,) = _pairs(builds, "lean", "serial", 80.0, PAIR_V_DC="60")
+    (stock,) = _pairs(builds, "pythonfmu", "serial", 80.0, PAIR_V_DC="60", PAIR_COUNTERS="0")
+    assert pair["trace"] == stock["trace"]
+    assert pair["fast"] == pair["calls"]
+    assert pair["compiled"]["ctrl"] == pair["calls"]["ctrl"]
+    assert 0 < pair["compiled"]["plant"] < pair["calls"]["plant"]  # some steps Python's, the rest compiled
 
 
 def test_several_instances_in_one_process_each_count_their_own(builds):

@@ -18,6 +18,8 @@ each function's docstring citing its equations:
   tracking observer, the blend with the EKF);
 * ``modes``: the sensorless unit with injection as a state machine (modes, detectors, the transition
   table, its step);
+* ``fmu``: the FMUs' ``fmi2DoStep`` on flat buffers and its C functions (numba ``cfunc``), which the lean
+  binding calls with no Python on the way;
 * ``jit``: the ``kernel`` decorator (numba or plain Python).
 
 The functions take floats and flat float vectors (a numpy float64 array when compiled, a list of
@@ -41,6 +43,7 @@ the last bit).
 from __future__ import annotations
 
 from .control import *  # noqa: F403 - the package's interface is all its kernels and constants
+from .fmu import *  # noqa: F403
 from .injection import *  # noqa: F403
 from .jit import CACHE, JIT  # noqa: F401 - how this copy was loaded (pmsm_ev.accel reads it)
 from .layout import *  # noqa: F403

@@ -8,7 +8,7 @@ total the declared size. Each slot's offset is then a module-level int named aft
 index the vectors as fast as with literal numbers. A slot longer than 1 holds consecutive
 entries from its offset (``S_P + n * i + j``).
 
-Four vectors:
+Four vectors of the physics:
 
 * ``PLANT_PARAMS_LAYOUT`` (``P_*``): the plant's parameters (``pmsm_ev.plant.Plant``);
 * ``PLANT_ENERGY_LAYOUT`` (``E_*``): the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``);
@@ -16,6 +16,12 @@ Four vectors:
   observer (``pmsm_ev.control_unit.ControlUnit``); the slots marked ``saved=False`` are scratch
   space, written before they are read in every step, and are not part of a saved state;
 * ``UNIT_PARAMS_LAYOUT`` (``C_*``): the control unit's parameters.
+
+and the buffers of the FMUs' compiled step (``pmsm_ev.kernels.fmu``), which the lean binding reads and writes:
+
+* ``PLANT_IO_LAYOUT`` (``PIO_*``): the plant FMU's inputs, outputs and the state ``Plant`` keeps outside its
+  vectors;
+* ``UNIT_IO_LAYOUT`` (``UIO_*``): a controller FMU's inputs, outputs and sample clock.
 """
 
 from __future__ import annotations
@@ -453,6 +459,85 @@ PLANT_PARAMS = PLANT_PARAMS_LAYOUT.size  #: length of the plant's parameter vect
 PLANT_ENERGY = PLANT_ENERGY_LAYOUT.size  #: length of the plant's energy vector
 UNIT_STATE = UNIT_STATE_LAYOUT.size  #: length of the control unit's state vector
 UNIT_PARAMS = UNIT_PARAMS_LAYOUT.size  #: length of the control unit's parameter vector
+
+# the FMUs' buffers of the compiled step (``pmsm_ev.kernels.fmu``): what the lean binding reads and writes
+PLANT_IO_LAYOUT = Layout("plant FMU buffer", "PIO_", (
+    # the Real inputs (PmsmEvPlant's)
+    ("PIO_V_ALPHA", 1, "input v_alpha [V]"),
+    ("PIO_V_BETA", 1, "input v_beta [V]"),
+    ("PIO_DELTA", 1, "input delta [rad]"),
+    ("PIO_T_BRAKE", 1, "input T_brake [N m at the wheels]"),
+    # the outputs: the plant's state and outputs after the last step (``Plant``'s attributes of the same names)
+    ("PIO_I_ALPHA", 1, "output i_alpha (as measured) [A]"),
+    ("PIO_I_BETA", 1, "output i_beta (as measured) [A]"),
+    ("PIO_I_D", 1, "output i_d [A]"),
+    ("PIO_I_Q", 1, "output i_q [A]"),
+    ("PIO_OMEGA_M", 1, "output omega_m [rad/s]"),
+    ("PIO_THETA_E", 1, "output theta_e [rad]"),
+    ("PIO_T_E", 1, "output T_e [N m]"),
+    ("PIO_T_L_MECH", 1, "output T_L_mech [N m]"),
+    ("PIO_V_VEHICLE", 1, "output v_vehicle [m/s]"),
+    ("PIO_X_VEHICLE", 1, "output x_vehicle [m]"),
+    # the plant's other state (``Plant``'s attributes)
+    ("PIO_PLANT_DELTA", 1, "Plant.delta: the elevation of the last step [rad]"),
+    ("PIO_PLANT_T_BRAKE", 1, "Plant.T_brake: the brake torque of the last step, >= 0 [N m]"),
+    ("PIO_CLOCK", 1, "Plant.clock [s]"),
+    ("PIO_SAMPLES", 1, "Plant.samples: the measurements taken (a whole number)"),
+    ("PIO_V_ALPHA_APPLIED", 1, "Plant.v_alpha_applied [V]"),
+    ("PIO_V_BETA_APPLIED", 1, "Plant.v_beta_applied [V]"),
+    ("PIO_I_ALPHA_TRUE", 1, "Plant.i_alpha_true [A]"),
+    ("PIO_I_BETA_TRUE", 1, "Plant.i_beta_true [A]"),
+    # the plant's constants
+    ("PIO_U_LIM", 1, "the voltage limit v_dc / sqrt(3) [V] (0: none)"),
+    ("PIO_SENSORS", 1, "1.0: the current sensors are modelled (plant_step_measured)"),
+    ("PIO_SEED", 2, "the sensors' noise stream: its 64-bit seed as two 32-bit halves, high first"),
+    ("PIO_SENSOR_ARGS", 7, "gain_a, offset_a, gain_b, offset_b, noise, lsb, adc_range (Plant._sensor_args)"),
+    # scratch
+    ("PIO_SAVE", PLANT_ENERGY, "the energy vector before the step (restored when a kernel raises) [J]"),
+), size=47)
+
+UNIT_IO_LAYOUT = Layout("controller FMU buffer", "UIO_", (
+    # the Real inputs (FocSlave's)
+    ("UIO_I_ALPHA", 1, "input i_alpha [A]"),
+    ("UIO_I_BETA", 1, "input i_beta [A]"),
+    ("UIO_OMEGA_REF", 1, "input omega_ref [rad/s]"),
+    ("UIO_THETA_MEAS", 1, "input theta_meas [rad]"),
+    ("UIO_OMEGA_MEAS", 1, "input omega_meas [rad/s]"),
+    # the outputs the step writes (FocSlave's attributes of the same names)
+    ("UIO_V_ALPHA", 1, "output v_alpha [V]"),
+    ("UIO_V_BETA", 1, "output v_beta [V]"),
+    ("UIO_V_D", 1, "output v_d [V]"),
+    ("UIO_V_Q", 1, "output v_q [V]"),
+    ("UIO_I_D", 1, "output i_d [A]"),
+    ("UIO_I_Q", 1, "output i_q [A]"),
+    ("UIO_I_QREF", 1, "output i_qref [A]"),
+    ("UIO_I_D_HAT", 1, "output i_d_hat [A]"),
+    ("UIO_I_Q_HAT", 1, "output i_q_hat [A]"),
+    ("UIO_OMEGA_HAT", 1, "output omega_hat [rad/s]"),
+    ("UIO_THETA_HAT", 1, "output theta_hat [rad]"),
+    ("UIO_T_L_HAT", 1, "output T_L_hat [N m]"),
+    ("UIO_MODE", 1, "output mode"),
+    ("UIO_FAULT", 1, "output fault"),
+    ("UIO_THETA_CTRL", 1, "output theta_ctrl [rad]"),
+    ("UIO_OMEGA_CTRL", 1, "output omega_ctrl [rad/s]"),
+    ("UIO_T_BRAKE", 1, "output T_brake: ControlUnit.T_brake of the state [N m]"),
+    # the sample clock (FocSlave._dt, _t0, _k_next) and the unit's constants
+    ("UIO_DT", 1, "the sample period [s] (0: not fixed yet, the first step's size)"),
+    ("UIO_T0", 1, "the start time [s]"),
+    ("UIO_CLOCK", 1, "1.0: the clock runs (_k_next set), 0.0: the first step starts it"),
+    ("UIO_K_NEXT", 1, "the index of the next sample instant (a whole number)"),
+    ("UIO_UNIT_DT", 1, "the unit's own dt [s] (a first step of another size rebuilds the unit: declined)"),
+    ("UIO_TOLERANCE", 1, "SAMPLE_TOLERANCE of the slave [-]"),
+    ("UIO_KIND", 1, "the step's kernel: 0 control_step, 1 sensorless_step, 2 injection_unit_step"),
+    ("UIO_MEASURED", 1, "1.0: the control frame is the measured angle (theta_ctrl = theta_meas)"),
+    ("UIO_REFERENCE", 1, "the reference generator's mode (ControlUnit.reference; T_brake is 0 with 0)"),
+    # scratch
+    ("UIO_SAVE", UNIT_STATE, "the state vector before the step (restored when a kernel raises)"),
+), size=31 + UNIT_STATE)
+PLANT_IO_LAYOUT.export(globals())
+UNIT_IO_LAYOUT.export(globals())
+PLANT_IO = PLANT_IO_LAYOUT.size  #: length of the plant FMU's buffer
+UNIT_IO = UNIT_IO_LAYOUT.size  #: length of a controller FMU's buffer
 
 #: modes of the sensorless unit (``S_MODE``): the I-f strategy's alignment and I-f, FOC on the EKF (both
 #: strategies), and the injection strategy's angle acquisition, polarity test and FOC on the injection

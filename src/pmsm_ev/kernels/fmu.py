@@ -1,0 +1,299 @@
+"""The FMUs' per-step path in compiled code: one ``fmi2DoStep`` of the plant FMU and of a controller FMU on
+flat buffers, and the C functions (numba ``cfunc``) the lean binding calls with those buffers
+(fmus/README.md, "The compiled step").
+
+A slave of ``pmsm_ev_fmus`` that runs with compiled kernels hands the binding, when it is initialised, a buffer
+``io`` laid out by ``PLANT_IO_LAYOUT`` (``PIO_*``) or ``UNIT_IO_LAYOUT`` (``UIO_*``): its Real inputs, its
+outputs and the little state its ``do_step`` keeps outside the kernels' vectors (the plant's clock and sample
+counter, the controller's sample clock), with two more vectors: the plant's parameter and energy vectors
+(``PLANT_PARAMS_LAYOUT``, ``PLANT_ENERGY_LAYOUT``), the control unit's state and parameter vectors
+(``UNIT_STATE_LAYOUT``, ``UNIT_PARAMS_LAYOUT``). The binding writes the inputs into ``io``, calls the C
+function at ``fmu_step_address(kind)`` with the three pointers and the communication point and step, and reads
+the outputs from ``io``: no Python on the way.
+
+``plant_fmu_step`` and ``unit_fmu_step`` are ``PmsmEvPlant.do_step`` (``pmsm_ev.plant.Plant.step``) and
+``FocSlave.do_step`` (the sample clock, ``ControlUnit.kernel_step``) written on these buffers: the physics are
+the kernels they call (``plant_step``, ``plant_step_measured``, ``control_step``, ``sensorless_step``,
+``injection_unit_step``), the same functions with the same arguments in the same order, so the numbers are
+the same, bit for bit; what they add is the bookkeeping of those two methods. A step they do not take returns
+``STEP_DECLINED`` with nothing changed, and the binding runs the slave's Python ``do_step`` instead: a plant
+with the inverter's delay or the thermal model (the slave does not offer those), a plant voltage at or near the
+DC link's limit (CPython's ``math.hypot``, which numba does not reproduce to the last bit, decides the limit
+there), a controller's first step that rebuilds its unit, a non-finite plant state (the slave raises), a step
+size <= 0. An exception in a kernel returns ``STEP_FAILED`` with the vectors as they were before the step (the
+binding then hands the step to Python, which raises it as it would have).
+"""
+
+from __future__ import annotations
+
+import math
+
+from .control import control_step
+from .jit import CACHE, JIT, kernel
+from .layout import (
+    MODE_EKF,
+    MODE_INJECTION,
+    P_T_BRAKE,
+    PIO_CLOCK,
+    PIO_DELTA,
+    PIO_I_ALPHA,
+    PIO_I_ALPHA_TRUE,
+    PIO_I_BETA,
+    PIO_I_BETA_TRUE,
+    PIO_I_D,
+    PIO_I_Q,
+    PIO_OMEGA_M,
+    PIO_PLANT_DELTA,
+    PIO_PLANT_T_BRAKE,
+    PIO_SAMPLES,
+    PIO_SAVE,
+    PIO_SEED,
+    PIO_SENSOR_ARGS,
+    PIO_SENSORS,
+    PIO_T_BRAKE,
+    PIO_T_E,
+    PIO_T_L_MECH,
+    PIO_THETA_E,
+    PIO_U_LIM,
+    PIO_V_ALPHA,
+    PIO_V_ALPHA_APPLIED,
+    PIO_V_BETA,
+    PIO_V_BETA_APPLIED,
+    PIO_V_VEHICLE,
+    PIO_X_VEHICLE,
+    PLANT_ENERGY,
+    PLANT_IO,
+    PLANT_PARAMS,
+    S_MODE,
+    S_T_BRAKE,
+    UIO_CLOCK,
+    UIO_DT,
+    UIO_FAULT,
+    UIO_I_ALPHA,
+    UIO_I_BETA,
+    UIO_I_D,
+    UIO_I_D_HAT,
+    UIO_I_Q,
+    UIO_I_Q_HAT,
+    UIO_I_QREF,
+    UIO_K_NEXT,
+    UIO_KIND,
+    UIO_MEASURED,
+    UIO_MODE,
+    UIO_OMEGA_CTRL,
+    UIO_OMEGA_HAT,
+    UIO_OMEGA_MEAS,
+    UIO_OMEGA_REF,
+    UIO_REFERENCE,
+    UIO_SAVE,
+    UIO_T0,
+    UIO_T_BRAKE,
+    UIO_T_L_HAT,
+    UIO_THETA_CTRL,
+    UIO_THETA_HAT,
+    UIO_THETA_MEAS,
+    UIO_TOLERANCE,
+    UIO_UNIT_DT,
+    UIO_V_ALPHA,
+    UIO_V_BETA,
+    UIO_V_D,
+    UIO_V_Q,
+    UNIT_IO,
+    UNIT_PARAMS,
+    UNIT_STATE,
+)
+from .modes import injection_unit_step
+from .plant import plant_step, plant_step_measured
+from .startup import sensorless_step
+
+if JIT:
+    from numba import carray
+else:
+    def carray(pointer, n):  # pragma: no cover - the C steps exist only compiled
+        raise RuntimeError("the FMUs' C steps need the compiled kernels")
+
+#: the returns of a compiled step: taken; not taken (nothing changed: the slave's Python step runs); an
+#: exception in a kernel (the vectors restored: the slave's Python step runs, and raises it)
+STEP_TAKEN, STEP_DECLINED, STEP_FAILED = 1, 0, -1
+
+#: a plant voltage whose squared magnitude is below this share of the squared limit is inside the limit whatever
+#: the last bit of its magnitude (``Plant.step`` takes it by ``math.hypot``); closer, the step is declined
+U_LIMIT_MARGIN = 1.0 - 1e-9
+
+#: the controller's kernels (``UIO_KIND``)
+UNIT_KIND_CONTROL, UNIT_KIND_SENSORLESS, UNIT_KIND_INJECTION = 0.0, 1.0, 2.0
+
+
+@kernel()
+def plant_fmu_step(io, pp, ee, h):
+    """``PmsmEvPlant.do_step`` over ``h`` on the buffer ``io`` (``PLANT_IO_LAYOUT``), the plant's parameter
+    vector ``pp`` and energy vector ``ee``: ``Plant.step`` with the inputs held (without its inverter delay and
+    thermal model), then the outputs. ``STEP_TAKEN``, or ``STEP_DECLINED`` with nothing changed (the module
+    doc)."""
+    if not h > 0.0:
+        return STEP_DECLINED
+    v_alpha = io[PIO_V_ALPHA]
+    v_beta = io[PIO_V_BETA]
+    u_lim = io[PIO_U_LIM]
+    if u_lim != 0.0 and not v_alpha * v_alpha + v_beta * v_beta < u_lim * u_lim * U_LIMIT_MARGIN:
+        return STEP_DECLINED  # at or near the limit: math.hypot decides, in Python
+    for i in range(PLANT_ENERGY):
+        io[PIO_SAVE + i] = ee[i]
+    delta = io[PIO_DELTA]
+    t_brake_in = io[PIO_T_BRAKE]
+    t_brake = io[PIO_PLANT_T_BRAKE]
+    if t_brake_in != t_brake:
+        t_brake = t_brake_in if t_brake_in > 0.0 else 0.0
+        pp[P_T_BRAKE] = t_brake
+    sample = io[PIO_SAMPLES]
+    if io[PIO_SENSORS] != 0.0:
+        seed = (int(io[PIO_SEED]) << 32) | int(io[PIO_SEED + 1])
+        (i_d, i_q, omega_m, theta_e, i_alpha_true, i_beta_true, t_e, t_l, v_v, dx, i_alpha,
+         i_beta) = plant_step_measured(io[PIO_I_D], io[PIO_I_Q], io[PIO_OMEGA_M], io[PIO_THETA_E], v_alpha, v_beta,
+                                       delta, h, pp, ee, seed, int(sample), io[PIO_SENSOR_ARGS],
+                                       io[PIO_SENSOR_ARGS + 1], io[PIO_SENSOR_ARGS + 2], io[PIO_SENSOR_ARGS + 3],
+                                       io[PIO_SENSOR_ARGS + 4], io[PIO_SENSOR_ARGS + 5], io[PIO_SENSOR_ARGS + 6])
+    else:
+        i_d, i_q, omega_m, theta_e, i_alpha, i_beta, t_e, t_l, v_v, dx = plant_step(
+            io[PIO_I_D], io[PIO_I_Q], io[PIO_OMEGA_M], io[PIO_THETA_E], v_alpha, v_beta, delta, h, pp, ee)
+        i_alpha_true = i_alpha
+        i_beta_true = i_beta
+    if not math.isfinite(omega_m + i_d + i_q):  # the slave raises: its Python step, from the state before
+        for i in range(PLANT_ENERGY):
+            ee[i] = io[PIO_SAVE + i]
+        pp[P_T_BRAKE] = io[PIO_PLANT_T_BRAKE]
+        return STEP_DECLINED
+    io[PIO_PLANT_DELTA] = delta
+    io[PIO_PLANT_T_BRAKE] = t_brake
+    io[PIO_CLOCK] += h
+    io[PIO_SAMPLES] = sample + 1.0
+    io[PIO_V_ALPHA_APPLIED] = v_alpha
+    io[PIO_V_BETA_APPLIED] = v_beta
+    io[PIO_I_D] = i_d
+    io[PIO_I_Q] = i_q
+    io[PIO_OMEGA_M] = omega_m
+    io[PIO_THETA_E] = theta_e
+    io[PIO_T_E] = t_e
+    io[PIO_T_L_MECH] = t_l
+    io[PIO_V_VEHICLE] = v_v
+    io[PIO_X_VEHICLE] += dx
+    io[PIO_I_ALPHA_TRUE] = i_alpha_true
+    io[PIO_I_BETA_TRUE] = i_beta_true
+    io[PIO_I_ALPHA] = i_alpha
+    io[PIO_I_BETA] = i_beta
+    return STEP_TAKEN
+
+
+@kernel()
+def unit_t_brake(io, s):
+    """``ControlUnit.T_brake`` of the state ``s``: the friction brake's demand, 0 in the paper's mode and in the
+    sensorless unit's modes without FOC."""
+    if io[UIO_REFERENCE] != 0.0 and (io[UIO_KIND] == UNIT_KIND_CONTROL or s[S_MODE] == MODE_EKF
+                                     or s[S_MODE] == MODE_INJECTION):
+        return s[S_T_BRAKE]
+    return 0.0
+
+
+@kernel()
+def unit_fmu_step(io, s, c, t, h):
+    """``FocSlave.do_step(t, h)`` on the buffer ``io`` (``UNIT_IO_LAYOUT``) and the unit's state and parameter
+    vectors ``s``, ``c``: one control period at each sample instant in [t, t + h) not yet run, on the inputs
+    held. ``STEP_TAKEN``, or ``STEP_DECLINED`` with nothing changed (the module doc)."""
+    if not h > 0.0:
+        return STEP_DECLINED
+    tolerance = io[UIO_TOLERANCE]
+    dt = io[UIO_DT]
+    if io[UIO_CLOCK] == 0.0:  # the first step starts the clock (FocSlave._start_clock)
+        if dt == 0.0:
+            if h != io[UIO_UNIT_DT]:
+                return STEP_DECLINED  # the unit is rebuilt for dt = h: in Python
+            dt = h
+        k_next = math.ceil((t - io[UIO_T0]) / dt - tolerance)
+        io[UIO_DT] = dt
+        io[UIO_K_NEXT] = k_next
+        io[UIO_CLOCK] = 1.0
+    else:
+        k_next = int(io[UIO_K_NEXT])
+    k_end = math.ceil((t + h - io[UIO_T0]) / dt - tolerance)
+    n = k_end - k_next
+    kind = io[UIO_KIND]
+    while n > 0:
+        if kind == UNIT_KIND_CONTROL:
+            (io[UIO_V_ALPHA], io[UIO_V_BETA], io[UIO_V_D], io[UIO_V_Q], io[UIO_I_D], io[UIO_I_Q], io[UIO_I_QREF],
+             io[UIO_I_D_HAT], io[UIO_I_Q_HAT], io[UIO_OMEGA_HAT], io[UIO_THETA_HAT], io[UIO_T_L_HAT]) = control_step(
+                s, c, io[UIO_I_ALPHA], io[UIO_I_BETA], io[UIO_OMEGA_REF], io[UIO_THETA_MEAS], io[UIO_OMEGA_MEAS])
+            io[UIO_OMEGA_CTRL] = io[UIO_OMEGA_HAT]
+            io[UIO_THETA_CTRL] = io[UIO_THETA_MEAS] if io[UIO_MEASURED] != 0.0 else io[UIO_THETA_HAT]
+        elif kind == UNIT_KIND_SENSORLESS:
+            (io[UIO_V_ALPHA], io[UIO_V_BETA], io[UIO_V_D], io[UIO_V_Q], io[UIO_I_D], io[UIO_I_Q], io[UIO_I_QREF],
+             io[UIO_I_D_HAT], io[UIO_I_Q_HAT], io[UIO_OMEGA_HAT], io[UIO_THETA_HAT], io[UIO_T_L_HAT], io[UIO_MODE],
+             io[UIO_FAULT], io[UIO_THETA_CTRL], io[UIO_OMEGA_CTRL]) = sensorless_step(
+                s, c, io[UIO_I_ALPHA], io[UIO_I_BETA], io[UIO_OMEGA_REF])
+        else:
+            (io[UIO_V_ALPHA], io[UIO_V_BETA], io[UIO_V_D], io[UIO_V_Q], io[UIO_I_D], io[UIO_I_Q], io[UIO_I_QREF],
+             io[UIO_I_D_HAT], io[UIO_I_Q_HAT], io[UIO_OMEGA_HAT], io[UIO_THETA_HAT], io[UIO_T_L_HAT], io[UIO_MODE],
+             io[UIO_FAULT], io[UIO_THETA_CTRL], io[UIO_OMEGA_CTRL]) = injection_unit_step(
+                s, c, io[UIO_I_ALPHA], io[UIO_I_BETA], io[UIO_OMEGA_REF])
+        n -= 1
+        io[UIO_K_NEXT] = k_end
+    io[UIO_T_BRAKE] = unit_t_brake(io, s)
+    return STEP_TAKEN
+
+
+# -- the C functions (compiled kernels only) --------------------------------------------------------------------
+#: kind -> the compiled C function (numba's ``CFunc``), made when first asked for
+_CFUNCS: dict = {}
+
+
+def _plant_c(io, pp, ee, t, h):
+    """The plant's C step: ``plant_fmu_step`` on the buffers at the three addresses."""
+    a = carray(io, PLANT_IO)
+    b = carray(ee, PLANT_ENERGY)
+    p = carray(pp, PLANT_PARAMS)
+    t_brake = a[PIO_PLANT_T_BRAKE]
+    try:
+        return plant_fmu_step(a, p, b, h)
+    except Exception:  # the vectors as they were: the Python step raises it
+        for i in range(PLANT_ENERGY):
+            b[i] = a[PIO_SAVE + i]
+        p[P_T_BRAKE] = t_brake
+        return STEP_FAILED
+
+
+def _unit_c(io, s, c, t, h):
+    """A controller's C step: ``unit_fmu_step`` on the buffers at the three addresses."""
+    a = carray(io, UNIT_IO)
+    state = carray(s, UNIT_STATE)
+    for i in range(UNIT_STATE):
+        a[UIO_SAVE + i] = state[i]
+    clock = a[UIO_CLOCK]
+    dt = a[UIO_DT]
+    k_next = a[UIO_K_NEXT]
+    try:
+        return unit_fmu_step(a, state, carray(c, UNIT_PARAMS), t, h)
+    except Exception:  # the state as it was: the Python step raises it
+        for i in range(UNIT_STATE):
+            state[i] = a[UIO_SAVE + i]
+        a[UIO_CLOCK] = clock
+        a[UIO_DT] = dt
+        a[UIO_K_NEXT] = k_next
+        return STEP_FAILED
+
+
+_C_STEPS = {"plant": _plant_c, "unit": _unit_c}
+
+
+def fmu_step_address(kind: str) -> int:
+    """The address of the C function ``int32 step(double *io, double *a, double *b, double t, double h)`` of
+    ``kind`` ("plant": a, b the parameter and energy vectors; "unit": the state and parameter vectors), compiled
+    (or loaded from numba's cache) when first asked for; 0 where the kernels run as plain Python."""
+    if not JIT:
+        return 0
+    if kind not in _CFUNCS:
+        from numba import cfunc, types  # noqa: PLC0415 - numba only when the kernels are compiled
+
+        double = types.CPointer(types.float64)
+        signature = types.int32(double, double, double, types.float64, types.float64)
+        _CFUNCS[kind] = cfunc(signature, cache=CACHE)(_C_STEPS[kind])
+    return _CFUNCS[kind].address
+
