@@ -526,7 +526,17 @@ class DriveSlave(Fmi2Slave):
                 slots[names[name]] = slot
             offer((self, self.__dict__, raw.__get__(self) if raw is not None else step, self._defer_step,
                    self.log_queue, tuple(self._real_names), tuple(name is not None for name in self._real_inputs),
-                   self.refusal, self.compiled_step, self.compiled_pull, tuple(slots)))
+                   self.refusal, self.compiled_step if self._compiled_is_the_step() else None, self.compiled_pull,
+                   tuple(slots)))
+
+    def _compiled_is_the_step(self) -> bool:
+        """Whether ``compiled_step`` is this slave's ``do_step``: the class that defines the ``do_step`` it runs
+        defines ``compiled_step`` too (a subclass with a step of its own, e.g. a benchmark's pass-through unit, has
+        no compiled step unless it gives its own)."""
+        for klass in type(self).__mro__:
+            if "do_step" in klass.__dict__:
+                return "compiled_step" in klass.__dict__
+        return False
 
     # -- the compiled step (fmus/README.md, "The compiled step"; ``pmsm_ev.kernels.fmu``) -----------------------
     def compiled_slots(self) -> dict[str, int]:

@@ -337,6 +337,23 @@ def test_a_step_the_compiled_code_declines_is_pythons(builds):
     assert 0 < pair["compiled"]["plant"] < pair["calls"]["plant"]  # some steps Python's, the rest compiled
 
 
+def test_a_unit_with_a_step_of_its_own_gets_no_other_compiled_step(tmp_path):
+    """The benchmark's pass-through units subclass the plant and the controller with a ``do_step`` that computes
+    nothing: their compiled step is their own (nothing computed, every call compiled), never the parent's physics;
+    the outputs keep their initial values."""
+    names = ("PassThroughPlant", "PassThroughFoc")
+    subprocess.run([sys.executable, "-c", "import sys; from pmsm_ev_fmus import build; "
+                    "[build.build_fmu(n, sys.argv[1]) for n in sys.argv[2:]]", str(tmp_path), *names],
+                   env=_env("lean", tmp_path), check=True, capture_output=True, text=True, timeout=600)
+    done = subprocess.run([sys.executable, "-c", _PAIRS_SCRIPT, str(tmp_path / "PassThroughPlant.fmu"),
+                           str(tmp_path / "PassThroughFoc.fmu"), "serial", str(STEPS), "80.0"],
+                          env=_env("lean", tmp_path), capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    (pair,) = json.loads(done.stdout.strip().splitlines()[-1])
+    _all_fast(pair)
+    assert all(row == pair["trace"][0] for row in pair["trace"])
+
+
 def test_several_instances_in_one_process_each_count_their_own(builds):
     """Two plants and two controllers stepping interleaved, call by call: each pair's outputs equal those of a
     process with that pair alone, bit for bit; each instance's counter is its own calls."""

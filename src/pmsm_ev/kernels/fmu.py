@@ -280,12 +280,19 @@ def _unit_c(io, s, c, t, h):
         return STEP_FAILED
 
 
-_C_STEPS = {"plant": _plant_c, "unit": _unit_c}
+def _pass_c(io, a, b, t, h):
+    """The benchmark's pass-through units' C step (``PassThroughPlant``, ``PassThroughFoc``): nothing computed,
+    the outputs keep their values, as their Python ``do_step``."""
+    return STEP_TAKEN
+
+
+_C_STEPS = {"plant": _plant_c, "unit": _unit_c, "pass": _pass_c}
 
 
 def fmu_step_address(kind: str) -> int:
     """The address of the C function ``int32 step(double *io, double *a, double *b, double t, double h)`` of
-    ``kind`` ("plant": a, b the parameter and energy vectors; "unit": the state and parameter vectors), compiled
+    ``kind`` ("plant": a, b the parameter and energy vectors; "unit": the state and parameter vectors; "pass": the
+    benchmark's pass-through units, nothing computed), compiled
     (or loaded from numba's cache) when first asked for; 0 where the kernels run as plain Python."""
     if not JIT:
         return 0
