@@ -3,7 +3,9 @@ FocSensorless: ``pmsm_ev.control_unit.ControlUnit`` as an FMI 2.0 co-simulation 
 
 No equations here: a control period is ``ControlUnit.step(i_alpha, i_beta, omega_ref,
 theta_meas, omega_meas)`` (called as the unit's ``kernel_step``), then the unit's outputs are
-copied into the output variables.
+copied into the output variables. With the kernels compiled, the lean binding runs the same
+step in compiled code instead (``pmsm_ev.kernels.unit_fmu_step`` on the buffers of ``compiled_step``;
+fmus/README.md, "The compiled step"): a change of ``do_step`` or of the sample clock is made there too.
 
 The unit keeps its own sample clock: the sample period ``dt`` is a parameter (0, the
 default: the size of the first communication step), the sample instants are

@@ -1,6 +1,8 @@
 """Slave of PmsmEvPlant.fmu: the vehicle and PMSM, ``pmsm_ev.plant.Plant``, as an FMI 2.0
 co-simulation unit. No equations here: ``do_step(t, h)`` is ``Plant.step(v_alpha, v_beta,
-delta, h)``, then the plant's outputs are copied into the output variables.
+delta, h)``, then the plant's outputs are copied into the output variables. With the kernels compiled, the lean
+binding runs the same step in compiled code instead (``pmsm_ev.kernels.plant_fmu_step`` on the buffers of
+``compiled_step``; fmus/README.md, "The compiled step"): a change here is made there too.
 """
 
 from __future__ import annotations

@@ -220,7 +220,8 @@ class Plant:
         as 0: a brake only opposes the motion.
 
         Returns (i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle)
-        after the step, also set as attributes (i_alpha, i_beta as measured)."""
+        after the step, also set as attributes (i_alpha, i_beta as measured). The plant FMU's compiled step
+        (``pmsm_ev.kernels.plant_fmu_step``) is this method on a buffer: a change here is made there too."""
         self.delta = delta
         if T_brake != self.T_brake:
             self.T_brake = T_brake if T_brake > 0.0 else 0.0

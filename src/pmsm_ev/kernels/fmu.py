@@ -301,6 +301,8 @@ def fmu_step_address(kind: str) -> int:
 
         double = types.CPointer(types.float64)
         signature = types.int32(double, double, double, types.float64, types.float64)
-        _CFUNCS[kind] = cfunc(signature, cache=CACHE)(_C_STEPS[kind])
+        # the first one made is kept for good (another thread's, made meanwhile, is dropped before any address of
+        # it is handed out): the instances call it by its address
+        _CFUNCS.setdefault(kind, cfunc(signature, cache=CACHE)(_C_STEPS[kind]))
     return _CFUNCS[kind].address
 
