@@ -214,3 +214,35 @@ def test_a_layout_saves_and_restores_named_fields_and_refuses_others():
     with pytest.raises(layout.LayoutError, match="a dict of named fields"):
         table.restore(w, [1.0, 2.0, 3.0])
     assert w == [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]  # a refused state changes nothing
+
+
+def test_the_fmus_compiled_step_declines_without_changing_anything():
+    """``pmsm_ev.kernels.fmu`` (the FMUs' compiled step, here as plain Python): a step it does not take leaves the
+    buffer and the vectors as they were, so that the slave's Python step runs on the same values: a plant voltage
+    at or near the DC link's limit, a step size <= 0, a plant state that is no longer finite (the energies and the
+    brake slot put back), a controller's first step that rebuilds its unit."""
+    k = kernels
+    io = [0.0] * k.PLANT_IO
+    pp = [1.0] * k.PLANT_PARAMS
+    ee = [0.5] * k.PLANT_ENERGY
+    io[k.PIO_U_LIM] = 100.0
+    io[k.PIO_T_BRAKE] = 30.0
+    for v_alpha, h in ((100.0, 1e-4), (99.99999999, 1e-4), (10.0, 0.0), (10.0, -1e-4)):
+        io[k.PIO_V_ALPHA] = v_alpha
+        before = (list(io), list(pp), list(ee))
+        assert k.plant_fmu_step(io, pp, ee, h) == k.STEP_DECLINED
+        assert (io, pp, ee) == before
+    io[k.PIO_V_ALPHA] = 10.0
+    io[k.PIO_OMEGA_M] = float("nan")  # the step's state is not finite: the slave's Python step raises
+    before = (list(io), list(pp), list(ee))
+    assert k.plant_fmu_step(io, pp, ee, 1e-4) == k.STEP_DECLINED
+    assert (io[:k.PIO_SAVE], pp, ee) == (before[0][:k.PIO_SAVE], before[1], before[2])
+
+    unit = [0.0] * k.UNIT_IO
+    unit[k.UIO_UNIT_DT] = 1e-4
+    unit[k.UIO_TOLERANCE] = 1e-2
+    s, c = [0.0] * k.UNIT_STATE, [0.0] * k.UNIT_PARAMS
+    for h in (5e-5, 0.0):  # dt 0 and a first step of another size than the unit's: rebuilt in Python
+        before = (list(unit), list(s))
+        assert k.unit_fmu_step(unit, s, c, 0.0, h) == k.STEP_DECLINED
+        assert (unit, s) == before

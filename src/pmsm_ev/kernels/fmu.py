@@ -142,6 +142,7 @@ def plant_fmu_step(io, pp, ee, h):
     delta = io[PIO_DELTA]
     t_brake_in = io[PIO_T_BRAKE]
     t_brake = io[PIO_PLANT_T_BRAKE]
+    pp_t_brake = pp[P_T_BRAKE]
     if t_brake_in != t_brake:
         t_brake = t_brake_in if t_brake_in > 0.0 else 0.0
         pp[P_T_BRAKE] = t_brake
@@ -161,7 +162,7 @@ def plant_fmu_step(io, pp, ee, h):
     if not math.isfinite(omega_m + i_d + i_q):  # the slave raises: its Python step, from the state before
         for i in range(PLANT_ENERGY):
             ee[i] = io[PIO_SAVE + i]
-        pp[P_T_BRAKE] = io[PIO_PLANT_T_BRAKE]
+        pp[P_T_BRAKE] = pp_t_brake
         return STEP_DECLINED
     io[PIO_PLANT_DELTA] = delta
     io[PIO_PLANT_T_BRAKE] = t_brake
@@ -250,7 +251,7 @@ def _plant_c(io, pp, ee, t, h):
     a = carray(io, PLANT_IO)
     b = carray(ee, PLANT_ENERGY)
     p = carray(pp, PLANT_PARAMS)
-    t_brake = a[PIO_PLANT_T_BRAKE]
+    t_brake = p[P_T_BRAKE]
     try:
         return plant_fmu_step(a, p, b, h)
     except Exception:  # the vectors as they were: the Python step raises it
