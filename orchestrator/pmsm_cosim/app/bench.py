@@ -25,8 +25,13 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
 (f) the same system, signals and cycle with the pass-through FMUs: the FMI floor of (e);
 (g) the cycle drive with injection at and near zero speed: the shipped scenario ``wltc3b-injection`` (as
     (e), the unit with ``low_speed = "injection"``, the plant's algebraic flux model);
+(h) the whole compiled loop (no FMI) of the system of (e): its plant and controller in one numba-compiled loop
+    of the FMUs' own compiled steps (``pmsm_ev.kernels.whole_loop``, ``pmsm_cosim.app.whole_loop``), the
+    signals and rows as the master's, its results.csv the same as (e)'s, byte for byte: the limit that the
+    co-simulation is measured against (its time includes making the rows; not the set-up);
+(i) the same for the system of (a);
 
-and prints one table with the ratios a/b, d/a and e/f, in wall time (what a user waits) and in
+and prints one table with the ratios a/b, d/a, e/f, e/h and a/i, in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
 includes its worker threads). (a)-(c) include the recording of a row every 10 ms, (e), (f) every
 50 ms, as in a normal run of their scenario. With ``memory`` it also runs ``pmsm-cosim run scenario1``
@@ -61,6 +66,7 @@ from ..engine.master import Master
 from .drive import load_system, project_fmu_dir
 from .overrides import apply_overrides
 from .reference import run_reference
+from .whole_loop import run_whole_loop
 
 SCENARIO = "scenario1"
 DEFAULT_SLICE = 20.0  #: [s] of simulated time per case
@@ -127,6 +133,12 @@ def reference_us_per_step(stop_time: float, work: Path) -> tuple[float, float]:
     m = run_reference(out, 1, stop_time=stop_time)
     if m["status"] != "completed":
         raise CosimError(f"reference run did not complete: {m['status']}")
+    return m["us_per_step"], 1e6 * m["cpu_time_s"] / m["macro_steps"]
+
+
+def whole_loop_us_per_step(spec) -> tuple[float, float]:
+    """(h): the whole compiled loop of ``spec``'s system (``run_whole_loop``), (wall, CPU) time per step [us]."""
+    m = run_whole_loop(spec)
     return m["us_per_step"], 1e6 * m["cpu_time_s"] / m["macro_steps"]
 
 
@@ -245,9 +257,9 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         dummy = passthrough_fmus(work / "fmus")
         plant, ctrl = real["PmsmEvPlant"], real["FocEkf5"]
         n = round(slice_s / 1e-4)
-        say(f"step cost: {SCENARIO}, t = 0 .. {slice_s:g} s, dt = 1e-4 s ({n} macro steps per case (a)-(d)); "
+        say(f"step cost: {SCENARIO}, t = 0 .. {slice_s:g} s, dt = 1e-4 s ({n} macro steps per case (a)-(d), (i)); "
             f"{CYCLE_SYSTEM} --cycle {CYCLE}, t = 0 .. {cycle_slice:g} s ({round(cycle_slice / 1e-4)} per case "
-            f"(e), (f)); physics kernels: {jit_mode()}")
+            f"(e), (f), (g), (h)); physics kernels: {jit_mode()}")
         say(f"load average at start: {load_average()}")
         results["a"] = cosim_us_per_step(slice_s, work, plant, ctrl)
         results["b"] = cosim_us_per_step(slice_s, work, dummy["PassThroughPlant"], dummy["PassThroughFoc"])
@@ -259,6 +271,8 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
             cycle_slice, dummy["PassThroughPlant"], dummy["PassThroughFoc"]))
         results["g"] = cosim_us_per_step(cycle_slice, work, spec=cycle_spec(
             cycle_slice, plant, real["FocSensorless"], INJECTION_SYSTEM))
+        results["h"] = whole_loop_us_per_step(cycle_spec(cycle_slice, plant, real["FocSensorless"]))
+        results["i"] = whole_loop_us_per_step(_spec(slice_s, plant, ctrl))
         rows = [
             ("(a) orchestrator + PmsmEvPlant/FocEkf5 FMUs", results["a"]),
             ("(b) orchestrator + pass-through FMUs", results["b"]),
@@ -267,6 +281,8 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
             ("(e) sensorless cycle drive: FocSensorless FMUs", results["e"]),
             ("(f) the same with pass-through FMUs", results["f"]),
             ("(g) (e) with injection (wltc3b-injection)", results["g"]),
+            ("(h) whole compiled loop (no FMI), system of (e)", results["h"]),
+            ("(i) whole compiled loop (no FMI), system of (a)", results["i"]),
         ]
         say(f"{'case':<50}{'us/step wall':>14}{'us/step CPU':>13}")
         for label, value in rows:
@@ -282,6 +298,8 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         if results["d"] is not None:
             ratio("d/a", results["d"], results["a"])
         ratio("e/f", results["e"], results["f"])
+        ratio("e/h", results["e"], results["h"])
+        ratio("a/i", results["a"], results["i"])
         whole = round(pcycles.load(CYCLE).duration / 1e-4)
         say(f"{'(e) x the whole ' + CYCLE + f' ({whole} steps) [s]':<50}{results['e'][0] * whole * 1e-6:>14.1f}"
             f"{results['e'][1] * whole * 1e-6:>13.1f}")

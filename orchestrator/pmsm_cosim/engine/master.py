@@ -737,3 +737,40 @@ class Master:
 
 def status_name(code: int) -> str:
     return STATUS[code] if 0 <= code < len(STATUS) else str(code)
+
+
+class SignalClock:
+    """The master's evaluation of a system's scenario signals, without FMUs: ``Master._update_signals`` and
+    the methods it calls, on the signals alone. ``events(n_steps)`` gives, per signal, where its value is
+    evaluated from the profile and where it follows a ramp's formula, as the stepping loops evaluate it, so that
+    another loop (the whole-loop reference of ``pmsm-cosim bench``) gives its inputs the master's values, bit for
+    bit."""
+
+    _first_step_at = Master._first_step_at
+    _next_eval = Master._next_eval
+    _update_signals = Master._update_signals
+
+    def __init__(self, spec: SystemSpec):
+        self.h = spec.step_size
+        self.signals = [_Signal(sig.name, sig.profile) for sig in spec.signals.values()]
+
+    def events(self, n_steps: int) -> dict[str, list[tuple]]:
+        """{signal: [(n, value, ramp_end, v0, dv, t0, dt), ...]} for base steps 0 .. n_steps: at step n the
+        value is ``value``; at the steps after it up to ``ramp_end`` (exclusive; 0: none) it is
+        ``v0 + dv * (t - t0) / dt``, t the step's time (``_update_signals``' formula); from the next event
+        on, that event's."""
+        out: dict[str, list[tuple]] = {sig.name: [] for sig in self.signals}
+        n = 0
+        while n <= n_steps:
+            due = [sig for sig in self.signals if n >= sig.next_n]
+            self._update_signals(n)
+            for sig in due:
+                if sig.next_n == n + 1 and sig.ramp_end > n + 1:  # on a ramp: the formula to its end
+                    out[sig.name].append((n, sig.value, sig.ramp_end, *sig.segment))
+                    v0, dv, t0, dts = sig.segment  # as the compiled loop leaves it at the ramp's last step
+                    sig.value = v0 + dv * ((sig.ramp_end - 1) * self.h - t0) / dts
+                    sig.next_n = sig.ramp_end
+                else:
+                    out[sig.name].append((n, sig.value, 0, 0.0, 0.0, 0.0, 1.0))
+            n = min((sig.next_n for sig in self.signals), default=_NEVER)
+        return out

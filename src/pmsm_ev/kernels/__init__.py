@@ -20,6 +20,7 @@ each function's docstring citing its equations:
   table, its step);
 * ``fmu``: the FMUs' ``fmi2DoStep`` on flat buffers and its C functions (numba ``cfunc``), which the lean
   binding calls with no Python on the way;
+* ``loop``: the whole drive in one compiled loop of the FMUs' compiled steps, no FMI (the benchmark's limit);
 * ``jit``: the ``kernel`` decorator (numba or plain Python).
 
 The functions take floats and flat float vectors (a numpy float64 array when compiled, a list of
@@ -47,6 +48,7 @@ from .fmu import *  # noqa: F403
 from .injection import *  # noqa: F403
 from .jit import CACHE, JIT  # noqa: F401 - how this copy was loaded (pmsm_ev.accel reads it)
 from .layout import *  # noqa: F403
+from .loop import *  # noqa: F403
 from .modes import *  # noqa: F403
 from .observers import *  # noqa: F403
 from .plant import *  # noqa: F403
