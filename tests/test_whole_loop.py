@@ -15,7 +15,7 @@ from pmsm_cosim.app.whole_loop import run_whole_loop
 from pmsm_cosim.engine.master import Master, SignalClock
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import accel
-from pmsm_ev.whole_loop import NotCovered
+from pmsm_ev.whole_loop import NotCovered, WholeLoop
 
 pytestmark = pytest.mark.skipif(not accel.compiled(), reason="the whole loop runs the compiled kernels")
 
@@ -62,6 +62,23 @@ def test_the_bench_a_system_is_the_cosimulations(tmp_path):
     """The system of bench case (a) (scenario 1), a row every 10 ms as the benchmark records it."""
     real = project_fmus()
     _same(lambda: bench._spec(0.5, real["PmsmEvPlant"], real["FocEkf5"]), tmp_path)
+
+
+def test_a_plant_step_at_the_voltage_limit_is_the_fmus_python_step(tmp_path, monkeypatch):
+    """A plant voltage at the DC link's limit (v_dc 5 V: from 0.59 s on): the FMU's compiled step declines it and
+    its Python step runs (``math.hypot`` decides the limit); the whole loop takes it the same way, bit for bit."""
+    taken = []
+    step = WholeLoop.python_plant_step
+    monkeypatch.setattr(WholeLoop, "python_plant_step", lambda self, n, h: taken.append(n) or step(self, n, h))
+
+    def spec():
+        s = load_system("scenario2")
+        s.stop_time, s.output_interval = 0.7, 1e-4
+        s.component("plant", "test").start["v_dc"] = 5.0
+        return s
+
+    _same(spec, tmp_path)
+    assert len(taken) > 100 and taken[0] == 5885
 
 
 def test_signal_events_are_the_masters_values():

@@ -6,12 +6,14 @@ fills the buffers as the slaves fill them for the lean binding when they are ini
 (``PmsmEvPlant.compiled_step``, ``FocSlave.compiled_step`` with the ``dt`` parameter 0: the sample period is
 the first step's); ``run`` takes the signals' events and the recorded columns (``pmsm_cosim.app.whole_loop``
 makes them from a system file, the master's way) and returns the rows. A step the FMUs' compiled steps do not
-take (``pmsm_ev.kernels.fmu``: a plant voltage at or near the DC link's limit, a non-finite state, the unit
-rebuilt for another period) is not taken here either: ``run`` raises ``NotCovered``, naming it (the FMUs then
-run their Python step, which this loop does not have).
+take (``pmsm_ev.kernels.fmu``) is taken as the FMU takes it: a plant step (a voltage at or near the DC link's
+limit, where ``math.hypot`` decides) by the plant's Python step (``WholeLoop.python_plant_step``), then the loop
+goes on; a controller step (its unit rebuilt for another period) is not covered: ``run`` raises ``NotCovered``.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -78,9 +80,13 @@ class WholeLoop:
 
     def compile(self) -> None:
         """Compile the loop (or load it from numba's cache) for its argument types: no step taken."""
-        self._run(0, -1, [[(0.0,) * self._kernels.EV_COLUMNS]], [(0, 0)], np.zeros((1, 2), dtype=np.intp), 1, 0.0, 1)
+        go, _, _ = self._loop(-1, 0.0, 1, [[(0.0,) * self._kernels.EV_COLUMNS]], [(0, 0)],
+                              np.zeros((1, 2), dtype=np.intp), 1, False)
+        go(0)
 
-    def _run(self, n0, n_steps, events, targets, cols, every, h, n_rows, states=False):
+    def _loop(self, n_steps, h, every, events, targets, cols, n_rows, states):
+        """A callable ``go(n0) -> (step reached, rows made, LOOP_*)`` on the arrays of one run, its rows, its
+        unit states."""
         k = self._kernels
         n_sig = len(events)
         ev = np.array([e for evs in events for e in evs], dtype=np.float64).reshape(-1, k.EV_COLUMNS)
@@ -97,22 +103,51 @@ class WholeLoop:
         rows = np.zeros((n_rows, cols.shape[0]))
         state_rows = np.zeros((n_rows if states else 0, _k.UNIT_STATE))
         u, p = self.unit, self.plant
-        n, r, code = k.whole_loop(self.pio, p._pp, p.energy, self.uio, u._s, u._c, n0, n_steps, h, every, ev, first,
-                                  last, ptr, value, ramp, target, cols, rows, state_rows, 0)
-        return n, r, code, rows, state_rows
+        made = [0]
+
+        def go(n_from):
+            n, r, code = k.whole_loop(self.pio, p._pp, p.energy, self.uio, u._s, u._c, n_from, n_steps, h, every, ev,
+                                      first, last, ptr, value, ramp, target, cols, rows, state_rows, made[0])
+            made[0] = r
+            return n, r, code
+
+        return go, rows, state_rows
 
     def run(self, n_steps: int, h: float, every: int, events, targets, cols, states: bool = False):
         """Steps 0 .. ``n_steps`` of ``h``, a row every ``every`` and at the last: (rows, unit states: one row per
         recorded row when ``states``). ``events``: per signal, its events (``kernels.loop``, ``EV_*``);
         ``targets``: per signal, (``TARGET_PLANT`` or ``TARGET_UNIT``, the slot); ``cols``: per column, (``COL_*``,
-        slot). ``NotCovered`` at a step the FMUs' compiled steps hand to Python."""
+        slot). A plant step that the FMU's compiled step declines is the FMU's Python step (``python_plant_step``),
+        as in the FMU; ``NotCovered`` at a controller step it declines."""
         k = self._kernels
         n_rows = n_steps // every + 1 + (1 if n_steps % every else 0)
-        n, r, code, rows, state_rows = self._run(0, n_steps, events, targets,
-                                                 np.asarray(cols, dtype=np.intp).reshape(-1, 2), every, h, n_rows,
-                                                 states)
+        cols = np.asarray(cols, dtype=np.intp).reshape(-1, 2)
+        go, rows, state_rows = self._loop(n_steps, h, every, events, targets, cols, n_rows, states)
+        n, r, code = go(0)
+        while code == k.LOOP_PLANT_STOPPED:
+            self.python_plant_step(n, h)
+            n, r, code = go(n + 1)
         if code != k.LOOP_DONE:
-            who = "controller" if code == k.LOOP_UNIT_STOPPED else "plant"
-            raise NotCovered(f"the {who}'s compiled step did not take the step at t = {n * h:.9g} s (step {n}): "
+            raise NotCovered(f"the controller's compiled step did not take the step at t = {n * h:.9g} s (step {n}): "
                              f"the FMU runs its Python step there, which the whole loop does not have")
         return rows[:r], state_rows[:r]
+
+    def python_plant_step(self, n: int, h: float) -> None:
+        """Step n of the plant as the plant FMU takes a step its compiled step declines: its Python step
+        (``Plant.step`` on its inputs held), the plant taken from the buffer and put back
+        (``PmsmEvPlant.compiled_pull``, ``compiled_step``); ``FloatingPointError`` if the state is not finite (the
+        FMU fails the step)."""
+        p, pio = self.plant, self.pio
+        for name in _PLANT_OUTPUTS:
+            setattr(p, name, float(pio[getattr(_k, "PIO_" + name.upper())]))
+        for name, slot in _PLANT_STATE.items():
+            setattr(p, name, float(pio[slot]))
+        p.samples = int(p.samples)
+        p.step(float(pio[_k.PIO_V_ALPHA]), float(pio[_k.PIO_V_BETA]), float(pio[_k.PIO_DELTA]), h,
+               float(pio[_k.PIO_T_BRAKE]))
+        if not math.isfinite(p.omega_m + p.i_d + p.i_q):
+            raise FloatingPointError(f"plant state is not finite at t = {(n + 1) * h!r} s")
+        for name in _PLANT_OUTPUTS:
+            pio[getattr(_k, "PIO_" + name.upper())] = getattr(p, name)
+        for name, slot in _PLANT_STATE.items():
+            pio[slot] = getattr(p, name)

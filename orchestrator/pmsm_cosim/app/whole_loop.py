@@ -8,7 +8,7 @@ recorded columns from the system's ``[record]``, runs the loop and writes ``resu
 the same system gives the same file, byte for byte (``tests/test_whole_loop.py``). It covers a system of one
 ``PmsmEvPlant`` and one ``FocEkf5`` or ``FocSensorless`` wired as the shipped scenarios wire them, Gauss-Seidel,
 single-rate, the scenario signals on the plant's ``delta`` and the controller's ``omega_ref``; another system is a
-``NotCovered`` with the reason.
+``NotCovered`` with the reason. A plant step the FMU's compiled step declines is its Python step, as in the FMU.
 """
 
 from __future__ import annotations
