@@ -24,7 +24,7 @@ from .plant import Plant
 
 #: the sample-clock tolerance of the controller FMUs (``pmsm_ev_fmus.foc_slave.SAMPLE_TOLERANCE``)
 SAMPLE_TOLERANCE = 1.0e-2
-#: the plant FMU's inputs and outputs in its buffer, read from the plant (``PmsmEvPlant``: ``_IO_OUTPUTS``)
+#: the plant FMU's outputs in its buffer, the plant's attributes of the same names (``PmsmEvPlant._IO_OUTPUTS``)
 _PLANT_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle",
                   "x_vehicle")
 #: the plant's own attributes there (``PmsmEvPlant._IO_PLANT``)
@@ -35,7 +35,7 @@ _PLANT_STATE = {"delta": _k.PIO_PLANT_DELTA, "T_brake": _k.PIO_PLANT_T_BRAKE, "c
 
 
 class NotCovered(RuntimeError):
-    """A step that the FMUs' compiled steps hand to their Python step: not run by the whole loop."""
+    """A system, or a step of it, that the whole loop does not run (the reason in the message)."""
 
 
 class WholeLoop:

@@ -399,7 +399,9 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Measure the wall time per macro step on a slice of scenario 1: "
                                     "(a) the master with the project's FMUs, (b) with pass-through FMUs "
                                     "that compute nothing, (c) the monolithic reference, (d) libcosim "
-                                    "with the same FMUs; then the peak memory of 100 s and 350 s runs.")
+                                    "with the same FMUs; (e)-(g) the sensorless cycle drive on WLTC 3b; (h), (i) the "
+                                    "whole compiled loop (no FMI) of the systems of (e) and (a); then the peak "
+                                    "memory of 100 s and 350 s runs.")
     bench.add_arguments(bn)
     _fmu_dir_option(bn)
     bn.set_defaults(func=cmd_bench)
