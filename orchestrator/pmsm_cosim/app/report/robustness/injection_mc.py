@@ -63,10 +63,10 @@ def beside_lines(rows: list[dict], beside: Path) -> list[str]:
             inj, i_f = ", ".join(a["reasons"]) or "passed", ", ".join(b["reasons"]) or "passed"
             lines.append(f"| {a['run']} | {inj} | {i_f} | {where_text(b) if b['failed'] else ''} |")
     wh = [(a["dc_Wh_per_km"], b["dc_Wh_per_km"]) for a, b in both
-          if a["status"] == b["status"] == "completed" and math.isfinite(a["dc_Wh_per_km"] + b["dc_Wh_per_km"])]
+          if not a["failed"] and not b["failed"] and math.isfinite(a["dc_Wh_per_km"] + b["dc_Wh_per_km"])]
     if wh:
         d = [y - x for x, y in wh]
-        lines += ["", f"Energy at the DC link on the samples both completed ({len(wh)}): injection "
+        lines += ["", f"Energy at the DC link on the samples both passed ({len(wh)}): injection "
                   f"{sum(x for x, _ in wh) / len(wh):.1f} Wh/km mean, I-f {sum(y for _, y in wh) / len(wh):.1f}; I-f "
                   f"minus injection {min(d):+.1f} … {max(d):+.1f} Wh/km."]
     return lines
