@@ -55,7 +55,7 @@ def test_compiled_loop_through_a_cycle_s_ramps_and_the_row_boundaries(tmp_path):
     project_fmus()
     out = {}
     for loop in ("compiled", "plain"):
-        spec = load_system("wltc3b-sensorless")
+        spec = load_system("wltc3b-if")
         spec.stop_time = 13.0
         m = Master(spec, loop=loop)
         metrics = m.run(tmp_path / loop, catch_sigint=False)

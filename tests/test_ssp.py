@@ -389,10 +389,10 @@ def test_omsimulator_runs_the_package(fmus, tmp_path, angle_source):
 @pytest.mark.skipif(shutil.which("OMSimulator") is None,
                     reason="OMSimulator is not on PATH (not on the package index; README: building it)")
 def test_omsimulator_runs_the_sensorless_hill_start(fmus, tmp_path):
-    """A scenario whose name is no identifier (hill-start: OMSimulator needs identifiers for
+    """A scenario whose name is no identifier (hill-start-if: OMSimulator needs identifiers for
     its model and system) and the sensorless unit: alignment, I-f and handover in 5 s."""
     stop = 5.0
-    spec = load_system("hill-start")
+    spec = load_system("hill-start-if")
     spec.set_fmu("ctrl", fmus["FocSensorless"])
     spec.set_fmu("plant", fmus["PmsmEvPlant"])
     package = tmp_path / "hill.ssp"
@@ -404,7 +404,7 @@ def test_omsimulator_runs_the_sensorless_hill_start(fmus, tmp_path):
     # measured: up to 1.3e-8 from the Jacobi run over the start-up (round-off differences grow
     # through the alignment and I-f, ~1e-11 in the paper's scenarios), so 1e-8 relative here
     worst = compare_with_jacobi({k: v[1:] for k, v in rows.items()}, package, a, n, offset=1, tol=1e-8)
-    print(f"OMSimulator vs orchestrator Jacobi, hill-start, {stop} s: max |diff| = {worst:.3g}")
+    print(f"OMSimulator vs orchestrator Jacobi, hill-start-if, {stop} s: max |diff| = {worst:.3g}")
 
 
 # -- round trip ----------------------------------------------------------------------------------------

@@ -30,7 +30,7 @@ def fmus():
 
 def _run(tmp_path, name, stop, *sets):
     out = tmp_path / name
-    argv = ["run", "wltc3b-sensorless", "--stop-time", str(stop), "--no-figures", "--quiet", "--out", str(out)]
+    argv = ["run", "wltc3b-if", "--stop-time", str(stop), "--no-figures", "--quiet", "--out", str(out)]
     assert main(argv + ["--set", *MISMATCH, *sets]) == 0
     return read_results(out), json.loads((out / "metrics.json").read_text())
 

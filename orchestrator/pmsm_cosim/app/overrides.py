@@ -139,6 +139,15 @@ def _columns(spec: SystemSpec, record, cli: bool) -> list[ColumnSpec]:
     return columns
 
 
+def _replace_fmu(comp, fmu: Path, text: str) -> None:
+    """``comp`` with another FMU: the start values the system file wrote for the one it had are set where the
+    new FMU has the variable (``ComponentSpec.optional_start``; e.g. the sensorless unit's ``low_speed`` when
+    ``--controller sensored`` swaps it out), else left out with a warning by the master."""
+    if fmu != comp.fmu:
+        comp.optional_start = frozenset(comp.start)
+    comp.fmu, comp.fmu_text = fmu, text
+
+
 def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time=None, step_size=None,
                     output_interval=None, algorithm=None, set=None, profiles=None, record=None,
                     cycle=None, cli: bool = False) -> SystemSpec:
@@ -151,12 +160,10 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
     for option, instance, value in (("plant", PLANT_INSTANCE, plant), ("controller", CONTROLLER_INSTANCE, controller)):
         if value is not None:
             what = _named(option, value, cli)
-            comp = spec.component(instance, what)
-            comp.fmu, comp.fmu_text = resolve_fmu(value, what), str(value)
+            _replace_fmu(spec.component(instance, what), resolve_fmu(value, what), str(value))
     for instance, value in _pairs(fmus or {}, "fmus", "INSTANCE=FMU", cli):
         what = _named_item("fmus", instance, value, cli)
-        comp = spec.component(instance, what)
-        comp.fmu, comp.fmu_text = resolve_fmu(value, what), str(value)
+        _replace_fmu(spec.component(instance, what), resolve_fmu(value, what), str(value))
     if cycle is not None:  # omega_ref from the cycle (module cycles); the stop time its duration unless given
         what = _named("cycle", cycle, cli)
         loaded = cycles.load_cycle(str(cycle), what)
@@ -176,7 +183,9 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
     for target, value in _pairs(set or {}, "set", "INSTANCE.VAR=VALUE", cli):
         what = _named_item("set", target, value, cli)
         instance, variable = split_reference(target, what)
-        spec.component(instance, what).start[variable] = value
+        comp = spec.component(instance, what)
+        comp.start[variable] = value
+        comp.optional_start = comp.optional_start - {variable}  # the user's own: set, or refused
     for signal, csv in _pairs(profiles or {}, "profiles", "SIGNAL=CSV", cli):
         if signal not in spec.signals:
             raise CosimError(f"{_named_item('profiles', signal, csv, cli)}: unknown signal {signal!r}"

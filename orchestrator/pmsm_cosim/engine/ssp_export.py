@@ -165,7 +165,7 @@ def export_ssp(spec: SystemSpec, dest, *, signal_fmu=None, carries_starts=None, 
 
         # -- the .ssd ---------------------------------------------------------------
         # OMSimulator takes these names for its model and system: identifiers only (a hyphen,
-        # as in "hill-start", leaves it with no model); the run record keeps the system's name
+        # as in "hill-start-if", leaves it with no model); the run record keeps the system's name
         ident = re.sub(r"\W", "_", spec.name, flags=re.ASCII)
         ident = ident if ident[:1].isalpha() else f"s_{ident}"
         root = ET.Element(qname("ssd:SystemStructureDescription"), {

@@ -51,6 +51,10 @@ class ComponentSpec:
     step_multiple: int = 1  #: stepped every ``step_multiple`` base steps
     start: dict[str, Any] = field(default_factory=dict)  #: start values, by variable name
     fmu_text: str = ""  #: ``fmu`` as written (for messages and metrics)
+    #: the names in ``start`` written for the FMU this instance had before another replaced it (``--controller``,
+    #: ``--plant``, ``--fmu``): set where the new FMU has the variable, else left out with a warning
+    #: (:func:`~pmsm_cosim.engine.checks.drop_foreign_starts`)
+    optional_start: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
