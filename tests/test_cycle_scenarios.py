@@ -8,6 +8,7 @@ hilly road holds the car, sensored and sensorless. The whole cycles are the repo
 from __future__ import annotations
 
 import json
+import zipfile
 
 import numpy as np
 import pytest
@@ -157,3 +158,7 @@ def test_the_sensored_drive_swaps_into_a_sensorless_scenario(fmus, tmp_path, cap
                  "--no-figures", "--out", str(tmp_path / "refused")]) == 2
     assert "has no variable 'low_speed'" in capsys.readouterr().err
     assert not (tmp_path / "refused").exists()
+    # so does its SSP package: the sensored drive's, without the sensorless unit's parameter
+    assert main(["export-ssp", name, "--controller", "sensored", "-o", str(tmp_path / "p.ssp")]) == 0
+    with zipfile.ZipFile(tmp_path / "p.ssp") as z:
+        assert not any(b"low_speed" in z.read(n) for n in z.namelist() if n.endswith((".ssd", ".ssv")))

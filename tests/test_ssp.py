@@ -164,11 +164,12 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     """What OMSimulator needs (its annotation first in the system, no String in an .ssv, no
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
     now in the system), and still valid SSP 1.0."""
-    # the paper's 2, their 4 variants, 4 sensorless (one with injection), 3 acceleration, 13 drive-cycle runs (4
-    # with injection)
-    assert len(SCENARIOS) == 26
-    # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit
-    ctrl = "FocSensorless" if scenario.endswith("-injection") else "FocEkf5"
+    # the paper's 2, their 4 variants, 4 sensorless (the paper's 2 and the hill start with injection and I-f),
+    # 4 acceleration (sensorless with injection and I-f), 13 drive-cycle runs (sensored, injection, I-f; hilly)
+    assert len(SCENARIOS) == 27
+    # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit (its String travels in
+    # a copy of the FMU); the rest swap in FocEkf5
+    ctrl = "FocSensorless" if "low_speed" in load_system(scenario).component("ctrl").start else "FocEkf5"
     args = ["export-ssp", scenario, "-o", str(tmp_path / "p.ssp"), "--plant", str(fmus["PmsmEvPlant"]),
             "--controller", str(fmus[ctrl])]
     if angle_source:

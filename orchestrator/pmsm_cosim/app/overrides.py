@@ -139,15 +139,6 @@ def _columns(spec: SystemSpec, record, cli: bool) -> list[ColumnSpec]:
     return columns
 
 
-def _replace_fmu(comp, fmu: Path, text: str) -> None:
-    """``comp`` with another FMU: the start values the system file wrote for the one it had are set where the
-    new FMU has the variable (``ComponentSpec.optional_start``; e.g. the sensorless unit's ``low_speed`` when
-    ``--controller sensored`` swaps it out), else left out with a warning by the master."""
-    if fmu != comp.fmu:
-        comp.optional_start = frozenset(comp.start)
-    comp.fmu, comp.fmu_text = fmu, text
-
-
 def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time=None, step_size=None,
                     output_interval=None, algorithm=None, set=None, profiles=None, record=None,
                     cycle=None, cli: bool = False) -> SystemSpec:
@@ -157,13 +148,16 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
     (``controller='X'``). Checked as far as it can be without opening the FMUs (their
     variables and the values' types are checked by the master)."""
     spec = copy.deepcopy(system) if isinstance(system, SystemSpec) else load_system(system)
+    # a replaced FMU: the start values the system file wrote for the one it had are set where the new FMU has the
+    # variable (``ComponentSpec.optional_start``: e.g. the sensorless unit's ``low_speed`` when ``--controller
+    # sensored`` swaps it out), else left out with a warning by the master; ``--set`` values are the user's own
     for option, instance, value in (("plant", PLANT_INSTANCE, plant), ("controller", CONTROLLER_INSTANCE, controller)):
         if value is not None:
             what = _named(option, value, cli)
-            _replace_fmu(spec.component(instance, what), resolve_fmu(value, what), str(value))
+            spec.component(instance, what).replace_fmu(resolve_fmu(value, what), str(value))
     for instance, value in _pairs(fmus or {}, "fmus", "INSTANCE=FMU", cli):
         what = _named_item("fmus", instance, value, cli)
-        _replace_fmu(spec.component(instance, what), resolve_fmu(value, what), str(value))
+        spec.component(instance, what).replace_fmu(resolve_fmu(value, what), str(value))
     if cycle is not None:  # omega_ref from the cycle (module cycles); the stop time its duration unless given
         what = _named("cycle", cycle, cli)
         loaded = cycles.load_cycle(str(cycle), what)
