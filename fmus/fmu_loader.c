@@ -43,29 +43,8 @@
 
 extern char** environ;
 
-typedef void* fmi2Component;
-typedef void* fmi2ComponentEnvironment;
-typedef void* fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Integer;
-typedef int fmi2Boolean;
-typedef char fmi2Char;
-typedef const fmi2Char* fmi2String;
-typedef char fmi2Byte;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
-typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-typedef struct {
-    fmi2CallbackLogger logger;
-    void* (*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void*);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
+#include "fmi2_binding.h"
 
-#define EXPORT __attribute__((visibility("default")))
 #define ENV_PYTHON "PMSM_FMU_PYTHON"
 #define USER_FILE "python.txt"
 #define BUILT_FILE "build_python.txt"
@@ -523,9 +502,6 @@ static void* fn(const char* name)
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
 
-typedef fmi2Component (*instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions*,
-                                       fmi2Boolean, fmi2Boolean);
-
 EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
                                      fmi2Boolean visible, fmi2Boolean loggingOn)
@@ -561,7 +537,6 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     return c;
 }
 
-typedef void (*free_t)(fmi2Component);
 EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     free_t f = (free_t)fn("fmi2FreeInstance");
@@ -569,46 +544,35 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 }
 
 /* pmsm_fmu_fast_calls(instance): the lean binding's counter (fmus/lean_binding.c), 0 without one */
-typedef unsigned long long (*fast_calls_t)(fmi2Component);
 EXPORT unsigned long long pmsm_fmu_fast_calls(fmi2Component c)
 {
-    fast_calls_t f = (fast_calls_t)fn("pmsm_fmu_fast_calls");
+    calls_t f = (calls_t)fn("pmsm_fmu_fast_calls");
     return f ? f(c) : 0;
 }
 
 /* pmsm_fmu_compiled_calls(instance): the lean binding's count of the calls served with no Python, 0 without one */
 EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi2Component c)
 {
-    fast_calls_t f = (fast_calls_t)fn("pmsm_fmu_compiled_calls");
+    calls_t f = (calls_t)fn("pmsm_fmu_compiled_calls");
     return f ? f(c) : 0;
 }
 
-typedef fmi2Status (*debug_t)(fmi2Component, fmi2Boolean, size_t, const fmi2String[]);
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[])
 {
     FORWARD(fmi2SetDebugLogging, debug_t, c, on, n, categories);
 }
 
-typedef fmi2Status (*setup_t)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol, fmi2Real start,
                                       fmi2Boolean stopDefined, fmi2Real stop)
 {
     FORWARD(fmi2SetupExperiment, setup_t, c, tolDefined, tol, start, stopDefined, stop);
 }
 
-typedef fmi2Status (*plain_t)(fmi2Component);
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c) { FORWARD(fmi2EnterInitializationMode, plain_t, c); }
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD(fmi2ExitInitializationMode, plain_t, c); }
 EXPORT fmi2Status fmi2Terminate(fmi2Component c) { FORWARD(fmi2Terminate, plain_t, c); }
 EXPORT fmi2Status fmi2Reset(fmi2Component c) { FORWARD(fmi2Reset, plain_t, c); }
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c) { FORWARD(fmi2CancelStep, plain_t, c); }
-
-typedef fmi2Status (*get_real_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
-typedef fmi2Status (*set_real_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
-typedef fmi2Status (*get_int_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]);
-typedef fmi2Status (*set_int_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
-typedef fmi2Status (*get_str_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2String[]);
-typedef fmi2Status (*set_str_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]);
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
@@ -646,12 +610,6 @@ EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], 
     FORWARD(fmi2SetString, set_str_t, c, vr, nvr, value);
 }
 
-typedef fmi2Status (*state_t)(fmi2Component, fmi2FMUstate*);
-typedef fmi2Status (*set_state_t)(fmi2Component, fmi2FMUstate);
-typedef fmi2Status (*state_size_t)(fmi2Component, fmi2FMUstate, size_t*);
-typedef fmi2Status (*serialize_t)(fmi2Component, fmi2FMUstate, fmi2Byte[], size_t);
-typedef fmi2Status (*deserialize_t)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate*);
-
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) { FORWARD(fmi2GetFMUstate, state_t, c, state); }
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
@@ -674,13 +632,6 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
     FORWARD(fmi2DeSerializeFMUstate, deserialize_t, c, bytes, size, state);
 }
 
-typedef fmi2Status (*derivative_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2ValueReference[],
-                                   size_t, const fmi2Real[], fmi2Real[]);
-typedef fmi2Status (*input_derivatives_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[],
-                                          const fmi2Real[]);
-typedef fmi2Status (*output_derivatives_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[],
-                                           fmi2Real[]);
-
 EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference unknown[], size_t nu,
                                                const fmi2ValueReference known[], size_t nk, const fmi2Real dv[],
                                                fmi2Real df[])
@@ -698,17 +649,10 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
     FORWARD(fmi2GetRealOutputDerivatives, output_derivatives_t, c, vr, nvr, order, value);
 }
 
-typedef fmi2Status (*do_step_t)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean flag)
 {
     FORWARD(fmi2DoStep, do_step_t, c, t, h, flag);
 }
-
-typedef fmi2Status (*status_t)(fmi2Component, const fmi2StatusKind, fmi2Status*);
-typedef fmi2Status (*real_status_t)(fmi2Component, const fmi2StatusKind, fmi2Real*);
-typedef fmi2Status (*int_status_t)(fmi2Component, const fmi2StatusKind, fmi2Integer*);
-typedef fmi2Status (*bool_status_t)(fmi2Component, const fmi2StatusKind, fmi2Boolean*);
-typedef fmi2Status (*str_status_t)(fmi2Component, const fmi2StatusKind, fmi2String*);
 
 EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status* value)
 {
