@@ -20,7 +20,10 @@
  * loaded and pythonfmu sees an interpreter already running, as in a Python host (it neither starts nor
  * finalizes it). A libpython named directly is initialised with the home found above it (lib/pythonX.Y/os.py).
  * Where no Python is found, fmi2Instantiate logs one line through the host's logger (what was looked for, and
- * how to point at a Python) and returns NULL.
+ * how to point at a Python) and returns NULL. Where the process's Python is not a Python program's, pythonfmu's
+ * interpreter guard is reset at exit (release_wrapper), before pythonfmu's static destructors and, once the slaves'
+ * compiled kernels have loaded numba's LLVM, before LLVM's (plan_release): the kernels are compiled in such a host
+ * as in a Python program.
  *
  * Every other fmi2 function, and pmsm_fmu_fast_calls and pmsm_fmu_compiled_calls, are the binding's, called with
  * the same arguments: the instance is the binding's own. Python's C API is reached through dlsym only.
@@ -29,6 +32,7 @@
 #include <dlfcn.h>
 #include <errno.h>
 #include <limits.h>
+#include <link.h>
 #include <pthread.h>
 #include <spawn.h>
 #include <stdarg.h>
@@ -370,6 +374,7 @@ static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 static void* binding = NULL;
 static int embedded = 0;        /* the process's Python is not a Python program's (started here, or by pythonfmu) */
 static int release_planned = 0; /* release_wrapper registered with atexit */
+static int release_after_llvm = 0; /* ... and again once numba's LLVM (llvmlite's library) was loaded */
 
 typedef int (*gil_ensure_t)(void);
 typedef void (*gil_release_t)(int);
@@ -410,6 +415,39 @@ static void release_wrapper(void)
     void (*finalize)(void) = (void (*)(void))dlsym(wrapper, "finalizePythonInterpreter");
     if (finalize != NULL) finalize();
     dlclose(wrapper);
+}
+
+/* dl_iterate_phdr's callback: 1 at llvmlite's library (numba's LLVM), which has C++ static destructors */
+static int is_llvm(struct dl_phdr_info* info, size_t size, void* data)
+{
+    (void)size;
+    (void)data;
+    const char* base = info->dlpi_name ? strrchr(info->dlpi_name, '/') : NULL;
+    return base != NULL && strncmp(base + 1, "libllvmlite", 11) == 0;
+}
+
+/* where the process's Python is not a Python program's: release_wrapper at exit, registered after the first instance
+ * (pythonfmu's library loaded, its static destructors registered) and again once numba's compiled kernels have
+ * loaded llvmlite's library. Exit handlers run in the reverse order of their registration, so the second runs
+ * before LLVM's static destructors: what release_wrapper may do then (an interpreter that pythonfmu started is
+ * finalized with it, numba's objects freed through LLVM) finds LLVM still there, as at the end of a Python program,
+ * which finalizes its interpreter before exit runs the handlers. Called after the calls in which the slaves build
+ * their physics (and so load the kernels): fmi2Instantiate, fmi2ExitInitializationMode, fmi2Reset, fmi2Terminate,
+ * fmi2FreeInstance. The second release finds the guard reset already and does nothing more. */
+static void plan_release(void)
+{
+    pthread_mutex_lock(&lock);
+    if (embedded && binding != NULL) {
+        if (!release_planned) {
+            release_planned = 1;
+            atexit(release_wrapper);
+        }
+        if (!release_after_llvm && dl_iterate_phdr(is_llvm, NULL)) {
+            release_after_llvm = 1;
+            atexit(release_wrapper);
+        }
+    }
+    pthread_mutex_unlock(&lock);
 }
 
 /* bring a Python into a process that has none; 0, or -1 with what was looked for in `why` */
@@ -498,6 +536,17 @@ static void* fn(const char* name)
         return f(__VA_ARGS__);                                                                               \
     } while (0)
 
+/* FORWARD, then plan_release(): a call in which a slave may have loaded the kernels (and so numba) */
+#define FORWARD_PLANNED(name, type, ...)                                                                     \
+    do {                                                                                                     \
+        static type f = NULL;                                                                                \
+        if (f == NULL) f = (type)fn(#name);                                                                  \
+        if (f == NULL) return fmi2Error;                                                                     \
+        fmi2Status status = f(__VA_ARGS__);                                                                  \
+        plan_release();                                                                                      \
+        return status;                                                                                       \
+    } while (0)
+
 /* -- the FMI functions ----------------------------------------------------------------------------------- */
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
@@ -528,12 +577,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         return NULL;
     }
     fmi2Component c = f(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible, loggingOn);
-    pthread_mutex_lock(&lock);
-    if (c != NULL && embedded && !release_planned) { /* pythonfmu's library is loaded now: its statics made */
-        release_planned = 1;
-        atexit(release_wrapper);
-    }
-    pthread_mutex_unlock(&lock);
+    if (c != NULL) plan_release(); /* pythonfmu's library is loaded now: its statics made */
     return c;
 }
 
@@ -541,6 +585,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     free_t f = (free_t)fn("fmi2FreeInstance");
     if (f != NULL && c != NULL) f(c);
+    if (c != NULL) plan_release();
 }
 
 /* pmsm_fmu_fast_calls(instance): the lean binding's counter (fmus/lean_binding.c), 0 without one */
@@ -569,9 +614,18 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, f
 }
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c) { FORWARD(fmi2EnterInitializationMode, plain_t, c); }
-EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD(fmi2ExitInitializationMode, plain_t, c); }
-EXPORT fmi2Status fmi2Terminate(fmi2Component c) { FORWARD(fmi2Terminate, plain_t, c); }
-EXPORT fmi2Status fmi2Reset(fmi2Component c) { FORWARD(fmi2Reset, plain_t, c); }
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    FORWARD_PLANNED(fmi2ExitInitializationMode, plain_t, c);
+}
+EXPORT fmi2Status fmi2Terminate(fmi2Component c)
+{
+    FORWARD_PLANNED(fmi2Terminate, plain_t, c);
+}
+EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    FORWARD_PLANNED(fmi2Reset, plain_t, c);
+}
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c) { FORWARD(fmi2CancelStep, plain_t, c); }
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])

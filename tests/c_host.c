@@ -11,7 +11,9 @@
  *   output <vr>            (a Real output printed after each step)
  *   run
  *
- * For each FMU it prints "fmu <name>", then one line per step: "<k> <status> <output values %.17g>...".
+ * For each FMU it prints "fmu <name>", then one line per step: "<k> <status> <output values %.17g>...", then
+ * "calls <fast> <compiled>": the lean binding's pmsm_fmu_fast_calls and pmsm_fmu_compiled_calls of the instance
+ * (0 0 where the FMU's library has none).
  *
  * Or a system of FMUs, all loaded and instantiated at once and stepped by a Jacobi master (as OMSimulator's):
  *
@@ -106,6 +108,11 @@ static int run(const Spec* s)
         for (int i = 0; i < s->n_out; i++) printf(" %.17g", y[i]);
         printf("\n");
     }
+    /* the lean binding's counters (fmus/README.md, "The compiled step"), through the loader; absent: none */
+    typedef unsigned long long calls_t(fmi2Component);
+    calls_t* fast = (calls_t*)dlsym(h, "pmsm_fmu_fast_calls");
+    calls_t* compiled = (calls_t*)dlsym(h, "pmsm_fmu_compiled_calls");
+    printf("calls %llu %llu\n", fast ? fast(c) : 0ULL, compiled ? compiled(c) : 0ULL);
     printf("terminate %d\n", (int)Terminate(c));
     FreeInstance(c);
     fflush(stdout);
