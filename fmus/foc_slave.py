@@ -25,16 +25,10 @@ import math
 
 from pmsm_ev import __version__, accel
 from pmsm_ev import kernels as _k
-from pmsm_ev.control_unit import IO_INPUTS, IO_OUTPUTS, SAMPLE_TOLERANCE, ControlUnit
+from pmsm_ev.control_unit import IO_INPUTS, IO_OUTPUTS, SAMPLE_TOLERANCE, ControlUnit, parameter_groups
 from pmsm_ev.params import (
     DT_DEFAULT,
-    SENSORLESS_EKF,
-    ControllerParams,
-    EkfParams,
-    InjectionParams,
-    MotorParams,
     ParameterError,
-    StartupParams,
 )
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, check_fields
 
@@ -142,9 +136,7 @@ class FocSlave(DriveSlave):
         self._sensorless = observer == "sensorless"
         if self._sensorless:  # it never reads the measured angle and speed: any value there, NaN included
             self.unread_inputs = frozenset(("theta_meas", "omega_meas"))
-            self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams, InjectionParams)
-        else:
-            self.add_parameters(ControllerParams, EkfParams, MotorParams)
+        self.add_parameters(*parameter_groups(observer))
         self.add_parameter("angle_source", "measured")  # the same interface for every controller
         self.add_parameter("dt", 0.0)
         self._unit = None
@@ -179,10 +171,7 @@ class FocSlave(DriveSlave):
         self._k_next = None
 
     def _build_unit(self, dt: float) -> None:
-        self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
-                                 self.parameters(ControllerParams), self.parameters(EkfParams), dt,
-                                 self.parameters(StartupParams) if self._sensorless else None,
-                                 self.parameters(InjectionParams) if self._sensorless else None)
+        self._unit = ControlUnit.from_groups(self._observer, self.angle_source, self.parameters, dt)
         kernels = self._unit._kernels
         self._periods = accel.direct(kernels.unit_periods)
         self._sample_instant = accel.direct(kernels.sample_instant)

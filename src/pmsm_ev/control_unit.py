@@ -106,6 +106,15 @@ IO_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d", "i_q", "i_qref", "i_d_ha
               "theta_hat", "T_L_hat", "mode", "fault", "theta_ctrl", "omega_ctrl")
 
 
+def parameter_groups(observer: str) -> tuple:
+    """The parameter groups of a unit with ``observer``, as a controller FMU declares them (a class: its defaults;
+    an instance: its values): the controller's, the EKF's (``SENSORLESS_EKF`` for the sensorless unit), the motor
+    model's, and the sensorless unit's start-up and injection (``ControlUnit.from_groups`` makes the unit)."""
+    if observer == "sensorless":
+        return (ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams, InjectionParams)
+    return (ControllerParams, EkfParams, MotorParams)
+
+
 def _slot(index: int, doc: str) -> property:
     def get(self) -> float:
         return float(self._s[index])
@@ -251,6 +260,13 @@ class ControlUnit:
         self.reset()
         self.load_io(self.outputs(), None)  # the outputs before the first period (the mode and fault of a unit
         # without them stay so)
+
+    @classmethod
+    def from_groups(cls, observer: str, angle_source: str, group, dt: float) -> ControlUnit:
+        """The unit of ``observer`` from its ``parameter_groups``, ``group(cls)`` giving the group of that class."""
+        sensorless = observer == "sensorless"
+        return cls(observer, angle_source, group(MotorParams), group(ControllerParams), group(EkfParams), dt,
+                   group(StartupParams) if sensorless else None, group(InjectionParams) if sensorless else None)
 
     def outputs(self, theta_meas: float = 0.0) -> dict[str, float]:
         """A controller FMU's outputs of the unit's state (``IO_OUTPUTS``, by name), ``theta_meas`` the control

@@ -803,6 +803,15 @@ def plant_step_measured(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, 
     return r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], m[0], m[1]
 
 
+#: the slots ``plant_advance`` writes as runs: the outputs i_alpha .. v_vehicle, the state delta .. i_beta_true
+_PIO_OUTPUTS, _PIO_STATE = 9, 8
+if ((PIO_I_ALPHA, PIO_I_BETA, PIO_I_D, PIO_I_Q, PIO_OMEGA_M, PIO_THETA_E, PIO_T_E, PIO_T_L_MECH, PIO_V_VEHICLE)
+        != tuple(range(PIO_I_ALPHA, PIO_I_ALPHA + _PIO_OUTPUTS))
+        or (PIO_PLANT_DELTA, PIO_PLANT_T_BRAKE, PIO_CLOCK, PIO_SAMPLES, PIO_V_ALPHA_APPLIED, PIO_V_BETA_APPLIED,
+            PIO_I_ALPHA_TRUE, PIO_I_BETA_TRUE) != tuple(range(PIO_PLANT_DELTA, PIO_PLANT_DELTA + _PIO_STATE))):
+    raise ImportError("PLANT_IO_LAYOUT: the outputs and the plant's state are not in plant_advance's order")
+
+
 @kernel(_sig("boolean", _V, _V, _V, _F, _F, _F, _F, _F, "boolean"))
 def plant_advance(io, pp, ee, v_alpha, v_beta, delta, t_brake_in, h, finite_only):
     """One step of ``Plant`` over h on its buffer ``io`` (``PLANT_IO_LAYOUT``: its state, outputs and constants),
@@ -839,22 +848,12 @@ def plant_advance(io, pp, ee, v_alpha, v_beta, delta, t_brake_in, h, finite_only
             ee[i] = io[PIO_SAVE + i]
         pp[P_T_BRAKE] = pp_t_brake
         return False
-    io[PIO_PLANT_DELTA] = delta
-    io[PIO_PLANT_T_BRAKE] = t_brake
-    io[PIO_CLOCK] += h
-    io[PIO_SAMPLES] = sample + 1.0
-    io[PIO_V_ALPHA_APPLIED] = v_alpha
-    io[PIO_V_BETA_APPLIED] = v_beta
-    io[PIO_I_D] = i_d
-    io[PIO_I_Q] = i_q
-    io[PIO_OMEGA_M] = omega_m
-    io[PIO_THETA_E] = theta_e
-    io[PIO_T_E] = t_e
-    io[PIO_T_L_MECH] = t_l
-    io[PIO_V_VEHICLE] = v_v
+    # the outputs and the plant's other state, each a run of slots in the layout's order
+    outputs = (i_alpha, i_beta, i_d, i_q, omega_m, theta_e, t_e, t_l, v_v)
+    for j in range(_PIO_OUTPUTS):
+        io[PIO_I_ALPHA + j] = outputs[j]
     io[PIO_X_VEHICLE] += dx
-    io[PIO_I_ALPHA_TRUE] = i_alpha_true
-    io[PIO_I_BETA_TRUE] = i_beta_true
-    io[PIO_I_ALPHA] = i_alpha
-    io[PIO_I_BETA] = i_beta
+    state = (delta, t_brake, io[PIO_CLOCK] + h, sample + 1.0, v_alpha, v_beta, i_alpha_true, i_beta_true)
+    for j in range(_PIO_STATE):
+        io[PIO_PLANT_DELTA + j] = state[j]
     return True
