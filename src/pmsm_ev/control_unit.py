@@ -177,9 +177,6 @@ class ControlUnit:
         self._kernels = accel.kernels()
         self._s = accel.vector(_k.UNIT_STATE)
         self._c = accel.vector(_k.UNIT_PARAMS)
-        #: the state vector read from Python at every step (``T_brake``): a memoryview of the numpy vector,
-        #: whose items are Python floats (the same doubles, without numpy's scalar per read), or the list
-        self._s_items = self._s if isinstance(self._s, list) else memoryview(self._s)
         #: the step's kernel on this unit's vectors (what ``step`` calls, for a caller's hot loop):
         #: ``(i_alpha, i_beta, omega_ref)`` of the sensorless unit, ``(i_alpha, i_beta, omega_ref,
         #: theta_meas, omega_meas)`` of the others; returns ``step``'s outputs
@@ -249,6 +246,9 @@ class ControlUnit:
         #: the controller FMU's buffer of its step (``pmsm_ev.kernels.UNIT_IO_LAYOUT``): its inputs, outputs and
         #: sample clock (``load_io``), which ``pmsm_ev.kernels.unit_fmu_step`` and ``unit_periods`` step on
         self.io = accel.vector(_k.UNIT_IO)
+        self._t_brake = accel.direct(self._kernels.unit_t_brake)
+        #: ``io`` read and written from Python (``FocSlave.do_step``): a memoryview of the numpy vector, whose items
+        #: are Python floats (the same doubles, without numpy's scalar per read), or the list
         self._io_items = self.io if isinstance(self.io, list) else memoryview(self.io)
         io = self._io_items
         io[_k.UIO_UNIT_DT] = dt
@@ -400,12 +400,9 @@ class ControlUnit:
     @property
     def T_brake(self) -> float:
         """The friction brake's demand at the wheels of the last period [N m, >= 0]: the braking shaft torque
-        the motor does not give (the regen limit, the envelope) x n_g eta; 0 in the paper's mode.
-        (Read at every step by the FMU: ``_foc`` written out, on ``_s_items``.)"""
-        s = self._s_items
-        return (float(s[_k.S_T_BRAKE]) if self.reference and (not self.sensorless or s[_k.S_MODE] == _k.MODE_EKF
-                                                               or s[_k.S_MODE] == _k.MODE_INJECTION)
-                else 0.0)
+        the motor does not give (the regen limit, the envelope) x n_g eta; 0 in the paper's mode and in the
+        sensorless unit's modes without FOC (the kernel ``unit_t_brake``, which the compiled step calls too)."""
+        return self._t_brake(self.io, self._s)
 
     @property
     def ref_region(self) -> float:

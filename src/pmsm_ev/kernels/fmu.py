@@ -7,15 +7,17 @@ A slave of ``pmsm_ev_fmus`` that runs with compiled kernels hands the binding, w
 outputs and the little state its ``do_step`` keeps outside the kernels' vectors (the plant's clock and sample
 counter, the controller's sample clock), with two more vectors: the plant's parameter and energy vectors
 (``PLANT_PARAMS_LAYOUT``, ``PLANT_ENERGY_LAYOUT``), the control unit's state and parameter vectors
-(``UNIT_STATE_LAYOUT``, ``UNIT_PARAMS_LAYOUT``). The binding writes the inputs into ``io``, calls the C
-function at ``fmu_step_address(kind)`` with the three pointers and the communication point and step, and reads
-the outputs from ``io``: no Python on the way.
+(``UNIT_STATE_LAYOUT``, ``UNIT_PARAMS_LAYOUT``). The buffer is the physics object's own: ``Plant.io``, where the
+plant keeps its state, and ``ControlUnit.io``, which the slave fills (``ControlUnit.load_io``). The binding writes
+the inputs into ``io``, calls the C function at ``fmu_step_address(kind)`` with the three pointers and the
+communication point and step, and reads the outputs from ``io``: no Python on the way.
 
-``plant_fmu_step`` and ``unit_fmu_step`` are ``PmsmEvPlant.do_step`` (``pmsm_ev.plant.Plant.step``) and
-``FocSlave.do_step`` (the sample clock, ``ControlUnit.kernel_step``) written on these buffers: the physics are
-the kernels they call (``plant_step``, ``plant_step_measured``, ``control_step``, ``sensorless_step``,
-``injection_unit_step``), the same functions with the same arguments in the same order, so the numbers are
-the same, bit for bit; what they add is the bookkeeping of those two methods. A step they do not take returns
+``plant_fmu_step`` and ``unit_fmu_step`` are ``PmsmEvPlant.do_step`` and ``FocSlave.do_step`` on these buffers,
+and they call the kernels those Python steps call, so the numbers are the same, bit for bit, and nothing is
+written twice: the plant's step is ``plant_advance`` (``Plant.step`` calls it after the inverter's delay and
+limit, which are Python's), the controller's periods ``unit_periods`` and its sample clock ``sample_instant``
+(``FocSlave.do_step`` calls both), the brake's demand ``unit_t_brake`` (``ControlUnit.T_brake``); what is here is
+what decides whether the compiled step is taken. A step they do not take returns
 ``STEP_DECLINED`` with nothing changed, and the binding runs the slave's Python ``do_step`` instead: a plant
 with the inverter's delay or the thermal model (the slave does not offer those), a plant voltage at or near the
 DC link's limit (CPython's ``math.hypot``, which numba does not reproduce to the last bit, decides the limit
@@ -125,10 +127,10 @@ def plant_fmu_step(io, pp, ee, h):
     return STEP_TAKEN
 
 
-@kernel()
+@kernel(_sig(_F, _V, _V))
 def unit_t_brake(io, s):
-    """``ControlUnit.T_brake`` of the state ``s``: the friction brake's demand, 0 in the paper's mode and in the
-    sensorless unit's modes without FOC."""
+    """``ControlUnit.T_brake`` of the state ``s`` (the unit's buffer ``io`` says its kind and reference mode): the
+    friction brake's demand, 0 in the paper's mode and in the sensorless unit's modes without FOC."""
     if io[UIO_REFERENCE] != 0.0 and (io[UIO_KIND] == UNIT_KIND_CONTROL or s[S_MODE] == MODE_EKF
                                      or s[S_MODE] == MODE_INJECTION):
         return s[S_T_BRAKE]
