@@ -25,7 +25,7 @@ import math
 
 from pmsm_ev import __version__, accel
 from pmsm_ev import kernels as _k
-from pmsm_ev.control_unit import IO_INPUTS, IO_OUTPUTS, SAMPLE_TOLERANCE, ControlUnit, parameter_groups
+from pmsm_ev.control_unit import IO_SLOTS, SAMPLE_TOLERANCE, ControlUnit, parameter_groups
 from pmsm_ev.params import (
     DT_DEFAULT,
     ParameterError,
@@ -213,7 +213,7 @@ class FocSlave(DriveSlave):
 
     # -- the compiled step (``pmsm_ev.kernels.fmu``: ``unit_fmu_step`` on these buffers) -------------------------
     def compiled_slots(self) -> dict[str, int]:
-        return {name: getattr(_k, "UIO_" + name.upper()) for name in IO_INPUTS + IO_OUTPUTS + ("T_brake",)}
+        return {**IO_SLOTS, "T_brake": _k.UIO_T_BRAKE}
 
     def compiled_step(self):
         """(the controllers' C step, the unit's buffer ``ControlUnit.io`` filled from the slave, the unit's state and
@@ -224,13 +224,13 @@ class FocSlave(DriveSlave):
         step = self.__dict__.get("_step_address")
         if step is None:
             step = self._step_address = u._kernels.fmu_step_address("unit")
-        u.load_io({name: getattr(self, name) for name in IO_INPUTS + IO_OUTPUTS}, self._dt, self._t0, self._k_next)
+        u.load_io({name: getattr(self, name) for name in IO_SLOTS}, self._dt, self._t0, self._k_next)
         return step, u.io.ctypes.data, u._s.ctypes.data, u._c.ctypes.data
 
     def compiled_pull(self) -> None:
         values = self._unit.io.tolist()
-        for name in IO_INPUTS + IO_OUTPUTS:
-            setattr(self, name, values[getattr(_k, "UIO_" + name.upper())])
+        for name, slot in IO_SLOTS.items():
+            setattr(self, name, values[slot])
         if values[_k.UIO_CLOCK]:
             self._dt = values[_k.UIO_DT]
             self._k_next = int(values[_k.UIO_K_NEXT])

@@ -60,8 +60,9 @@ _ENERGY_OUTPUTS = {
 
 #: the slave's inputs and outputs in the compiled step's buffer, the plant's ``io``
 #: (``pmsm_ev.kernels.PLANT_IO_LAYOUT``); the outputs are the plant's attributes of the same names there
-_IO_VARIABLES = ("v_alpha", "v_beta", "delta", "T_brake", "i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e",
-                 "T_e", "T_L_mech", "v_vehicle", "x_vehicle")
+_IO_SLOTS = {name: getattr(_k, "PIO_" + name.upper()) for name in (
+    "v_alpha", "v_beta", "delta", "T_brake", "i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e",
+    "T_L_mech", "v_vehicle", "x_vehicle")}
 
 
 class _Energy:
@@ -191,7 +192,7 @@ class PmsmEvPlant(DriveSlave):
 
     # -- the compiled step (``pmsm_ev.kernels.fmu``: ``plant_fmu_step`` on these buffers) ------------------------
     def compiled_slots(self) -> dict[str, int]:
-        slots = {name: getattr(_k, "PIO_" + name.upper()) for name in _IO_VARIABLES}
+        slots = dict(_IO_SLOTS)
         slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in ENERGY_SLOTS.items()})
         slots["P_dc"] = 2 * COMPILED_BUFFER + _k.E_P_DC
         return slots
@@ -207,14 +208,14 @@ class PmsmEvPlant(DriveSlave):
         if step is None:
             step = self._step_address = p._kernels.fmu_step_address("plant")
         io = p.io
-        for name in _IO_VARIABLES:
-            io[getattr(_k, "PIO_" + name.upper())] = getattr(self, name)
+        for name, slot in _IO_SLOTS.items():
+            io[slot] = getattr(self, name)
         return step, io.ctypes.data, p._pp.ctypes.data, p.energy.ctypes.data
 
     def compiled_pull(self) -> None:
         values = self._plant.io.tolist()
-        for name in _IO_VARIABLES:
-            setattr(self, name, values[getattr(_k, "PIO_" + name.upper())])
+        for name, slot in _IO_SLOTS.items():
+            setattr(self, name, values[slot])
 
     # -- FMI -------------------------------------------------------------------------
     def do_step(self, current_time, step_size):

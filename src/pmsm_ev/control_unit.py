@@ -104,6 +104,8 @@ SAMPLE_TOLERANCE = 1.0e-2
 IO_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
 IO_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d", "i_q", "i_qref", "i_d_hat", "i_q_hat", "omega_hat",
               "theta_hat", "T_L_hat", "mode", "fault", "theta_ctrl", "omega_ctrl")
+#: their slots there, by name
+IO_SLOTS = {name: getattr(_k, "UIO_" + name.upper()) for name in IO_INPUTS + IO_OUTPUTS}
 
 
 def parameter_groups(observer: str) -> tuple:
@@ -287,8 +289,8 @@ class ControlUnit:
         yet, the first step's size), the start time ``t0`` and the index of the next sample instant (None: the
         first step starts the clock)."""
         io = self._io_items
-        for name in IO_INPUTS + IO_OUTPUTS:
-            io[getattr(_k, "UIO_" + name.upper())] = values.get(name, 0.0)
+        for name, slot in IO_SLOTS.items():
+            io[slot] = values.get(name, 0.0)
         io[_k.UIO_T_BRAKE] = self.T_brake
         io[_k.UIO_DT] = dt or 0.0
         io[_k.UIO_T0] = t0
