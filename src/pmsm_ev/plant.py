@@ -70,6 +70,10 @@ def inverter_loss_voltage(p: PlantParams) -> float:
     return p.inv_v0 + p.inv_e_sw * p.v_dc / (p.switching_period * p.inv_v_ref * p.inv_i_ref)
 
 
+#: the slots of ``io`` that hold ``step``'s results (i_alpha .. v_vehicle, in the layout's order)
+_OUTPUTS = slice(_k.PIO_I_ALPHA, _k.PIO_V_VEHICLE + 1)
+
+
 def _io_slot(slot: int, doc: str) -> property:
     """An attribute of ``Plant`` held in its buffer ``io`` at ``slot``."""
     def get(self) -> float:
@@ -287,8 +291,7 @@ class Plant:
                 v_alpha *= u_lim / mag
                 v_beta *= u_lim / mag
         self._advance(self.io, self._pp, self.energy, v_alpha, v_beta, delta, T_brake, dt, False)
-        (i_alpha, i_beta, i_d, i_q, omega_m, theta_e, T_e, T_L_mech,
-         v_vehicle) = self._io_items[_k.PIO_I_ALPHA:_k.PIO_X_VEHICLE]
+        i_alpha, i_beta, i_d, i_q, omega_m, theta_e, T_e, T_L_mech, v_vehicle = self._io_items[_OUTPUTS]
         if self._thermal:  # the copper losses heat the winding; R_s follows for the next step
             p = self.params
             self.T_winding, self._pp[_k.P_R_S] = self._kernels.winding_thermal_step(
