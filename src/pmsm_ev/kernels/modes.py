@@ -14,7 +14,8 @@ Modes (``S_MODE``):
 
 Each period the detectors (small functions, each of one purpose and timer) return at most one event
 (``EV_*``, by priority); ``transition`` looks the (mode, event) pair up in ``TRANSITIONS``, the one
-ordered table, and runs the row's entry action. A pair not in the table changes nothing.
+ordered table, and runs the row's entry action. A pair not in the table changes nothing. The mechanism
+is the I-f strategy's too (``kernels.machine``).
 
 The fault output, as the I-f strategy's: a loss of synchronism begins an episode (``FAULT_RECOVERING``),
 which ends after ``C_RECOVER_TIME`` without trouble, or latches the safe state after ``C_FAULT_TIME``:
@@ -125,12 +126,12 @@ from .layout import (
     S_W_INT,
     S_X,
 )
+from .machine import EV_NONE, lookup
 from .observers import ekf5ab_period
 from .startup import age_episode
 from .transforms import park, wrap_angle
 
-# -- events: what a detector saw this period (``S_EVENT``); 0 none -------------------------------
-EV_NONE = 0.0
+# -- events: what a detector saw this period (``S_EVENT``); EV_NONE (0) none ----------------------
 EV_ACQUIRED = 1.0  #: the acquisition and the tracking observer's settling are over
 EV_POLARITY_RIGHT = 2.0  #: the polarity test found the tracking observer's direction right
 EV_POLARITY_FLIPPED = 3.0  #: ... found it pi off
@@ -471,10 +472,7 @@ def enter(s, c, action, i_alpha, i_beta):
 @kernel()
 def next_mode(mode, event):
     """The table's row for (mode, event): (next mode, entry action), or (mode, -1.0) where none."""
-    for row in TRANSITIONS:
-        if row[0] == mode and row[1] == event:
-            return row[2], row[3]
-    return mode, -1.0
+    return lookup(TRANSITIONS, mode, event)
 
 
 @kernel()
