@@ -898,7 +898,7 @@ class EkfParams:
 class StartupParams:
     """The sensorless unit's low-speed range (observer "sensorless", FocSensorless.fmu):
     alignment at standstill, I-f (current-frequency) drive, and the handover to and from
-    the stationary-frame EKF5 (``pmsm_ev.kernels.sensorless_step``; reasoning in
+    the stationary-frame EKF5 (``pmsm_ev.kernels.sensorless_step``, a state machine: ``kernels.startup``; reasoning in
     ``docs/sensorless.md``).
 
     Alignment [chosen]: a current vector of ``i_align`` is ramped up on the +90 deg axis
@@ -990,11 +990,9 @@ class StartupParams:
     #: then takes the vector's angle plus that offset, and that load, and the EKF is restarted at the
     #: vector's angle plus that offset when the stand ends (the vector may have turned since it began).
     #: Below ~10 rad/s an EKF with a mismatched motor model is not to be trusted: the resistance error
-    #: against a back-EMF of N omega psi = 3.6 V at 10 rad/s (+50 % R_s at 160 A: 0.69 V, ~0.2 rad);
-    #: measured on WLTC's stop at 445-511 s with R_s +10 %, L_q -24 % (cycle Monte-Carlo sample 17): the
-    #: EKF's angle 0.03 rad off at 10 rad/s, 0.46 rad at the stand's 0.5 rad/s, which the restart used
-    #: to inherit (its load 23 N m against 1.6; the I-f current then rose to the limit and the rotor
-    #: slipped 9 turns); 0: the EKF's angle and load at the stand's start, as before
+    #: against a back-EMF of N omega psi = 3.6 V at 10 rad/s (+50 % R_s at 160 A: 0.69 V, ~0.2 rad), and
+    #: the error grows as the back-EMF falls (a hot motor with L_q 24 % off: 0.03 rad at 10 rad/s, 0.46 rad
+    #: at a stand's 0.5 rad/s, docs/sensorless.md); 0: the EKF's angle and load at the stand's start
     anchor_speed: float = 10.0
     #: design load angle of the I-f drive [rad] [chosen]: 60 deg. The I-f acceleration is held to
     #: what N psi i sin(60 deg) leaves over the load the EKF sees, and the current raised to what

@@ -13,7 +13,10 @@ each function's docstring citing its equations:
 * ``references``: the reference generator (torque, speed and voltage to the current references: MTPA,
   field weakening, MTPV, the current and torque limits), the regenerative-braking limit and the friction
   brake's share;
-* ``startup``: the sensorless unit's step (alignment, I-f, handover, synchronism);
+* ``machine``: what the sensorless unit's two state machines share (modes, detectors returning events, an
+  ordered transition table looked up by ``lookup``, entry actions);
+* ``startup``: the sensorless unit with the I-f strategy as a state machine (alignment, I-f, handover, the
+  stand, synchronism; its table ``IF_TRANSITIONS``, its step);
 * ``injection``: high-frequency injection at and near zero speed (the square wave, its demodulation, the
   tracking observer, the blend with the EKF);
 * ``modes``: the sensorless unit with injection as a state machine (modes, detectors, the transition
@@ -49,6 +52,7 @@ from .injection import *  # noqa: F403
 from .jit import CACHE, JIT  # noqa: F401 - how this copy was loaded (pmsm_ev.accel reads it)
 from .layout import *  # noqa: F403
 from .loop import *  # noqa: F403
+from .machine import *  # noqa: F403
 from .modes import *  # noqa: F403
 from .observers import *  # noqa: F403
 from .plant import *  # noqa: F403
