@@ -1,5 +1,5 @@
 """The sensorless unit's I-f strategy as a state machine (``pmsm_ev.kernels.startup``): its transition tables
-(the modes' ``IF_TRANSITIONS`` and the stand's ``STAND_TRANSITIONS``), each transition called on its own, each
+(its rows of the unit's ``TRANSITIONS`` and the stand's ``STAND_TRANSITIONS``), each transition called on its own, each
 detector, and property tests over event sequences. The kernels are called as plain Python
 (``pmsm_ev.kernels`` is the source package; ``pmsm_ev.accel`` compiles a copy), on the vectors of a
 ``ControlUnit`` built with the I-f strategy (the default). The tests assert what a transition does to the
@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from machine_support import reachable
 from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import StartupParams
@@ -24,6 +25,8 @@ STAND_EVENTS = (k.EV_STANDS, k.EV_VECTOR_TURNS, k.EV_ROTOR_MOVES)
 IF_ACTIONS = (k.A_CATCH, k.A_START_IF, k.A_HANDOVER_DOWN, k.A_FLYING, k.A_RELOCK, k.A_EPISODE, k.A_HANDOVER_UP,
               k.A_FORCED_UP, k.A_STALL_FOC, k.A_REALIGN, k.A_LATCH)
 STAND_ACTIONS = (k.A_ANCHOR, k.A_RESTART_ON_ANCHOR, k.A_PUT_BACK)
+#: the strategy's rows of the unit's one table (``kernels.machine``): those of its events
+IF_ROWS = tuple(row for row in k.TRANSITIONS if row[1] in IF_EVENTS)
 #: the events that begin (or continue) a loss-of-synchronism episode: all but the healthy handovers
 TROUBLE = (k.EV_RUNAWAY, k.EV_SLIP_AT_SPEED, k.EV_SLIP, k.EV_LIMIT, k.EV_OVERDUE, k.EV_STALL_TURNING, k.EV_STALL,
            k.EV_STALL_LAST)
@@ -51,12 +54,13 @@ def _first(events):
 
 # -- the tables ----------------------------------------------------------------------------------------
 def test_table_has_one_row_per_pair_and_known_modes_events_and_actions():
-    pairs = [(row[0], row[1]) for row in k.IF_TRANSITIONS]
-    assert len(pairs) == len(set(pairs))
-    for mode, event, new, action in k.IF_TRANSITIONS:
+    pairs = [(row[0], row[1]) for row in k.TRANSITIONS]
+    assert len(pairs) == len(set(pairs))  # over both strategies' rows
+    assert len(IF_ROWS) == 11
+    for mode, event, new, action in IF_ROWS:
         assert mode in IF_MODES and new in IF_MODES
         assert event in IF_EVENTS and action in IF_ACTIONS
-    assert {row[1] for row in k.IF_TRANSITIONS} == set(IF_EVENTS)  # every event has its row
+    assert {row[1] for row in IF_ROWS} == set(IF_EVENTS)  # every event has its row
     for state, event, new, action in k.STAND_TRANSITIONS:
         assert {state, new} <= {k.STAND_FREE, k.STAND_HELD}
         assert event in STAND_EVENTS and action in STAND_ACTIONS
@@ -64,23 +68,17 @@ def test_table_has_one_row_per_pair_and_known_modes_events_and_actions():
 
 def test_codes_are_distinct_from_the_injection_strategys():
     """A row says which strategy it is of: events and actions of the two strategies do not share codes."""
-    injection_events = {row[1] for row in k.TRANSITIONS}
-    injection_actions = {row[3] for row in k.TRANSITIONS}
+    injection_events = {row[1] for row in k.TRANSITIONS if row not in IF_ROWS}
+    injection_actions = {row[3] for row in k.TRANSITIONS if row not in IF_ROWS}
+    assert len(injection_events) == 9
     assert not injection_events & (set(IF_EVENTS) | set(STAND_EVENTS))
     assert not injection_actions & (set(IF_ACTIONS) | set(STAND_ACTIONS))
     assert k.EV_NONE not in set(IF_EVENTS) | set(STAND_EVENTS)
 
 
 def test_every_mode_is_reachable_from_the_alignment_and_every_mode_can_leave():
-    seen, todo = {k.MODE_ALIGN}, [k.MODE_ALIGN]
-    while todo:
-        m = todo.pop()
-        for mode, _, new, _ in k.IF_TRANSITIONS:
-            if mode == m and new not in seen:
-                seen.add(new)
-                todo.append(new)
-    assert seen == set(IF_MODES)
-    assert all(any(row[0] == m and row[2] != m for row in k.IF_TRANSITIONS) for m in IF_MODES)
+    assert reachable(IF_ROWS, k.MODE_ALIGN) == set(IF_MODES)
+    assert all(any(row[0] == m and row[2] != m for row in IF_ROWS) for m in IF_MODES)
 
 
 def test_a_pair_not_in_the_table_or_no_event_changes_nothing():
@@ -408,7 +406,7 @@ def test_modes_stay_the_strategys_and_every_trouble_is_an_episode(events):
         episode = s[k.S_EPISODE]
         new = _go(s, c, mode, ev, omega_ref=10.0)
         assert new in IF_MODES
-        taken = any(row[0] == mode and row[1] == ev for row in k.IF_TRANSITIONS)
+        taken = any(row[0] == mode and row[1] == ev for row in IF_ROWS)
         if taken and ev in TROUBLE:
             assert s[k.S_EPISODE] > 0.0
         elif taken:
@@ -429,7 +427,7 @@ def test_realignments_count_stalls_since_the_last_handover_and_only_the_last_sta
     _, s, c = _unit()
     mode, stalls, latched = k.MODE_ALIGN, 0, False
     for ev in events:
-        taken = any(row[0] == mode and row[1] == ev for row in k.IF_TRANSITIONS)
+        taken = any(row[0] == mode and row[1] == ev for row in IF_ROWS)
         mode = _go(s, c, mode, ev, omega_ref=10.0)
         if taken and ev in (k.EV_AGREED, k.EV_OVERDUE):
             stalls = 0

@@ -13,10 +13,10 @@ each function's docstring citing its equations:
 * ``references``: the reference generator (torque, speed and voltage to the current references: MTPA,
   field weakening, MTPV, the current and torque limits), the regenerative-braking limit and the friction
   brake's share;
-* ``machine``: what the sensorless unit's two state machines share (modes, detectors returning events, an
-  ordered transition table looked up by ``lookup``, entry actions);
+* ``machine``: the sensorless unit's two state machines' events, entry actions and their one ordered
+  transition table ``TRANSITIONS`` (looked up by ``lookup``);
 * ``startup``: the sensorless unit with the I-f strategy as a state machine (alignment, I-f, handover, the
-  stand, synchronism; its table ``IF_TRANSITIONS``, its step);
+  stand, synchronism; its step);
 * ``injection``: high-frequency injection at and near zero speed (the square wave, its demodulation, the
   tracking observer, the blend with the EKF);
 * ``modes``: the sensorless unit with injection as a state machine (modes, detectors, the transition

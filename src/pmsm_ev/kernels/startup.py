@@ -2,8 +2,8 @@
 sizes the vector's current, eq 13 turns it), handover to and from FOC (eqs 14-20) on the stationary-frame
 EKF5 (eqs 23-27), the load-angle guard, the stand, and the loss-of-synchronism detection and recovery
 (docs/sensorless.md): a state machine in the form of ``kernels.modes``' (``kernels.machine``): modes,
-detectors that return events, the ordered table ``IF_TRANSITIONS`` (and the stand's,
-``STAND_TRANSITIONS``), entry actions; ``sensorless_step`` is one control period.
+detectors that return events, the I-f rows of the unit's one ordered table ``machine.TRANSITIONS`` (and
+the stand's, ``STAND_TRANSITIONS``), entry actions; ``sensorless_step`` is one control period.
 
 The vectors ``s`` and ``c`` are laid out by ``pmsm_ev.kernels.layout`` (``S_*``, ``C_*``).
 """
@@ -130,7 +130,39 @@ from .layout import (
     S_W_INT,
     S_X,
 )
-from .machine import EV_NONE, lookup
+from .machine import (
+    A_ANCHOR,
+    A_CATCH,
+    A_FLYING,
+    A_FORCED_UP,
+    A_HANDOVER_DOWN,
+    A_HANDOVER_UP,
+    A_LATCH,
+    A_REALIGN,
+    A_RELOCK,
+    A_RESTART_ON_ANCHOR,
+    A_STALL_FOC,
+    A_START_IF,
+    EV_AGREED,
+    EV_ALIGNED,
+    EV_LIMIT,
+    EV_NONE,
+    EV_OVERDUE,
+    EV_ROTOR_MOVES,
+    EV_RUNAWAY,
+    EV_SLIP,
+    EV_SLIP_AT_SPEED,
+    EV_SLOWED,
+    EV_STALL,
+    EV_STALL_LAST,
+    EV_STALL_TURNING,
+    EV_STANDS,
+    EV_VECTOR_TURNS,
+    STAND_FREE,
+    STAND_TRANSITIONS,
+    TRANSITIONS,
+    lookup,
+)
 from .observers import adapt_psi, ekf5ab_period
 from .transforms import park, wrap_angle
 
@@ -349,78 +381,7 @@ def age_episode(s, c, trouble):
             s[S_FAULT] = FAULT_LATCHED
 
 
-# == the I-f strategy as a state machine (``kernels.machine``) ====================================
-# Modes (``S_MODE``): MODE_ALIGN (the alignment's schedule, ``align_schedule``), MODE_IF (the vector
-# turned, ``turn_vector``), MODE_EKF (FOC on the EKF). The stand is a second, smaller machine beside
-# them (``S_ANCHORED``: STAND_FREE, STAND_HELD): the car standing on the I-f vector, whose angle and load
-# the guard and the sizing then take from when the EKF last saw the rotor turn. The safe state is the
-# fault latched (``S_FAULT``) over the modes, as in the injection strategy: the reference taken as 0.
-
-# -- events (``EV_*``; ``EV_NONE``, 0, none): distinct from the injection strategy's (1 .. 9) --------
-EV_RUNAWAY = 11.0  #: alignment: |omega_hat| above C_ALIGN_SLIP for C_ALIGN_SLIP_TIME (a load beyond the vector)
-EV_ALIGNED = 12.0  #: alignment: its schedule is over, the magnet on the vector
-EV_SLOWED = 13.0  #: EKF: |omega_hat| below C_W_DOWN (no back-EMF to see the angle by much longer)
-EV_SLIP_AT_SPEED = 14.0  #: I-f: out of step for C_SLIP_TIME, the rotor at C_W_DOWN or faster (the EKF sees it)
-EV_SLIP = 15.0  #: I-f: out of step for C_SLIP_TIME, slower
-EV_LIMIT = 16.0  #: I-f: the guard holding the vector at the current limit, the rotor off the reference, that long
-EV_AGREED = 17.0  #: I-f: omega_hat within C_AGREE_TOL of the I-f speed above C_W_UP for C_AGREE_TIME
-EV_OVERDUE = 18.0  #: I-f: C_IF_DEADLINE with |omega_ref| above C_W_UP, the rotor turning with the vector
-EV_STALL_TURNING = 19.0  #: I-f: C_STALL_TIME so, the rotor turning the vector's way at C_W_DOWN or faster
-EV_STALL = 20.0  #: ... the rotor slower: it stands or swings
-EV_STALL_LAST = 21.0  #: ... with no realignment left (C_REALIGN_MAX)
-EV_STANDS = 22.0  #: the stand: the car stands on the I-f vector (``car_stands``)
-EV_VECTOR_TURNS = 23.0  #: the stand ends, the rotor still: the vector starts to turn (a restart)
-EV_ROTOR_MOVES = 24.0  #: the stand ends, the rotor moving: a load that changed pushes it
-IF_EVENT_NAMES = {EV_RUNAWAY: "runaway", EV_ALIGNED: "aligned", EV_SLOWED: "slowed", EV_SLIP_AT_SPEED:
-                  "slip at speed", EV_SLIP: "slip", EV_LIMIT: "limit", EV_AGREED: "agreed", EV_OVERDUE: "overdue",
-                  EV_STALL_TURNING: "stall, turning", EV_STALL: "stall", EV_STALL_LAST: "stall, none left",
-                  EV_STANDS: "stands", EV_VECTOR_TURNS: "vector turns", EV_ROTOR_MOVES: "rotor moves"}
-
-# -- entry actions (``A_*``): distinct from the injection strategy's (0 .. 9) ------------------------
-A_CATCH = 11.0  #: a new episode, I-f on the EKF's angle at the current limit (``catch_runaway``)
-A_START_IF = 12.0  #: the EKF restarted on the aligned vector, at rest (``start_if``)
-A_HANDOVER_DOWN = 13.0  #: the vector left where the current is (``hand_down``)
-A_FLYING = 14.0  #: an episode, FOC on the EKF seated on its load (``seat_foc``)
-A_RELOCK = 15.0  #: an episode, the vector put back on the rotor (``relock``)
-A_EPISODE = 16.0  #: an episode, nothing more to give (it runs on to the fault unless it ends)
-A_HANDOVER_UP = 17.0  #: FOC on the EKF seated on the present torque (``seat_foc``), the realignments counted from 0
-A_FORCED_UP = 18.0  #: an episode, FOC on the EKF seated on its load, the realignments counted from 0
-A_STALL_FOC = 19.0  #: an episode, a realignment counted, FOC on the EKF seated on its load
-A_REALIGN = 20.0  #: an episode, a realignment counted, the alignment from standstill (``realign``)
-A_LATCH = 21.0  #: an episode, the fault latched (the safe state)
-A_ANCHOR = 22.0  #: the stand anchored on the trusted angle and load (``anchor``)
-A_RESTART_ON_ANCHOR = 23.0  #: the EKF restarted at rest on the anchor, on the vector as it is now (``release``)
-A_PUT_BACK = 24.0  #: the EKF's angle and load put back on the anchor (``release``)
-
-#: the I-f strategy's transition table: (mode, event, next mode, entry action), the first match taken. In a
-#: period the detectors run in this order, each in the mode the one before left: the alignment's (runaway
-#: before its end), FOC's, then in I-f trouble, agreement, the handover due (``sensorless_step``). Each row
-#: is tested on its own (tests/test_if_modes.py)
-IF_TRANSITIONS = (
-    (MODE_ALIGN, EV_RUNAWAY, MODE_IF, A_CATCH),
-    (MODE_ALIGN, EV_ALIGNED, MODE_IF, A_START_IF),
-    (MODE_EKF, EV_SLOWED, MODE_IF, A_HANDOVER_DOWN),
-    (MODE_IF, EV_SLIP_AT_SPEED, MODE_EKF, A_FLYING),
-    (MODE_IF, EV_SLIP, MODE_IF, A_RELOCK),
-    (MODE_IF, EV_LIMIT, MODE_IF, A_EPISODE),
-    (MODE_IF, EV_AGREED, MODE_EKF, A_HANDOVER_UP),
-    (MODE_IF, EV_OVERDUE, MODE_EKF, A_FORCED_UP),
-    (MODE_IF, EV_STALL_TURNING, MODE_EKF, A_STALL_FOC),
-    (MODE_IF, EV_STALL, MODE_ALIGN, A_REALIGN),
-    (MODE_IF, EV_STALL_LAST, MODE_IF, A_LATCH),
-)
-
-#: the stand's states (``S_ANCHORED``)
-STAND_FREE, STAND_HELD = 0.0, 1.0
-#: the stand's transition table (as ``IF_TRANSITIONS``, on ``S_ANCHORED``); its detector runs first in a
-#: period, before the modes' (``detect_stand``)
-STAND_TRANSITIONS = (
-    (STAND_FREE, EV_STANDS, STAND_HELD, A_ANCHOR),
-    (STAND_HELD, EV_VECTOR_TURNS, STAND_FREE, A_RESTART_ON_ANCHOR),
-    (STAND_HELD, EV_ROTOR_MOVES, STAND_FREE, A_PUT_BACK),
-)
-
-
+# == the I-f strategy as a state machine (``kernels.machine``: its codes and tables) ===============
 # -- detectors: each returns an event or EV_NONE -------------------------------------------------
 @kernel()
 def car_stands(s, c):
@@ -653,11 +614,11 @@ def enter_if(s, c, action, i_alpha, i_beta, omega_ref):
 
 @kernel()
 def if_transition(s, c, mode, event, i_alpha, i_beta, omega_ref):
-    """Take ``IF_TRANSITIONS``' transition for (mode, event), if any: the entry action run. Returns the mode
+    """Take the table's (``TRANSITIONS``) transition for (mode, event), if any: the entry action run. Returns the mode
     (``S_MODE`` is written at the end of the period: ``sensorless_step`` reads the last period's)."""
     if event == EV_NONE:
         return mode
-    new, action = lookup(IF_TRANSITIONS, mode, event)
+    new, action = lookup(TRANSITIONS, mode, event)
     if action < 0.0:
         return mode
     enter_if(s, c, action, i_alpha, i_beta, omega_ref)
@@ -756,7 +717,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     2. The stand (``STAND_TRANSITIONS``): a car standing on the I-f vector is anchored (``anchor``), and the
        EKF put back on the anchor when the stand ends (``release``); outside a stand, in I-f, the EKF believed
        where it has something to say (``ekf_believed``, ``trust_rotor``).
-    3. The modes' detectors, in order, each in the mode the one before left, with ``IF_TRANSITIONS``: in
+    3. The modes' detectors, in order, each in the mode the one before left, with ``TRANSITIONS``: in
        alignment ``detect_alignment_end`` (else the schedule, ``align_schedule``); on FOC ``detect_slowed``; in
        I-f (after ``turn_vector``, but in the period the vector was placed) ``detect_trouble``, then
        ``detect_agreed``, then ``detect_due``.
