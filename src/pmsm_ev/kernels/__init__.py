@@ -35,7 +35,8 @@ module re-exports them all: ``from pmsm_ev.kernels import plant_step``, ``kernel
 FMUs and the tests share one implementation whether numba is there or not. The other modules of
 ``pmsm_ev`` keep the readable, dataclass-based interface (``pmsm.current_derivatives(..., m)``,
 ``Plant``, ``ControlUnit``, the observer classes) on top of these functions. The package imports
-nothing outside itself but ``math`` (and numba): ``pmsm_ev.accel`` compiles a copy of it.
+nothing outside itself but ``math`` (and numba, with numpy for its constant tables, ``jit.table``):
+``pmsm_ev.accel`` compiles a copy of it.
 
 Floating-point results are the same compiled or not: the operations are written in the
 order of the plain-Python formulas they replaced (numba does not reorder or fuse them

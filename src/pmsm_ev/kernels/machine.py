@@ -19,6 +19,7 @@ Event and action codes are distinct across the strategies, so that a row says wh
 from __future__ import annotations
 
 from .jit import kernel
+from .jit import table as _table
 from .layout import (
     MODE_ACQUIRE,
     MODE_ALIGN,
@@ -144,10 +145,16 @@ STAND_TRANSITIONS = (
 
 
 
+#: the tables as ``lookup`` reads them (``jit.table``)
+TRANSITION_TABLE = _table(TRANSITIONS)
+STAND_TABLE = _table(STAND_TRANSITIONS)
+
+
 @kernel()
 def lookup(table, mode, event):
     """The row of ``table`` for (mode, event): (next mode, entry action), or (mode, -1.0) where none."""
-    for row in table:
+    for i in range(len(table)):
+        row = table[i]
         if row[0] == mode and row[1] == event:
             return row[2], row[3]
     return mode, -1.0
@@ -156,4 +163,4 @@ def lookup(table, mode, event):
 @kernel()
 def next_mode(mode, event):
     """The table's row for (mode, event): (next mode, entry action), or (mode, -1.0) where none."""
-    return lookup(TRANSITIONS, mode, event)
+    return lookup(TRANSITION_TABLE, mode, event)

@@ -159,8 +159,8 @@ from .machine import (
     EV_STANDS,
     EV_VECTOR_TURNS,
     STAND_FREE,
-    STAND_TRANSITIONS,
-    TRANSITIONS,
+    STAND_TABLE,
+    TRANSITION_TABLE,
     lookup,
 )
 from .observers import adapt_psi, ekf5ab_period
@@ -618,7 +618,7 @@ def if_transition(s, c, mode, event, i_alpha, i_beta, omega_ref):
     (``S_MODE`` is written at the end of the period: ``sensorless_step`` reads the last period's)."""
     if event == EV_NONE:
         return mode
-    new, action = lookup(TRANSITIONS, mode, event)
+    new, action = lookup(TRANSITION_TABLE, mode, event)
     if action < 0.0:
         return mode
     enter_if(s, c, action, i_alpha, i_beta, omega_ref)
@@ -655,7 +655,7 @@ def stand_transition(s, c, event, i_alpha, i_beta):
     """Take ``STAND_TRANSITIONS``' transition for (``S_ANCHORED``, event), if any."""
     if event == EV_NONE:
         return
-    new, action = lookup(STAND_TRANSITIONS, s[S_ANCHORED], event)
+    new, action = lookup(STAND_TABLE, s[S_ANCHORED], event)
     if action < 0.0:
         return
     s[S_ANCHORED] = new
@@ -747,27 +747,34 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_CLOCK] += 1.0
     last = s[S_MODE]
     mode = last
-    if mode == MODE_ALIGN:
-        event = detect_alignment_end(s, c, t)
-        if event == EV_NONE:
-            align_schedule(s, c, t)
-        mode = if_transition(s, c, mode, event, i_alpha, i_beta, omega_ref)
-    elif mode == MODE_EKF:
-        mode = if_transition(s, c, mode, detect_slowed(s, c), i_alpha, i_beta, omega_ref)
     trouble = False  # this period, in I-f: out of step, or a limit reached (the episode's clock)
-    if mode == MODE_IF:
-        omega_hat = s[S_X + 2]
-        if last == MODE_IF:  # not in the period the vector was placed
-            turn_vector(s, c, omega_ref, omega_hat)
-        slip = slipping(s, c)
-        event = detect_trouble(s, c, slip, at_limit(s, c, omega_ref, omega_hat), omega_hat)
-        trouble = s[S_LOS] > 0.0 or event != EV_NONE
-        mode = if_transition(s, c, mode, event, i_alpha, i_beta, omega_ref)
-        if mode == MODE_IF:
-            mode = if_transition(s, c, mode, detect_agreed(s, c, omega_hat), i_alpha, i_beta, omega_ref)
-        if mode == MODE_IF:
-            event = detect_due(s, c, omega_ref, omega_hat, slip)
+    slip = False
+    # the detectors in their order, each in the mode the one before left (the table's comment); the
+    # transitions taken in one place (one inlined copy of the entry actions: the step stays small)
+    for stage in range(4):
+        event = EV_NONE
+        if stage == 0:  # the mode's own: the alignment's end (else its schedule), FOC's handover down
+            if mode == MODE_ALIGN:
+                event = detect_alignment_end(s, c, t)
+                if event == EV_NONE:
+                    align_schedule(s, c, t)
+            elif mode == MODE_EKF:
+                event = detect_slowed(s, c)
+        elif mode != MODE_IF:
+            break
+        elif stage == 1:  # I-f: the vector turned (not in the period it was placed), then in trouble?
+            omega_hat = s[S_X + 2]
+            if last == MODE_IF:
+                turn_vector(s, c, omega_ref, omega_hat)
+            slip = slipping(s, c)
+            event = detect_trouble(s, c, slip, at_limit(s, c, omega_ref, omega_hat), omega_hat)
+            trouble = s[S_LOS] > 0.0 or event != EV_NONE
+        elif stage == 2:
+            event = detect_agreed(s, c, s[S_X + 2])
+        else:
+            event = detect_due(s, c, omega_ref, s[S_X + 2], slip)
             trouble = trouble or event != EV_NONE
+        if event != EV_NONE:
             mode = if_transition(s, c, mode, event, i_alpha, i_beta, omega_ref)
     age_episode(s, c, trouble)  # a loss-of-synchronism episode: recovered, or the fault latched
     s[S_MODE] = mode
