@@ -74,7 +74,9 @@ _STARTUP_SLOTS = (
     ("fault_time", _k.C_FAULT_TIME), ("align_damping", _k.C_ALIGN_DAMP),
     ("align_slip", _k.C_ALIGN_SLIP), ("align_slip_time", _k.C_ALIGN_SLIP_TIME),
     ("still_speed", _k.C_STILL), ("if_deadline", _k.C_IF_DEADLINE), ("stall_time", _k.C_STALL_TIME),
-    ("realign_max", _k.C_REALIGN_MAX), ("anchor_speed", _k.C_ANCHOR_SPEED))
+    ("realign_max", _k.C_REALIGN_MAX), ("anchor_speed", _k.C_ANCHOR_SPEED),
+    ("soft_guard_angle", _k.C_SOFT_GUARD), ("guard_band", _k.C_GUARD_BAND), ("trust_move", _k.C_TRUST_MOVE),
+    ("relock_time", _k.C_RELOCK_TIME), ("still_time", _k.C_STILL_TIME))
 #: the injection's parameters (``InjectionParams``) that go into the parameter vector as they are
 _INJECTION_SLOTS = (
     ("inj_blend_low", _k.C_BLEND_LO), ("inj_blend_high", _k.C_BLEND_HI), ("inj_hysteresis", _k.C_BLEND_HYST),
@@ -87,7 +89,8 @@ _INJECTION_SLOTS = (
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
                   _k.S_OMEGA_CTRL, _k.S_ANCHOR, _k.S_ANCHORED, _k.S_ANCHOR_TL,
-                  _k.S_STILL_OUT, _k.S_IF_DUE, _k.S_REALIGN, _k.S_TRUST_OFF, _k.S_TRUST_TL, _k.S_ANCHOR_REL)
+                  _k.S_STILL_OUT, _k.S_IF_DUE, _k.S_REALIGN, _k.S_TRUST_OFF, _k.S_TRUST_TL, _k.S_ANCHOR_REL,
+                  _k.S_RUNAWAY_T, _k.S_ALIGN_SPEED)
 #: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 #: the reference generator's outputs, zeroed by ``reset``
