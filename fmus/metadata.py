@@ -300,6 +300,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                           "the axes it sees), rising to the drive's own with the EKF's weight in the blend"),
     "pol_frame_band": ("rad", "the polarity test's frame holds while the tracking observer stays within this of "
                        "it, and follows it this far behind beyond"),
+    "hold_brake": (None, "the hill hold: from enable to the unit's first torque it asks the friction brake (output "
+                         "T_brake) for this times the drive's torque limit at the wheels, T_max n_g eta; 0: none"),
     "inj_los_angle": ("rad", "loss of synchronism under injection: the tracking observer's angle error (or, in the "
                              "blend, its disagreement with the EKF) beyond this ..."),
     "inj_los_time": ("s", "... for this long"),

@@ -46,7 +46,7 @@ def _run(p, u, t_end, omega_ref=lambda t: 0.0, delta=lambda t: 0.0, every=None):
     for i in range(n):
         t = i * DT
         out = u.step(ia, ib, omega_ref(t))
-        r = p.step(out[0], out[1], delta(t), DT)
+        r = p.step(out[0], out[1], delta(t), DT, u.T_brake)  # ctrl.T_brake -> plant.T_brake, as connected
         ia, ib = r[4], r[5]
         if every is None or i % every == 0:
             rows.append((t, out[12], out[13], p.x_vehicle, p.i_d, p.i_q, p.omega_m, p.T_L_mech,
@@ -92,6 +92,23 @@ def test_polarity_right_torque_within_0_3_s_car_still(index):
     assert abs(rows[-1, 8]) < 0.3  # the right polarity: the angle within 0.3 rad, not pi off
     assert np.abs(rows[:, 3]).max() < 1e-3
     assert np.all(rows[:, 2] == k.FAULT_NONE)
+
+
+@pytest.mark.parametrize("hold", [1.0, 0.0])
+def test_a_car_parked_on_a_slope_is_held_until_the_unit_gives_torque(hold):
+    """Parked on 16 deg with no brake of its own, enabled at rest: with the hill hold (``hold_brake``) the car
+    creeps less than 5 mm before the unit gives torque; without it, it rolls free for the 0.23 s the angle and
+    the polarity take, about 1/2 g sin(delta) t^2 (8 cm; the rotating inertia and rolling resistance make it
+    less)."""
+    p, u = _drive(1.9, seed=5, hold_brake=hold)
+    slope = math.radians(16.0)
+    rows = _run(p, u, 0.35, delta=lambda t: slope)
+    first = np.nonzero(rows[:, 1] == k.MODE_INJECTION)[0][0]
+    travel = abs(rows[first, 3])
+    if hold:
+        assert travel < 5e-3
+    else:
+        assert 0.03 < travel < 0.5 * 9.81 * math.sin(slope) * rows[first, 0] ** 2 * 1.01
 
 
 @pytest.mark.parametrize(("dL_d", "dL_q"), [(0.1, -0.1), (-0.1, 0.1), (0.1, 0.1)])

@@ -103,6 +103,38 @@ def test_an_unresolved_polarity_is_tried_again_once_then_latches_without_torque(
     assert k.detect_acquired(s, c) == k.EV_NONE
 
 
+def _t_brake(u, s):
+    return k.unit_t_brake([float(x) for x in u.io], s)
+
+
+@pytest.mark.parametrize("event", [k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED])
+def test_the_hill_hold_brakes_from_enable_and_lets_go_at_the_first_torque(event):
+    u, s, c = _unit()
+    hold = c[k.C_T_MAX] * u.params.n_g * u.params.eta  # the drive's own torque limit at the wheels
+    assert c[k.C_HOLD_BRAKE] == pytest.approx(hold) and hold > 1000.0
+    assert u.T_brake == pytest.approx(hold) and _t_brake(u, s) == pytest.approx(hold)
+    assert _go(s, c, k.MODE_ACQUIRE, k.EV_ACQUIRED) == k.MODE_POLARITY
+    assert _t_brake(u, s) == pytest.approx(hold)  # still no torque: still held
+    assert _go(s, c, k.MODE_POLARITY, event) == k.MODE_INJECTION
+    assert s[k.S_HOLD] == 0.0 and _t_brake(u, s) == 0.0  # the paper's reference: no friction brake after
+    assert _go(s, c, k.MODE_INJECTION, k.EV_INJECTION_LOST) == k.MODE_ACQUIRE
+    assert _t_brake(u, s) == 0.0  # a reacquisition, maybe under way: the hold is enable's only
+
+
+def test_a_polarity_never_resolved_keeps_the_car_held():
+    u, s, c = _unit()
+    for _ in range(2):
+        assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_UNRESOLVED) == k.MODE_ACQUIRE
+    assert s[k.S_FAULT] == k.FAULT_LATCHED and _t_brake(u, s) == pytest.approx(c[k.C_HOLD_BRAKE])
+
+
+def test_no_hill_hold_when_off_or_on_the_if_strategy():
+    u, s, _ = _unit(hold_brake=0.0)
+    assert u.T_brake == 0.0 and _t_brake(u, s) == 0.0
+    u_if = ControlUnit("sensorless", injection=InjectionParams(low_speed="if"))
+    assert u_if.T_brake == 0.0 and u_if._s[k.S_HOLD] == 0.0
+
+
 @pytest.mark.parametrize("mode", [k.MODE_POLARITY, k.MODE_INJECTION])
 def test_a_lost_injection_reacquires_as_an_episode(mode):
     _, s, c = _unit()
@@ -325,6 +357,7 @@ def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
     ({"low_speed": "injection", "inj_voltage": -5.0}, "inj_voltage"),
     ({"low_speed": "injection", "inj_voltage": 150.0}, "inj_voltage"),
     ({"low_speed": "injection", "inj_blend_low": 40.0}, "inj_blend_low"),
+    ({"low_speed": "injection", "hold_brake": -1.0}, "hold_brake"),
 ])
 def test_bad_injection_parameters_are_refused_by_name(kw, names):
     with pytest.raises(ParameterError, match=names) as err:

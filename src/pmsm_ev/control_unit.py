@@ -321,6 +321,7 @@ class ControlUnit:
         c[_k.C_EKF_LOS_EMF] = self.dt * m.N * m.psi / m.L_q
         for j, phi in enumerate(cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * 9):
             c[_k.C_CROSS + j] = phi
+        c[_k.C_HOLD_BRAKE] = float(p.hold_brake) * c[_k.C_T_MAX] * c[_k.C_BRAKE_GAIN]
 
     def reset(self) -> None:
         self.observer.reset()
@@ -341,6 +342,7 @@ class ControlUnit:
         self._s[_k.S_PSI_RATIO] = 1.0
         if self.injecting:  # enabled: the acquisition first
             self._s[_k.S_MODE] = _k.MODE_ACQUIRE
+            self._s[_k.S_HOLD] = self._c[_k.C_HOLD_BRAKE]  # the hill hold until the first torque
             self._kernels.enter_acquire(self._s, self._c, 0.0, 0.0)
 
     @property

@@ -1218,6 +1218,16 @@ class InjectionParams:
     #: moves the car: 0.95 mm at 200 A when the frame followed it), and follows the observer this far behind
     #: when the rotor turns (a car that rolls while the test runs)
     pol_frame_band: float = 0.15
+    #: the hill hold at enable [-] [chosen: 1]: from enable until the unit first gives torque (the
+    #: acquisition and the polarity test, 0.23 s; for good where the polarity is never resolved) it asks the
+    #: friction brake (output ``T_brake``) for this times the drive's own torque limit at the wheels,
+    #: T_max n_g eta (1837 N m with Table I and II): the brake then holds any slope the drive itself could,
+    #: and a car parked on one does not roll free while the unit finds the angle (1/2 g sin(delta) t^2: 4.3 cm
+    #: on 8 deg in 0.23 s, 8.5 cm on 16 deg). A car's hill-hold function does the same until the drive reports
+    #: torque (the unit's ``mode`` output: 5). The plant's brake opposes motion with the smooth sign
+    #: tanh(v / v_eps) (``VehicleParams.v_eps``), so a held car creeps at v_eps atanh(load / brake): 4 mm/s on
+    #: 16 deg with 900 kg. 0: no hold
+    hold_brake: float = 1.0
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""

@@ -1,8 +1,9 @@
 """Monolithic reference run: plant and control unit in one loop, no FMUs.
 
 The discrete ordering is the co-simulation's (Gauss-Seidel): at t_k the row is recorded,
-the control unit reads the plant's outputs at t_k and computes its voltage, then the
-plant advances to t_k + dt with it. Usage::
+the control unit reads the plant's outputs at t_k and computes its voltage and its friction
+brake's demand (``T_brake``, connected as the shipped systems connect it), then the plant
+advances to t_k + dt with them. Usage::
 
     python -m pmsm_cosim.app.reference --scenario 1 --out runs/ref1
 """
@@ -84,7 +85,7 @@ def run_reference(out_dir, scenario: int | str = 1, stop_time: float = SCENARIO_
                     break
                 theta_meas = plant.theta_e
                 v_alpha, v_beta = ctrl.step(plant.i_alpha, plant.i_beta, w_ref, theta_meas, plant.omega_m)[:2]
-                plant.step(v_alpha, v_beta, delta, dt)
+                plant.step(v_alpha, v_beta, delta, dt, ctrl.T_brake)  # ctrl.T_brake -> plant.T_brake, as connected
                 if not math.isfinite(plant.omega_m + plant.i_d + plant.i_q):
                     raise FloatingPointError(f"plant state is not finite at t = {(k + 1) * dt:.6g} s")
         except KeyboardInterrupt:

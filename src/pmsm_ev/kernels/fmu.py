@@ -48,6 +48,7 @@ from .layout import (
     PLANT_ENERGY,
     PLANT_IO,
     PLANT_PARAMS,
+    S_HOLD,
     S_MODE,
     S_T_BRAKE,
     UIO_CLOCK,
@@ -130,7 +131,10 @@ def plant_fmu_step(io, pp, ee, h):
 @kernel(_sig(_F, _V, _V))
 def unit_t_brake(io, s):
     """``ControlUnit.T_brake`` of the state ``s`` (the unit's buffer ``io`` says its kind and reference mode): the
-    friction brake's demand, 0 in the paper's mode and in the sensorless unit's modes without FOC."""
+    friction brake's demand: the injection strategy's hill hold from enable to its first torque (``S_HOLD``), else
+    0 in the paper's mode and in the sensorless unit's modes without FOC."""
+    if s[S_HOLD] > 0.0:
+        return s[S_HOLD]
     if io[UIO_REFERENCE] != 0.0 and (io[UIO_KIND] == UNIT_KIND_CONTROL or s[S_MODE] == MODE_EKF
                                      or s[S_MODE] == MODE_INJECTION):
         return s[S_T_BRAKE]

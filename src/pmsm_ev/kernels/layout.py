@@ -314,11 +314,13 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
                    "cross-saturation's offset"),
     ("S_POL_AXIS", 1, "the polarity test's frame [rad]: the axis the acquisition found, moved only where the "
                       "tracking observer gets more than C_POL_BAND from it"),
+    ("S_HOLD", 1, "the hill hold: the friction brake asked for from enable until the unit first gives torque "
+                  "[N m at the wheels] (C_HOLD_BRAKE; 0 from then on)"),
     # the I-f strategy's alignment (``kernels.startup``)
     ("S_RUNAWAY_T", 1, "alignment: how long |omega_hat| has been above C_ALIGN_SLIP [s]"),
     ("S_ALIGN_SPEED", 1, "alignment: the rotor's speed the back-EMF shows on the vector's q axis less the sweep's, "
                          "low-pass filtered (the alignment damping's input) [rad/s]"),
-), size=198)
+), size=199)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -453,6 +455,8 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_INJ_I_MAX", 1, "the q current limit while the injection carries the angle [A]"),
     ("C_POL_BAND", 1, "the polarity test's frame: how far the tracking observer may move from it before it follows "
                       "[rad]"),
+    ("C_HOLD_BRAKE", 1, "the hill hold's friction brake [N m at the wheels]: InjectionParams.hold_brake times the "
+                        "drive's torque limit at the wheels, C_T_MAX C_BRAKE_GAIN"),
     # the I-f strategy's guard, trust, relock and stand (``pmsm_ev.params.StartupParams``)
     ("C_SOFT_GUARD", 1, "beyond this lead of the I-f vector over the rotor's angle it turns no faster than the rotor "
                         "[rad]"),
@@ -460,7 +464,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_TRUST_MOVE", 1, "in I-f the EKF is believed once the rotor has moved this far on the vector since [rad]"),
     ("C_RELOCK_TIME", 1, "a relocked vector's torque brings the speed to the reference in this time [s]"),
     ("C_STILL_TIME", 1, "a stand ends once |omega_hat| has been above C_STILL this long [s]"),
-), size=143)
+), size=144)
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())

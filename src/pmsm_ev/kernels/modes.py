@@ -101,6 +101,7 @@ from .layout import (
     S_EPISODE,
     S_EVENT,
     S_FAULT,
+    S_HOLD,
     S_I_DL,
     S_I_QL,
     S_INJ_ADM,
@@ -347,8 +348,9 @@ def polarity_frame(s, c):
 @kernel()
 def enter_torque(s, c):
     """FOC on the injection: the speed loop's integral from 0 (the car is at rest, no torque yet), the EKF
-    put on the tracking observer."""
+    put on the tracking observer; the hill hold of enable released (``S_HOLD``)."""
     s[S_W_INT] = 0.0
+    s[S_HOLD] = 0.0
     trust_injection(s, c)
     clear_detectors(s)
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pmsm_ev.params import InjectionParams
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX
 
 from ....engine.recording import read_results
@@ -82,7 +83,10 @@ def section(results: list[dict], runs_dir: Path, machine: str) -> list[str]:
              "(`python -m pmsm_cosim.app.report.robustness.injection_sync RUNS --run`, on "
              f"{machine}). Targets: the roll-back within the sensored drive's + {100 * ROLL_BACK_EXTRA:.0f} cm, "
              f"no turn slipped, no episode, no fault, the frame never spinning past a standing rotor for more than "
-             f"{synchronism.SPIN_LIMIT:g} s, back within the recovery band by {synchronism.RECOVERY_LIMIT:g} s.", "",
+             f"{synchronism.SPIN_LIMIT:g} s, back within the recovery band by {synchronism.RECOVERY_LIMIT:g} s. "
+             f"From enable until it first gives torque the unit holds the car with the friction brake "
+             f"(`hold_brake` = {InjectionParams().hold_brake:g}: docs/sensorless.md, \"The hill hold\"); the sensored "
+             "drive has torque from t = 0 and no hold.", "",
              "| case | roll-back [cm] | sensored [cm] | worst extra [cm] | turns slipped | episodes | faults | "
              "recovery [s] | targets |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
