@@ -58,3 +58,20 @@ def test_the_if_strategy_beside_on_the_samples_both_ran(tmp_path):
     assert "**2 samples run with both: injection 0 failed, I-f 1 failed**" in text
     assert "| 0001_b | passed | slipped a turn |" in text
     assert "both passed (1)" in text and "I-f minus injection +2.5 … +2.5 Wh/km" in text
+
+
+def test_a_fresh_draw_reported_with_its_own_seed(tmp_path):
+    """A fresh draw is the shipped design with another seed (its sweep.toml copied beside its runs): the
+    section names that seed and judges its samples by the same rule."""
+    from pmsm_cosim.app.studies import packaged_sweep
+
+    _summary(tmp_path / "inj", [("0000_a", "completed", 900, 0.1, 1.0, 0, 0, 120.0, 75.0, 4.0)])
+    fresh = tmp_path / "fresh"
+    _summary(fresh, [("0000_x", "completed", 900, 0.2, 1.0, 0, 0, 121.0, 75.0, 4.0),
+                     ("0001_y", "completed", 975, -0.1, 0.97, 0, 0, 133.0, 76.0, 4.1)])  # left the band
+    text = packaged_sweep(im.SWEEP).read_text(encoding="utf-8")
+    (fresh / "sweep.toml").write_text(text.replace("seed = 36", "seed = 41").replace("samples = 100", "samples = 2"),
+                                      encoding="utf-8")
+    out = "\n".join(im.section(tmp_path / "inj", "a test machine", fresh=fresh))
+    assert "drawn again with seed 41 (2 samples planned" in out
+    assert "**2 samples run: 1 failed**" in out and "- 0001_y: left the band" in out

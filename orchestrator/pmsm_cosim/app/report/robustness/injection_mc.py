@@ -72,7 +72,39 @@ def beside_lines(rows: list[dict], beside: Path) -> list[str]:
     return lines
 
 
-def section(out: Path, machine: str, beside: Path | None = None) -> list[str]:
+def fresh_lines(fresh: Path) -> list[str]:
+    """A fresh draw of the same design (the sweep file's copy in ``fresh``, ``sweep.toml``: another seed, maybe
+    fewer samples), run with the unit as it is now, judged by the same rule."""
+    rows = judged_rows(fresh)
+    design = load_sweep(Path(fresh) / "sweep.toml")
+    lines = ["### A fresh draw", "",
+             f"The same design drawn again with seed {design.seed} ({design.samples} samples planned; "
+             f"`{Path(fresh).name}/sweep.toml`, the design above with its seed and count changed), the unit as "
+             "shipped now (with the hill hold at enable: docs/sensorless.md, \"The hill hold\"), judged by the "
+             "same rule."]
+    if not rows:
+        return lines + ["", "No sample has run yet."]
+    f = findings(rows, cycle_duration_of(rows))
+    lo, hi = f.interval
+    lines += ["", f"**{f.n} samples run: {f.failures} failed** (95 % interval of the failure rate "
+              f"{100 * lo:.1f} … {100 * hi:.1f} %, Wilson)."]
+    for r in rows:
+        if r["failed"]:
+            lines.append(f"- {r['run']}: {', '.join(r['reasons'])}; {where_text(r)}")
+    inside = [r["inside_share"] for r in rows if math.isfinite(r["inside_share"])]
+    episodes = [r["episodes"] for r in rows if math.isfinite(r.get("episodes", math.nan))]
+    if inside:
+        lines += ["", f"Inside the band: the least {100 * min(inside):.2f} % of the cycle."]
+    if episodes:
+        lines += ["", f"Loss-of-synchronism episodes: {sum(episodes):g} over {len(episodes)} samples (in "
+                  f"{sum(e > 0 for e in episodes)} of them)."]
+    if f.wh["count"]:
+        lines += ["", f"Energy at the DC link: {f.wh['mean']:.1f} Wh/km mean, {f.wh['min']:.1f} … {f.wh['max']:.1f} "
+                  f"over {f.wh['count']} samples."]
+    return lines
+
+
+def section(out: Path, machine: str, beside: Path | None = None, fresh: Path | None = None) -> list[str]:
     rows = judged_rows(out)
     design = load_sweep(SWEEP)
     planned = design.samples
@@ -117,11 +149,13 @@ def section(out: Path, machine: str, beside: Path | None = None) -> list[str]:
     lines += [""] + [x for fact in facts for x in (fact, "")]
     if beside is not None:
         lines += beside_lines(rows, beside) + [""]
+    if fresh is not None:
+        lines += fresh_lines(fresh) + [""]
     return lines + [END]
 
 
-def write(page: Path, out: Path, machine: str, beside: Path | None = None) -> None:
-    write_between(page, section(out, machine, beside), BEGIN, END)
+def write(page: Path, out: Path, machine: str, beside: Path | None = None, fresh: Path | None = None) -> None:
+    write_between(page, section(out, machine, beside, fresh), BEGIN, END)
 
 
 def main(argv=None) -> int:
@@ -132,10 +166,13 @@ def main(argv=None) -> int:
     p.add_argument("--machine", default="this machine", help="the machine the samples ran on, for the page")
     p.add_argument("--beside", metavar="RUNS_IF", help=f"the output directory of {SWEEP_IF}: the I-f strategy on "
                                                        "the same samples, reported beside")
+    p.add_argument("--fresh", metavar="RUNS_FRESH", help="the output directory of a fresh draw of the same design "
+                                                         "(its sweep.toml with another seed), reported after")
     a = p.parse_args(argv)
     beside = Path(a.beside) if a.beside else None
-    write(Path(a.page), Path(a.runs), a.machine, beside)
-    print("\n".join(section(Path(a.runs), a.machine, beside)))
+    fresh = Path(a.fresh) if a.fresh else None
+    write(Path(a.page), Path(a.runs), a.machine, beside, fresh)
+    print("\n".join(section(Path(a.runs), a.machine, beside, fresh)))
     return 0
 
 
