@@ -70,15 +70,16 @@ def _run(args) -> dict:
     return run_one(CASES[name], controller, k, Path(out), strategy)
 
 
-def run_matrix(runs_dir, jobs: int = 2, cases=SYNC_MATRIX, angles: int = len(SYNC_ANGLES), log=print,
+def run_matrix(runs_dir, jobs: int = 2, cases=SYNC_MATRIX, angles=len(SYNC_ANGLES), log=print,
                strategy: str = "if") -> list[dict]:
     """Every case x controller x angle, ``jobs`` at a time (``strategy``: ``drive_params``); the list of their
-    figures."""
+    figures. ``angles``: the first that many of ``SYNC_ANGLES``, or the indices of those to run."""
     runs_dir = Path(runs_dir)
+    indices = list(range(angles)) if isinstance(angles, int) else list(angles)
     todo = [(c.name, ctrl, k, str(runs_dir / f"{c.name}-{ctrl}-{k}"), strategy)
-            for c in cases for ctrl in CONTROLLERS for k in range(angles)]
-    log(f"synchronism matrix: {len(todo)} runs ({len(cases)} cases x {len(CONTROLLERS)} controllers x {angles} "
-        f"angles), {jobs} at a time, in {runs_dir}")
+            for c in cases for ctrl in CONTROLLERS for k in indices]
+    log(f"synchronism matrix: {len(todo)} runs ({len(cases)} cases x {len(CONTROLLERS)} controllers x "
+        f"{len(indices)} angles), {jobs} at a time, in {runs_dir}")
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             results = list(pool.map(_run, todo))
