@@ -52,9 +52,21 @@ def test_sensored_steady_state_torque_balance(tmp_path, deg):
 
 @pytest.mark.parametrize("scenario", [1, 2])
 def test_paper_mode_ekf5_whole_scenario(tmp_path, scenario):
-    """Speed back within 1 rad/s before each plateau ends; T_L_hat within 3 % of T_e."""
-    m = run_reference(tmp_path, scenario=scenario)  # 350 s, EKF5, angle source measured
-    assert m["status"] == "completed"
+    """Speed back within 1 rad/s before each plateau ends; T_L_hat within 3 % of T_e. The shipped scenario (350 s,
+    EKF5, angle source measured) in the whole loop (compiled, every step the co-simulation's:
+    tests/test_whole_loop.py), whose first 2 s are run_reference's here too."""
+    from pmsm_cosim.app.drive import load_system
+    from pmsm_cosim.app.whole_loop import run_whole_loop
+    from pmsm_ev.results import compute_metrics
+
+    run_whole_loop(load_system(f"scenario{scenario}"), tmp_path)
+    m = compute_metrics(read_results(tmp_path))
+    head = read_results(tmp_path)
+    ref = tmp_path / "reference"
+    run_reference(ref, scenario=scenario, stop_time=2.0)
+    r_ref = read_results(ref)
+    for name in ("omega_m", "omega_hat", "i_q", "T_L_hat"):
+        assert np.array_equal(head[name][: len(r_ref["time"])], r_ref[name]), name
     assert len(m["steps"]) == 10 and len(m["plateaus"]) == 11
     for s in m["steps"]:
         assert s["settling_time"] is not None and s["settling_time"] < 28.0, s
