@@ -79,9 +79,9 @@ def fresh_lines(fresh: Path) -> list[str]:
     design = load_sweep(Path(fresh) / "sweep.toml")
     lines = ["### A fresh draw", "",
              f"The same design drawn again with seed {design.seed} ({design.samples} samples planned; "
-             f"`{Path(fresh).name}/sweep.toml`, the design above with its seed and count changed), the unit as "
-             "shipped now (with the hill hold at enable: docs/sensorless.md, \"The hill hold\"), judged by the "
-             "same rule."]
+             f"`{Path(fresh).name}/sweep.toml`, the design above with its `seed` and `samples` changed), the unit "
+             "as shipped now (with the hill hold at enable: docs/sensorless.md, \"The hill hold\"; the samples "
+             "above ran before it), judged by the same rule."]
     if not rows:
         return lines + ["", "No sample has run yet."]
     f = findings(rows, cycle_duration_of(rows))
