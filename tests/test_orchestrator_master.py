@@ -312,3 +312,16 @@ def test_signal_into_a_multi_rate_component_is_set_when_it_steps(tmp_path):
     assert list(r["last_u"]) == [0, 0, 0, 0, 2, 2, 2, 2, 2, 2, 3, 3, 3]
     assert r["calls"][-1] == 4
     assert r["u_sets"][-1] == 3  # at initialization, at n = 3 (1 then 2 queued: one set), at n = 9
+
+
+def test_read_results_of_some_columns_parses_only_those(tmp_path):
+    """``read_results(columns=...)``: the columns asked for that the file has, in the file's order, the same
+    doubles as a whole read; a cut last line left out as in a whole read; none asked for that it has: {}."""
+    path = tmp_path / "results.csv"
+    path.write_text("time,a,b,c\n0.0,1.5,2.5,3.5\n0.1,1.25,2.25,3.25\n0.2,1.1", encoding="ascii")
+    whole = read_results(path)
+    some = read_results(path, columns=("c", "time", "missing"))
+    assert list(some) == ["time", "c"]
+    for name in some:
+        assert some[name].tolist() == whole[name].tolist() and len(some[name]) == 2
+    assert read_results(tmp_path, columns=("x",)) == {}

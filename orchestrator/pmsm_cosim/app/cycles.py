@@ -307,7 +307,7 @@ def with_trace_figures(metrics_of, spec: SystemSpec):
     def measured(out_dir, columns, rows: int) -> dict:
         m = metrics_of(out_dir, columns, rows)
         if rows >= 2 and "time" in columns and "v_vehicle" in columns:
-            r = read_results(out_dir)
+            r = read_results(out_dir, columns=("time", "v_vehicle"))
             m["trace"] = {"cycle": cycle.name, **trace_figures(r["time"], r["v_vehicle"], cycle)}
         return m
 

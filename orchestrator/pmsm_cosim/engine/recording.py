@@ -47,24 +47,30 @@ class ResultWriter:
         self.close()
 
 
-def read_results(path) -> dict[str, np.ndarray]:
+def read_results(path, columns=None) -> dict[str, np.ndarray]:
     """results.csv (or its directory) -> {column: array}. Tolerates a cut last line.
 
     Read line by line (the complete lines: as many fields as the header) into one array of
     doubles by numpy's parser (the same doubles as ``float``): memory is the size of the numbers
-    (8 bytes each), not of the text and its Python objects, whatever the length of the run."""
+    (8 bytes each), not of the text and its Python objects, whatever the length of the run.
+    ``columns``: only those of the file's columns (the others not parsed, nor held; a name the file
+    lacks is left out of the result), in the file's order."""
     path = Path(path)
     if path.is_dir():
         path = path / "results.csv"
     with open(path, encoding="ascii") as fh:
         header = fh.readline().strip().split(",")
         commas = len(header) - 1
+        wanted = set(header) if columns is None else set(columns)
+        keep = [i for i, name in enumerate(header) if name in wanted]
+        if not keep:
+            return {}
         with warnings.catch_warnings():  # a run cut before its first row: no data, no warning
             warnings.simplefilter("ignore", UserWarning)
             data = np.loadtxt((line for line in fh if line.count(",") == commas), delimiter=",", dtype=float,
-                              ndmin=2, comments=None)
-    data = data.reshape(-1, len(header))
-    return {name: data[:, i] for i, name in enumerate(header)}
+                              ndmin=2, comments=None, usecols=None if columns is None else keep)
+    data = data.reshape(-1, len(keep))
+    return {header[i]: data[:, j] for j, i in enumerate(keep)}
 
 
 def write_metrics(out_dir, metrics: dict) -> Path:
