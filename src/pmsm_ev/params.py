@@ -80,6 +80,12 @@ class MotorParams:
     #: speed scale of the smooth sign of T_m0 in the "physical" load model [rad/s]
     #: [chosen]: 0.1 rad/s (2.3 mm/s at the wheel), smooth enough for RK4 at 10 kHz.
     omega_eps: float = 0.1
+    #: windage [N m s^2/rad^2]: a drag k_wind omega |omega| beside eq 8, a power k_wind |omega|^3; 0 = off
+    #: (the paper's motor, eq 8 alone). The drive-cycle and speed-range scenarios take the sourced friction
+    #: and windage of a traction motor of this power instead of the paper's B_m, T_m0 (docs/speed-range.md,
+    #: "The losses"): ``SOURCED_T_M0`` (bearings, SKF's friction model) and ``SOURCED_K_WIND`` (the rotor's
+    #: air friction, Saari's formulas in Pyrhoenen et al.), with B_m = 0.
+    k_wind: float = 0.0
     #: the dq convention, stated once (docs/speed-range.md). The project's Clarke and Park transforms,
     #: current sensors and voltage limit (u_max = v_dc / sqrt 3) are amplitude-invariant: a dq current
     #: of 1 A is a phase current of 1 A peak. With those, the power into the winding is
@@ -108,6 +114,8 @@ class MotorParams:
         _require(self.B_m >= 0, f"B_m must be >= 0 N m s/rad (got {self.B_m})")
         _require(self.T_m0 >= 0, f"T_m0 must be >= 0 N m (got {self.T_m0})")
         _require(self.omega_eps > 0, f"omega_eps must be > 0 rad/s (got {self.omega_eps})")
+        _require(math.isfinite(self.k_wind) and self.k_wind >= 0,
+                 f"k_wind must be finite and >= 0 N m s^2/rad^2, 0 = off (got {self.k_wind})")
 
 
 @dataclass(frozen=True)
@@ -183,6 +191,119 @@ def road_load_coefficients(vehicle: VehicleParams) -> tuple[float, float, float]
 
 _ROAD_LOAD = road_load_coefficients(VehicleParams())
 
+
+# -- the sourced losses of the drive-cycle and speed-range scenarios (docs/speed-range.md, "The losses") ----
+#: the motor the figures are taken from [source]: the 2010 Toyota Prius traction motor (MG2), 60 kW, 8 poles
+#: (N = 4, as Table I), 13 500 rpm (1414 rad/s), the closest of the Oak Ridge National Laboratory's
+#: benchmarked EV motors to this drive's ~55 kW, N = 4 and 1550 rad/s: T. A. Burress et al., "Evaluation of
+#: the 2010 Toyota Prius Hybrid Synergy Drive System", ORNL/TM-2010/253, 2011, its design table: stator
+#: outer diameter 264 mm, inner 161.9 mm, stack length 50.8 mm, rotor outer diameter 160.4 mm (air gap
+#: 0.75 mm), 48 slots (figures as taken here; check them against the report's table)
+PRIUS2010 = {"D_so": 0.264, "D_si": 0.1619, "l": 0.0508, "D_r": 0.1604}
+#: air at 20 degC [kg/m^3, Pa s] (warm air in a motor at 80 degC is 17 % lighter and its windage ~15 % lower)
+AIR_RHO, AIR_MU = 1.204, 1.81e-5
+
+
+def _saari_cylinder_cm(re: float, gap_ratio: float) -> float:
+    """The torque coefficient C_M of a cylinder turning in a coaxial one (Saari's fits, laminar to
+    turbulent, of the Couette flow in the air gap): gap_ratio = 2 delta / D_r, re = rho Omega r delta / mu."""
+    k = gap_ratio ** 0.3
+    if re < 64.0:
+        return 10.0 * k / re
+    if re < 500.0:
+        return 2.0 * k / re ** 0.6
+    if re < 1.0e4:
+        return 1.03 * k / re ** 0.5
+    return 0.065 * k / re ** 0.2
+
+
+def rotor_windage_power(omega: float, D_r: float, l_r: float, delta: float, D_ri: float = 0.0,
+                        rho: float = AIR_RHO, mu: float = AIR_MU) -> float:
+    """The air friction of a smooth rotor [W] at omega [rad/s]: its surface, (1/32) C_M pi rho Omega^3 D_r^4 l_r,
+    and its two end faces, (1/64) C_M rho Omega^3 (D_r^5 - D_ri^5), with Saari's moment coefficients C_M
+    (cylinder: ``_saari_cylinder_cm`` of Re_delta = rho Omega (D_r/2) delta / mu; faces: 3.87 / Re_r^0.5
+    below Re_r = 3e5, 0.146 / Re_r^0.2 above, Re_r = rho Omega (D_r/2)^2 / mu): J. Pyrhoenen, T. Jokinen,
+    V. Hrabovcova, "Design of Rotating Electrical Machines", Wiley, 2nd ed. 2014, the mechanical losses
+    (after J. Saari, "Thermal analysis of high-speed induction machines", Acta Polytechnica Scandinavica
+    El 90, 1998). D_r, l_r, delta, D_ri in m (D_ri: the faces' inner diameter, the shaft's)."""
+    w = abs(omega)
+    if w == 0.0:
+        return 0.0
+    re_gap = rho * w * 0.5 * D_r * delta / mu
+    cm = _saari_cylinder_cm(re_gap, 2.0 * delta / D_r)
+    p_cyl = cm * math.pi * rho * w**3 * D_r**4 * l_r / 32.0
+    re_r = rho * w * (0.5 * D_r) ** 2 / mu
+    cm_face = 3.87 / re_r**0.5 if re_r < 3.0e5 else 0.146 / re_r**0.2
+    p_faces = cm_face * rho * w**3 * (D_r**5 - D_ri**5) / 64.0
+    return p_cyl + p_faces
+
+
+def bearing_friction_torque(mu: float, load: float, bore: float) -> float:
+    """The friction moment of a rolling bearing [N m], SKF's simplified model M = 1/2 mu P d (SKF, "Rolling
+    bearings" catalogue, "Friction": "Estimating the frictional moment"; valid for a load P ~ 0.1 C, good
+    lubrication, normal conditions): mu the bearing type's constant coefficient of friction, P the equivalent
+    dynamic load [N], d the bore [m]."""
+    return 0.5 * mu * load * bore
+
+
+#: the top speed at which the windage coefficient is fitted [rad/s]: 131 km/h at the wheels (acceleration.toml)
+WINDAGE_SPEED = 1550.8
+#: the windage of the reference motor at ``WINDAGE_SPEED`` [W]: ``rotor_windage_power`` with the 2010 Prius
+#: rotor (160.4 mm x 50.8 mm, air gap 0.75 mm, a 50 mm shaft): 47.7 W on its surface, 74.3 W on its faces,
+#: 122.0 W
+SOURCED_WINDAGE_POWER = rotor_windage_power(WINDAGE_SPEED, PRIUS2010["D_r"], PRIUS2010["l"], 0.75e-3, 0.05)
+#: the windage as k_wind omega |omega| [N m s^2/rad^2] (``MotorParams.k_wind``): the power at top speed over
+#: its cube, 3.27e-8. Saari's C_M falls as Re^-0.5 there (Re_delta = 6.2e3), so the exact power goes as
+#: omega^2.5 and the cubic law under-states it at lower speed (at 500 rad/s 4.9 W against 4.1 W): both are
+#: below 0.1 % of the drive's power
+SOURCED_K_WIND = SOURCED_WINDAGE_POWER / WINDAGE_SPEED**3
+#: the bearings' Coulomb friction [N m] (``MotorParams.T_m0`` with B_m = 0 and load model "physical"): two
+#: deep-groove ball bearings, mu = 0.0015 (SKF's constant coefficient for deep-groove ball bearings, the
+#: catalogue's table for the simplified model), bore d = 35 mm (a 6207 on the 50 mm rotor hub's shaft)
+#: [chosen], P = 250 N each [chosen: a wave spring's axial preload of ~200 N, as EV motors' deep-groove
+#: bearings carry, plus half of the ~9 kg rotor's weight]: 2 x 6.6e-3 = 0.0131 N m, 20 W at top speed
+SOURCED_T_M0 = 2.0 * bearing_friction_torque(0.0015, 250.0, 0.035)
+
+
+#: the lamination [source]: 0.35 mm non-oriented fully processed electrical steel of grade M270-35A
+#: (EN 10106, IEC 60404-8-4): the grade's figure, the largest specific total loss at 1.5 T, 50 Hz, is
+#: 2.70 W/kg; its conventional density 7600 kg/m^3; resistivity 0.55 uOhm m (3 % Si-Al steel) [chosen]
+M270_35A = {"P15_50": 2.70, "d": 0.35e-3, "gamma": 7600.0, "rho_e": 0.55e-6}
+
+
+def lamination_loss_coefficients(lam: dict = M270_35A) -> tuple[float, float]:
+    """(k_h [W/(kg Hz T^2)], k_e [W/(kg Hz^2 T^2)]) of the specific loss p = k_h f B^2 + k_e f^2 B^2 of a
+    lamination: k_e the classical eddy-current loss of a sheet of thickness d, pi^2 d^2 / (6 rho_e gamma)
+    (Pyrhoenen et al. 2014, ch. 3, the iron losses), k_h the rest of the grade's loss at 1.5 T, 50 Hz
+    (hysteresis and the excess loss there): (P15_50 - k_e 50^2 1.5^2) / (50 x 1.5^2)."""
+    k_e = math.pi**2 * lam["d"] ** 2 / (6.0 * lam["rho_e"] * lam["gamma"])
+    k_h = (lam["P15_50"] - k_e * 50.0**2 * 1.5**2) / (50.0 * 1.5**2)
+    return k_h, k_e
+
+
+def iron_loss_coefficients(mass: float, B_ref: float, psi_ref: float, k_build: float = 1.5,
+                           lam: dict = M270_35A) -> tuple[float, float]:
+    """(c_h, c_e) of ``PlantParams.iron_c_h``, ``iron_c_e`` for a stator of ``mass`` [kg] of the lamination
+    ``lam`` whose flux density is B_ref [T] at the flux linkage psi_ref [Wb] (B = B_ref psi_s / psi_ref),
+    with the build factor k_build (punching, rotating fields and harmonics over the Epstein figure):
+    P_fe = k_build mass (k_h f + k_e f^2) B^2, f = omega_e / (2 pi), so
+    c_h = k_build mass k_h B_ref^2 / (2 pi psi_ref^2), c_e = k_build mass k_e B_ref^2 / (4 pi^2 psi_ref^2)."""
+    k_h, k_e = lamination_loss_coefficients(lam)
+    b2 = k_build * mass * (B_ref / psi_ref) ** 2
+    return k_h * b2 / (2.0 * math.pi), k_e * b2 / (4.0 * math.pi**2)
+
+
+#: the stator iron of the reference motor [kg]: the 2010 Prius stator's annulus (264 / 161.9 mm, 50.8 mm of
+#: stack) less its 48 slots (a quarter of the annulus [chosen]) in M270-35A's 7600 kg/m^3: 9.9 kg
+SOURCED_IRON_MASS = (0.25 * math.pi * (PRIUS2010["D_so"] ** 2 - PRIUS2010["D_si"] ** 2) * PRIUS2010["l"]
+                     * 0.75 * M270_35A["gamma"])
+#: (c_h, c_e) of the drive-cycle and speed-range scenarios: ``iron_loss_coefficients`` of
+#: ``SOURCED_IRON_MASS`` with B_ref = 1.5 T at Table I's psi = 0.08975 Wb (no load: the mean of the
+#: teeth's 1.6-1.8 T and the yoke's 1.3-1.5 T [chosen]) and k_build = 1.5 (Pyrhoenen et al.'s correction
+#: factor of the yoke's losses, 1.5-1.7; the teeth's is 1.8-2.0 [chosen: the lower]): 14.2 and 5.06e-3.
+#: At no load, 6000 rpm: 546 W; at top speed in field weakening (psi_s ~ 0.034 Wb): ~330 W
+SOURCED_IRON = iron_loss_coefficients(SOURCED_IRON_MASS, 1.5, 0.08975)
+
 #: reference temperature of Table I's R_s and psi [degC] [chosen]: data-sheet values are
 #: usually given at 20-25 degC; 20 degC, the reference of copper's alpha = 0.00393 1/K
 TEMPERATURE_REF = 20.0
@@ -254,35 +375,47 @@ class PlantParams:
     #: current charges the switches' output capacitance within the dead time, i0 ~ C_oss v_dc / t_d
     #: = 10 nF x 360 V / 2 us = 1.8 A for a module of this size: 2 A.
     dead_time_i0: float = 2.0
-    #: the inverter's conduction and switching losses (``pmsm_ev.kernels.inverter_loss``), drawn from
-    #: the DC link only (the winding's voltage is unchanged); off by default (the paper's inverter is
-    #: ideal). Each phase loses (inv_v0 + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref)) |i_x| +
-    #: inv_r_on i_x^2, f_sw = 1 / switching_period; needs v_dc > 0. The defaults are those of a
-    #: 650 V / 400 A IGBT six-pack for EV inverters (Infineon HybridPACK 1, FS400R07A1E3, data sheet
-    #: V3.4 2018: V_CEsat = 1.45 V typ. at 400 A, 25 degC); docs/speed-range.md
+    #: the inverter's conduction and switching losses (``pmsm_ev.kernels.inverter_loss``,
+    #: ``inverter_modulation_loss``), drawn from the DC link only (the winding's voltage is unchanged); off
+    #: by default (the paper's inverter is ideal). A phase current flows through the IGBT of its leg for the
+    #: duty d (i > 0; 1 - d for i < 0) and through the opposite diode for the rest: each phase loses
+    #: d (V_CE0 |i| + r_CE i^2) + (1 - d) (V_F0 |i| + r_F i^2) + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref) |i|,
+    #: f_sw = 1 / switching_period; needs v_dc > 0. The figures are one module's: Infineon HybridPACK 1,
+    #: FS400R07A1E3 (650 V / 400 A six-pack, trench-field-stop IGBT3 and emitter-controlled diode, for EV
+    #: inverters up to 420 V of DC link; final data sheet V3.4, 2018-08-09), its typical values at the
+    #: highest operating junction temperature, T_vj op = 150 degC (the losses are largest there), from the
+    #: tables "IGBT, Inverter / Characteristic Values" and "Diode, Inverter / Characteristic Values" and the
+    #: output characteristics (figures as taken here; check them against the data sheet's revision at
+    #: hand); docs/speed-range.md
     inverter_losses: bool = False
-    #: threshold voltage of the IGBT and the diode [V] (V_CE0 = V_F0, the straight-line model of the
-    #: output characteristic) [chosen]: 0.8 V, a trench-field-stop IGBT3's and its diode's knee
-    inv_v0: float = 0.8
-    #: on-state slope resistance of the IGBT and the diode [Ohm] [chosen]: (1.45 V - 0.8 V) / 400 A =
-    #: 1.6 mOhm, from the data sheet's V_CEsat at the rated current
-    inv_r_on: float = 1.6e-3
-    #: switching energy per switching period, E_on + E_off + E_rec of one leg [J] at inv_v_ref and
-    #: inv_i_ref [chosen]: 20 mJ, the order of 650 V / 400 A IGBT3 modules' data-sheet values at
-    #: 300 V, 400 A, 150 degC (check the module you model); scaled linearly with current and voltage
-    inv_e_sw: float = 0.02
+    #: the IGBT's knee V_CE0 [V] (the straight-line model V_CE = V_CE0 + r_CE i of the output
+    #: characteristic I_C = f(V_CE) at V_GE = 15 V, T_vj = 150 degC: its intercept) [data sheet]: 0.70 V
+    inv_v0: float = 0.70
+    #: the IGBT's slope r_CE [Ohm] [data sheet]: (V_CEsat - V_CE0) / I_C = (1.65 V - 0.70 V) / 400 A =
+    #: 2.375 mOhm, V_CEsat = 1.65 V typical at I_C = 400 A, V_GE = 15 V, T_vj = 150 degC (1.45 V at 25 degC)
+    inv_r_on: float = 2.375e-3
+    #: the diode's knee V_F0 [V] (V_F = V_F0 + r_F i, the forward characteristic I_F = f(V_F) at
+    #: T_vj = 150 degC: its intercept) [data sheet]: 0.80 V
+    inv_vf0: float = 0.80
+    #: the diode's slope r_F [Ohm] [data sheet]: (V_F - V_F0) / I_F = (1.45 V - 0.80 V) / 400 A = 1.625 mOhm,
+    #: V_F = 1.45 V typical at I_F = 400 A, T_vj = 150 degC
+    inv_r_f: float = 1.625e-3
+    #: switching energy per switching period of one leg, E_on + E_off (IGBT) + E_rec (diode) [J] at
+    #: inv_v_ref and inv_i_ref [data sheet]: 4.0 + 16.5 + 8.0 mJ = 28.5 mJ, typical at I_C = 400 A,
+    #: V_CE = 300 V, V_GE = +-15 V, T_vj = 150 degC (the tables' test conditions); scaled linearly with the
+    #: current and the DC voltage (Graovac and Puerschel, Infineon application note 2009)
+    inv_e_sw: float = 0.0285
     inv_v_ref: float = 300.0  #: DC voltage at which inv_e_sw is given [V] (the data sheet's test condition)
     inv_i_ref: float = 400.0  #: current at which inv_e_sw is given [A] (the module's rated current)
 
     # -- iron losses (off by default: the paper's motor has none) ------------------------------
     #: hysteresis coefficient c_h of the iron losses P_fe = (c_h |omega_e| + c_e omega_e^2) psi_s^2,
     #: psi_s^2 = psi_d^2 + psi_q^2 (Steinmetz's loss separation, ``pmsm_ev.kernels.iron_torque``), taken
-    #: from the shaft as a drag [W / (rad/s Wb^2)]; 0 = off. Typical size [chosen]: the no-load losses
-    #: of a ~50 kW EV motor at 6000 rpm are ~1 % of its power; 400 W at 628 rad/s (N = 4, psi = Table I's
-    #: 0.08975 Wb), half of it hysteresis: 200 W / (2513 rad/s x 0.08975^2 Wb^2) = 9.9
+    #: from the shaft as a drag [W / (rad/s Wb^2)]; 0 = off. The drive-cycle and speed-range scenarios take
+    #: ``SOURCED_IRON`` (``iron_loss_coefficients``: a 0.35 mm M270-35A lamination's grade figure and
+    #: classical eddy currents on the stator iron of the 2010 Prius motor; docs/speed-range.md)
     iron_c_h: float = 0.0
-    #: eddy-current coefficient c_e [W / ((rad/s)^2 Wb^2)]; 0 = off. Typical [chosen]: the other half of
-    #: the 400 W above, 200 W / (2513^2 x 0.08975^2) = 3.9e-3
+    #: eddy-current coefficient c_e [W / ((rad/s)^2 Wb^2)]; 0 = off; see ``iron_c_h``
     iron_c_e: float = 0.0
 
     # -- magnetic saturation (off by default: Table I's constant inductances) ------------
@@ -401,7 +534,7 @@ class PlantParams:
                  f"dead_time = {self.dead_time} s needs the DC-link voltage: set v_dc > 0 V")
         _require(math.isfinite(self.dead_time_i0) and self.dead_time_i0 > 0,
                  f"dead_time_i0 must be > 0 A (got {self.dead_time_i0})")
-        for name in ("inv_v0", "inv_r_on", "inv_e_sw"):
+        for name in ("inv_v0", "inv_r_on", "inv_vf0", "inv_r_f", "inv_e_sw"):
             value = getattr(self, name)
             _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0 (got {value})")
         for name in ("inv_v_ref", "inv_i_ref"):

@@ -62,12 +62,22 @@ BALANCE_TERMS = ("E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_
 
 
 def inverter_loss_voltage(p: PlantParams) -> float:
-    """The inverter's per-phase loss voltage [V] (``pmsm_ev.kernels.inverter_loss``): the threshold
-    ``inv_v0`` plus the switching losses per ampere, f_sw E_sw v_dc / (V_ref I_ref); 0 when
-    ``inverter_losses`` is off."""
+    """The inverter's per-phase loss voltage [V] (``pmsm_ev.kernels.inverter_loss``): the mean of the IGBT's
+    and the diode's knees, (``inv_v0`` + ``inv_vf0``) / 2, plus the switching losses per ampere,
+    f_sw E_sw v_dc / (V_ref I_ref); 0 when ``inverter_losses`` is off."""
     if not p.inverter_losses:
         return 0.0
-    return p.inv_v0 + p.inv_e_sw * p.v_dc / (p.switching_period * p.inv_v_ref * p.inv_i_ref)
+    return 0.5 * (p.inv_v0 + p.inv_vf0) + p.inv_e_sw * p.v_dc / (p.switching_period * p.inv_v_ref * p.inv_i_ref)
+
+
+def inverter_slot_values(p: PlantParams) -> dict:
+    """The inverter's slots of the plant's vector: the loss voltage (``inverter_loss_voltage``), the mean
+    slope (r_CE + r_F) / 2, the IGBT's knee and slope less the diode's and 1 / v_dc
+    (``pmsm_ev.kernels.inverter_modulation_loss``); all 0 when ``inverter_losses`` is off."""
+    if not p.inverter_losses:
+        return {_k.P_INV_V: 0.0, _k.P_INV_R: 0.0, _k.P_INV_DV: 0.0, _k.P_INV_DR: 0.0, _k.P_INV_VDC: 0.0}
+    return {_k.P_INV_V: inverter_loss_voltage(p), _k.P_INV_R: 0.5 * (p.inv_r_on + p.inv_r_f),
+            _k.P_INV_DV: p.inv_v0 - p.inv_vf0, _k.P_INV_DR: p.inv_r_on - p.inv_r_f, _k.P_INV_VDC: 1.0 / p.v_dc}
 
 
 class Plant:
@@ -100,8 +110,8 @@ class Plant:
                   _k.P_K_DQ: m.k_dq, _k.P_SUBSTEP_ANGLE: p.substep_angle,
                   _k.P_GEAR_PF: 1.0 if v.gear_model == "power_flow" else 0.0, _k.P_J_M: m.J_m,
                   _k.P_M_R: v.m_v * v.r_w**2 / v.n_g**2,
-                  _k.P_INV: 1.0 if p.inverter_losses else 0.0, _k.P_INV_V: inverter_loss_voltage(p),
-                  _k.P_INV_R: p.inv_r_on, _k.P_INV_K: m.k_dq / 1.5, _k.P_FE_H: p.iron_c_h,
+                  _k.P_INV: 1.0 if p.inverter_losses else 0.0, **inverter_slot_values(p),
+                  _k.P_INV_K: m.k_dq / 1.5, _k.P_FE_H: p.iron_c_h, _k.P_K_W: m.k_wind,
                   _k.P_FE_E: p.iron_c_e,
                   _k.P_SAT: 1.0 if (p.sat_i_d > 0 or p.sat_i_q > 0) else 0.0,
                   _k.P_SAT_AD: 1.0 / p.sat_i_d if p.sat_i_d > 0 else 0.0,

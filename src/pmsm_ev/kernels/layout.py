@@ -189,7 +189,13 @@ PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
                   "integrates psi_d, psi_q); 0.0: eqs 10-12 (or the per-axis saturation, P_SAT)"),
     ("P_FLUX_C", 12, "its coefficients in the order FX_AD0 .. FX_W0 (``pmsm_ev.kernels.plant``; "
                      "``pmsm_ev.params.flux_model_coefficients``)"),
-), size=52)
+    # the windage and the inverter's modulation-dependent conduction (``plant_rates``, ``inverter_loss``)
+    ("P_K_W", 1, "windage: k_w of the drag k_w omega_m |omega_m| [N m s^2/rad^2] (0 = off; ``MotorParams.k_wind``)"),
+    ("P_INV_DV", 1, "inverter: V_CE0 - V_F0, the IGBT's knee less the diode's [V] (``PlantParams.inv_v0``, "
+                    "``inv_vf0``)"),
+    ("P_INV_DR", 1, "inverter: r_CE - r_F, the IGBT's slope less the diode's [Ohm] (``inv_r_on``, ``inv_r_f``)"),
+    ("P_INV_VDC", 1, "inverter: 1 / v_dc [1/V] (a phase's duty from its pole voltage; 0 = no DC link)"),
+), size=56)
 
 #: the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``; ``plant_step`` adds each step's
 #: RK4-integrated energies): joules since the start, in the dq convention's power scaling (``P_K_DQ``)

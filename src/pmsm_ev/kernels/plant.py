@@ -50,12 +50,16 @@ from .layout import (
     P_G,
     P_GEAR_PF,
     P_INV,
+    P_INV_DR,
+    P_INV_DV,
     P_INV_K,
     P_INV_R,
     P_INV_V,
+    P_INV_VDC,
     P_J_EQ,
     P_J_M,
     P_K_DQ,
+    P_K_W,
     P_L_D,
     P_L_Q,
     P_M_R,
@@ -103,6 +107,24 @@ def friction_torque(omega_m, B_m, T_m0, omega_eps, paper):
     if paper:
         return B_m * omega_m + T_m0
     return B_m * omega_m + T_m0 * math.tanh(omega_m / omega_eps)
+
+
+@kernel()
+def windage_torque(omega_m, k_w):
+    """The rotor's windage, k_w omega_m |omega_m| [N m]: the air's drag on a turning cylinder and its end
+    faces at a constant moment coefficient (turbulent flow), a power k_w |omega_m|^3
+    (``MotorParams.k_wind``)."""
+    return k_w * omega_m * abs(omega_m)
+
+
+@kernel()
+def plant_friction(omega_m, pp):
+    """The motor's mechanical drag with the plant's vector [N m]: eq 8's friction (``friction_torque``)
+    plus the windage (``windage_torque``) when ``P_K_W`` is not 0 (eq 8 alone otherwise, unchanged)."""
+    t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], pp[P_PAPER] != 0.0)
+    if pp[P_K_W] != 0.0:
+        t_f = t_f + windage_torque(omega_m, pp[P_K_W])
+    return t_f
 
 
 # -- departures of a real motor and inverter from eqs 10-12 (plant only, each off by default) ----
@@ -190,18 +212,41 @@ def thermal_step(T, P, T_amb, R_th, C_th, dt):
 def inverter_loss(i_alpha, i_beta, v_loss, r_on):
     """Conduction and switching losses of a two-level three-phase inverter [W] for the current vector
     (i_alpha, i_beta) (amplitude-invariant Clarke: the phase currents are i_a = i_alpha, i_b, i_c):
-    each phase x loses v_loss |i_x| + r_on i_x^2. Conduction: the threshold-and-slope model of the
-    data sheets, V_CE = V_CE0 + r_CE i (IGBT), V_F = V_F0 + r_F i (diode), with V_CE0 = V_F0 and
-    r_CE = r_F, so that a phase current loses the same through the IGBT or the diode of its leg and
-    the loss does not depend on the duty cycle (the modulation). Switching: E_sw (v_dc / V_ref)
-    (|i_x| / I_ref) per switching period, linear in current and voltage (Graovac and Puerschel,
-    "IGBT Power Losses Calculation Using the Data-Sheet Parameters", Infineon application note,
-    2009; the SEMIKRON application manual, ch. 3.10), a voltage f_sw E_sw v_dc / (V_ref I_ref) per
-    ampere: ``v_loss`` is V_CE0 plus that."""
+    each phase x loses v_loss |i_x| + r_on i_x^2, the part of the losses that does not depend on the
+    modulation (``inverter_modulation_loss`` adds the part that does). Conduction: the threshold-and-slope
+    model of the data sheets, V_CE = V_CE0 + r_CE i (IGBT), V_F = V_F0 + r_F i (diode); a phase current
+    flows through the IGBT for the duty d and the opposite diode for 1 - d (i > 0: upper IGBT, lower diode;
+    i < 0: lower IGBT for 1 - d, upper diode for d), so that v_loss holds (V_CE0 + V_F0) / 2 and r_on
+    (r_CE + r_F) / 2. Switching: E_sw (v_dc / V_ref) (|i_x| / I_ref) per switching period, linear in
+    current and voltage (Graovac and Puerschel, "IGBT Power Losses Calculation Using the Data-Sheet
+    Parameters", Infineon application note, 2009; the SEMIKRON application manual, ch. 3.10), a voltage
+    f_sw E_sw v_dc / (V_ref I_ref) per ampere: ``v_loss`` holds it too."""
     i_b = -0.5 * i_alpha + _SQRT3_2 * i_beta
     i_c = -0.5 * i_alpha - _SQRT3_2 * i_beta
     return (v_loss * (abs(i_alpha) + abs(i_b) + abs(i_c))
             + r_on * (i_alpha * i_alpha + i_b * i_b + i_c * i_c))
+
+
+@kernel()
+def inverter_modulation_loss(i_alpha, i_beta, v_alpha, v_beta, dv, dr, inv_vdc):
+    """The conduction losses' part that depends on the modulation [W]: where the IGBT's knee and slope differ
+    from the diode's (dv = V_CE0 - V_F0, dr = r_CE - r_F), a phase x loses (d_x - 1/2) (dv i_x + dr i_x |i_x|)
+    besides ``inverter_loss``'s mean (the IGBT conducts for the duty d_x when i_x > 0, for 1 - d_x when
+    i_x < 0). The duty is the pole voltage's, d_x = 1/2 + (v_x + v_0) inv_vdc, with the space-vector
+    modulation's common mode v_0 = -(max + min) / 2 of the phase voltages (the linear range up to
+    v_dc / sqrt 3 that the plant's limit allows), clipped to [0, 1]. Averaged over a sinusoidal period it
+    gives the textbook forms (the IGBT's V_CE0 I (1/(2 pi) + M cos(phi) / 8), the diode's V_F0 I (1/(2 pi)
+    - M cos(phi) / 8) for the knees; Graovac and Puerschel 2009, eqs 9, 13; M = 2 |v| / v_dc)."""
+    v_b = -0.5 * v_alpha + _SQRT3_2 * v_beta
+    v_c = -0.5 * v_alpha - _SQRT3_2 * v_beta
+    v_0 = -0.5 * (max(v_alpha, v_b, v_c) + min(v_alpha, v_b, v_c))
+    i_b = -0.5 * i_alpha + _SQRT3_2 * i_beta
+    i_c = -0.5 * i_alpha - _SQRT3_2 * i_beta
+    p = 0.0
+    for v_x, i_x in ((v_alpha, i_alpha), (v_b, i_b), (v_c, i_c)):
+        m = min(max((v_x + v_0) * inv_vdc, -0.5), 0.5)
+        p += m * (dv * i_x + dr * i_x * abs(i_x))
+    return p
 
 
 @kernel()
@@ -458,7 +503,7 @@ def shaft_load(i_d, i_q, omega_m, delta, t_e, pp):
               + rolling_force(v_v, delta, pp[P_C_R], pp[P_M_V], pp[P_G], pp[P_V_EPS], paper)
               + aero_force(v_v, pp[P_RHO_A], pp[P_C_D], pp[P_A_F], pp[P_V_A], paper))
     y = pp[P_R_W] / pp[P_N_G] * forces + brake_torque(omega_m, pp)
-    x = t_e - friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)
+    x = t_e - plant_friction(omega_m, pp)
     if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
         if pp[P_FLUX] != 0.0:  # the algebraic model's flux linkages
             psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
@@ -503,6 +548,7 @@ def plant_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
         psi_d = psi_q = 0.0
     c = math.cos(theta_e)
     s = math.sin(theta_e)
+    v_alpha0, v_beta0 = v_alpha, v_beta  # the commanded voltage: the pole voltages' duties
     if pp[P_DT_V] != 0.0:  # the inverter's dead time: the applied voltage loses its error
         e_alpha, e_beta = dead_time_error(c * i_d - s * i_q, s * i_d + c * i_q, pp[P_DT_V], pp[P_DT_I0])
         v_alpha = v_alpha + e_alpha
@@ -525,7 +571,7 @@ def plant_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
                                        pp[P_R_S], pp[P_L_D], pp[P_L_Q], pp[P_PSI], N)  # (10), (11)
         t_e = k * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12) x k_dq
     paper = pp[P_PAPER] != 0.0
-    t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)  # (8)
+    t_f = plant_friction(omega_m, pp)  # (8), and the windage when on
     t_drag = t_f  # the shaft's drag: friction, and the iron losses when on
     p_iron = 0.0
     if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
@@ -561,7 +607,13 @@ def plant_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     p_term = k * (v_d * i_d + v_q * i_q)
     p_inv = 0.0
     if pp[P_INV] != 0.0:  # drawn from the DC link only: the winding's voltage is the same
-        p_inv = pp[P_INV_K] * inverter_loss(c * i_d - s * i_q, s * i_d + c * i_q, pp[P_INV_V], pp[P_INV_R])
+        i_alpha = c * i_d - s * i_q
+        i_beta = s * i_d + c * i_q
+        p_inv = inverter_loss(i_alpha, i_beta, pp[P_INV_V], pp[P_INV_R])
+        if pp[P_INV_DV] != 0.0 or pp[P_INV_DR] != 0.0:  # the IGBT's and the diode's shares differ
+            p_inv = p_inv + inverter_modulation_loss(i_alpha, i_beta, v_alpha0, v_beta0, pp[P_INV_DV],
+                                                     pp[P_INV_DR], pp[P_INV_VDC])
+        p_inv = pp[P_INV_K] * p_inv
     return (did, diq, dw, dth, p_term + p_inv, k * pp[P_R_S] * (i_d * i_d + i_q * i_q), omega_m * t_f,
             omega_m * t_e, p_gear, v_v * f_a, v_v * f_f, v_v * f_g, omega_m * y_b, p_inv, p_iron)
 
