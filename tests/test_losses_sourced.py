@@ -168,3 +168,27 @@ def test_a_negative_loss_coefficient_on_the_command_line_is_one_line_and_exit_2(
     errors = [line for line in r.stderr.strip().splitlines() if not line.startswith("note:")]
     assert len(errors) == 1 and "k_wind must be finite and >= 0" in errors[0]
     assert not out.exists()
+
+
+def test_the_physical_scenarios_carry_the_sourced_losses_and_the_paper_scenarios_none():
+    """Every shipped scenario that switches the inverter's losses on takes the sourced friction, windage and
+    iron as plant start values (to their printed digits); scenario1 and scenario2 keep eq 8 and no iron."""
+    import tomllib
+    from pathlib import Path
+
+    import pmsm_cosim.app
+
+    folder = Path(pmsm_cosim.app.__file__).parent / "scenarios"
+    sourced = {"B_m": 0.0, "T_m0": SOURCED_T_M0, "k_wind": SOURCED_K_WIND, "iron_c_h": SOURCED_IRON[0],
+               "iron_c_e": SOURCED_IRON[1]}
+    physical = 0
+    for path in sorted(folder.glob("*.toml")):
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        plant = next(c for c in doc["components"] if c["name"] == "plant").get("start", {})
+        if plant.get("inverter_losses"):
+            physical += 1
+            for name, value in sourced.items():
+                assert plant[name] == pytest.approx(value, rel=2e-3, abs=1e-12), (path.name, name)
+        if path.stem in ("scenario1", "scenario2"):
+            assert not set(sourced) & set(plant) and not plant.get("inverter_losses")
+    assert physical == 16
