@@ -7,9 +7,12 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+import tomllib
 
+import pmsm_cosim.app
 from pmsm_ev.losses import steady_state
 from pmsm_ev.params import (
     M270_35A,
@@ -173,11 +176,6 @@ def test_a_negative_loss_coefficient_on_the_command_line_is_one_line_and_exit_2(
 def test_the_physical_scenarios_carry_the_sourced_losses_and_the_paper_scenarios_none():
     """Every shipped scenario that switches the inverter's losses on takes the sourced friction, windage and
     iron as plant start values (to their printed digits); scenario1 and scenario2 keep eq 8 and no iron."""
-    import tomllib
-    from pathlib import Path
-
-    import pmsm_cosim.app
-
     folder = Path(pmsm_cosim.app.__file__).parent / "scenarios"
     sourced = {"B_m": 0.0, "T_m0": SOURCED_T_M0, "k_wind": SOURCED_K_WIND, "iron_c_h": SOURCED_IRON[0],
                "iron_c_e": SOURCED_IRON[1]}
