@@ -45,7 +45,8 @@ _ENERGY_OUTPUTS = {
     "E_dc_abs": "the DC link's energy throughput since the start, the integral of |P_dc|",
     "E_regen": "energy returned to the DC link since the start, the integral of max(-P_dc, 0)",
     "E_copper": "copper losses since the start, k_dq R_s (i_d^2 + i_q^2)",
-    "E_friction": "motor friction losses since the start, omega_m T_f (eq 8)",
+    "E_friction": "motor friction losses since the start, omega_m T_f (eq 8, and the windage k_wind "
+                  "omega_m^2 |omega_m|)",
     "E_shaft": "electromagnetic work at the shaft since the start, omega_m T_e",
     "E_gear": "gear losses since the start (gear_model 'paper': (1/eta - 1) times the wheel forces' power, "
               "signed)",

@@ -205,7 +205,7 @@ PLANT_ENERGY_LAYOUT = Layout("plant energy vector", "E_", (
     ("E_DC_ABS", 1, "the DC link's energy throughput, the integral of |P_dc| [J]"),
     ("E_REGEN", 1, "energy returned to the DC link, the integral of max(-P_dc, 0) [J]"),
     ("E_COPPER", 1, "copper losses k_dq R_s (i_d^2 + i_q^2) [J]"),
-    ("E_FRICTION", 1, "motor friction omega_m T_f (eq 8) [J]"),
+    ("E_FRICTION", 1, "motor friction omega_m T_f (eq 8, and the windage k_w omega_m |omega_m|) [J]"),
     ("E_SHAFT", 1, "electromagnetic work at the shaft omega_m T_e [J]"),
     ("E_GEAR", 1, "gear losses [J] (the paper's gear: (1/eta - 1) times the wheel forces' power, signed)"),
     ("E_AERO", 1, "work against the aerodynamic drag v f_a (eq 4) [J]"),
