@@ -190,3 +190,31 @@ def test_the_physical_scenarios_carry_the_sourced_losses_and_the_paper_scenarios
         if path.stem in ("scenario1", "scenario2"):
             assert not set(sourced) & set(plant) and not plant.get("inverter_losses")
     assert physical == 16
+
+
+def test_the_sourced_losses_give_the_same_bits_compiled_or_not():
+    """The plant's step with every sourced loss on (windage, iron, the inverter's modulation share): the same
+    state and energies, bit for bit, from the compiled kernels as from the plain-Python ones."""
+    pytest.importorskip("numba")
+    from pmsm_ev import accel
+    from pmsm_ev import kernels as plain
+
+    compiled = accel.kernels()
+    assert accel.compiled()
+    p = Plant(SOURCED_MOTOR, VehicleParams(gear_model="power_flow"),
+              PlantParams(v_dc=360.0, inverter_losses=True, iron_c_h=SOURCED_IRON[0], iron_c_e=SOURCED_IRON[1]))
+    pp = [float(x) for x in p._pp]
+    results = []
+    for k in (plain, compiled):
+        vec = pp if k is plain else accel.vector(len(pp))
+        if k is compiled:
+            for i, x in enumerate(pp):
+                vec[i] = x
+        ee = [0.0] * plain.PLANT_ENERGY if k is plain else accel.vector(plain.PLANT_ENERGY)
+        x = (-150.0, 120.0, 700.0, 0.3)
+        for j in range(200):
+            v_alpha, v_beta = 150.0 * math.cos(0.35 * j), 150.0 * math.sin(0.35 * j)
+            x = k.plant_step(x[0], x[1], x[2], x[3], v_alpha, v_beta, 0.02, 1e-4, vec, ee)[:4]
+        results.append((tuple(x), tuple(float(e) for e in ee)))
+    assert results[0] == results[1]
+    assert results[0][1][plain.E_INVERTER] > 0 and results[0][1][plain.E_IRON] > 0
