@@ -193,20 +193,32 @@ _ROAD_LOAD = road_load_coefficients(VehicleParams())
 
 
 # -- the sourced losses of the drive-cycle and speed-range scenarios (docs/speed-range.md, "The losses") ----
-#: the motor the figures are taken from [source]: the 2010 Toyota Prius traction motor (MG2), 60 kW, 8 poles
-#: (N = 4, as Table I), 13 500 rpm (1414 rad/s), the closest of the Oak Ridge National Laboratory's
-#: benchmarked EV motors to this drive's ~55 kW, N = 4 and 1550 rad/s: T. A. Burress et al., "Evaluation of
-#: the 2010 Toyota Prius Hybrid Synergy Drive System", ORNL/TM-2010/253, 2011, its design table: stator
-#: outer diameter 264 mm, inner 161.9 mm, stack length 50.8 mm, rotor outer diameter 160.4 mm (air gap
-#: 0.75 mm), 48 slots (figures as taken here; check them against the report's table)
-PRIUS2010 = {"D_so": 0.264, "D_si": 0.1619, "l": 0.0508, "D_r": 0.1604}
-#: air at 20 degC [kg/m^3, Pa s] (warm air in a motor at 80 degC is 17 % lighter and its windage ~15 % lower)
+#: the motor the geometry is taken from [source]: the 2004 Toyota Prius traction motor, an interior-PM motor
+#: of 50 kW ("the motor can deliver a peak-power output of 50 kW over the speed range of 1200-1540 rpm": R. H.
+#: Staunton et al., "Evaluation of 2004 Toyota Prius Hybrid Electric Drive System", ORNL/TM-2006/423, 2006,
+#: abstract), 8 poles (N = 4, as Table I) and 48 slots, the size of this drive's ~55 kW. Its dimensions as
+#: the open-source machine model of it gives them (pyleecan, Eomys/pyleecan, pyleecan/Data/Machine/
+#: Toyota_Prius.json, "TOYOTA Prius 2004 interior magnet (V shape) with distributed winding"): stator
+#: Rext 0.13462 m, Rint 0.08095 m, L1 0.08382 m, Kf1 0.95 (the stacking factor), 48 slots of type SlotW11
+#: (H0 1 mm, W0 1.93 mm, H1 0, W1 5 mm, W2 8 mm, H2 33.3 mm, R1 4 mm); rotor Rext 0.0802 m, its bore (the
+#: shaft, Drsh) 0.11064 m. [m]
+PRIUS2004 = {"D_so": 2 * 0.13462, "D_si": 2 * 0.08095, "l": 0.08382, "k_stack": 0.95, "D_r": 2 * 0.0802,
+             "D_ri": 0.11064, "slots": 48,
+             "slot": {"H0": 1e-3, "W0": 1.93e-3, "W1": 5e-3, "W2": 8e-3, "H2": 33.3e-3, "R1": 4e-3}}
+#: air at 20 degC and 101.325 kPa [kg/m^3, Pa s]: the ideal gas law, 101325 / (287.05 x 293.15) = 1.204, and
+#: Sutherland's law, 1.716e-5 (293.15/273.15)^1.5 (273.15 + 110.4) / (293.15 + 110.4) = 1.81e-5 (warm air in
+#: a motor at 80 degC is 17 % lighter and its windage ~15 % lower)
 AIR_RHO, AIR_MU = 1.204, 1.81e-5
 
 
 def _saari_cylinder_cm(re: float, gap_ratio: float) -> float:
     """The torque coefficient C_M of a cylinder turning in a coaxial one (Saari's fits, laminar to
-    turbulent, of the Couette flow in the air gap): gap_ratio = 2 delta / D_r, re = rho Omega r delta / mu."""
+    turbulent, of the Couette flow in the air gap): gap_ratio = 2 delta / D_r, re = rho Omega r delta / mu.
+    The two upper regimes (500 < Re < 1e4: 1.03, above: 0.065) are those FAST-OAD_CS23-HE's PMSM model uses
+    (perf_windage_friction_coeff.py: 0.515 (e_g / r)^0.3 Re^-0.5 and 0.0325 (e_g / r)^0.3 Re^-0.2 with the
+    power c_f pi rho r^4 Omega^3 l, perf_air_gap_windage_losses.py: the same power); the two laminar ones
+    below Re = 500 [not checked against a source here] only matter below ~125 rad/s, where the windage is
+    below 0.2 W."""
     k = gap_ratio ** 0.3
     if re < 64.0:
         return 10.0 * k / re
@@ -220,12 +232,13 @@ def _saari_cylinder_cm(re: float, gap_ratio: float) -> float:
 def rotor_windage_power(omega: float, D_r: float, l_r: float, delta: float, D_ri: float = 0.0,
                         rho: float = AIR_RHO, mu: float = AIR_MU) -> float:
     """The air friction of a smooth rotor [W] at omega [rad/s]: its surface, (1/32) C_M pi rho Omega^3 D_r^4 l_r,
-    and its two end faces, (1/64) C_M rho Omega^3 (D_r^5 - D_ri^5), with Saari's moment coefficients C_M
-    (cylinder: ``_saari_cylinder_cm`` of Re_delta = rho Omega (D_r/2) delta / mu; faces: 3.87 / Re_r^0.5
-    below Re_r = 3e5, 0.146 / Re_r^0.2 above, Re_r = rho Omega (D_r/2)^2 / mu): J. Pyrhoenen, T. Jokinen,
-    V. Hrabovcova, "Design of Rotating Electrical Machines", Wiley, 2nd ed. 2014, the mechanical losses
-    (after J. Saari, "Thermal analysis of high-speed induction machines", Acta Polytechnica Scandinavica
-    El 90, 1998). D_r, l_r, delta, D_ri in m (D_ri: the faces' inner diameter, the shaft's)."""
+    and its two end faces, (1/64) C_M rho Omega^3 (D_r^5 - D_ri^5) = 1/2 C_M rho Omega^3 (r^5 - r_i^5), with
+    Saari's moment coefficients C_M for the cylinder (``_saari_cylinder_cm`` of Re_delta = rho Omega (D_r/2)
+    delta / mu) and, for the faces, 3.87 / Re_r^0.5 below Re_r = 3e5 and 0.146 / Re_r^0.2 above, Re_r = rho
+    Omega (D_r/2)^2 / mu (the coefficients and the face power 0.5 c_f rho Omega^3 R^5 of eMach's windage
+    analyser, Severson-Group/eMach, mach_eval/analyzers/general/windage_loss.py, after Riemer, Lessmann,
+    Hameyer, ECCE 2010; 3.87 = 2 x 0.616 pi, von Karman's laminar disk wetted on both sides). D_r, l_r, delta,
+    D_ri in m (D_ri: the faces' inner diameter, the shaft's)."""
     w = abs(omega)
     if w == 0.0:
         return 0.0
@@ -239,50 +252,60 @@ def rotor_windage_power(omega: float, D_r: float, l_r: float, delta: float, D_ri
 
 
 def bearing_friction_torque(mu: float, load: float, bore: float) -> float:
-    """The friction moment of a rolling bearing [N m], SKF's simplified model M = 1/2 mu P d (SKF, "Rolling
-    bearings" catalogue, "Friction": "Estimating the frictional moment"; valid for a load P ~ 0.1 C, good
-    lubrication, normal conditions): mu the bearing type's constant coefficient of friction, P the equivalent
-    dynamic load [N], d the bore [m]."""
+    """The friction moment of a rolling bearing [N m] with a constant coefficient of friction, M = 1/2 mu P d
+    (JTEKT/Koyo catalogue, "Friction coefficient of bearings": M = mu P d / 2; SKF, "Rolling bearings",
+    "Friction", "Estimating the frictional moment", with its table of mu for open bearings): mu the bearing
+    type's coefficient, P the bearing's load [N], d the bore [m]."""
     return 0.5 * mu * load * bore
 
 
 #: the top speed at which the windage coefficient is fitted [rad/s]: 131 km/h at the wheels (acceleration.toml)
 WINDAGE_SPEED = 1550.8
-#: the windage of the reference motor at ``WINDAGE_SPEED`` [W]: ``rotor_windage_power`` with the 2010 Prius
-#: rotor (160.4 mm x 50.8 mm, air gap 0.75 mm, a 50 mm shaft): 47.7 W on its surface, 74.3 W on its faces,
-#: 122.0 W
-SOURCED_WINDAGE_POWER = rotor_windage_power(WINDAGE_SPEED, PRIUS2010["D_r"], PRIUS2010["l"], 0.75e-3, 0.05)
+#: the rotor's air gap [m]: half the stator bore less the rotor's diameter, (161.9 - 160.4) / 2 = 0.75 mm
+PRIUS2004_GAP = 0.5 * (PRIUS2004["D_si"] - PRIUS2004["D_r"])
+#: the windage of the reference motor at ``WINDAGE_SPEED`` [W]: ``rotor_windage_power`` with the 2004 Prius
+#: rotor (160.4 mm x 83.82 mm, air gap 0.75 mm, faces from its 110.64 mm bore out): 78.7 W on its surface,
+#: 62.9 W on its faces, 141.6 W
+SOURCED_WINDAGE_POWER = rotor_windage_power(WINDAGE_SPEED, PRIUS2004["D_r"], PRIUS2004["l"], PRIUS2004_GAP,
+                                            PRIUS2004["D_ri"])
 #: the windage as k_wind omega |omega| [N m s^2/rad^2] (``MotorParams.k_wind``): the power at top speed over
-#: its cube, 3.27e-8. Saari's C_M falls as Re^-0.5 there (Re_delta = 6.2e3), so the exact power goes as
-#: omega^2.5 and the cubic law under-states it at lower speed (at 500 rad/s 4.9 W against 4.1 W): both are
+#: its cube, 3.80e-8. Saari's C_M falls as Re^-0.5 there (Re_delta = 6.2e3), so the exact power goes as
+#: omega^2.5 and the cubic law under-states it at lower speed (at 500 rad/s 6.4 W against 4.7 W): both are
 #: below 0.1 % of the drive's power
 SOURCED_K_WIND = SOURCED_WINDAGE_POWER / WINDAGE_SPEED**3
 #: the bearings' Coulomb friction [N m] (``MotorParams.T_m0`` with B_m = 0 and load model "physical"): two
-#: deep-groove ball bearings, mu = 0.0015 (SKF's constant coefficient for deep-groove ball bearings, the
-#: catalogue's table for the simplified model), bore d = 35 mm (a 6207 on the 50 mm rotor hub's shaft)
-#: [chosen], P = 250 N each [chosen: a wave spring's axial preload of ~200 N, as EV motors' deep-groove
-#: bearings carry, plus half of the ~9 kg rotor's weight]: 2 x 6.6e-3 = 0.0131 N m, 20 W at top speed
+#: deep-groove ball bearings, mu = 0.0015 (SKF, "Rolling bearings", "Friction", table 1, "Constant
+#: coefficient of friction mu for open bearings": "Deep groove ball bearings 0,0015"; JTEKT/Koyo give
+#: 0.0010 to 0.0015), bore d = 35 mm [chosen: a 6207, a common deep-groove size for the shaft of a motor of
+#: this power; the Prius's bearings are not in the sources above], P = 250 N each [chosen: a wave spring's
+#: axial preload of ~200 N, as motors' deep-groove bearing pairs carry to keep the balls rolling, plus half
+#: the rotor's weight, its laminations 6.5 kg by the geometry above, ~9 kg with magnets and shaft]:
+#: 2 x 6.6e-3 = 0.0131 N m, 20 W at top speed
 SOURCED_T_M0 = 2.0 * bearing_friction_torque(0.0015, 250.0, 0.035)
 
 
-#: the lamination [source]: 0.35 mm non-oriented fully processed electrical steel of grade M270-35A
-#: (EN 10106, IEC 60404-8-4): the grade's figure, the largest specific total loss at 1.5 T, 50 Hz, is
-#: 2.70 W/kg; its conventional density 7600 kg/m^3; resistivity 0.55 uOhm m (3 % Si-Al steel) [chosen]
-M270_35A = {"P15_50": 2.70, "d": 0.35e-3, "gamma": 7600.0, "rho_e": 0.55e-6}
+#: the lamination: 0.35 mm non-oriented fully processed electrical steel of grade M330-35A (EN 10106,
+#: IEC 60404-8-4; the name gives 3.30 W/kg, the grade's largest specific total loss at 1.5 T, 50 Hz, and
+#: the 0.35 mm thickness [the designation's figure: the standard's table itself not consulted here]); its
+#: density 7650 kg/m^3 and resistivity 0.48 uOhm m as stem_material's record of this grade has them
+#: (docs.rs stem_material 0.3.4, stem_test_database/src/Material/M330-35A.yaml: "mass_density: 7650.0
+#: kg / m^3", "electrical_resistivity: 0.48e-6 Ohm * m", after EMT's "Allgemeine Informationen zu
+#: Elektroblechen")
+M330_35A = {"P15_50": 3.30, "d": 0.35e-3, "gamma": 7650.0, "rho_e": 0.48e-6}
 
 
-def lamination_loss_coefficients(lam: dict = M270_35A) -> tuple[float, float]:
+def lamination_loss_coefficients(lam: dict = M330_35A) -> tuple[float, float]:
     """(k_h [W/(kg Hz T^2)], k_e [W/(kg Hz^2 T^2)]) of the specific loss p = k_h f B^2 + k_e f^2 B^2 of a
-    lamination: k_e the classical eddy-current loss of a sheet of thickness d, pi^2 d^2 / (6 rho_e gamma)
-    (Pyrhoenen et al. 2014, ch. 3, the iron losses), k_h the rest of the grade's loss at 1.5 T, 50 Hz
-    (hysteresis and the excess loss there): (P15_50 - k_e 50^2 1.5^2) / (50 x 1.5^2)."""
+    lamination: k_e the classical eddy-current loss of a sheet of thickness d in a sinusoidal field,
+    pi^2 d^2 / (6 rho_e gamma) (Steinmetz's separation, textbook), k_h the rest of the grade's loss at
+    1.5 T, 50 Hz (hysteresis and the excess loss there): (P15_50 - k_e 50^2 1.5^2) / (50 x 1.5^2)."""
     k_e = math.pi**2 * lam["d"] ** 2 / (6.0 * lam["rho_e"] * lam["gamma"])
     k_h = (lam["P15_50"] - k_e * 50.0**2 * 1.5**2) / (50.0 * 1.5**2)
     return k_h, k_e
 
 
 def iron_loss_coefficients(mass: float, B_ref: float, psi_ref: float, k_build: float = 1.5,
-                           lam: dict = M270_35A) -> tuple[float, float]:
+                           lam: dict = M330_35A) -> tuple[float, float]:
     """(c_h, c_e) of ``PlantParams.iron_c_h``, ``iron_c_e`` for a stator of ``mass`` [kg] of the lamination
     ``lam`` whose flux density is B_ref [T] at the flux linkage psi_ref [Wb] (B = B_ref psi_s / psi_ref),
     with the build factor k_build (punching, rotating fields and harmonics over the Epstein figure):
@@ -293,15 +316,30 @@ def iron_loss_coefficients(mass: float, B_ref: float, psi_ref: float, k_build: f
     return k_h * b2 / (2.0 * math.pi), k_e * b2 / (4.0 * math.pi**2)
 
 
-#: the stator iron of the reference motor [kg]: the 2010 Prius stator's annulus (264 / 161.9 mm, 50.8 mm of
-#: stack) less its 48 slots (a quarter of the annulus [chosen]) in M270-35A's 7600 kg/m^3: 9.9 kg
-SOURCED_IRON_MASS = (0.25 * math.pi * (PRIUS2010["D_so"] ** 2 - PRIUS2010["D_si"] ** 2) * PRIUS2010["l"]
-                     * 0.75 * M270_35A["gamma"])
+def slot_w11_area(slot: dict) -> float:
+    """The cross-section of a slot of pyleecan's type SlotW11 [m^2]: its opening H0 W0 (H1 = 0: no wedge
+    trapezoid) and its winding area 1/2 (W1 + W2) (H2 - R1) + pi R1^2 / 2 + R1 (W2 - 2 R1) (pyleecan,
+    pyleecan/Methods/Slot/SlotW11/comp_surface_opening.py and comp_surface_active.py; the opening's arc on
+    the bore, below 1e-8 m^2 here, left out)."""
+    s_open = slot["H0"] * slot["W0"]
+    s_wind = (0.5 * (slot["W1"] + slot["W2"]) * (slot["H2"] - slot["R1"]) + 0.5 * math.pi * slot["R1"] ** 2
+              + slot["R1"] * (slot["W2"] - 2.0 * slot["R1"]))
+    return s_open + s_wind
+
+
+#: the stator iron of the reference motor [kg]: the 2004 Prius stator's annulus (269.24 / 161.9 mm) less its
+#: 48 slots of 217.5 mm^2 (``slot_w11_area``), over its 83.82 mm stack at the stacking factor 0.95, in
+#: M330-35A's 7650 kg/m^3: 15.8 kg
+SOURCED_IRON_MASS = ((0.25 * math.pi * (PRIUS2004["D_so"] ** 2 - PRIUS2004["D_si"] ** 2)
+                      - PRIUS2004["slots"] * slot_w11_area(PRIUS2004["slot"]))
+                     * PRIUS2004["l"] * PRIUS2004["k_stack"] * M330_35A["gamma"])
 #: (c_h, c_e) of the drive-cycle and speed-range scenarios: ``iron_loss_coefficients`` of
-#: ``SOURCED_IRON_MASS`` with B_ref = 1.5 T at Table I's psi = 0.08975 Wb (no load: the mean of the
-#: teeth's 1.6-1.8 T and the yoke's 1.3-1.5 T [chosen]) and k_build = 1.5 (Pyrhoenen et al.'s correction
-#: factor of the yoke's losses, 1.5-1.7; the teeth's is 1.8-2.0 [chosen: the lower]): 14.2 and 5.06e-3.
-#: At no load, 6000 rpm: 546 W; at top speed in field weakening (psi_s ~ 0.034 Wb): ~330 W
+#: ``SOURCED_IRON_MASS`` with B_ref = 1.5 T at Table I's psi = 0.08975 Wb [chosen: a PM motor's no-load flux
+#: density lies near 1.5 T in the stator iron, above it in the teeth, below it in the yoke; one figure for
+#: both] and k_build = 1.5 [chosen: punching, pressing, rotating fields and the PWM's harmonics raise a
+#: stator's losses over the grade's Epstein figure; a factor of 1.5]: see their values in
+#: docs/speed-range.md (28.0 and 9.19e-3). At no load, 6000 rpm: 1.03 kW; at top speed in field weakening
+#: (psi_s ~ 0.034 Wb): ~0.6 kW
 SOURCED_IRON = iron_loss_coefficients(SOURCED_IRON_MASS, 1.5, 0.08975)
 
 #: reference temperature of Table I's R_s and psi [degC] [chosen]: data-sheet values are
@@ -380,40 +418,49 @@ class PlantParams:
     #: by default (the paper's inverter is ideal). A phase current flows through the IGBT of its leg for the
     #: duty d (i > 0; 1 - d for i < 0) and through the opposite diode for the rest: each phase loses
     #: d (V_CE0 |i| + r_CE i^2) + (1 - d) (V_F0 |i| + r_F i^2) + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref) |i|,
-    #: f_sw = 1 / switching_period; needs v_dc > 0. The figures are one module's: Infineon HybridPACK 1,
-    #: FS400R07A1E3 (650 V / 400 A six-pack, trench-field-stop IGBT3 and emitter-controlled diode, for EV
-    #: inverters up to 420 V of DC link; final data sheet V3.4, 2018-08-09), its typical values at the
-    #: highest operating junction temperature, T_vj op = 150 degC (the losses are largest there), from the
-    #: tables "IGBT, Inverter / Characteristic Values" and "Diode, Inverter / Characteristic Values" and the
-    #: output characteristics (figures as taken here; check them against the data sheet's revision at
-    #: hand); docs/speed-range.md
+    #: f_sw = 1 / switching_period; needs v_dc > 0. The figures are for one module, Infineon's HybridPACK 1
+    #: FS400R07A1E3 (final data sheet V3.4, 2018-08-09, page 1: "HybridPACK 1 module with Trench/Fieldstop
+    #: IGBT3 and Emitter Controlled 3 diode and NTC", "VCES = 650V", "IC nom = 400A", "Optimized for
+    #: automotive applications with DC link voltages up to 420V", T_vj op = 150 degC), at T_vj = 150 degC,
+    #: where the losses are largest. Its characteristic-value tables were not at hand: V_CEsat = 1.45 V typical is
+    #: the module's headline figure as its distributors quote it (slw-ele.com, FS400R07A1E3: "an extremely
+    #: low VCE(sat) of 1.45V (typ)"; its conditions not stated there, taken as I_C nom = 400 A, 25 degC);
+    #: every other figure below is [chosen] and should give way to the data sheet's tables;
+    #: docs/speed-range.md
     inverter_losses: bool = False
-    #: the IGBT's knee V_CE0 [V] (the straight-line model V_CE = V_CE0 + r_CE i of the output
-    #: characteristic I_C = f(V_CE) at V_GE = 15 V, T_vj = 150 degC: its intercept) [data sheet]: 0.70 V
+    #: the IGBT's knee V_CE0 [V] (the straight-line model V_CE = V_CE0 + r_CE i of the output characteristic
+    #: at V_GE = 15 V, T_vj = 150 degC: its intercept) [chosen]: 0.70 V, the knee of a silicon IGBT's
+    #: collector junction at 150 degC
     inv_v0: float = 0.70
-    #: the IGBT's slope r_CE [Ohm] [data sheet]: (V_CEsat - V_CE0) / I_C = (1.65 V - 0.70 V) / 400 A =
-    #: 2.375 mOhm, V_CEsat = 1.65 V typical at I_C = 400 A, V_GE = 15 V, T_vj = 150 degC (1.45 V at 25 degC)
+    #: the IGBT's slope r_CE [Ohm]: (V_CEsat - V_CE0) / I_C = (1.65 V - 0.70 V) / 400 A = 2.375 mOhm, with
+    #: V_CEsat = 1.65 V at 400 A, 150 degC [chosen: the 1.45 V at 25 degC above raised by the 13 % a 650 V
+    #: Infineon trench-field-stop module's typical V_CEsat rises from 25 to 150 degC at its rated current,
+    #: FS200R07N3E4R (IGBT4), technical information rev. 2.0, 2013-11-05: 1.55 V at 25 degC, 1.75 V at 150 degC;
+    #: 1.64 V, rounded up]
     inv_r_on: float = 2.375e-3
-    #: the diode's knee V_F0 [V] (V_F = V_F0 + r_F i, the forward characteristic I_F = f(V_F) at
-    #: T_vj = 150 degC: its intercept) [data sheet]: 0.80 V
+    #: the diode's knee V_F0 [V] (V_F = V_F0 + r_F i, the forward characteristic at T_vj = 150 degC: its
+    #: intercept) [chosen]: 0.80 V, a silicon pin diode's knee, a little above the IGBT's
     inv_vf0: float = 0.80
-    #: the diode's slope r_F [Ohm] [data sheet]: (V_F - V_F0) / I_F = (1.45 V - 0.80 V) / 400 A = 1.625 mOhm,
-    #: V_F = 1.45 V typical at I_F = 400 A, T_vj = 150 degC
+    #: the diode's slope r_F [Ohm]: (V_F - V_F0) / I_F = (1.45 V - 0.80 V) / 400 A = 1.625 mOhm, with
+    #: V_F = 1.45 V at 400 A, 150 degC [chosen: an emitter-controlled diode's forward voltage at the module's
+    #: rated current, of the order of its IGBT's V_CEsat and falling a little with temperature]
     inv_r_f: float = 1.625e-3
     #: switching energy per switching period of one leg, E_on + E_off (IGBT) + E_rec (diode) [J] at
-    #: inv_v_ref and inv_i_ref [data sheet]: 4.0 + 16.5 + 8.0 mJ = 28.5 mJ, typical at I_C = 400 A,
-    #: V_CE = 300 V, V_GE = +-15 V, T_vj = 150 degC (the tables' test conditions); scaled linearly with the
-    #: current and the DC voltage (Graovac and Puerschel, Infineon application note 2009)
+    #: inv_v_ref and inv_i_ref [chosen]: 28.5 mJ at 300 V, 400 A, 150 degC, the order of a 650 V / 400 A
+    #: trench-field-stop module's typical switching energies at its rated current (tens of mJ; the data
+    #: sheet's switching table should replace it); scaled linearly with the current and the DC voltage
+    #: (D. Graovac, M. Puerschel, "IGBT Power Losses Calculation Using the Data-Sheet Parameters", Infineon
+    #: application note, 2009)
     inv_e_sw: float = 0.0285
-    inv_v_ref: float = 300.0  #: DC voltage at which inv_e_sw is given [V] (the data sheet's test condition)
-    inv_i_ref: float = 400.0  #: current at which inv_e_sw is given [A] (the module's rated current)
+    inv_v_ref: float = 300.0  #: DC voltage at which inv_e_sw is given [V] [chosen: its reference point]
+    inv_i_ref: float = 400.0  #: current at which inv_e_sw is given [A] (the module's rated current, I_C nom)
 
     # -- iron losses (off by default: the paper's motor has none) ------------------------------
     #: hysteresis coefficient c_h of the iron losses P_fe = (c_h |omega_e| + c_e omega_e^2) psi_s^2,
     #: psi_s^2 = psi_d^2 + psi_q^2 (Steinmetz's loss separation, ``pmsm_ev.kernels.iron_torque``), taken
     #: from the shaft as a drag [W / (rad/s Wb^2)]; 0 = off. The drive-cycle and speed-range scenarios take
-    #: ``SOURCED_IRON`` (``iron_loss_coefficients``: a 0.35 mm M270-35A lamination's grade figure and
-    #: classical eddy currents on the stator iron of the 2010 Prius motor; docs/speed-range.md)
+    #: ``SOURCED_IRON`` (``iron_loss_coefficients``: a 0.35 mm M330-35A lamination's grade figure and
+    #: classical eddy currents on the stator iron of the 2004 Prius motor; docs/speed-range.md)
     iron_c_h: float = 0.0
     #: eddy-current coefficient c_e [W / ((rad/s)^2 Wb^2)]; 0 = off; see ``iron_c_h``
     iron_c_e: float = 0.0

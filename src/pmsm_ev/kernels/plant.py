@@ -236,7 +236,8 @@ def inverter_modulation_loss(i_alpha, i_beta, v_alpha, v_beta, dv, dr, inv_vdc):
     modulation's common mode v_0 = -(max + min) / 2 of the phase voltages (the linear range up to
     v_dc / sqrt 3 that the plant's limit allows), clipped to [0, 1]. Averaged over a sinusoidal period it
     gives the textbook forms (the IGBT's V_CE0 I (1/(2 pi) + M cos(phi) / 8), the diode's V_F0 I (1/(2 pi)
-    - M cos(phi) / 8) for the knees; Graovac and Puerschel 2009, eqs 9, 13; M = 2 |v| / v_dc)."""
+    - M cos(phi) / 8) for the knees, M = 2 |v| / v_dc; the forms of Graovac and Puerschel's application note,
+    2009, checked against this kernel in tests/test_losses_sourced.py)."""
     v_b = -0.5 * v_alpha + _SQRT3_2 * v_beta
     v_c = -0.5 * v_alpha - _SQRT3_2 * v_beta
     v_0 = -0.5 * (max(v_alpha, v_b, v_c) + min(v_alpha, v_b, v_c))
