@@ -171,6 +171,31 @@ def efficiency_summary(em: dict, level: float = 0.9) -> dict:
     return out
 
 
+#: the speeds [rad/s] at which ``level_torques`` gives where the efficiency contour starts (docs/speed-range.md)
+LEVEL_SPEEDS = (150.0, 300.0, 600.0, 1000.0, 1500.0)
+
+
+def level_torques(p: dict, lim, speeds=LEVEL_SPEEDS, level: float = 0.9, n_torques: int = 400) -> list:
+    """Where the motoring efficiency reaches ``level`` at each of ``speeds``: the lowest motoring torque T_from
+    [N m] at which it does (``efficiency_map`` on that one speed and ``n_torques`` torques, the crossing
+    interpolated linearly; None where it never does) and the best efficiency there, [{"omega", "T_from",
+    "best"}]: the figures a published map's contour is read at."""
+    out = []
+    for w in speeds:
+        em = efficiency_map(p, lim, float(w), n_speeds=1, n_torques=n_torques)
+        mot = em["T"] > 0.0
+        t, e = em["T"][mot], em["efficiency"][mot, 0]
+        ok = np.flatnonzero(np.isfinite(e) & (e >= level))
+        t_from = None
+        if ok.size:
+            i = int(ok[0])
+            t_from = float(t[i]) if i == 0 or not np.isfinite(e[i - 1]) else float(
+                t[i - 1] + (level - e[i - 1]) / (e[i] - e[i - 1]) * (t[i] - t[i - 1]))
+        best = float(np.nanmax(e)) if np.any(np.isfinite(e)) else None
+        out.append({"omega": float(w), "T_from": t_from, "best": best})
+    return out
+
+
 def mtpv_line(lim, n: int = 200):
     """The MTPV trajectory inside the current circle, (i_d, i_q >= 0) arrays [A] (``kernels.mtpv_angle`` on
     the flux circles up to psi); None where it lies outside the circle (psi / L_d > I_max)."""
@@ -298,6 +323,7 @@ def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency
         fig.savefig(made[-1], dpi=100)
         plt.close(fig)
         summary["efficiency"] = efficiency_summary(em)
+        summary["efficiency"]["level_from"] = level_torques(p, lim)
         summary["figures"] = [str(m) for m in made]
     (out / "envelope.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
