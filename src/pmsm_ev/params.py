@@ -83,8 +83,8 @@ class MotorParams:
     #: windage [N m s^2/rad^2]: a drag k_wind omega |omega| beside eq 8, a power k_wind |omega|^3; 0 = off
     #: (the paper's motor, eq 8 alone). The drive-cycle and speed-range scenarios take the sourced friction
     #: and windage of a traction motor of this power instead of the paper's B_m, T_m0 (docs/speed-range.md,
-    #: "The losses"): ``SOURCED_T_M0`` (bearings, SKF's friction model) and ``SOURCED_K_WIND`` (the rotor's
-    #: air friction, Saari's formulas in Pyrhoenen et al.), with B_m = 0.
+    #: "The losses"): ``SOURCED_T_M0`` (bearings, the constant-coefficient friction moment) and
+    #: ``SOURCED_K_WIND`` (the rotor's air friction, ``rotor_windage_power``), with B_m = 0.
     k_wind: float = 0.0
     #: the dq convention, stated once (docs/speed-range.md). The project's Clarke and Park transforms,
     #: current sensors and voltage limit (u_max = v_dc / sqrt 3) are amplitude-invariant: a dq current
@@ -237,7 +237,8 @@ def rotor_windage_power(omega: float, D_r: float, l_r: float, delta: float, D_ri
     delta / mu) and, for the faces, 3.87 / Re_r^0.5 below Re_r = 3e5 and 0.146 / Re_r^0.2 above, Re_r = rho
     Omega (D_r/2)^2 / mu (the coefficients and the face power 0.5 c_f rho Omega^3 R^5 of eMach's windage
     analyser, Severson-Group/eMach, mach_eval/analyzers/general/windage_loss.py, after Riemer, Lessmann,
-    Hameyer, ECCE 2010; 3.87 = 2 x 0.616 pi, von Karman's laminar disk wetted on both sides). D_r, l_r, delta,
+    Hameyer, ECCE 2010; FAST-OAD_CS23-HE's perf_rotor_windage_loss.py has the same coefficients but a factor pi
+    more in the power, which would make the faces' windage pi times larger: eMach's is taken). D_r, l_r, delta,
     D_ri in m (D_ri: the faces' inner diameter, the shaft's)."""
     w = abs(omega)
     if w == 0.0:
