@@ -44,7 +44,8 @@ SAMPLE_TOLERANCE = 1.0e-2
 
 #: the slave's inputs and the outputs its step writes, in the compiled step's buffer
 #: (``pmsm_ev.kernels.UNIT_IO_LAYOUT``)
-_IO_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
+_IO_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas", "v_dc_meas", "P_charge_max",
+              "P_discharge_max")
 _IO_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d", "i_q", "i_qref", "i_d_hat", "i_q_hat", "omega_hat",
                "theta_hat", "T_L_hat", "mode", "fault", "theta_ctrl", "omega_ctrl")
 
@@ -96,6 +97,16 @@ class FocSlave(DriveSlave):
                                             "sensored observer)")
         self.add_input("omega_meas", "rad/s", "measured mechanical rotor speed (sensored observer)",
                        display_unit="rpm")
+        self.add_input("v_dc_meas", "V", "the DC link's measured voltage (a battery's: the plant's v_bat output); "
+                                         "> 0: the voltage limit follows it (v_dc_meas / sqrt 3, field weakening at "
+                                         "fw_margin of it) and the torque is held within P_charge_max, "
+                                         "P_discharge_max; 0 (unconnected): the parameters' constant DC link")
+        self.add_input("P_charge_max", "W", "the battery's charge acceptance (the plant's P_charge_max output): a "
+                                            "braking torque's power at the shaft at most this, the friction brake "
+                                            "takes the rest (read only when v_dc_meas > 0)", display_unit="kW")
+        self.add_input("P_discharge_max", "W", "the battery's discharge power (the plant's P_discharge_max output): a "
+                                               "motoring torque's power at the shaft at most this (read only when "
+                                               "v_dc_meas > 0)", display_unit="kW")
 
         hold = ", computed at the last step"
         self.add_output("v_alpha", "V", "commanded stator voltage, alpha axis, to be held until the next "
@@ -294,6 +305,8 @@ class FocSlave(DriveSlave):
                 self._start_clock(current_time, step_size)
             k_end = math.ceil((current_time + step_size - self._t0) / self._dt - SAMPLE_TOLERANCE)
             n = k_end - self._k_next  # the instants in [t, t + h), run on the inputs at t
+            if self.v_dc_meas > 0.0:  # a measured DC link (the compiled step's ``unit_fmu_step`` does the same)
+                self._unit.dc_link(self.v_dc_meas, self.P_charge_max, self.P_discharge_max)
             while n > 0:  # (one per step when h = dt: no range object on the per-step path)
                 if self._sensorless:  # never reads theta_meas, omega_meas
                     (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,

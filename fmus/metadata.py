@@ -52,6 +52,7 @@ UNITS: dict[str, dict[str, float]] = {
     "K/W": {"K": 1, "kg": -1, "m": -2, "s": 3},
     "J/K": {"kg": 1, "m": 2, "s": -2, "K": -1},
     "J": {"kg": 1, "m": 2, "s": -2},
+    "C": {"A": 1, "s": 1},
 }
 
 #: unit name -> [(display unit, factor)], display value = factor * value
@@ -307,4 +308,21 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     # the controller FMUs' sample clock (fmus/foc_slave.py)
     "dt": ("s", "sample period of the controller and observer: one control period at each instant "
                 "start + k dt; 0 (default): the size of the first communication step"),
+    # BatteryParams (the plant's DC link)
+    "battery": (None, "the DC link: 'ideal' (a constant source of v_dc, the paper's) or 'ecm' (the battery's "
+                      "equivalent circuit: OCV(soc) - R0 i - v_rc, one RC pair; the plant's v_dc, losses and voltage "
+                      "limit follow its terminal voltage)"),
+    "bat_soc0": (None, "the battery's state of charge at the start, in [0, 1]"),
+    "bat_capacity": (None, "the battery's capacity [Ah], > 0"),
+    "bat_ocv_soc": (None, "the open-circuit voltage table's states of charge, comma-separated, rising from 0 to 1"),
+    "bat_ocv_v": (None, "the open-circuit voltage table's voltages [V], comma-separated, rising with the state of "
+                        "charge"),
+    "bat_R0": ("Ohm", "the battery's series resistance R0"),
+    "bat_R1": ("Ohm", "the battery's RC pair: its resistance R1 (0 = no RC pair)"),
+    "bat_C1": (None, "the battery's RC pair: its capacitance C1 [F]"),
+    "bat_i_discharge_max": ("A", "the battery's discharge current limit"),
+    "bat_i_charge_max": ("A", "the battery's charge current limit (charge acceptance)"),
+    "bat_v_max": ("V", "the terminal voltage a charge current may raise the battery to"),
+    "bat_v_min": ("V", "the terminal voltage a discharge current may lower the battery to"),
+    "bat_soc_taper": (None, "above this state of charge the charge current limit falls linearly to 0 at 1"),
 }

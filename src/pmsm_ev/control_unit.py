@@ -214,6 +214,7 @@ class ControlUnit:
         c[_k.C_I_MAX] = float(pr.i_max)
         c[_k.C_T_MAX] = float(pr.T_max or pr.torque_at_current_limit(m))
         c[_k.C_U_FW] = pr.fw_margin * pr.u_limit if pr.reference == "fw" else 0.0
+        c[_k.C_FW_MARGIN] = pr.fw_margin if pr.reference == "fw" else 0.0  # on a measured DC link (``dc_link``)
         c[_k.C_K_T] = m.k_dq * m.N * m.psi
         c[_k.C_K_DQN] = m.k_dq * m.N
         c[_k.C_P_REGEN] = float(pr.P_regen_max)
@@ -357,6 +358,11 @@ class ControlUnit:
     def mode(self) -> float:
         """The sensorless unit's mode: 0 alignment, 1 I-f, 2 EKF (``MODES``); 2 for the others."""
         return float(self._s[_k.S_MODE]) if self.sensorless else _k.MODE_EKF
+
+    def dc_link(self, v_dc: float, p_charge: float, p_discharge: float) -> None:
+        """On a measured DC link of ``v_dc`` [V] > 0: the voltage limits follow it and the torque is held within the
+        battery's charge acceptance and discharge power [W] (``pmsm_ev.kernels.unit_dc_link``)."""
+        self._kernels.unit_dc_link(self._c, v_dc, p_charge, p_discharge)
 
     def step(self, i_alpha: float, i_beta: float, omega_ref: float,
              theta_meas: float = 0.0, omega_meas: float = 0.0) -> tuple:

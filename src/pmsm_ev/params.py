@@ -359,6 +359,127 @@ def magnet_flux(psi20: float, T: float, alpha_psi: float) -> float:
     return psi20 * (1.0 + alpha_psi * (T - TEMPERATURE_REF))
 
 
+# -- the battery (off by default: the DC link is an ideal source of PlantParams.v_dc) -------------------------------
+#: the ideal link or the battery's equivalent circuit (``BatteryParams.battery``)
+BATTERY_MODELS = ("ideal", "ecm")
+#: the most points of the open-circuit voltage table (``pmsm_ev.kernels.BAT_OCV_MAX``)
+BATTERY_OCV_POINTS = 24
+
+
+def parse_table(text: str, name: str) -> tuple[float, ...]:
+    """The numbers of a comma-separated table (``BatteryParams.bat_ocv_soc``, ``bat_ocv_v``); ``ParameterError``
+    names ``name`` when an entry is not a finite number."""
+    values = []
+    for item in str(text).split(","):
+        try:
+            value = float(item)
+        except ValueError:
+            raise ParameterError(f"{name}: {item.strip()!r} is not a number (a comma-separated table)") from None
+        _require(math.isfinite(value), f"{name}: {item.strip()!r} is not finite")
+        values.append(value)
+    return tuple(values)
+
+
+@dataclass(frozen=True)
+class BatteryParams:
+    """The traction battery that feeds the DC link (docs/speed-range.md, "The battery"), off by default: the DC link
+    is then an ideal source of ``PlantParams.v_dc``, as in the paper's scenarios.
+
+    "ecm": a Thevenin equivalent circuit, v = OCV(soc) - R0 i - v_rc, C1 dv_rc/dt = i - v_rc / R1, the state of
+    charge falling with the charge drawn, soc = soc0 - integral(i) / capacity (coulombic efficiency 1), inside the
+    plant FMU (``pmsm_ev.kernels.battery_step``). The pack is a 2013 Nissan Leaf's: 48 modules of 2s2p cells,
+    96s2p, 192 cells ("The 24 kWh Leaf battery pack has 48 modules. Each module has 4 cells. Each module's cells
+    are in two pairs. Each pair is in parallel. The two pairs are in series.", "The fully charged voltage is
+    403.2 volts with a nominal voltage of 360 volts": mobility.lk, "Leaf 24 kWh Battery", 2021). Its cell's
+    figures are fitted here to ORNL's hybrid-pulse (HPPC) test of the 2013 Leaf cell at 25 degC
+    (batterysim/equiv-circ-model, examples/data/cell-low-current-hppc-25c-2.csv, MIT licence: a full charge to
+    4.2 V, then per 10 % of charge an hour's rest, a 30 A discharge pulse of 30 s, a 22 A charge pulse of 10 s
+    and 3 Ah at 10 A, to 3.0 V): the rest voltages are the open-circuit voltages, the 30 A pulses fitted by
+    least squares with v = OCV - R0 i - R1 i (1 - exp(-t / tau)) at 1 s samples (R0 then holds what happens
+    within the first second); a cell discharged 30.50 Ah to 3.0 V. The pack: 96 x the cell's voltages, 48 x its
+    resistances, 2 x its capacity, C1 = tau / R1."""
+
+    #: the DC link: "ideal" (default; ``PlantParams.v_dc``, constant) or "ecm" (this equivalent circuit)
+    battery: str = "ideal"
+    #: state of charge at the start [-], in [0, 1] [chosen: 0.9, a car charged to 90 %, the WLTP's
+    #: "fully charged" less the margin most EVs keep]
+    bat_soc0: float = 0.9
+    #: capacity [Ah]: 2 x 30.50 Ah, the cell's charge from 4.2 V to 3.0 V in ORNL's HPPC test at 10 A (C/3), 25 degC
+    #: (the cell's rating is 33.1 Ah: batterysim/equiv-circ-model, examples/cell/params.py); 61.0 Ah x ~375 V
+    #: = 22.9 kWh, of the Leaf's 24 kWh
+    bat_capacity: float = 61.0
+    #: the open-circuit voltage table's states of charge [-], comma-separated, rising from 0 to 1: the HPPC test's
+    #: rest points by coulomb counting from the full charge (1) and 0 at its end of discharge
+    bat_ocv_soc: str = "0, 0.0610, 0.1653, 0.2697, 0.3740, 0.4783, 0.5826, 0.6869, 0.7912, 0.8956, 1"
+    #: ... its open-circuit voltages [V], rising: 96 x the cell's rest voltage at the end of each hour's rest (3.531,
+    #: 3.723, 3.802, 3.869, 3.909, 3.949, 3.984, 4.048, 4.086 V from 6 % to 90 %, 4.182 V at 100 %); at 0, 96 x
+    #: 3.00 V [chosen: the test's end of discharge under 10 A, a lower bound of the open-circuit voltage there]
+    bat_ocv_v: str = ("288.0, 338.976, 357.408, 364.992, 371.424, 375.264, 379.104, 382.464, 388.608, 392.256, "
+                      "401.472")
+    #: series resistance R0 [Ohm]: 48 x 1.60 mOhm, the median of the cell's fits from 10 % to 90 % (1.58 .. 1.64
+    #: mOhm; 1.85 at 100 %, 1.70 at 6 %)
+    bat_R0: float = 0.0768
+    #: the RC pair's resistance R1 [Ohm]: 48 x 1.34 mOhm, the median of the fits from 10 % to 90 % (1.08 .. 1.74)
+    bat_R1: float = 0.0643
+    #: the RC pair's capacitance C1 [F]: tau / R1 with tau = 25 s, the median of the fits (19.5 .. 29.5 s)
+    bat_C1: float = 389.0
+    #: discharge current limit [A] [chosen: 250 A, ~4 C of the 61 Ah pack, a power cell's 10 s rating; 90 kW at
+    #: 360 V, above the ~55 kW this drive draws at its peak]
+    bat_i_discharge_max: float = 250.0
+    #: charge current limit [A] [chosen: 125 A, ~2 C, the order of a power cell's pulse charge rating; ~49 kW at
+    #: 390 V, the drive's former constant regenerative limit of 50 kW]
+    bat_i_charge_max: float = 125.0
+    #: the terminal voltage a charge current may raise the pack to [V]: 96 x 4.2 V = 403.2 V, the fully charged
+    #: voltage (mobility.lk, above)
+    bat_v_max: float = 403.2
+    #: the terminal voltage a discharge current may lower it to [V]: 96 x 3.0 V, the HPPC test's end of discharge
+    bat_v_min: float = 288.0
+    #: above this state of charge the charge current limit falls linearly to 0 at 1 [-] [chosen: 0.95, a battery
+    #: management system's taper near full; regeneration then refused, the friction brake takes it]
+    bat_soc_taper: float = 0.95
+
+    @property
+    def enabled(self) -> bool:
+        return self.battery == "ecm"
+
+    def ocv_table(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(states of charge, open-circuit voltages) of the table, as numbers."""
+        return parse_table(self.bat_ocv_soc, "bat_ocv_soc"), parse_table(self.bat_ocv_v, "bat_ocv_v")
+
+    def validate(self) -> None:
+        _require(self.battery in BATTERY_MODELS,
+                 f"battery must be one of {BATTERY_MODELS} (got {self.battery!r})")
+        _require(math.isfinite(self.bat_capacity) and self.bat_capacity > 0,
+                 f"bat_capacity must be > 0 Ah (got {self.bat_capacity})")
+        _require(math.isfinite(self.bat_soc0) and 0.0 <= self.bat_soc0 <= 1.0,
+                 f"bat_soc0 must be in [0, 1] (got {self.bat_soc0})")
+        for name in ("bat_R0", "bat_R1"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0 Ohm (got {value})")
+        _require(math.isfinite(self.bat_C1) and self.bat_C1 > 0, f"bat_C1 must be > 0 F (got {self.bat_C1})")
+        for name in ("bat_i_discharge_max", "bat_i_charge_max"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0 A (got {value})")
+        _require(math.isfinite(self.bat_soc_taper) and 0.0 <= self.bat_soc_taper < 1.0,
+                 f"bat_soc_taper must be in [0, 1) (got {self.bat_soc_taper})")
+        socs, volts = self.ocv_table()
+        _require(len(socs) == len(volts),
+                 f"bat_ocv_soc and bat_ocv_v must have as many points (got {len(socs)} and {len(volts)})")
+        _require(2 <= len(socs) <= BATTERY_OCV_POINTS,
+                 f"the open-circuit voltage table must have 2 to {BATTERY_OCV_POINTS} points (got {len(socs)})")
+        _require(socs[0] == 0.0 and socs[-1] == 1.0,
+                 f"bat_ocv_soc must run from 0 to 1 (got {socs[0]:g} .. {socs[-1]:g})")
+        _require(all(b > a for a, b in zip(socs, socs[1:])), "bat_ocv_soc is not monotonic: it must rise")
+        _require(volts[0] > 0, f"bat_ocv_v must be > 0 V (got {volts[0]:g} at a state of charge of 0)")
+        _require(all(b > a for a, b in zip(volts, volts[1:])),
+                 "bat_ocv_v (the open-circuit voltage table) is not monotonic: it must rise with the state of charge")
+        for name in ("bat_v_max", "bat_v_min"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, f"{name} must be > 0 V (got {value})")
+        _require(self.bat_v_min < self.bat_v_max,
+                 f"bat_v_min ({self.bat_v_min:g} V) must be below bat_v_max ({self.bat_v_max:g} V)")
+
+
 @dataclass(frozen=True)
 class PlantParams:
     """Numerical and initial-state settings of the plant (vehicle + PMSM)."""

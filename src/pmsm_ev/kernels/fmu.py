@@ -18,7 +18,8 @@ the kernels they call (``plant_step``, ``plant_step_measured``, ``control_step``
 the same, bit for bit; what they add is the bookkeeping of those two methods. A step they do not take returns
 ``STEP_DECLINED`` with nothing changed, and the binding runs the slave's Python ``do_step`` instead: a plant
 with the inverter's delay or the thermal model (the slave does not offer those), a plant voltage at or near the
-DC link's limit (CPython's ``math.hypot``, which numba does not reproduce to the last bit, decides the limit
+DC link's limit (the ideal link's v_dc / sqrt 3, or the battery's terminal voltage over sqrt 3, ``dc_link_limit``;
+CPython's ``math.hypot``, which numba does not reproduce to the last bit, decides the limit
 there), a controller's first step that rebuilds its unit, a non-finite plant state (the slave raises), a step
 size <= 0. An exception in a kernel returns ``STEP_FAILED`` with the vectors as they were before the step (the
 binding then hands the step to Python, which raises it as it would have).
@@ -28,9 +29,10 @@ from __future__ import annotations
 
 import math
 
-from .control import control_step
+from .control import control_step, unit_dc_link
 from .jit import CACHE, JIT, kernel
 from .layout import (
+    E_BAT_V,
     MODE_EKF,
     MODE_INJECTION,
     P_T_BRAKE,
@@ -84,6 +86,8 @@ from .layout import (
     UIO_OMEGA_HAT,
     UIO_OMEGA_MEAS,
     UIO_OMEGA_REF,
+    UIO_P_CHARGE_MAX,
+    UIO_P_DISCHARGE_MAX,
     UIO_REFERENCE,
     UIO_SAVE,
     UIO_T0,
@@ -97,13 +101,14 @@ from .layout import (
     UIO_V_ALPHA,
     UIO_V_BETA,
     UIO_V_D,
+    UIO_V_DC_MEAS,
     UIO_V_Q,
     UNIT_IO,
     UNIT_PARAMS,
     UNIT_STATE,
 )
 from .modes import injection_unit_step
-from .plant import plant_step, plant_step_measured
+from .plant import dc_link_limit, plant_step, plant_step_measured
 from .startup import sensorless_step
 
 if JIT:
@@ -134,7 +139,7 @@ def plant_fmu_step(io, pp, ee, h):
         return STEP_DECLINED
     v_alpha = io[PIO_V_ALPHA]
     v_beta = io[PIO_V_BETA]
-    u_lim = io[PIO_U_LIM]
+    u_lim = dc_link_limit(pp, ee, io[PIO_U_LIM])  # the ideal link's, or the battery's of the step before
     if u_lim != 0.0 and not v_alpha * v_alpha + v_beta * v_beta < u_lim * u_lim * U_LIMIT_MARGIN:
         return STEP_DECLINED  # at or near the limit: math.hypot decides, in Python
     for i in range(PLANT_ENERGY):
@@ -159,7 +164,8 @@ def plant_fmu_step(io, pp, ee, h):
             io[PIO_I_D], io[PIO_I_Q], io[PIO_OMEGA_M], io[PIO_THETA_E], v_alpha, v_beta, delta, h, pp, ee)
         i_alpha_true = i_alpha
         i_beta_true = i_beta
-    if not math.isfinite(omega_m + i_d + i_q):  # the slave raises: its Python step, from the state before
+    if not math.isfinite(omega_m + i_d + i_q + ee[E_BAT_V]):  # the slave raises (a state, or the battery's
+        # voltage when it cannot give the power: 0 with the ideal link): its Python step, from the state before
         for i in range(PLANT_ENERGY):
             ee[i] = io[PIO_SAVE + i]
         pp[P_T_BRAKE] = pp_t_brake
@@ -217,6 +223,8 @@ def unit_fmu_step(io, s, c, t, h):
         k_next = int(io[UIO_K_NEXT])
     k_end = math.ceil((t + h - io[UIO_T0]) / dt - tolerance)
     n = k_end - k_next
+    if io[UIO_V_DC_MEAS] > 0.0:  # a measured DC link (FocSlave.do_step: ControlUnit.dc_link)
+        unit_dc_link(c, io[UIO_V_DC_MEAS], io[UIO_P_CHARGE_MAX], io[UIO_P_DISCHARGE_MAX])
     kind = io[UIO_KIND]
     while n > 0:
         if kind == UNIT_KIND_CONTROL:

@@ -22,7 +22,18 @@ from .jit import V as _V
 from .jit import kernel
 from .jit import sig as _sig
 from .layout import (
+    BAT_OCV_MAX,
     E_AERO,
+    E_BAT_CHEM,
+    E_BAT_I,
+    E_BAT_LOSS,
+    E_BAT_P_CHG,
+    E_BAT_P_DIS,
+    E_BAT_Q,
+    E_BAT_SOC,
+    E_BAT_V,
+    E_BAT_VRC,
+    E_BAT_W,
     E_BRAKE,
     E_COPPER,
     E_DC,
@@ -38,9 +49,24 @@ from .layout import (
     E_SHAFT,
     P_A_F,
     P_B_M,
+    P_BAT,
+    P_BAT_C1,
+    P_BAT_I_CHG,
+    P_BAT_I_DIS,
+    P_BAT_N,
+    P_BAT_OCV,
+    P_BAT_Q,
+    P_BAT_R0,
+    P_BAT_R1,
+    P_BAT_SOC0,
+    P_BAT_SOC_TAPER,
+    P_BAT_TAU,
+    P_BAT_V_MAX,
+    P_BAT_V_MIN,
     P_C_D,
     P_C_R,
     P_DT_I0,
+    P_DT_K,
     P_DT_V,
     P_ETA,
     P_FE_E,
@@ -53,8 +79,10 @@ from .layout import (
     P_INV_DR,
     P_INV_DV,
     P_INV_K,
+    P_INV_KSW,
     P_INV_R,
     P_INV_V,
+    P_INV_V0,
     P_INV_VDC,
     P_J_EQ,
     P_J_M,
@@ -674,6 +702,128 @@ def stored_energies(i_d, i_q, omega_m, pp):
     return pp[P_K_DQ] * w, e_kin
 
 
+# -- the battery (``PlantParams.battery`` 'ecm'; docs/speed-range.md, "The battery") ------------------------------
+@kernel()
+def battery_ocv(soc, pp):
+    """The battery's open-circuit voltage [V] at the state of charge ``soc`` [-]: the table ``P_BAT_OCV`` (``P_BAT_N``
+    points, states of charge rising from 0 to 1), interpolated linearly, held at its ends outside [0, 1]."""
+    n = int(pp[P_BAT_N])
+    o = P_BAT_OCV
+    v = P_BAT_OCV + BAT_OCV_MAX
+    if soc <= pp[o]:
+        return pp[v]
+    if soc >= pp[o + n - 1]:
+        return pp[v + n - 1]
+    k = 1
+    while soc > pp[o + k]:
+        k += 1
+    z0 = pp[o + k - 1]
+    v0 = pp[v + k - 1]
+    return v0 + (pp[v + k] - v0) * (soc - z0) / (pp[o + k] - z0)
+
+
+@kernel()
+def battery_link(pp, ee):
+    """The inverter's slots that depend on the DC link's voltage set at the battery's terminal voltage ``E_BAT_V``
+    (held over the step, as the inverter measures its DC link once a period): the switching losses' share of the
+    loss voltage (``P_INV_V``), 1 / v_dc of the duties (``P_INV_VDC``) and the dead time's error (``P_DT_V``)."""
+    v_dc = ee[E_BAT_V]
+    if pp[P_INV] != 0.0:
+        pp[P_INV_V] = pp[P_INV_V0] + pp[P_INV_KSW] * v_dc
+        pp[P_INV_VDC] = 1.0 / v_dc
+    if pp[P_DT_K] != 0.0:
+        pp[P_DT_V] = v_dc * pp[P_DT_K]
+
+
+@kernel()
+def dc_link_limit(pp, ee, u_lim):
+    """The inverter's voltage limit for the next step [V]: ``u_lim`` (v_dc / sqrt 3 of the ideal link, 0 = none), or
+    with the battery its terminal voltage over sqrt 3 (the linear range of the space-vector modulation)."""
+    if pp[P_BAT] != 0.0:
+        return ee[E_BAT_V] / math.sqrt(3.0)
+    return u_lim
+
+
+@kernel()
+def battery_limits(pp, ee):
+    """The battery's charge acceptance and discharge power now [W] (``E_BAT_P_CHG``, ``E_BAT_P_DIS``), what a battery
+    management system tells the drive: the charge current ``P_BAT_I_CHG``, falling linearly to 0 from the state of
+    charge ``P_BAT_SOC_TAPER`` to 1 and bounded so that the terminal voltage stays at or below ``P_BAT_V_MAX``; the
+    discharge current ``P_BAT_I_DIS`` (0 at a state of charge of 0 or less), bounded so that it stays at or above
+    ``P_BAT_V_MIN``; each power at the terminal voltage that current gives through R0 behind the open-circuit voltage
+    less the RC pair's (the pair's own response left out: an instant's limit, as a 10 s pulse power is quoted)."""
+    soc = ee[E_BAT_SOC]
+    e = battery_ocv(soc, pp) - ee[E_BAT_VRC]
+    r0 = pp[P_BAT_R0]
+    i_c = pp[P_BAT_I_CHG]
+    taper = pp[P_BAT_SOC_TAPER]
+    if soc >= 1.0:
+        i_c = 0.0
+    elif soc > taper:
+        i_c = i_c * (1.0 - soc) / (1.0 - taper)
+    i_d = pp[P_BAT_I_DIS] if soc > 0.0 else 0.0
+    if r0 > 0.0:
+        i_c = min(i_c, max((pp[P_BAT_V_MAX] - e) / r0, 0.0))
+        i_d = min(i_d, max((e - pp[P_BAT_V_MIN]) / r0, 0.0))
+    ee[E_BAT_P_CHG] = (e + r0 * i_c) * i_c
+    ee[E_BAT_P_DIS] = (e - r0 * i_d) * i_d
+
+
+@kernel()
+def battery_reset(pp, ee):
+    """The battery at rest at its initial state of charge: the RC pair discharged, the terminal voltage the
+    open-circuit voltage, its limits (``battery_limits``)."""
+    ee[E_BAT_SOC] = pp[P_BAT_SOC0]
+    ee[E_BAT_VRC] = 0.0
+    ee[E_BAT_V] = battery_ocv(pp[P_BAT_SOC0], pp)
+    ee[E_BAT_I] = 0.0
+    battery_limits(pp, ee)
+
+
+@kernel()
+def battery_step(p_dc, dt, pp, ee):
+    """The battery over a step of ``dt`` [s] delivering the DC power ``p_dc`` [W] (the step's mean, from the RK4 of the
+    motor; negative: charging): the equivalent circuit v = OCV(soc) - R0 i - v_rc, C1 dv_rc/dt = i - v_rc / R1, with
+    the current i held over the step. The current is the one whose mean terminal voltage times it is ``p_dc``: with
+    v_rc exact over the step, its mean is phi v_rc0 + R1 (1 - phi) i (phi = tau / dt (1 - exp(-dt / tau))), so that
+    p_dc = (E - R i) i with E = OCV(soc0) - phi v_rc0, R = R0 + R1 (1 - phi): the algebraic loop of the DC link
+    through the internal resistance, closed within the step (the smaller root, 2 p / (E + sqrt(E^2 - 4 R p)); a power
+    beyond E^2 / (4 R), more than the battery can give, leaves the current NaN: the plant fails the step). Then the
+    charge, the state of charge (the start's less the charge over the capacity), v_rc (exact), the terminal voltage at
+    the end of the step (the next step's DC link) and the energies: chemical OCV(soc0) i dt, the losses R0 i^2 dt plus
+    the RC pair's R1 share (the energy into the pair less the change of its capacitor's), the capacitor's energy; then
+    the limits (``battery_limits``). Chemical = terminal + losses + the capacitor's change, to round-off."""
+    soc0 = ee[E_BAT_SOC]
+    v_rc0 = ee[E_BAT_VRC]
+    ocv = battery_ocv(soc0, pp)
+    r0 = pp[P_BAT_R0]
+    r1 = pp[P_BAT_R1]
+    a = 0.0
+    phi = 0.0
+    if r1 > 0.0:
+        tau = pp[P_BAT_TAU]
+        a = math.exp(-dt / tau)
+        phi = tau / dt * (1.0 - a)
+    e = ocv - phi * v_rc0
+    r = r0 + r1 * (1.0 - phi)
+    disc = e * e - 4.0 * r * p_dc
+    i = 2.0 * p_dc / (e + math.sqrt(disc)) if disc >= 0.0 else math.nan
+    v_rc_mean = phi * v_rc0 + r1 * (1.0 - phi) * i
+    v_rc = r1 * i + (v_rc0 - r1 * i) * a
+    w0 = ee[E_BAT_W]
+    w1 = 0.5 * pp[P_BAT_C1] * v_rc * v_rc
+    ee[E_BAT_CHEM] += ocv * i * dt
+    ee[E_BAT_LOSS] += r0 * i * i * dt + (v_rc_mean * i * dt - (w1 - w0))
+    ee[E_BAT_W] = w1
+    ee[E_BAT_Q] += i * dt
+    soc = pp[P_BAT_SOC0] - ee[E_BAT_Q] / pp[P_BAT_Q]
+    ee[E_BAT_SOC] = soc
+    ee[E_BAT_VRC] = v_rc
+    ee[E_BAT_I] = i
+    ee[E_BAT_V] = battery_ocv(soc, pp) - r0 * i - v_rc
+    battery_limits(pp, ee)
+
+
 @kernel()
 def _stage_sum(ra, rb, rc, rd, i):
     """RK4's weighted sum of power i of the four stages, a + 2 b + 2 c + d (times h/6 by the caller)."""
@@ -705,6 +855,9 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     starts from ``flux_linkages`` of the state's currents (Newton, to round-off) and returns the
     currents ``flux_currents`` of the fluxes it ends with; the state and the outputs stay the
     currents."""
+    battery = pp[P_BAT] != 0.0
+    if battery:  # the inverter at the battery's terminal voltage of the step before
+        battery_link(pp, ee)
     n = int(pp[P_SUBSTEPS])
     if pp[P_SUBSTEP_ANGLE] > 0.0:  # at most that angle per sub-step: accurate at top speed
         m = abs(pp[P_N] * omega_m) * dt / pp[P_SUBSTEP_ANGLE]
@@ -761,6 +914,8 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     ee[E_INVERTER] += w * s_inv
     ee[E_IRON] += w * s_fe
     ee[E_P_DC] = w * s_dc / dt
+    if battery:  # the battery delivers the step's DC power
+        battery_step(ee[E_P_DC], dt, pp, ee)
     dx = pp[P_R_W] / (pp[P_N_G] * pp[P_N]) * (x3 - theta_e)
     x3 = wrap_angle(x3)
     if flux:  # the currents of the new fluxes
