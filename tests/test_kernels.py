@@ -169,13 +169,16 @@ def test_each_slot_is_a_module_constant_and_no_two_overlap(table, size):
 
 def test_the_offsets_are_those_the_kernels_were_written_with():
     assert (kernels.P_SUBSTEPS, kernels.P_DT_V, kernels.P_SAT_AQ, kernels.P_T_BRAKE, kernels.PLANT_PARAMS) == (
-        21, 22, 26, 29, 56)
-    assert (kernels.E_DC, kernels.E_P_DC, kernels.E_IRON, kernels.PLANT_ENERGY) == (0, 12, 13, 14)
+        21, 22, 26, 29, 120)
+    assert (kernels.E_DC, kernels.E_P_DC, kernels.E_IRON, kernels.PLANT_ENERGY) == (0, 12, 13, 24)
+    # the battery's slots, after the ideal link's (0 there with the ideal link)
+    assert (kernels.P_BAT, kernels.P_BAT_OCV, kernels.P_DT_K, kernels.E_BAT_SOC, kernels.E_BAT_P_DIS) == (
+        56, 69, 119, 14, 23)
     assert (kernels.S_X, kernels.S_THETA_PRIOR, kernels.S_P, kernels.S_PHT, kernels.S_K, kernels.S_A,
             kernels.S_STARTED, kernels.S_MODE, kernels.S_STILL_OUT, kernels.UNIT_STATE) == (
         15, 20, 21, 46, 56, 66, 91, 92, 113, 196)
     assert (kernels.C_Q, kernels.C_C_MID, kernels.C_P0, kernels.C_T_RAMP, kernels.C_P0_ALIGNED,
-            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 138)
+            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 142)
     # the reference generator's slots, at the end of both unit vectors
     assert (kernels.S_I_DREF, kernels.S_T_AVAIL, kernels.C_REF_MODE, kernels.C_BRAKE_GAIN) == (114, 118, 87, 94)
     # the speed loop's feedforward, after them

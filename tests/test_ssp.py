@@ -166,7 +166,7 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     now in the system), and still valid SSP 1.0."""
     # the paper's 2, their 4 variants, 4 sensorless (one with injection), 3 acceleration, 13 drive-cycle runs (4
     # with injection)
-    assert len(SCENARIOS) == 26
+    assert len(SCENARIOS) == 28
     # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit
     ctrl = "FocSensorless" if scenario.endswith("-injection") else "FocEkf5"
     args = ["export-ssp", scenario, "-o", str(tmp_path / "p.ssp"), "--plant", str(fmus["PmsmEvPlant"]),
