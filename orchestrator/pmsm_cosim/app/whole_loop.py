@@ -97,6 +97,9 @@ def build(spec: SystemSpec) -> tuple[WholeLoop, dict[str, str]]:
     roles = _roles(spec)
     comps = {roles[c.name]: c for c in spec.components}
     plant_start, ctrl_start = comps["plant"].start, comps["ctrl"].start
+    if plant_start.get("battery", "ideal") != "ideal":  # the battery's link to the controller is not in the loop
+        raise NotCovered(f"{spec.name}: the whole loop covers the ideal DC link only (battery = "
+                         f"{plant_start['battery']!r})")
     plant = Plant(_group(MotorParams(), plant_start), _group(VehicleParams(), plant_start),
                   _group(PlantParams(), plant_start))
     observer, defaults = CONTROLLERS[Path(comps["ctrl"].fmu).stem]
