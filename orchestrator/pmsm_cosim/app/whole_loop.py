@@ -50,7 +50,11 @@ PLANT = "PmsmEvPlant"
 WIRING = {("plant", "i_alpha", "ctrl", "i_alpha"), ("plant", "i_beta", "ctrl", "i_beta"),
           ("plant", "theta_e", "ctrl", "theta_meas"), ("plant", "omega_m", "ctrl", "omega_meas"),
           ("ctrl", "v_alpha", "plant", "v_alpha"), ("ctrl", "v_beta", "plant", "v_beta"),
-          ("ctrl", "T_brake", "plant", "T_brake")}
+          ("ctrl", "T_brake", "plant", "T_brake"),
+          # the battery's DC link: 0 with the ideal link, which the controller then ignores (a plant on the battery
+          # is not covered, ``build``), so the loop does not transfer them
+          ("plant", "v_bat", "ctrl", "v_dc_meas"), ("plant", "P_charge_max", "ctrl", "P_charge_max"),
+          ("plant", "P_discharge_max", "ctrl", "P_discharge_max")}
 #: the signal inputs it sets: (instance role, variable) -> (target kind, slot)
 SIGNAL_INPUTS = {("plant", "delta"): (_k.TARGET_PLANT, _k.PIO_DELTA),
                  ("ctrl", "omega_ref"): (_k.TARGET_UNIT, _k.UIO_OMEGA_REF)}
