@@ -220,7 +220,8 @@ def test_bad_battery_input_on_the_command_line_is_one_line_and_exit_2(tmp_path, 
 def test_the_first_60_s_of_wltc3b_battery_close_the_balances(tmp_path):
     """The shipped scenario on the battery: the plant's balance (ideal link's terms) and the battery's close to
     1e-6 of the throughput; the state of charge falls from 0.9 by the charge drawn; the controller reads the
-    battery's voltage (the run completes in the band)."""
+    battery's voltage (the run completes in the band); from a full pack the charge acceptance refuses the braking
+    the friction brake then takes."""
     from pmsm_cosim.app.cli import main
     from pmsm_cosim.engine.recording import read_results
     from pmsm_ev import cycle_energy as ce
@@ -238,3 +239,10 @@ def test_the_first_60_s_of_wltc3b_battery_close_the_balances(tmp_path):
     assert abs(bat["residual_Wh"]) < 1e-6 * metrics["energy"]["drawn_Wh"]
     assert bat["chemical_Wh"] > bat["terminal_Wh"] > 0.0 and bat["v_bat_min"] < bat["v_bat_max"]
     assert metrics["trace"]["inside_share"] > 0.99
+    # from a full pack the charge acceptance is 0 and grows as the charge falls: the friction brake takes the rest
+    full = tmp_path / "full"
+    assert main(["run", "wltc3b-battery", "--stop-time", "60", "--set", "plant.bat_soc0=1.0", "--out", str(full),
+                 "--quiet", "--no-figures"]) == 0
+    refused = json.loads((full / "metrics.json").read_text())["energy"]
+    assert metrics["energy"]["brake_Wh"] < 1e-9 and refused["brake_Wh"] > 3.0
+    assert refused["regen_Wh"] < 0.5 * metrics["energy"]["regen_Wh"]
