@@ -350,7 +350,7 @@ def test_build_cli_reports_up_to_date(fmus, capsys):
 def test_bundled_imports_are_renamed():
     src = textwrap.dedent("""\
         from pmsm_ev import __version__
-        from pmsm_ev.plant import BATTERY_SLOTS, Plant
+        from pmsm_ev.plant import Plant
         from pmsm_ev_fmus.slave_support import (DriveSlave,
                                                 FmuUsageError)
         import math
