@@ -4,7 +4,7 @@ from Python as the FMUs call them, without the FMI plumbing and the master (whic
 
     python benchmarks/kernel_split.py [--steps 100000]
 
-The drive is the shipped ``wltc3b-sensorless``'s: the start values of its components ``ctrl`` and
+The drive is the shipped ``wltc3b-if``'s: the start values of its components ``ctrl`` and
 ``plant`` are read from the system file and given to ``ControlUnit`` (sensorless) and ``Plant`` by the
 names of their parameter dataclasses' fields, as the FMUs take them. It prints, in us per call:
 
@@ -30,7 +30,7 @@ from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import SENSORLESS_EKF, ControllerParams, MotorParams, PlantParams, StartupParams, VehicleParams
 from pmsm_ev.plant import Plant
 
-SYSTEM = "wltc3b-sensorless"
+SYSTEM = "wltc3b-if"
 DT = 1e-4  #: [s] the scenario's step and the unit's sample period
 PLANT_SPEEDS = (0.0, 100.0, 300.0, 600.0, 1000.0, 1500.0)  #: [rad/s] the plant's speed held
 

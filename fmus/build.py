@@ -109,6 +109,8 @@ BINDINGS = ("lean", "pythonfmu")
 #: the FMU's loader (fmus/README.md, "Hosts that are not Python"): its C source, and the name the lean binding
 #: takes behind it in binaries/linux64/ (the loader is binaries/linux64/<model>.so)
 LOADER_SOURCE = HERE / "fmu_loader.c"
+#: the FMI 2.0 types both C libraries include (beside them: found by ``#include "..."`` from their folder)
+C_HEADER = HERE / "fmi2_binding.h"
 BINDING_LIBRARY = "pmsm-binding.so"
 #: resources/ file naming the interpreter the FMU was built with (the loader's third choice of a Python)
 BUILT_PYTHON_FILE = "build_python.txt"
@@ -127,9 +129,9 @@ def binding_requested() -> str:
 
 def _compiled(source_path: Path, prefix: str, python_headers: bool) -> tuple[Path | None, str]:
     """``source_path`` compiled into a shared library (``cc``, or ``$CC``; no libpython linked), kept in the
-    user's cache (``user_cache_dir()/binding/``) under the hash of its source (and of the Python headers, if it
-    uses them): (path, "") or (None, why it cannot be built)."""
-    source = source_path.read_bytes()
+    user's cache (``user_cache_dir()/binding/``) under the hash of its source and of ``C_HEADER`` (and of the Python
+    headers, if it uses them): (path, "") or (None, why it cannot be built)."""
+    source = source_path.read_bytes() + C_HEADER.read_bytes()  # the header it includes changes it too
     include = sysconfig.get_paths()["include"] if python_headers else ""
     key = hashlib.sha256(source + include.encode()).hexdigest()[:16]
     folder = user_cache_dir() / "binding"
@@ -366,6 +368,7 @@ def source_hash(name: str) -> str:
     if binding == "lean":
         add("lean_binding.c", LEAN_SOURCE.read_bytes())
         add("fmu_loader.c", LOADER_SOURCE.read_bytes())
+        add("fmi2_binding.h", C_HEADER.read_bytes())
     for module in sorted(_fmus_modules(script)):
         add(f"fmus/{module}", (HERE / module).read_bytes())
     root = physics_dir()
@@ -390,7 +393,7 @@ def _source_signature() -> tuple:
             except OSError:
                 continue
             files.append((str(path), st.st_size, st.st_mtime_ns))
-    for source in (LEAN_SOURCE, LOADER_SOURCE):
+    for source in (LEAN_SOURCE, LOADER_SOURCE, C_HEADER):
         st = source.stat()
         files.append((str(source), st.st_size, st.st_mtime_ns))
     return (_pythonfmu_version(), os.environ.get(ENV_BINDING, ""), tuple(files))

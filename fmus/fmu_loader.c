@@ -20,7 +20,10 @@
  * loaded and pythonfmu sees an interpreter already running, as in a Python host (it neither starts nor
  * finalizes it). A libpython named directly is initialised with the home found above it (lib/pythonX.Y/os.py).
  * Where no Python is found, fmi2Instantiate logs one line through the host's logger (what was looked for, and
- * how to point at a Python) and returns NULL.
+ * how to point at a Python) and returns NULL. Where the process's Python is not a Python program's, pythonfmu's
+ * interpreter guard is reset at exit (release_wrapper), before pythonfmu's static destructors and, once the slaves'
+ * compiled kernels have loaded numba's LLVM, before LLVM's (plan_release): the kernels are compiled in such a host
+ * as in a Python program.
  *
  * Every other fmi2 function, and pmsm_fmu_fast_calls and pmsm_fmu_compiled_calls, are the binding's, called with
  * the same arguments: the instance is the binding's own. Python's C API is reached through dlsym only.
@@ -29,6 +32,7 @@
 #include <dlfcn.h>
 #include <errno.h>
 #include <limits.h>
+#include <link.h>
 #include <pthread.h>
 #include <spawn.h>
 #include <stdarg.h>
@@ -43,29 +47,8 @@
 
 extern char** environ;
 
-typedef void* fmi2Component;
-typedef void* fmi2ComponentEnvironment;
-typedef void* fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Integer;
-typedef int fmi2Boolean;
-typedef char fmi2Char;
-typedef const fmi2Char* fmi2String;
-typedef char fmi2Byte;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
-typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-typedef struct {
-    fmi2CallbackLogger logger;
-    void* (*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void*);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
+#include "fmi2_binding.h"
 
-#define EXPORT __attribute__((visibility("default")))
 #define ENV_PYTHON "PMSM_FMU_PYTHON"
 #define USER_FILE "python.txt"
 #define BUILT_FILE "build_python.txt"
@@ -391,6 +374,7 @@ static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 static void* binding = NULL;
 static int embedded = 0;        /* the process's Python is not a Python program's (started here, or by pythonfmu) */
 static int release_planned = 0; /* release_wrapper registered with atexit */
+static int release_after_llvm = 0; /* ... and again once numba's LLVM (llvmlite's library) was loaded */
 
 typedef int (*gil_ensure_t)(void);
 typedef void (*gil_release_t)(int);
@@ -431,6 +415,39 @@ static void release_wrapper(void)
     void (*finalize)(void) = (void (*)(void))dlsym(wrapper, "finalizePythonInterpreter");
     if (finalize != NULL) finalize();
     dlclose(wrapper);
+}
+
+/* dl_iterate_phdr's callback: 1 at llvmlite's library (numba's LLVM), which has C++ static destructors */
+static int is_llvm(struct dl_phdr_info* info, size_t size, void* data)
+{
+    (void)size;
+    (void)data;
+    const char* base = info->dlpi_name ? strrchr(info->dlpi_name, '/') : NULL;
+    return base != NULL && strncmp(base + 1, "libllvmlite", 11) == 0;
+}
+
+/* where the process's Python is not a Python program's: release_wrapper at exit, registered after the first instance
+ * (pythonfmu's library loaded, its static destructors registered) and again once numba's compiled kernels have
+ * loaded llvmlite's library. Exit handlers run in the reverse order of their registration, so the second runs
+ * before LLVM's static destructors: what release_wrapper may do then (an interpreter that pythonfmu started is
+ * finalized with it, numba's objects freed through LLVM) finds LLVM still there, as at the end of a Python program,
+ * which finalizes its interpreter before exit runs the handlers. Called after the calls in which the slaves build
+ * their physics (and so load the kernels): fmi2Instantiate, fmi2ExitInitializationMode, fmi2Reset, fmi2Terminate,
+ * fmi2FreeInstance. The second release finds the guard reset already and does nothing more. */
+static void plan_release(void)
+{
+    pthread_mutex_lock(&lock);
+    if (embedded && binding != NULL) {
+        if (!release_planned) {
+            release_planned = 1;
+            atexit(release_wrapper);
+        }
+        if (!release_after_llvm && dl_iterate_phdr(is_llvm, NULL)) {
+            release_after_llvm = 1;
+            atexit(release_wrapper);
+        }
+    }
+    pthread_mutex_unlock(&lock);
 }
 
 /* bring a Python into a process that has none; 0, or -1 with what was looked for in `why` */
@@ -519,12 +536,20 @@ static void* fn(const char* name)
         return f(__VA_ARGS__);                                                                               \
     } while (0)
 
+/* FORWARD, then plan_release(): a call in which a slave may have loaded the kernels (and so numba) */
+#define FORWARD_PLANNED(name, type, ...)                                                                     \
+    do {                                                                                                     \
+        static type f = NULL;                                                                                \
+        if (f == NULL) f = (type)fn(#name);                                                                  \
+        if (f == NULL) return fmi2Error;                                                                     \
+        fmi2Status status = f(__VA_ARGS__);                                                                  \
+        plan_release();                                                                                      \
+        return status;                                                                                       \
+    } while (0)
+
 /* -- the FMI functions ----------------------------------------------------------------------------------- */
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
-
-typedef fmi2Component (*instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions*,
-                                       fmi2Boolean, fmi2Boolean);
 
 EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
@@ -552,63 +577,56 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         return NULL;
     }
     fmi2Component c = f(instanceName, fmuType, fmuGUID, fmuResourceLocation, functions, visible, loggingOn);
-    pthread_mutex_lock(&lock);
-    if (c != NULL && embedded && !release_planned) { /* pythonfmu's library is loaded now: its statics made */
-        release_planned = 1;
-        atexit(release_wrapper);
-    }
-    pthread_mutex_unlock(&lock);
+    if (c != NULL) plan_release(); /* pythonfmu's library is loaded now: its statics made */
     return c;
 }
 
-typedef void (*free_t)(fmi2Component);
 EXPORT void fmi2FreeInstance(fmi2Component c)
 {
     free_t f = (free_t)fn("fmi2FreeInstance");
     if (f != NULL && c != NULL) f(c);
+    if (c != NULL) plan_release();
 }
 
 /* pmsm_fmu_fast_calls(instance): the lean binding's counter (fmus/lean_binding.c), 0 without one */
-typedef unsigned long long (*fast_calls_t)(fmi2Component);
 EXPORT unsigned long long pmsm_fmu_fast_calls(fmi2Component c)
 {
-    fast_calls_t f = (fast_calls_t)fn("pmsm_fmu_fast_calls");
+    calls_t f = (calls_t)fn("pmsm_fmu_fast_calls");
     return f ? f(c) : 0;
 }
 
 /* pmsm_fmu_compiled_calls(instance): the lean binding's count of the calls served with no Python, 0 without one */
 EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi2Component c)
 {
-    fast_calls_t f = (fast_calls_t)fn("pmsm_fmu_compiled_calls");
+    calls_t f = (calls_t)fn("pmsm_fmu_compiled_calls");
     return f ? f(c) : 0;
 }
 
-typedef fmi2Status (*debug_t)(fmi2Component, fmi2Boolean, size_t, const fmi2String[]);
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[])
 {
     FORWARD(fmi2SetDebugLogging, debug_t, c, on, n, categories);
 }
 
-typedef fmi2Status (*setup_t)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol, fmi2Real start,
                                       fmi2Boolean stopDefined, fmi2Real stop)
 {
     FORWARD(fmi2SetupExperiment, setup_t, c, tolDefined, tol, start, stopDefined, stop);
 }
 
-typedef fmi2Status (*plain_t)(fmi2Component);
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c) { FORWARD(fmi2EnterInitializationMode, plain_t, c); }
-EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD(fmi2ExitInitializationMode, plain_t, c); }
-EXPORT fmi2Status fmi2Terminate(fmi2Component c) { FORWARD(fmi2Terminate, plain_t, c); }
-EXPORT fmi2Status fmi2Reset(fmi2Component c) { FORWARD(fmi2Reset, plain_t, c); }
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    FORWARD_PLANNED(fmi2ExitInitializationMode, plain_t, c);
+}
+EXPORT fmi2Status fmi2Terminate(fmi2Component c)
+{
+    FORWARD_PLANNED(fmi2Terminate, plain_t, c);
+}
+EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    FORWARD_PLANNED(fmi2Reset, plain_t, c);
+}
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c) { FORWARD(fmi2CancelStep, plain_t, c); }
-
-typedef fmi2Status (*get_real_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
-typedef fmi2Status (*set_real_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
-typedef fmi2Status (*get_int_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]);
-typedef fmi2Status (*set_int_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
-typedef fmi2Status (*get_str_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2String[]);
-typedef fmi2Status (*set_str_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]);
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
@@ -646,12 +664,6 @@ EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], 
     FORWARD(fmi2SetString, set_str_t, c, vr, nvr, value);
 }
 
-typedef fmi2Status (*state_t)(fmi2Component, fmi2FMUstate*);
-typedef fmi2Status (*set_state_t)(fmi2Component, fmi2FMUstate);
-typedef fmi2Status (*state_size_t)(fmi2Component, fmi2FMUstate, size_t*);
-typedef fmi2Status (*serialize_t)(fmi2Component, fmi2FMUstate, fmi2Byte[], size_t);
-typedef fmi2Status (*deserialize_t)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate*);
-
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) { FORWARD(fmi2GetFMUstate, state_t, c, state); }
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
@@ -674,13 +686,6 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
     FORWARD(fmi2DeSerializeFMUstate, deserialize_t, c, bytes, size, state);
 }
 
-typedef fmi2Status (*derivative_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2ValueReference[],
-                                   size_t, const fmi2Real[], fmi2Real[]);
-typedef fmi2Status (*input_derivatives_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[],
-                                          const fmi2Real[]);
-typedef fmi2Status (*output_derivatives_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[],
-                                           fmi2Real[]);
-
 EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference unknown[], size_t nu,
                                                const fmi2ValueReference known[], size_t nk, const fmi2Real dv[],
                                                fmi2Real df[])
@@ -698,17 +703,10 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
     FORWARD(fmi2GetRealOutputDerivatives, output_derivatives_t, c, vr, nvr, order, value);
 }
 
-typedef fmi2Status (*do_step_t)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean flag)
 {
     FORWARD(fmi2DoStep, do_step_t, c, t, h, flag);
 }
-
-typedef fmi2Status (*status_t)(fmi2Component, const fmi2StatusKind, fmi2Status*);
-typedef fmi2Status (*real_status_t)(fmi2Component, const fmi2StatusKind, fmi2Real*);
-typedef fmi2Status (*int_status_t)(fmi2Component, const fmi2StatusKind, fmi2Integer*);
-typedef fmi2Status (*bool_status_t)(fmi2Component, const fmi2StatusKind, fmi2Boolean*);
-typedef fmi2Status (*str_status_t)(fmi2Component, const fmi2StatusKind, fmi2String*);
 
 EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status* value)
 {

@@ -1,11 +1,11 @@
 """The controller-plus-observer slave shared by FocEkf5, FocEkf4, FocEkf5AB, FocSensored and
 FocSensorless: ``pmsm_ev.control_unit.ControlUnit`` as an FMI 2.0 co-simulation unit.
 
-No equations here: a control period is ``ControlUnit.step(i_alpha, i_beta, omega_ref,
-theta_meas, omega_meas)`` (called as the unit's ``kernel_step``), then the unit's outputs are
-copied into the output variables. With the kernels compiled, the lean binding runs the same
-step in compiled code instead (``pmsm_ev.kernels.unit_fmu_step`` on the buffers of ``compiled_step``;
-fmus/README.md, "The compiled step"): a change of ``do_step`` or of the sample clock is made there too.
+No equations here: the control periods of a step are the kernel ``unit_periods`` on the unit's buffer
+``ControlUnit.io`` (``ControlUnit.step``'s kernel, then the control frame), the inputs written into it and the
+outputs copied from it into the output variables. With the kernels compiled, the lean binding runs the whole
+step in compiled code instead (``pmsm_ev.kernels.unit_fmu_step``: the same sample clock, ``sample_instant``, and
+the same ``unit_periods``, on the buffers of ``compiled_step``; fmus/README.md, "The compiled step").
 
 The unit keeps its own sample clock: the sample period ``dt`` is a parameter (0, the
 default: the size of the first communication step), the sample instants are
@@ -16,38 +16,21 @@ one within it of ``t + h`` as ``t + h``, i.e. the next step's), so that a master
 arithmetic (an accumulated sum ``t += h``, integer nanoseconds) neither moves a period
 to another step nor runs it twice, and a sliver step at the end of a run runs none. With
 ``h = dt`` every step runs exactly one period, as the unit did before it had a clock.
+(``SAMPLE_TOLERANCE`` is ``pmsm_ev.control_unit``'s, which the whole-loop reference uses too.)
 """
 
 from __future__ import annotations
 
 import math
 
-from pmsm_ev import __version__
+from pmsm_ev import __version__, accel
 from pmsm_ev import kernels as _k
-from pmsm_ev.control_unit import ControlUnit
+from pmsm_ev.control_unit import IO_SLOTS, SAMPLE_TOLERANCE, ControlUnit, parameter_groups
 from pmsm_ev.params import (
     DT_DEFAULT,
-    SENSORLESS_EKF,
-    ControllerParams,
-    EkfParams,
-    InjectionParams,
-    MotorParams,
     ParameterError,
-    StartupParams,
 )
 from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, check_fields
-
-#: an instant within this fraction of dt of a communication point counts as that point:
-#: far above the drift of time accumulated as t += h (1.6e-4 dt after 350 s at h = dt,
-#: 7e-4 dt at h = dt/3), far below any step size that makes sense
-SAMPLE_TOLERANCE = 1.0e-2
-
-#: the slave's inputs and the outputs its step writes, in the compiled step's buffer
-#: (``pmsm_ev.kernels.UNIT_IO_LAYOUT``)
-_IO_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas", "v_dc_meas", "P_charge_max",
-              "P_discharge_max")
-_IO_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d", "i_q", "i_qref", "i_d_hat", "i_q_hat", "omega_hat",
-               "theta_hat", "T_L_hat", "mode", "fault", "theta_ctrl", "omega_ctrl")
 
 DESCRIPTION = (
     "Speed and current control of a sensorless EV drive (Wicaksono, Harini, Yusivar, "
@@ -163,9 +146,7 @@ class FocSlave(DriveSlave):
         self._sensorless = observer == "sensorless"
         if self._sensorless:  # it never reads the measured angle and speed: any value there, NaN included
             self.unread_inputs = frozenset(("theta_meas", "omega_meas"))
-            self.add_parameters(ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams, InjectionParams)
-        else:
-            self.add_parameters(ControllerParams, EkfParams, MotorParams)
+        self.add_parameters(*parameter_groups(observer))
         self.add_parameter("angle_source", "measured")  # the same interface for every controller
         self.add_parameter("dt", 0.0)
         self._unit = None
@@ -200,12 +181,10 @@ class FocSlave(DriveSlave):
         self._k_next = None
 
     def _build_unit(self, dt: float) -> None:
-        self._unit = ControlUnit(self._observer, self.angle_source, self.parameters(MotorParams),
-                                 self.parameters(ControllerParams), self.parameters(EkfParams), dt,
-                                 self.parameters(StartupParams) if self._sensorless else None,
-                                 self.parameters(InjectionParams) if self._sensorless else None)
-        self._measured_frame = self._unit.angle_source == "measured"
-        self._kernel_step = self._unit.kernel_step
+        self._unit = ControlUnit.from_groups(self._observer, self.angle_source, self.parameters, dt)
+        kernels = self._unit._kernels
+        self._periods = accel.direct(kernels.unit_periods)
+        self._sample_instant = accel.direct(kernels.sample_instant)
         self.mark_built()
         self._copy_outputs()
 
@@ -228,18 +207,8 @@ class FocSlave(DriveSlave):
         self._dt = self._k_next = None
 
     def _copy_outputs(self) -> None:
-        u = self._unit
-        self.v_alpha, self.v_beta = u.v_out
-        self.v_d = u.v_d
-        self.v_q = u.v_q
-        self.i_d = u.i_d
-        self.i_q = u.i_q
-        self.i_qref = u.i_qref
-        self.i_d_hat, self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat = u.estimates
-        self.mode = u.mode
-        self.fault = u.fault
-        self.theta_ctrl = u.theta_ctrl if self._sensorless or u.angle_source == "estimated" else self.theta_meas
-        self.omega_ctrl = u.omega_ctrl
+        for name, value in self._unit.outputs(self.theta_meas).items():
+            setattr(self, name, value)
 
     def _start_clock(self, current_time: float, step_size: float) -> None:
         """First step: the sample period (the parameter, else ``step_size``) and the first
@@ -250,44 +219,28 @@ class FocSlave(DriveSlave):
             if step_size != self._unit.dt:
                 self._build_unit(step_size)
             self._dt = step_size
-        self._k_next = math.ceil((current_time - self._t0) / self._dt - SAMPLE_TOLERANCE)
+        self._k_next = self._sample_instant(current_time, self._t0, self._dt, SAMPLE_TOLERANCE)
 
     # -- the compiled step (``pmsm_ev.kernels.fmu``: ``unit_fmu_step`` on these buffers) -------------------------
     def compiled_slots(self) -> dict[str, int]:
-        return {name: getattr(_k, "UIO_" + name.upper()) for name in _IO_INPUTS + _IO_OUTPUTS + ("T_brake",)}
+        return {**IO_SLOTS, "T_brake": _k.UIO_T_BRAKE}
 
     def compiled_step(self):
-        """(the controllers' C step, the buffer, the unit's state and parameter vectors), filled from the slave
-        and its unit; None where the kernels run as plain Python."""
+        """(the controllers' C step, the unit's buffer ``ControlUnit.io`` filled from the slave, the unit's state and
+        parameter vectors); None where the kernels run as plain Python."""
         u = self._unit
         if u is None or not getattr(u._kernels, "JIT", False):
             return None
-        io = self.__dict__.get("_io")
-        if io is None:
-            import numpy as np  # noqa: PLC0415 - numpy is there: the kernels are compiled
-
-            io = self._io = np.zeros(_k.UNIT_IO)
-            self._io_address = io.ctypes.data
-            self._step_address = u._kernels.fmu_step_address("unit")
-        for name in _IO_INPUTS + _IO_OUTPUTS:
-            io[getattr(_k, "UIO_" + name.upper())] = getattr(self, name)
-        io[_k.UIO_T_BRAKE] = u.T_brake
-        io[_k.UIO_DT] = self._dt or 0.0
-        io[_k.UIO_T0] = self._t0
-        io[_k.UIO_CLOCK] = 0.0 if self._k_next is None else 1.0
-        io[_k.UIO_K_NEXT] = self._k_next or 0
-        io[_k.UIO_UNIT_DT] = u.dt
-        io[_k.UIO_TOLERANCE] = SAMPLE_TOLERANCE
-        io[_k.UIO_KIND] = (_k.UNIT_KIND_INJECTION if u.injecting else _k.UNIT_KIND_SENSORLESS if self._sensorless
-                           else _k.UNIT_KIND_CONTROL)
-        io[_k.UIO_MEASURED] = 1.0 if self._measured_frame else 0.0
-        io[_k.UIO_REFERENCE] = u.reference
-        return self._step_address, self._io_address, u._s.ctypes.data, u._c.ctypes.data
+        step = self.__dict__.get("_step_address")
+        if step is None:
+            step = self._step_address = u._kernels.fmu_step_address("unit")
+        u.load_io({name: getattr(self, name) for name in IO_SLOTS}, self._dt, self._t0, self._k_next)
+        return step, u.io.ctypes.data, u._s.ctypes.data, u._c.ctypes.data
 
     def compiled_pull(self) -> None:
-        values = self._io.tolist()
-        for name in _IO_INPUTS + _IO_OUTPUTS:
-            setattr(self, name, values[getattr(_k, "UIO_" + name.upper())])
+        values = self._unit.io.tolist()
+        for name, slot in IO_SLOTS.items():
+            setattr(self, name, values[slot])
         if values[_k.UIO_CLOCK]:
             self._dt = values[_k.UIO_DT]
             self._k_next = int(values[_k.UIO_K_NEXT])
@@ -303,22 +256,22 @@ class FocSlave(DriveSlave):
                 raise FmuUsageError(f"communication step size must be > 0 s (got {step_size!r})")
             if self._k_next is None:
                 self._start_clock(current_time, step_size)
-            k_end = math.ceil((current_time + step_size - self._t0) / self._dt - SAMPLE_TOLERANCE)
-            n = k_end - self._k_next  # the instants in [t, t + h), run on the inputs at t
-            if self.v_dc_meas > 0.0:  # a measured DC link (the compiled step's ``unit_fmu_step`` does the same)
-                self._unit.dc_link(self.v_dc_meas, self.P_charge_max, self.P_discharge_max)
-            while n > 0:  # (one per step when h = dt: no range object on the per-step path)
-                if self._sensorless:  # never reads theta_meas, omega_meas
-                    (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
-                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode, self.fault, self.theta_ctrl,
-                     self.omega_ctrl) = self._kernel_step(self.i_alpha, self.i_beta, self.omega_ref)
-                else:
-                    (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
-                     self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat) = self._kernel_step(
-                        self.i_alpha, self.i_beta, self.omega_ref, self.theta_meas, self.omega_meas)
-                    self.omega_ctrl = self.omega_hat
-                    self.theta_ctrl = self.theta_meas if self._measured_frame else self.theta_hat
-                n -= 1
+            k_end = self._sample_instant(current_time + step_size, self._t0, self._dt, SAMPLE_TOLERANCE)
+            if k_end > self._k_next:  # the instants in [t, t + h), run on the inputs at t
+                u = self._unit
+                io = u._io_items
+                io[_k.UIO_I_ALPHA] = self.i_alpha
+                io[_k.UIO_I_BETA] = self.i_beta
+                io[_k.UIO_OMEGA_REF] = self.omega_ref
+                io[_k.UIO_THETA_MEAS] = self.theta_meas
+                io[_k.UIO_OMEGA_MEAS] = self.omega_meas
+                io[_k.UIO_V_DC_MEAS] = self.v_dc_meas  # a measured DC link (0: the parameters')
+                io[_k.UIO_P_CHARGE_MAX] = self.P_charge_max
+                io[_k.UIO_P_DISCHARGE_MAX] = self.P_discharge_max
+                self._periods(u.io, u._s, u._c, k_end - self._k_next)
+                (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
+                 self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode, self.fault, self.theta_ctrl,
+                 self.omega_ctrl) = io[_k.UIO_V_ALPHA:_k.UIO_T_BRAKE]
                 self._k_next = k_end
         except Exception as exc:
             self._fail("fmi2DoStep", exc)

@@ -61,29 +61,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-typedef void* fmi2Component;
-typedef void* fmi2ComponentEnvironment;
-typedef void* fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Integer;
-typedef int fmi2Boolean;
-typedef char fmi2Char;
-typedef const fmi2Char* fmi2String;
-typedef char fmi2Byte;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
-typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-typedef struct {
-    fmi2CallbackLogger logger;
-    void* (*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void*);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
+#include "fmi2_binding.h"
 
-#define EXPORT __attribute__((visibility("default")))
 #define INNER_LIBRARY "pythonfmu-export.so"
 
 /* -- pythonfmu's library ------------------------------------------------------------------------------ */
@@ -497,10 +476,6 @@ static void direct_path(Instance* w)
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
 
-typedef fmi2Component (*instantiate_t)(fmi2String, fmi2Type, fmi2String, fmi2String, const fmi2CallbackFunctions*,
-                                       fmi2Boolean, fmi2Boolean);
-typedef void (*free_t)(fmi2Component);
-
 EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                                      fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
                                      fmi2Boolean visible, fmi2Boolean loggingOn)
@@ -552,13 +527,11 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
     free(W);
 }
 
-typedef fmi2Status (*debug_t)(fmi2Component, fmi2Boolean, size_t, const fmi2String[]);
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[])
 {
     FORWARD(fmi2SetDebugLogging, debug_t, W->inner, on, n, categories);
 }
 
-typedef fmi2Status (*setup_t)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real);
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol, fmi2Real start,
                                       fmi2Boolean stopDefined, fmi2Real stop)
 {
@@ -567,7 +540,6 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, f
     FORWARD(fmi2SetupExperiment, setup_t, W->inner, tolDefined, tol, start, stopDefined, stop);
 }
 
-typedef fmi2Status (*plain_t)(fmi2Component);
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     static plain_t fn = NULL;
@@ -618,9 +590,6 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     PyGILState_Release(gil);
     return status;
 }
-
-typedef fmi2Status (*get_real_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
-typedef fmi2Status (*set_real_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
 
 static fmi2Status forward_get_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
@@ -712,11 +681,6 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
     return ok ? fmi2OK : forward_set_real(c, vr, nvr, value);
 }
 
-typedef fmi2Status (*get_int_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[]);
-typedef fmi2Status (*set_int_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
-typedef fmi2Status (*get_str_t)(fmi2Component, const fmi2ValueReference[], size_t, fmi2String[]);
-typedef fmi2Status (*set_str_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[]);
-
 EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
 {
     FORWARD(fmi2GetInteger, get_int_t, W->inner, vr, nvr, value);
@@ -744,12 +708,6 @@ EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], 
 {
     FORWARD(fmi2SetString, set_str_t, W->inner, vr, nvr, value);
 }
-
-typedef fmi2Status (*state_t)(fmi2Component, fmi2FMUstate*);
-typedef fmi2Status (*set_state_t)(fmi2Component, fmi2FMUstate);
-typedef fmi2Status (*state_size_t)(fmi2Component, fmi2FMUstate, size_t*);
-typedef fmi2Status (*serialize_t)(fmi2Component, fmi2FMUstate, fmi2Byte[], size_t);
-typedef fmi2Status (*deserialize_t)(fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate*);
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state)
 {
@@ -782,13 +740,6 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
     FORWARD(fmi2DeSerializeFMUstate, deserialize_t, W->inner, bytes, size, state);
 }
 
-typedef fmi2Status (*derivative_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2ValueReference[],
-                                   size_t, const fmi2Real[], fmi2Real[]);
-typedef fmi2Status (*input_derivatives_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[],
-                                          const fmi2Real[]);
-typedef fmi2Status (*output_derivatives_t)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[],
-                                           fmi2Real[]);
-
 EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference unknown[], size_t nu,
                                                const fmi2ValueReference known[], size_t nk, const fmi2Real dv[],
                                                fmi2Real df[])
@@ -805,8 +756,6 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
 {
     FORWARD(fmi2GetRealOutputDerivatives, output_derivatives_t, W->inner, vr, nvr, order, value);
 }
-
-typedef fmi2Status (*do_step_t)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
 
 static fmi2Status forward_do_step(Instance* w, fmi2Real t, fmi2Real h, fmi2Boolean flag)
 {
@@ -902,12 +851,6 @@ EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 {
     FORWARD(fmi2CancelStep, plain_t, W->inner);
 }
-
-typedef fmi2Status (*status_t)(fmi2Component, const fmi2StatusKind, fmi2Status*);
-typedef fmi2Status (*real_status_t)(fmi2Component, const fmi2StatusKind, fmi2Real*);
-typedef fmi2Status (*int_status_t)(fmi2Component, const fmi2StatusKind, fmi2Integer*);
-typedef fmi2Status (*bool_status_t)(fmi2Component, const fmi2StatusKind, fmi2Boolean*);
-typedef fmi2Status (*str_status_t)(fmi2Component, const fmi2StatusKind, fmi2String*);
 
 EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status* value)
 {

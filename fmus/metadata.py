@@ -274,6 +274,15 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                         "realigned from standstill (an episode; a rotor turning at omega_down or faster: FOC "
                         "on the EKF); 0 = never"),
     "realign_max": (None, "realignments after a stall, without a handover up in between, before the fault latches"),
+    "soft_guard_angle": ("rad", "the synchronism guard's soft limit: beyond this lead over the rotor's angle the I-f "
+                                "vector turns no faster than the rotor (90 deg: the magnet torque's pull-out angle)"),
+    "guard_band": ("rad", "the guard lets go once the lead is back within soft_guard_angle less this (hysteresis)"),
+    "trust_move": ("rad", "in I-f at low speed the EKF is believed once it says the rotor has moved on the vector by "
+                          "more than this (a load change of half the vector's pull-out torque moves it 30 deg)"),
+    "relock_time": ("s", "a relocked vector leads the rotor in the direction of the torque that holds the load and "
+                         "brings the speed to the reference within this time"),
+    "still_time": ("s", "a stand in I-f ends once |omega_hat| has been above still_speed this long (the EKF's "
+                        "speed noise at a stand crosses it for a few periods)"),
     # InjectionParams: the sensorless unit at and near zero speed by high-frequency injection
     "low_speed": (None, "the strategy at and near zero speed: 'if' (alignment, I-f, handover) or 'injection' "
                         "(a square wave on the estimated d axis, the angle from the rotor's saliency, closed loop "

@@ -76,14 +76,11 @@ _BATTERY_OUTPUTS = {
 }
 
 
-#: the slave's inputs and outputs in the compiled step's buffer (``pmsm_ev.kernels.PLANT_IO_LAYOUT``); the
-#: outputs are also the plant's attributes of the same names (x_vehicle last)
-_IO_INPUTS = ("v_alpha", "v_beta", "delta", "T_brake")
-_IO_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle", "x_vehicle")
-_IO_VARIABLES = _IO_INPUTS + _IO_OUTPUTS
-#: the plant's other attributes there
-_IO_PLANT = ("delta", "T_brake", "clock", "samples", "v_alpha_applied", "v_beta_applied", "i_alpha_true",
-             "i_beta_true")
+#: the slave's inputs and outputs in the compiled step's buffer, the plant's ``io``
+#: (``pmsm_ev.kernels.PLANT_IO_LAYOUT``); the outputs are the plant's attributes of the same names there
+_IO_SLOTS = {name: getattr(_k, "PIO_" + name.upper()) for name in (
+    "v_alpha", "v_beta", "delta", "T_brake", "i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e",
+    "T_L_mech", "v_vehicle", "x_vehicle")}
 
 
 class _Energy:
@@ -218,50 +215,31 @@ class PmsmEvPlant(DriveSlave):
 
     # -- the compiled step (``pmsm_ev.kernels.fmu``: ``plant_fmu_step`` on these buffers) ------------------------
     def compiled_slots(self) -> dict[str, int]:
-        slots = {name: getattr(_k, "PIO_" + name.upper()) for name in _IO_VARIABLES}
+        slots = dict(_IO_SLOTS)
         slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in ENERGY_SLOTS.items()})
         slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in BATTERY_SLOTS.items()})
         slots["P_dc"] = 2 * COMPILED_BUFFER + _k.E_P_DC
         return slots
 
     def compiled_step(self):
-        """(the plant's C step, the buffer, the plant's parameter and energy vectors), filled from the slave and
-        its plant; None where the kernels run as plain Python or the plant has an inverter delay or the thermal
-        model (their state is Python's)."""
+        """(the plant's C step, the plant's buffer ``Plant.io`` with the slave's inputs and outputs written into it,
+        the plant's parameter and energy vectors); None where the kernels run as plain Python or the plant has an
+        inverter delay or the thermal model (their state is Python's)."""
         p = self._plant
         if p is None or not getattr(p._kernels, "JIT", False) or p.delay or p._thermal:
             return None
-        io = self.__dict__.get("_io")
-        if io is None:
-            import numpy as np  # noqa: PLC0415 - numpy is there: the kernels are compiled
-
-            io = self._io = np.zeros(_k.PLANT_IO)
-            self._io_address = io.ctypes.data
-            self._step_address = p._kernels.fmu_step_address("plant")
-        for name in _IO_INPUTS + _IO_OUTPUTS:
-            io[getattr(_k, "PIO_" + name.upper())] = getattr(self, name)
-        for name in _IO_PLANT:
-            io[getattr(_k, "PIO_PLANT_" + name.upper()) if name in ("delta", "T_brake")
-               else getattr(_k, "PIO_" + name.upper())] = getattr(p, name)
-        io[_k.PIO_U_LIM] = p._u_lim
-        io[_k.PIO_SENSORS] = 1.0 if p._sensors else 0.0
-        io[_k.PIO_SEED] = p._seed64 >> 32
-        io[_k.PIO_SEED + 1] = p._seed64 & 0xFFFFFFFF
-        for i, value in enumerate(p._sensor_args):
-            io[_k.PIO_SENSOR_ARGS + i] = value
-        return self._step_address, self._io_address, p._pp.ctypes.data, p.energy.ctypes.data
+        step = self.__dict__.get("_step_address")
+        if step is None:
+            step = self._step_address = p._kernels.fmu_step_address("plant")
+        io = p.io
+        for name, slot in _IO_SLOTS.items():
+            io[slot] = getattr(self, name)
+        return step, io.ctypes.data, p._pp.ctypes.data, p.energy.ctypes.data
 
     def compiled_pull(self) -> None:
-        values, p = self._io.tolist(), self._plant
-        for name in _IO_INPUTS + _IO_OUTPUTS:
-            setattr(self, name, values[getattr(_k, "PIO_" + name.upper())])
-        for name in _IO_PLANT:
-            setattr(p, name, values[getattr(_k, "PIO_PLANT_" + name.upper()) if name in ("delta", "T_brake")
-                                    else getattr(_k, "PIO_" + name.upper())])
-        p.samples = int(p.samples)
-        p.x_vehicle = self.x_vehicle
-        for name in _IO_OUTPUTS[:-1]:
-            setattr(p, name, getattr(self, name))
+        values = self._plant.io.tolist()
+        for name, slot in _IO_SLOTS.items():
+            setattr(self, name, values[slot])
 
     # -- FMI -------------------------------------------------------------------------
     def do_step(self, current_time, step_size):

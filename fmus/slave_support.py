@@ -736,3 +736,26 @@ class DriveSlave(Fmi2Slave):
                 SubElement(node, "Unknown", index=str(index[var.name]),
                            dependencies=" ".join(str(d) for d in deps))
         return root
+
+
+class PassThrough:
+    """The benchmark's pass-through units (``PassThroughPlant``, ``PassThroughFoc``; ``pmsm-cosim bench``): put
+    before a drive slave's class, it keeps that slave's interface, parameters and FMI plumbing but ``do_step``
+    computes nothing (the outputs keep their initial values), and its compiled step is the real slave's buffers
+    with the C step that computes nothing (``pmsm_ev.kernels.fmu``, "pass"): the floor of the FMI calls, in
+    compiled code where the kernels are compiled."""
+
+    @_checked_step  # behind the FMI 2.0 checks as every slave's (``DriveSlave.__init_subclass__`` wraps only a
+    def do_step(self, current_time, step_size):  # do_step of the class itself)
+        return True
+
+    def compiled_step(self):
+        offer = super().compiled_step()
+        if offer is None:
+            return None
+        step = self.__dict__.get("_pass_address")
+        if step is None:
+            from pmsm_ev import accel  # noqa: PLC0415 - compiled kernels exist: the offer above says so
+
+            step = self._pass_address = accel.kernels().fmu_step_address("pass")
+        return (step, *offer[1:])

@@ -11,7 +11,9 @@
  *   output <vr>            (a Real output printed after each step)
  *   run
  *
- * For each FMU it prints "fmu <name>", then one line per step: "<k> <status> <output values %.17g>...".
+ * For each FMU it prints "fmu <name>", then one line per step: "<k> <status> <output values %.17g>...", then
+ * "calls <fast> <compiled>": the lean binding's pmsm_fmu_fast_calls and pmsm_fmu_compiled_calls of the instance
+ * (0 0 where the FMU's library has none).
  *
  * Or a system of FMUs, all loaded and instantiated at once and stepped by a Jacobi master (as OMSimulator's):
  *
@@ -24,6 +26,9 @@
  *
  * At each step k every member's connected outputs are read, then every input set, then every member stepped
  * from t = k h; then "<k> <worst status> <recorded values %.17g>..." is printed (the values at t_{k+1}).
+ *
+ * A line "keep" (anywhere before the runs) leaves every FMU's library loaded to the end of the process, as hosts do
+ * that never unload one; by default each is unloaded (dlclose) after its run, as FMI Library's hosts (fmuCheck) do.
  *
  * What the FMU logs goes to stdout as "log <status> <category> <message>". Exit code 0 when every FMU ran
  * (whatever its statuses), 2 when a binary cannot be loaded, 3 when fmi2Instantiate returns NULL. */
@@ -50,6 +55,8 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
 }
 
 #define MAX_VARS 64
+
+static int unload = 1; /* dlclose each FMU's library after its run ("keep": never) */
 
 typedef struct {
     char name[256], binary[4096], resources[4096], guid[256];
@@ -106,10 +113,15 @@ static int run(const Spec* s)
         for (int i = 0; i < s->n_out; i++) printf(" %.17g", y[i]);
         printf("\n");
     }
+    /* the lean binding's counters (fmus/README.md, "The compiled step"), through the loader; absent: none */
+    typedef unsigned long long calls_t(fmi2Component);
+    calls_t* fast = (calls_t*)dlsym(h, "pmsm_fmu_fast_calls");
+    calls_t* compiled = (calls_t*)dlsym(h, "pmsm_fmu_compiled_calls");
+    printf("calls %llu %llu\n", fast ? fast(c) : 0ULL, compiled ? compiled(c) : 0ULL);
     printf("terminate %d\n", (int)Terminate(c));
     FreeInstance(c);
     fflush(stdout);
-    dlclose(h); /* as FMI Library's hosts (fmuCheck) unload an FMU */
+    if (unload) dlclose(h); /* as FMI Library's hosts (fmuCheck) unload an FMU */
     return 0;
 }
 
@@ -208,7 +220,7 @@ static int run_system(System* s)
         ((fmi2TerminateTYPE*)dlsym(m->h, "fmi2Terminate"))(m->c);
         ((fmi2FreeInstanceTYPE*)dlsym(m->h, "fmi2FreeInstance"))(m->c);
     }
-    for (int i = 0; i < s->n_members; i++) dlclose(s->m[i].h);
+    for (int i = 0; i < s->n_members && unload; i++) dlclose(s->m[i].h);
     fflush(stdout);
     return 0;
 }
@@ -258,6 +270,8 @@ int main(int argc, char** argv)
             s.n_in++;
         } else if (strncmp(line, "output ", 7) == 0 && s.n_out < MAX_VARS) {
             sscanf(line + 7, "%u", &s.out[s.n_out++]);
+        } else if (strcmp(line, "keep") == 0) {
+            unload = 0;
         } else if (strcmp(line, "run") == 0) {
             int rc = run(&s);
             if (rc != 0) return rc;

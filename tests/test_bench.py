@@ -49,7 +49,7 @@ def test_passthrough_fmus_compute_nothing(passthrough, tmp_path):
 
 
 def test_the_cycle_case_is_the_sensorless_drive_on_wltc(passthrough, tmp_path):
-    """(e), (f): the shipped wltc3b-sensorless (the speed range's settings, the feedforward, 1 A noise) with the
+    """(e), (f): the shipped wltc3b-if (the speed range's settings, the feedforward, 1 A noise) with the
     cycle's speed reference (a linear table, set with the controller's connections), the real or the
     pass-through FMUs."""
     real = project_fmus()
@@ -71,7 +71,7 @@ def test_the_cycle_case_is_the_sensorless_drive_on_wltc(passthrough, tmp_path):
 
 
 def test_the_injection_case_is_the_same_drive_with_injection(tmp_path):
-    """(g): wltc3b-injection, the drive of (e) with low_speed = "injection" on the plant's algebraic flux
+    """(g): wltc3b-sensorless, the drive of (e) with low_speed = "injection" on the plant's algebraic flux
     model: acquiring the angle in its first 0.05 s."""
     real = project_fmus()
     spec = bench.cycle_spec(0.05, real["PmsmEvPlant"], real["FocSensorless"], bench.INJECTION_SYSTEM)

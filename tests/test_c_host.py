@@ -1,7 +1,8 @@
 """The FMUs in a host that is not Python (fmus/README.md, "Hosts that are not Python"): a small C host
 (tests/c_host.c: no libpython linked, no PYTHON* variables, no preload, a cleaned environment) loads each project
 FMU, unzipped; the FMU's loader (fmus/fmu_loader.c) brings up a Python itself. What must hold: the outputs of
-every step equal those of the same calls made by fmpy in a Python process; where no Python is found,
+every step equal those of the same calls made by fmpy in a Python process, and the same calls are served by the
+compiled step there as in fmpy (the kernels compiled with numba, from the same cache); where no Python is found,
 fmi2Instantiate returns NULL with one log line saying what was looked for and how to point at one."""
 
 from __future__ import annotations
@@ -76,6 +77,7 @@ def spec_of(root: Path, name: str, instance: str | None = None) -> str:
 
 # the same calls through fmpy, in a Python process of its own, printed as the C host prints them
 _FMPY_HOST = r"""
+import ctypes
 import sys
 from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
@@ -108,6 +110,11 @@ for b in blocks:
             fmu.setReal([vr for vr, _, _ in b["in"]], [a + s * k for _, a, s in b["in"]])
         fmu.doStep(k * b["h"], b["h"])
         print(k, 0, 0, " ".join("%.17g" % y for y in fmu.getReal(b["out"])))
+    counters = [getattr(fmu.dll, name, None) for name in ("pmsm_fmu_fast_calls", "pmsm_fmu_compiled_calls")]
+    for counter in counters:
+        if counter is not None:
+            counter.restype, counter.argtypes = ctypes.c_ulonglong, [ctypes.c_void_p]
+    print("calls", *(counter(fmu.component) if counter is not None else 0 for counter in counters))
     fmu.terminate()
     print("terminate 0")
     fmu.freeInstance()
@@ -116,10 +123,23 @@ for b in blocks:
 
 def _clean_env(tmp_path: Path, **extra) -> dict:
     """What a tool started from a desktop has: no PYTHON* variable, no LD_PRELOAD; ``PATH`` without this
-    project's interpreter."""
-    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "LANG": "C.UTF-8"}
+    project's interpreter; the user's ``HOME`` (so the kernels compiled by Python processes are found in the user's
+    cache, ``pmsm_ev.accel``)."""
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(Path.home()), "LANG": "C.UTF-8"}
     env.update(extra)
     return env
+
+
+def _calls(text: str) -> dict[str, tuple[int, int]]:
+    """{fmu: (pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls)} of what a host printed after each run."""
+    calls, current = {}, None
+    for line in text.splitlines():
+        word, *rest = line.split()
+        if word == "fmu":
+            current = rest[0]
+        elif word == "calls":
+            calls[current] = (int(rest[0]), int(rest[1]))
+    return calls
 
 
 def _steps(text: str) -> dict[str, list[list[float]]]:
@@ -138,9 +158,12 @@ def _steps(text: str) -> dict[str, list[list[float]]]:
 
 def test_every_fmu_runs_in_a_c_host_with_no_python_set_up_as_in_fmpy(unzipped, host, tmp_path):
     """All the project's FMUs, one after the other in one C process with a cleaned environment: the Python the FMU
-    was built with is brought up by the FMU itself; every step's outputs equal fmpy's, bit for bit. Each FMU's
-    library is unloaded after its run (dlclose, as fmuCheck does) and the process exits cleanly (exit code 0:
-    pythonfmu's interpreter guard released before its static destructors, fmus/README.md)."""
+    was built with is brought up by the FMU itself; every step's outputs equal fmpy's, bit for bit, and the calls
+    are served as in fmpy: the compiled step (numba) takes every fmi2SetReal and fmi2DoStep of the plant and of the
+    controllers in the C host too (``pmsm_fmu_compiled_calls``; the fmi2GetReal of every output also reads values
+    that are not in the step's buffers, so Python's). Each FMU's library is unloaded after its run (dlclose, as
+    fmuCheck does) and the process exits cleanly (exit code 0: pythonfmu's interpreter guard released before its
+    static destructors and before numba's LLVM's, fmus/README.md)."""
     spec = tmp_path / "spec.txt"
     spec.write_text("".join(spec_of(root, name) for name, root in unzipped.items()))
     done = subprocess.run([str(host), str(spec)], capture_output=True, text=True, env=_clean_env(tmp_path),
@@ -158,6 +181,29 @@ def test_every_fmu_runs_in_a_c_host_with_no_python_set_up_as_in_fmpy(unzipped, h
         assert c_runs[name] == py_runs[name], name
     moved = c_runs["PmsmEvPlant"]
     assert moved[-1] != moved[0]  # the ramps reached the plant
+    c_calls, py_calls = _calls(done.stdout), _calls(reference.stdout)
+    assert c_calls == py_calls
+    for name in unzipped:
+        fast, compiled = c_calls[name]
+        assert fast == (3 if INPUTS[_kind(name)] else 2) * STEPS, name  # every call on the direct path
+        assert compiled == (2 * STEPS if name != "RouteProfile" else 0), name  # RouteProfile has no kernels
+
+
+def test_the_c_host_with_plain_python_kernels_gives_the_same_numbers(unzipped, host, tmp_path):
+    """``PMSM_EV_JIT=0`` in the C host: no call compiled, every call on the direct path, every step's outputs
+    those of the compiled run, bit for bit."""
+    names = ["PmsmEvPlant", "FocSensorless"]
+    spec = tmp_path / "spec.txt"
+    spec.write_text("".join(spec_of(unzipped[name], name) for name in names))
+    runs = {}
+    for jit in ("1", "0"):
+        done = subprocess.run([str(host), str(spec)], capture_output=True, text=True,
+                              env=_clean_env(tmp_path, PMSM_EV_JIT=jit), timeout=300)
+        assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+        runs[jit] = (_steps(done.stdout), _calls(done.stdout))
+    assert runs["0"][0] == runs["1"][0]
+    assert runs["1"][1] == {name: (3 * STEPS, 2 * STEPS) for name in names}
+    assert runs["0"][1] == {name: (3 * STEPS, 0) for name in names}
 
 
 @pytest.fixture
@@ -227,8 +273,8 @@ def test_the_loader_references_no_python_symbol(unzipped):
 def test_the_exported_package_runs_in_a_c_jacobi_master_as_in_the_orchestrator(fmus, unzipped, host, tmp_path):
     """What OMSimulator does with ``export-ssp scenario2`` (all FMUs loaded at once in one process that is not
     Python, stepped Jacobi, the package's start values set), done by tests/c_host.c with no Python set up: every
-    recorded column equals the orchestrator's Jacobi run of the system, bit for bit (the kernels run as plain
-    Python there, compiled here: the same numbers; the route comes from the packaged RouteProfile)."""
+    recorded column equals the orchestrator's Jacobi run of the system, bit for bit (the kernels compiled in both
+    processes; the route comes from the packaged RouteProfile)."""
     from pmsm_cosim.app.drive import export_ssp, load_system
     from pmsm_cosim.engine.master import Master
     from pmsm_cosim.engine.recording import read_results

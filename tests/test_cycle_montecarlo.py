@@ -45,7 +45,7 @@ def _data(**changes) -> dict:
 
 def test_offset_adds_to_the_signal_table_and_r_w_resamples_the_cycle(tmp_path):
     project_fmus()
-    base = packaged_scenario("wltc3b-sensorless")
+    base = packaged_scenario("wltc3b-if")
     path = tmp_path / "s.toml"
     path.write_text(f'system = "{base.as_posix()}"\nstop_time = 1.0\n[set]\n"plant.r_w" = 0.3\n'
                     '[grid]\n"offset.delta" = [-1.0, 0.5]\n', encoding="utf-8")
@@ -65,7 +65,7 @@ def test_a_system_with_a_road_sweeps(tmp_path):
     """[road] (a RouteProfile component by position) and [cycle] in a sweep's system: each run carries the
     road component, its FMU shipped with the others, and the sweep's mass."""
     project_fmus()
-    base = packaged_scenario("wltc3b-sensorless").read_text(encoding="utf-8")
+    base = packaged_scenario("wltc3b-if").read_text(encoding="utf-8")
     with_road = base.replace("\n[cycle]", '\n[road]\nname = "hilly"\n\n[cycle]', 1)
     (tmp_path / "sys.toml").write_text(with_road, encoding="utf-8")
     (tmp_path / "s.toml").write_text('system = "sys.toml"\nstop_time = 1.0\n[grid]\n"plant.m_v" = [900.0, 1200.0]\n',
@@ -137,7 +137,7 @@ def test_the_shipped_sweep_draws_the_stated_design():
             assert a <= p[key] <= b
     assert len({r.params["plant.sensor_seed"] for r in sweep.runs}) == len(sweep.runs)
     # the base system: the sensorless unit on WLTC 3b, 1 A noise, a level road the offset shifts
-    assert sweep.system == "wltc3b-sensorless"
+    assert sweep.system == "wltc3b-if"
     spec = sweep.hooks.load_system(sweep.system)
     assert spec.signals["omega_ref"].cycle.name == "wltc3b" and spec.stop_time == 1800.0
     assert spec.component("ctrl").fmu.name == "FocSensorless.fmu"

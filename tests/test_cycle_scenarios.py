@@ -8,6 +8,7 @@ hilly road holds the car, sensored and sensorless. The whole cycles are the repo
 from __future__ import annotations
 
 import json
+import zipfile
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import cycles
 
 CYCLES = ("wltc3b", "udds", "hwfet", "us06")
-SCENARIOS = ([c for c in CYCLES] + [f"{c}-sensorless" for c in CYCLES] + [f"{c}-injection" for c in CYCLES]
+SCENARIOS = ([c for c in CYCLES] + [f"{c}-sensorless" for c in CYCLES] + [f"{c}-if" for c in CYCLES]
              + ["wltc3b-hilly", "wltc3b-battery", "wltc3b-battery-sensorless"])
 
 
@@ -46,10 +47,13 @@ def test_a_shipped_cycle_scenario_lasts_its_cycle_with_the_drive_of_the_speed_ra
     assert ("ctrl", "omega_ref") in [tuple(d) for d in sig.drives]
     ctrl = next(c for c in spec.components if c.name == "ctrl")
     plant = next(c for c in spec.components if c.name == "plant")
-    sensorless = name.endswith(("-sensorless", "-injection"))
+    sensorless = name.endswith(("-sensorless", "-if"))
     assert ctrl.fmu.name == ("FocSensorless.fmu" if sensorless else "FocSensored.fmu")
+    # the shipped sensorless drives use injection on the saturating plant; the -if ones the I-f strategy on
+    # the plain plant (docs/sensorless.md, "Which strategy the shipped scenarios use")
     assert (ctrl.start.get("low_speed"), plant.start.get("flux_model")) == (
-        ("injection", "algebraic") if name.endswith("-injection") else (None, None))
+        ("injection", "algebraic") if name.endswith("-sensorless") else
+        ("if", None) if name.endswith("-if") else (None, None))
     assert ctrl.start["reference"] == "fw" and ctrl.start["speed_feedforward"] == "inertia+road"
     assert plant.start["sensor_noise"] == 1.0
     # on the battery (docs/speed-range.md, "The battery"): from 90 %, the controller on the measured DC link
@@ -67,7 +71,7 @@ def test_us06_with_injection_through_a_stop_and_restart_from_an_angle_it_was_not
     noise, the plant's algebraic flux model: inside the +-2 km/h band all the way, no turn slipped, no
     episode, the car standing at the stop, and the unit went acquire -> polarity -> injection -> EKF ->
     injection (the stop) -> EKF."""
-    r, m = _run(tmp_path, "us06i", 60, "us06-injection", "--set", f"plant.theta_e0={theta0}")
+    r, m = _run(tmp_path, "us06i", 60, "us06-sensorless", "--set", f"plant.theta_e0={theta0}")
     trace, sync = m["trace"], m["synchronism"]
     assert m["status"] == "completed"
     assert trace["inside_share"] == 1.0 and trace["rmse_kmh"] < 0.6
@@ -84,7 +88,7 @@ def test_us06_sensorless_through_a_stop_and_restart_from_an_angle_it_was_not_tol
     rotor parked at theta_e0 (the unit aligns at an unknown angle), 1 A of current noise: inside the
     +-2 km/h band all the way, no electrical turn slipped, no loss of synchronism, and the unit went
     I-f -> EKF -> I-f (the stop) -> EKF. The run prints the band's figures and the energy."""
-    r, m = _run(tmp_path, "us06", 60, "us06-sensorless", "--set", f"plant.theta_e0={theta0}")
+    r, m = _run(tmp_path, "us06", 60, "us06-if", "--set", f"plant.theta_e0={theta0}")
     trace, sync, energy = m["trace"], m["synchronism"], m["energy"]
     printed = capsys.readouterr().out
     assert f"cycle us06: inside the +-2 km/h band {100 * trace['inside_share']:.2f} % of 60 s" in printed
@@ -127,7 +131,7 @@ def test_a_cycle_that_moves_before_the_alignment_ends(fmus, tmp_path, monkeypatc
     excursion, at the start and about as long as the alignment still had to run, and nothing after it."""
     monkeypatch.chdir(tmp_path)
     (tmp_path / "early.csv").write_text("time_s,speed_kmh\n0,0\n1,5\n4,25\n10,50\n15,50\n20,0\n25,0\n")
-    r, m = _run(tmp_path, "early", 25, "us06-sensorless", "--cycle", "early.csv")
+    r, m = _run(tmp_path, "early", 25, "us06-if", "--cycle", "early.csv")
     trace, sync = m["trace"], m["synchronism"]
     print(f"\nexcursions {trace['excursion_lengths_s']} from {trace['t_longest_excursion']:.2f} s; modes "
           f"{m['sensorless']['mode_changes']}; slipped {sync['slipped_turns']}")
@@ -138,3 +142,26 @@ def test_a_cycle_that_moves_before_the_alignment_ends(fmus, tmp_path, monkeypatc
     assert m["sensorless"]["mode_changes"][0][0] == pytest.approx(2.35, abs=0.05)
     late = r["time"] > 6.0
     assert np.max(np.abs(r["omega_ref"][late] - r["omega_m"][late])) < 15.0  # caught up: < 1.3 km/h
+
+
+@pytest.mark.parametrize("name", [f"{c}-sensorless" for c in CYCLES] + ["acceleration-sensorless",
+                                                                        "hill-start-injection"])
+def test_the_sensored_drive_swaps_into_a_sensorless_scenario(fmus, tmp_path, capsys, name):
+    """``--controller sensored`` on a scenario written for the sensorless unit: its ``low_speed`` (a variable
+    FocSensored does not have) is left out with a note, the run completes; the user's own ``--set`` of it is
+    refused as before."""
+    out = tmp_path / "swap"
+    assert main(["run", name, "--controller", "sensored", "--stop-time", "0.01", "--no-figures", "--out",
+                 str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "start value ctrl.low_speed = 'injection'" in err and "FocSensored.fmu has no such variable" in err
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["status"] == "completed"
+    assert main(["run", name, "--controller", "sensored", "--set", "ctrl.low_speed=if", "--stop-time", "0.01",
+                 "--no-figures", "--out", str(tmp_path / "refused")]) == 2
+    assert "has no variable 'low_speed'" in capsys.readouterr().err
+    assert not (tmp_path / "refused").exists()
+    # so does its SSP package: the sensored drive's, without the sensorless unit's parameter
+    assert main(["export-ssp", name, "--controller", "sensored", "-o", str(tmp_path / "p.ssp")]) == 0
+    with zipfile.ZipFile(tmp_path / "p.ssp") as z:
+        assert not any(b"low_speed" in z.read(n) for n in z.namelist() if n.endswith((".ssd", ".ssv")))

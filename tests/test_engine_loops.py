@@ -32,7 +32,7 @@ def _run(spec_source, out, loop, stop_time=None, note=None):
 
 
 def test_every_shipped_scenario_is_in_the_comparison():
-    assert len(PACKAGED_SCENARIOS) == 28
+    assert len(PACKAGED_SCENARIOS) == 29
 
 
 @pytest.mark.parametrize("scenario", PACKAGED_SCENARIOS)
@@ -55,7 +55,7 @@ def test_compiled_loop_through_a_cycle_s_ramps_and_the_row_boundaries(tmp_path):
     project_fmus()
     out = {}
     for loop in ("compiled", "plain"):
-        spec = load_system("wltc3b-sensorless")
+        spec = load_system("wltc3b-if")
         spec.stop_time = 13.0
         m = Master(spec, loop=loop)
         metrics = m.run(tmp_path / loop, catch_sigint=False)

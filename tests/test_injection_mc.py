@@ -13,7 +13,7 @@ COLUMNS = ("run", "status", "plant.m_v", "offset.delta", "inside_share", "slippe
 
 def test_the_design_is_the_physically_consistent_one():
     d = load_sweep(im.SWEEP)
-    assert str(d.system).endswith("wltc3b-injection") and d.samples >= 100
+    assert str(d.system).endswith("wltc3b-sensorless") and d.samples >= 100
     for key in ("plant.L_d", "plant.L_q", "plant.flux_q_current", "plant.flux_d_current", "plant.R_s", "plant.psi",
                 "plant.sensor_offset_a", "plant.sensor_gain_b", "ctrl.dead_time_comp"):
         assert key in d.random, key

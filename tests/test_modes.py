@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from machine_support import reachable
 from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import ControllerParams, InjectionParams, ParameterError
@@ -31,25 +32,23 @@ def _go(s, c, mode, event):
 
 
 # -- the table ---------------------------------------------------------------------------------------
+#: the strategy's rows of the unit's one table (``kernels.machine``, with the I-f strategy's): those of its events
+ROWS = tuple(row for row in k.TRANSITIONS if row[1] in EVENTS)
+
+
 def test_table_has_one_row_per_pair_and_known_modes_and_actions():
     pairs = [(row[0], row[1]) for row in k.TRANSITIONS]
     assert len(pairs) == len(set(pairs))
+    assert len(ROWS) == 10
     actions = {getattr(k, n) for n in dir(k) if n.startswith("A_")}
-    for mode, event, new, action in k.TRANSITIONS:
+    for mode, event, new, action in ROWS:
         assert mode in INJECTION_MODES and new in INJECTION_MODES
         assert event in EVENTS
         assert action in actions
 
 
 def test_every_mode_is_reachable_from_the_acquisition():
-    seen, todo = {k.MODE_ACQUIRE}, [k.MODE_ACQUIRE]
-    while todo:
-        m = todo.pop()
-        for mode, _, new, _ in k.TRANSITIONS:
-            if mode == m and new not in seen:
-                seen.add(new)
-                todo.append(new)
-    assert seen == set(INJECTION_MODES)
+    assert reachable(ROWS, k.MODE_ACQUIRE) == set(INJECTION_MODES)
 
 
 def test_a_pair_not_in_the_table_changes_nothing():

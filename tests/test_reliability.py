@@ -195,7 +195,7 @@ def test_non_physical_values_are_refused_before_the_run(fmus, tmp_path, capsys, 
     (["--set", "ctrl.J_model=-1"], "J_model must be finite and >= 0 (got -1.0)"),
 ])
 def test_sensorless_start_up_values_are_refused_before_the_run(fmus, tmp_path, capsys, args, message):
-    line = refused(["run", "hill-start", "--stop-time", 0.01, *args], capsys, tmp_path / "out")
+    line = refused(["run", "hill-start-if", "--stop-time", 0.01, *args], capsys, tmp_path / "out")
     assert message in line
 
 

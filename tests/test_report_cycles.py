@@ -1,5 +1,5 @@
 """The report's section "Drive cycles" (pmsm_cosim.app.report.cycles) built from the first 30 s of wltc3b and
-wltc3b-sensorless: its table holds the runs' metrics, its per-phase tables pmsm_ev.cycle_energy's figures,
+wltc3b-if: its table holds the runs' metrics, its per-phase tables pmsm_ev.cycle_energy's figures,
 the text flags a run inside the band for less than 99 % of the time (and says where and why), and the
 figures are written."""
 
@@ -20,8 +20,8 @@ from pmsm_ev import cycle_energy
 from pmsm_ev import cycles as pcycles
 from pmsm_ev.results import KMH, trace_figures
 
-CYCLE_IDS = ["cyc-wltc3b", "cyc-wltc3b-sensorless", "cyc-udds", "cyc-udds-sensorless", "cyc-hwfet",
-             "cyc-hwfet-sensorless", "cyc-us06", "cyc-us06-sensorless", "cyc-wltc3b-hilly"]
+CYCLE_IDS = ["cyc-wltc3b", "cyc-wltc3b-if", "cyc-udds", "cyc-udds-if", "cyc-hwfet",
+             "cyc-hwfet-if", "cyc-us06", "cyc-us06-if", "cyc-wltc3b-hilly"]
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +29,7 @@ def runs(tmp_path_factory):
     project_fmus()
     base = tmp_path_factory.mktemp("cyc")
     out = {}
-    for cid, scenario in (("cyc-wltc3b", "wltc3b"), ("cyc-wltc3b-sensorless", "wltc3b-sensorless")):
+    for cid, scenario in (("cyc-wltc3b", "wltc3b"), ("cyc-wltc3b-if", "wltc3b-if")):
         d = base / cid
         assert main(["run", scenario, "--stop-time", "30", "--out", str(d), "--quiet", "--no-figures"]) == 0
         out[cid] = d
@@ -44,7 +44,7 @@ def test_the_cycle_configurations_and_only_cyc():
     assert [c.id for c in cycle_configs()] == CYCLE_IDS
     assert [c.id for c in select(CONFIGS, ["cyc"])] == CYCLE_IDS  # --only cyc: just these
     by_id = {c.id: c for c in cycle_configs()}
-    assert by_id["cyc-us06-sensorless"].run_args(None, None)[:3] == ["us06-sensorless", "--controller", "sensorless"]
+    assert by_id["cyc-us06-if"].run_args(None, None)[:3] == ["us06-if", "--controller", "sensorless"]
     assert by_id["cyc-wltc3b-hilly"].run_args(60.0, None) == ["wltc3b-hilly", "--controller", "sensored",
                                                               "--stop-time", "60.0"]
 
@@ -64,7 +64,7 @@ def test_the_section_holds_the_runs_figures_and_writes_its_figures(runs, tmp_pat
     lines = cycles.render(data, names)
     text = "\n".join(lines)
     for cid, scen, label in (("cyc-wltc3b", "wltc3b", "sensored"),
-                             ("cyc-wltc3b-sensorless", "wltc3b-sensorless", "sensorless from standstill")):
+                             ("cyc-wltc3b-if", "wltc3b-if", "sensorless from standstill")):
         m = json.loads((runs[cid] / "metrics.json").read_text())
         r = read_results(runs[cid])
         _, vehicle = cycle_energy.plant_params(m)
@@ -84,9 +84,9 @@ def test_the_section_holds_the_runs_figures_and_writes_its_figures(runs, tmp_pat
         assert p[3] == f"{low['energy']['dc_Wh_per_km']:.2f}"
         assert p[8] == f"{low['energy']['losses_Wh']['copper']:.2f}"
     assert "Every run completed inside the band for at least 99 % of its cycle." in text
-    assert "measured up to their end: wltc3b (30 s), wltc3b-sensorless (30 s)" in text
+    assert "measured up to their end: wltc3b (30 s), wltc3b-if (30 s)" in text
     # what the sensorless start costs: its I-f time is the mode column's
-    rl = read_results(runs["cyc-wltc3b-sensorless"])
+    rl = read_results(runs["cyc-wltc3b-if"])
     t_if = float(np.sum(np.diff(rl["time"])[rl["mode"][:-1] == 1]))
     i = next(k for k, x in enumerate(lines) if x.startswith("| phase | Δ Wh/km"))
     cost = [x.strip() for x in lines[i + 2].strip("|").split("|")]
@@ -115,7 +115,7 @@ def test_a_run_outside_the_band_is_flagged_with_where_and_why(runs, tmp_path):
     m["trace"] = {"cycle": "wltc3b", **trace_figures(r["time"], r["v_vehicle"], pcycles.load("wltc3b"))}
     (bad / "metrics.json").write_text(json.dumps(m))
     assert m["trace"]["inside_share"] < 0.99
-    data = Data(cycle_configs(), {"cyc-wltc3b": bad, "cyc-wltc3b-sensorless": runs["cyc-wltc3b-sensorless"]})
+    data = Data(cycle_configs(), {"cyc-wltc3b": bad, "cyc-wltc3b-if": runs["cyc-wltc3b-if"]})
     text = "\n".join(cycles.render(data, []))
     share = 100 * m["trace"]["inside_share"]
     assert f"| {share:.2f} % (< 99 %) |" in text
@@ -125,7 +125,7 @@ def test_a_run_outside_the_band_is_flagged_with_where_and_why(runs, tmp_path):
     assert 19.0 <= t0 <= 21.0 and 3.0 <= length <= 6.0
     assert f"inside the band only {share:.2f} % of the time ({m['trace']['excursions']} excursions: low " in line
     assert f"the longest, {length:.2f} s from {t0:.2f} s (phase low" in line and "ahead of the trace" in line
-    assert "wltc3b-sensorless" not in text.split("where and why:")[1].split("\n\n")[0]
+    assert "wltc3b-if" not in text.split("where and why:")[1].split("\n\n")[0]
     # the edited speed no longer matches the plant's wheel energy: the check says so
     assert "within 1 % in every run except wltc3b, sensored (net" in text
     # a run that stopped early says so, with its last row

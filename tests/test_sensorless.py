@@ -262,7 +262,7 @@ def test_shipped_sensorless_scenarios_have_the_routes_of_pmsm_ev_scenarios():
         assert (tuple(t for t, _ in table), tuple(v for _, v in table)) == (delayed.times, delayed.values)
         assert list(spec["record"]) == list(ALL_COLUMNS + SENSORLESS_COLUMNS)
         assert spec["components"][0]["fmu"].endswith("FocSensorless.fmu")
-    hill_spec = _system("hill-start")
+    hill_spec = _system("hill-start-if")
     assert [tuple(p) for p in hill_spec["signals"]["delta"]["table"]] == [tuple(p) for p in HILL_START_DEG]
     assert [tuple(p) for p in hill_spec["signals"]["omega_ref"]["table"]] == list(HILL_START_OMEGA_REF)
     assert hill_spec["experiment"]["stop_time"] == HILL_START_STOP_TIME

@@ -34,7 +34,7 @@ def _run(tmp_path, *argv):
 
 
 @pytest.mark.parametrize("scenario, controller", [("acceleration", None), ("acceleration", "sensorless"),
-                                                  ("acceleration-sensorless", "sensored"),
+                                                  ("acceleration-if", "sensored"),
                                                   ("acceleration-flying", None)])
 def test_the_acceleration_launches_into_field_weakening_with_any_controller(fmus, tmp_path, scenario, controller):
     argv = [scenario] + (["--controller", controller] if controller else [])

@@ -164,11 +164,13 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     """What OMSimulator needs (its annotation first in the system, no String in an .ssv, no
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
     now in the system), and still valid SSP 1.0."""
-    # the paper's 2, their 4 variants, 4 sensorless (one with injection), 3 acceleration, 13 drive-cycle runs (4
-    # with injection)
-    assert len(SCENARIOS) == 28
-    # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit
-    ctrl = "FocSensorless" if scenario.endswith("-injection") else "FocEkf5"
+    # the paper's 2, their 4 variants, 4 sensorless (the paper's 2 and the hill start with injection and I-f),
+    # 4 acceleration (sensorless with injection and I-f), 15 drive-cycle runs (sensored, injection, I-f; hilly; the
+    # battery's, sensored and with injection)
+    assert len(SCENARIOS) == 29
+    # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit (its String travels in
+    # a copy of the FMU); the rest swap in FocEkf5
+    ctrl = "FocSensorless" if "low_speed" in load_system(scenario).component("ctrl").start else "FocEkf5"
     args = ["export-ssp", scenario, "-o", str(tmp_path / "p.ssp"), "--plant", str(fmus["PmsmEvPlant"]),
             "--controller", str(fmus[ctrl])]
     if angle_source:
@@ -389,10 +391,10 @@ def test_omsimulator_runs_the_package(fmus, tmp_path, angle_source):
 @pytest.mark.skipif(shutil.which("OMSimulator") is None,
                     reason="OMSimulator is not on PATH (not on the package index; README: building it)")
 def test_omsimulator_runs_the_sensorless_hill_start(fmus, tmp_path):
-    """A scenario whose name is no identifier (hill-start: OMSimulator needs identifiers for
+    """A scenario whose name is no identifier (hill-start-if: OMSimulator needs identifiers for
     its model and system) and the sensorless unit: alignment, I-f and handover in 5 s."""
     stop = 5.0
-    spec = load_system("hill-start")
+    spec = load_system("hill-start-if")
     spec.set_fmu("ctrl", fmus["FocSensorless"])
     spec.set_fmu("plant", fmus["PmsmEvPlant"])
     package = tmp_path / "hill.ssp"
@@ -404,7 +406,7 @@ def test_omsimulator_runs_the_sensorless_hill_start(fmus, tmp_path):
     # measured: up to 1.3e-8 from the Jacobi run over the start-up (round-off differences grow
     # through the alignment and I-f, ~1e-11 in the paper's scenarios), so 1e-8 relative here
     worst = compare_with_jacobi({k: v[1:] for k, v in rows.items()}, package, a, n, offset=1, tol=1e-8)
-    print(f"OMSimulator vs orchestrator Jacobi, hill-start, {stop} s: max |diff| = {worst:.3g}")
+    print(f"OMSimulator vs orchestrator Jacobi, hill-start-if, {stop} s: max |diff| = {worst:.3g}")
 
 
 # -- round trip ----------------------------------------------------------------------------------------

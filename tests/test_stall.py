@@ -30,7 +30,7 @@ def fmus():
 
 def _run(tmp_path, name, stop, *sets):
     out = tmp_path / name
-    argv = ["run", "wltc3b-sensorless", "--stop-time", str(stop), "--no-figures", "--quiet", "--out", str(out)]
+    argv = ["run", "wltc3b-if", "--stop-time", str(stop), "--no-figures", "--quiet", "--out", str(out)]
     assert main(argv + ["--set", *MISMATCH, *sets]) == 0
     return read_results(out), json.loads((out / "metrics.json").read_text())
 
@@ -43,6 +43,13 @@ def _due(r) -> float:
     while start > 0 and w[start - 1] > StartupParams().omega_up and m[start - 1] == _k.MODE_IF:
         start -= 1
     return float(t[up] - t[start])
+
+
+def _due_from(r, after: float) -> float:
+    """The time after ``after`` [s] from which the unit is in I-f with |omega_ref| above omega_up (the
+    handover up's due timer runs from there) [s]."""
+    t, m, w = r["time"], r["mode"], np.abs(r["omega_ref"])
+    return float(t[int(np.argmax((t > after) & (m == _k.MODE_IF) & (w > StartupParams().omega_up)))])
 
 
 def test_without_the_deadline_the_unit_stays_in_i_f_and_says_nothing(fmus, tmp_path):
@@ -63,7 +70,8 @@ def test_an_overdue_handover_is_forced_and_the_car_follows_the_trace(fmus, tmp_p
     assert _due(r) == pytest.approx(StartupParams().if_deadline, abs=0.051)
     assert m["trace"]["inside_share"] == 1.0
     s = m["synchronism"]
-    assert s["episodes"] == 1 and not s["fault_latched"] and 14.0 < s["t_first_episode"] < 14.5
+    assert s["episodes"] == 1 and not s["fault_latched"]
+    assert s["t_first_episode"] == pytest.approx(_due_from(r, 13.0) + StartupParams().if_deadline, abs=0.051)
     assert r["fault"][-1] == _k.FAULT_NONE and r["mode"][-1] == _k.MODE_EKF
     assert np.max(np.abs(r["omega_m"] - r["omega_hat"])[r["time"] > 16.0]) < 5.0
 
@@ -73,7 +81,7 @@ def test_an_overdue_handover_is_forced_and_the_car_follows_the_trace(fmus, tmp_p
     # the same case nudged (the stand's anchor taken at 5 rad/s instead of 10): the 400 A vector's swing
     # then has the rotor standing when the stall is detected, not turning at 30 rad/s
     (("ctrl.anchor_speed=5",), _k.MODE_ALIGN),
-])
+])  # (which reaction a run shows is the detector's, tests/test_if_modes.py: EV_STALL_TURNING or EV_STALL)
 def test_a_stalled_rotor_is_realigned_or_handed_to_foc_and_drives_on(fmus, tmp_path, sets, reaction):
     """The forced handover off: the rotor pulls out and swings on the 400 A vector; stall_time (3 s) after
     |omega_ref| passed omega_up the unit reacts (an episode): a rotor that stands is aligned again from
@@ -84,7 +92,7 @@ def test_a_stalled_rotor_is_realigned_or_handed_to_foc_and_drives_on(fmus, tmp_p
     r, m = _run(tmp_path, "stall", 30, "ctrl.if_deadline=0", *sets)
     changes = m["sensorless"]["mode_changes"]
     t_stall, to = next((t, b) for t, a, b in changes if a == _k.MODE_IF and t > 13.0)
-    assert 16.0 < t_stall < 16.6 and to == reaction
+    assert t_stall == pytest.approx(_due_from(r, 13.0) + st.stall_time, abs=0.051) and to == reaction
     t_up = next(t for t, a, b in changes if t >= t_stall and b == _k.MODE_EKF)
     assert t_up - t_stall < (st.align_time + 1.5 if reaction == _k.MODE_ALIGN else 0.051)
     s = m["synchronism"]
@@ -99,7 +107,8 @@ def test_a_stall_with_no_realignment_left_latches_the_safe_state(fmus, tmp_path)
     the current limit; the car does not move."""
     r, m = _run(tmp_path, "latched", 22, "ctrl.if_deadline=0", "ctrl.realign_max=0")
     s = m["synchronism"]
-    assert s["fault_latched"] and 16.0 < s["t_fault"] < 16.6
+    assert s["fault_latched"]
+    assert s["t_fault"] == pytest.approx(_due_from(r, 13.0) + StartupParams().stall_time, abs=0.051)
     after = r["time"] > s["t_fault"] + 0.5
     assert np.all(r["fault"][after] == _k.FAULT_LATCHED) and np.all(r["mode"][after] == _k.MODE_IF)
     assert np.all(np.abs(r["omega_ctrl"][after]) < 15.0) and np.all(np.abs(r["omega_m"][after]) < 3.0)

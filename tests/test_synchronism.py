@@ -259,13 +259,13 @@ def test_scenario2_with_the_sensorless_unit_swapped_in(tmp_path):
 
 
 def test_the_command_line_reports_the_fault(tmp_path, capsys):
-    """``pmsm-cosim run hill-start`` with a route of the user's (creeping into 45 deg): the run
+    """``pmsm-cosim run hill-start-if`` with a route of the user's (creeping into 45 deg): the run
     completes, prints a note of the episode and the latched safe state, and metrics.json has them."""
     project_fmus()
     (tmp_path / "delta.csv").write_text("time,delta\n0,0\n8,45\n", encoding="utf-8")
     (tmp_path / "w.csv").write_text("time,omega_ref\n0,0\n1,10\n", encoding="utf-8")
     out = tmp_path / "run"
-    assert main(["run", "hill-start", "--stop-time", "12.5", "--profile", f"delta={tmp_path / 'delta.csv'}",
+    assert main(["run", "hill-start-if", "--stop-time", "12.5", "--profile", f"delta={tmp_path / 'delta.csv'}",
                  "--profile", f"omega_ref={tmp_path / 'w.csv'}", "--out", str(out), "--no-figures"]) == 0
     err = capsys.readouterr().err
     found = re.search(r"1 loss-of-synchronism episode\(s\), the first at (\S+) s; safe state latched at (\S+) s", err)
@@ -282,7 +282,7 @@ def test_a_restart_after_a_long_stand_with_offset_sensors(tmp_path):
     the stand's start (``still_speed``) the car restarts: back in FOC on the way up, at 200 rad/s by the end."""
     route = hill_start_route()
     params = DriveParams(ekf=SENSORLESS_EKF, plant=PlantParams(sensor_offset_a=2.0, sensor_offset_b=-1.0))
-    run_reference(tmp_path, "hill-start", 70.0, "sensorless", params=params, elevation=route["delta"],
+    run_reference(tmp_path, "hill-start-if", 70.0, "sensorless", params=params, elevation=route["delta"],
                   omega_ref=route["omega_ref"])
     r = read_results(tmp_path)
     t = r["time"]

@@ -115,7 +115,7 @@ def test_bench_has_the_whole_loop_cases(monkeypatch):
     results = bench.run_bench(10.0, memory=False, libcosim=False, out=out, cycle_slice=10.0)
     text = out.getvalue()
     assert results["h"] == (2.0, 1.0) and results["i"] == (2.0, 1.0)
-    assert [s.name for s in seen] == ["wltc3b-sensorless", "scenario1"]
+    assert [s.name for s in seen] == ["wltc3b-if", "scenario1"]
     assert [c.start.get("reference") for s in seen for c in s.components if c.name == "ctrl"] == ["fw", None]
     assert "(h) whole compiled loop (no FMI), system of (e)" in text
     assert "(i) whole compiled loop (no FMI), system of (a)" in text

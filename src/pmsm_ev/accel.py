@@ -18,10 +18,11 @@ from a copy of the package's files in a directory named after the SHA-256 of all
 The cache directory is ``$PMSM_EV_CACHE_DIR`` or ``$XDG_CACHE_HOME/pmsm-ev-cosim``
 (``~/.cache/pmsm-ev-cosim``). If it cannot be written, the kernels are compiled without a
 cache (each process compiles them, a few seconds). ``PMSM_EV_JIT=0`` forces plain Python.
-So does a Python embedded in a host that is not a Python program (``sys.orig_argv`` empty,
-e.g. an FMU in a C/C++ tool): there numba's LLVM is torn down at exit before pythonfmu
-finalizes the interpreter, which crashes the process. Both ways give the same numbers
-(see ``pmsm_ev.kernels``).
+Both ways give the same numbers (see ``pmsm_ev.kernels``). A Python embedded in a host that is
+not a Python program (``sys.orig_argv`` empty: an FMU in a C/C++ tool) compiles them too, from
+the same cache: the FMU's loader never finalizes an interpreter it started, and releases one that
+pythonfmu started before numba's LLVM is torn down at exit (fmus/README.md, "Hosts that are not
+Python").
 
 Vectors handed to the kernels come from ``vector(n)``: a float64 numpy array when compiled,
 a list of floats otherwise (fast to index from plain Python).
@@ -132,11 +133,6 @@ def _compiled_description(module, version: str) -> str:
 def _load():
     if not jit_requested():
         return _source, f"plain Python ({ENV_JIT}=0)"
-    if not getattr(sys, "orig_argv", None):
-        # Python embedded in a host that is not Python (an FMU in a C/C++ tool): pythonfmu
-        # finalizes the interpreter from a C++ static destructor, after LLVM's own were run at
-        # exit, and the process dies in free(); compiled code is for Python processes only
-        return _source, "plain Python (embedded interpreter)"
     try:
         import numba  # noqa: PLC0415 - numba: heavy (LLVM), loaded only to compile the kernels
     except Exception:  # not installed, or broken (e.g. an llvmlite that does not load)

@@ -74,7 +74,9 @@ _STARTUP_SLOTS = (
     ("fault_time", _k.C_FAULT_TIME), ("align_damping", _k.C_ALIGN_DAMP),
     ("align_slip", _k.C_ALIGN_SLIP), ("align_slip_time", _k.C_ALIGN_SLIP_TIME),
     ("still_speed", _k.C_STILL), ("if_deadline", _k.C_IF_DEADLINE), ("stall_time", _k.C_STALL_TIME),
-    ("realign_max", _k.C_REALIGN_MAX), ("anchor_speed", _k.C_ANCHOR_SPEED))
+    ("realign_max", _k.C_REALIGN_MAX), ("anchor_speed", _k.C_ANCHOR_SPEED),
+    ("soft_guard_angle", _k.C_SOFT_GUARD), ("guard_band", _k.C_GUARD_BAND), ("trust_move", _k.C_TRUST_MOVE),
+    ("relock_time", _k.C_RELOCK_TIME), ("still_time", _k.C_STILL_TIME))
 #: the injection's parameters (``InjectionParams``) that go into the parameter vector as they are
 _INJECTION_SLOTS = (
     ("inj_blend_low", _k.C_BLEND_LO), ("inj_blend_high", _k.C_BLEND_HI), ("inj_hysteresis", _k.C_BLEND_HYST),
@@ -87,12 +89,36 @@ _INJECTION_SLOTS = (
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
                   _k.S_OMEGA_CTRL, _k.S_ANCHOR, _k.S_ANCHORED, _k.S_ANCHOR_TL,
-                  _k.S_STILL_OUT, _k.S_IF_DUE, _k.S_REALIGN, _k.S_TRUST_OFF, _k.S_TRUST_TL, _k.S_ANCHOR_REL)
+                  _k.S_STILL_OUT, _k.S_IF_DUE, _k.S_REALIGN, _k.S_TRUST_OFF, _k.S_TRUST_TL, _k.S_ANCHOR_REL,
+                  _k.S_RUNAWAY_T, _k.S_ALIGN_SPEED)
 #: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 #: the reference generator's outputs, zeroed by ``reset``
 _REFERENCE_STATE = (_k.S_I_DREF, _k.S_T_REF, _k.S_T_BRAKE, _k.S_REGION, _k.S_T_AVAIL,
                     _k.S_W_REF_PREV, _k.S_FF_PRIMED, _k.S_T_FF)
+
+
+#: a controller FMU's sample clock (``pmsm_ev_fmus.foc_slave``): an instant within this fraction of dt of a
+#: communication point counts as that point: far above the drift of time accumulated as t += h (1.6e-4 dt after
+#: 350 s at h = dt, 7e-4 dt at h = dt/3), far below any step size that makes sense
+SAMPLE_TOLERANCE = 1.0e-2
+#: a controller FMU's Real inputs and the outputs its step writes, in the unit's buffer ``ControlUnit.io``
+#: (``pmsm_ev.kernels.UNIT_IO_LAYOUT``; the outputs in the layout's order)
+IO_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas", "v_dc_meas", "P_charge_max",
+             "P_discharge_max")
+IO_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d", "i_q", "i_qref", "i_d_hat", "i_q_hat", "omega_hat",
+              "theta_hat", "T_L_hat", "mode", "fault", "theta_ctrl", "omega_ctrl")
+#: their slots there, by name
+IO_SLOTS = {name: getattr(_k, "UIO_" + name.upper()) for name in IO_INPUTS + IO_OUTPUTS}
+
+
+def parameter_groups(observer: str) -> tuple:
+    """The parameter groups of a unit with ``observer``, as a controller FMU declares them (a class: its defaults;
+    an instance: its values): the controller's, the EKF's (``SENSORLESS_EKF`` for the sensorless unit), the motor
+    model's, and the sensorless unit's start-up and injection (``ControlUnit.from_groups`` makes the unit)."""
+    if observer == "sensorless":
+        return (ControllerParams, SENSORLESS_EKF, MotorParams, StartupParams, InjectionParams)
+    return (ControllerParams, EkfParams, MotorParams)
 
 
 def _slot(index: int, doc: str) -> property:
@@ -157,9 +183,6 @@ class ControlUnit:
         self._kernels = accel.kernels()
         self._s = accel.vector(_k.UNIT_STATE)
         self._c = accel.vector(_k.UNIT_PARAMS)
-        #: the state vector read from Python at every step (``T_brake``): a memoryview of the numpy vector,
-        #: whose items are Python floats (the same doubles, without numpy's scalar per read), or the list
-        self._s_items = self._s if isinstance(self._s, list) else memoryview(self._s)
         #: the step's kernel on this unit's vectors (what ``step`` calls, for a caller's hot loop):
         #: ``(i_alpha, i_beta, omega_ref)`` of the sensorless unit, ``(i_alpha, i_beta, omega_ref,
         #: theta_meas, omega_meas)`` of the others; returns ``step``'s outputs
@@ -227,7 +250,57 @@ class ControlUnit:
         c[_k.C_FF_T1] = float(pr.ff_T1) if road else 0.0
         c[_k.C_FF_T2] = float(pr.ff_T2) if road else 0.0
         self._set_injection()
+        #: the controller FMU's buffer of its step (``pmsm_ev.kernels.UNIT_IO_LAYOUT``): its inputs, outputs and
+        #: sample clock (``load_io``), which ``pmsm_ev.kernels.unit_fmu_step`` and ``unit_periods`` step on
+        self.io = accel.vector(_k.UNIT_IO)
+        self._t_brake = accel.direct(self._kernels.unit_t_brake)
+        #: ``io`` read and written from Python (``FocSlave.do_step``): a memoryview of the numpy vector, whose items
+        #: are Python floats (the same doubles, without numpy's scalar per read), or the list
+        self._io_items = self.io if isinstance(self.io, list) else memoryview(self.io)
+        io = self._io_items
+        io[_k.UIO_UNIT_DT] = dt
+        io[_k.UIO_TOLERANCE] = SAMPLE_TOLERANCE
+        io[_k.UIO_KIND] = (_k.UNIT_KIND_INJECTION if self.injecting else _k.UNIT_KIND_SENSORLESS if self.sensorless
+                           else _k.UNIT_KIND_CONTROL)
+        io[_k.UIO_MEASURED] = 1.0 if self.angle_source == "measured" else 0.0
+        io[_k.UIO_REFERENCE] = self.reference
         self.reset()
+        self.load_io(self.outputs(), None)  # the outputs before the first period (the mode and fault of a unit
+        # without them stay so)
+
+    @classmethod
+    def from_groups(cls, observer: str, angle_source: str, group, dt: float) -> ControlUnit:
+        """The unit of ``observer`` from its ``parameter_groups``, ``group(cls)`` giving the group of that class."""
+        sensorless = observer == "sensorless"
+        return cls(observer, angle_source, group(MotorParams), group(ControllerParams), group(EkfParams), dt,
+                   group(StartupParams) if sensorless else None, group(InjectionParams) if sensorless else None)
+
+    def outputs(self, theta_meas: float = 0.0) -> dict[str, float]:
+        """A controller FMU's outputs of the unit's state (``IO_OUTPUTS``, by name), ``theta_meas`` the control
+        frame's angle of a unit on the measured angle."""
+        i_d_hat, i_q_hat, omega_hat, theta_hat, T_L_hat = self.estimates
+        v_alpha, v_beta = self.v_out
+        return {"v_alpha": v_alpha, "v_beta": v_beta, "v_d": self.v_d, "v_q": self.v_q, "i_d": self.i_d,
+                "i_q": self.i_q, "i_qref": self.i_qref, "i_d_hat": i_d_hat, "i_q_hat": i_q_hat,
+                "omega_hat": omega_hat, "theta_hat": theta_hat, "T_L_hat": T_L_hat, "mode": self.mode,
+                "fault": self.fault,
+                "theta_ctrl": self.theta_ctrl if self.sensorless or self.angle_source == "estimated" else theta_meas,
+                "omega_ctrl": self.omega_ctrl}
+
+    def load_io(self, values, dt: float | None, t0: float = 0.0, k_next: int | None = None) -> None:
+        """Fill ``io`` for a controller FMU's step in compiled code (``pmsm_ev.kernels.unit_fmu_step``): the FMU's
+        inputs and outputs from ``values`` (by name: ``IO_INPUTS``, ``IO_OUTPUTS``; an input not there is 0), the
+        friction brake's demand of the state, and its sample clock: the sample period ``dt`` (None: not fixed
+        yet, the first step's size), the start time ``t0`` and the index of the next sample instant (None: the
+        first step starts the clock)."""
+        io = self._io_items
+        for name, slot in IO_SLOTS.items():
+            io[slot] = values.get(name, 0.0)
+        io[_k.UIO_T_BRAKE] = self.T_brake
+        io[_k.UIO_DT] = dt or 0.0
+        io[_k.UIO_T0] = t0
+        io[_k.UIO_CLOCK] = 0.0 if k_next is None else 1.0
+        io[_k.UIO_K_NEXT] = k_next or 0
 
     def _set_injection(self) -> None:
         """The injection strategy's parameters (``InjectionParams``) into the parameter vector; the
@@ -334,12 +407,9 @@ class ControlUnit:
     @property
     def T_brake(self) -> float:
         """The friction brake's demand at the wheels of the last period [N m, >= 0]: the braking shaft torque
-        the motor does not give (the regen limit, the envelope) x n_g eta; 0 in the paper's mode.
-        (Read at every step by the FMU: ``_foc`` written out, on ``_s_items``.)"""
-        s = self._s_items
-        return (float(s[_k.S_T_BRAKE]) if self.reference and (not self.sensorless or s[_k.S_MODE] == _k.MODE_EKF
-                                                               or s[_k.S_MODE] == _k.MODE_INJECTION)
-                else 0.0)
+        the motor does not give (the regen limit, the envelope) x n_g eta; 0 in the paper's mode and in the
+        sensorless unit's modes without FOC (the kernel ``unit_t_brake``, which the compiled step calls too)."""
+        return self._t_brake(self.io, self._s)
 
     @property
     def ref_region(self) -> float:

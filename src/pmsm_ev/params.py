@@ -1200,7 +1200,7 @@ class EkfParams:
 class StartupParams:
     """The sensorless unit's low-speed range (observer "sensorless", FocSensorless.fmu):
     alignment at standstill, I-f (current-frequency) drive, and the handover to and from
-    the stationary-frame EKF5 (``pmsm_ev.kernels.sensorless_step``; reasoning in
+    the stationary-frame EKF5 (``pmsm_ev.kernels.sensorless_step``, a state machine: ``kernels.startup``; reasoning in
     ``docs/sensorless.md``).
 
     Alignment [chosen]: a current vector of ``i_align`` is ramped up on the +90 deg axis
@@ -1292,11 +1292,9 @@ class StartupParams:
     #: then takes the vector's angle plus that offset, and that load, and the EKF is restarted at the
     #: vector's angle plus that offset when the stand ends (the vector may have turned since it began).
     #: Below ~10 rad/s an EKF with a mismatched motor model is not to be trusted: the resistance error
-    #: against a back-EMF of N omega psi = 3.6 V at 10 rad/s (+50 % R_s at 160 A: 0.69 V, ~0.2 rad);
-    #: measured on WLTC's stop at 445-511 s with R_s +10 %, L_q -24 % (cycle Monte-Carlo sample 17): the
-    #: EKF's angle 0.03 rad off at 10 rad/s, 0.46 rad at the stand's 0.5 rad/s, which the restart used
-    #: to inherit (its load 23 N m against 1.6; the I-f current then rose to the limit and the rotor
-    #: slipped 9 turns); 0: the EKF's angle and load at the stand's start, as before
+    #: against a back-EMF of N omega psi = 3.6 V at 10 rad/s (+50 % R_s at 160 A: 0.69 V, ~0.2 rad), and
+    #: the error grows as the back-EMF falls (a hot motor with L_q 24 % off: 0.03 rad at 10 rad/s, 0.46 rad
+    #: at a stand's 0.5 rad/s, docs/sensorless.md); 0: the EKF's angle and load at the stand's start
     anchor_speed: float = 10.0
     #: design load angle of the I-f drive [rad] [chosen]: 60 deg. The I-f acceleration is held to
     #: what N psi i sin(60 deg) leaves over the load the EKF sees, and the current raised to what
@@ -1344,6 +1342,36 @@ class StartupParams:
     #: handover up in between, the fault latches (the safe state); 0: never
     stall_time: float = 3.0
     realign_max: int = 2
+    #: the guard's soft limit [rad] [chosen: 90 deg]: beyond this lead over the rotor's angle the I-f vector
+    #: turns no faster than the rotor. 90 deg is the pull-out angle of the magnet's torque N psi i sin e
+    #: (past it more lead gives more torque only through the reluctance term, which is small against the
+    #: magnet's at these currents): the lead stops growing where the torque per ampere is at its most,
+    #: before the EKF, whose load state lags a sudden load, shows the rotor slowing
+    soft_guard_angle: float = 0.5 * math.pi
+    #: the guard lets go once the lead is back within ``soft_guard_angle`` less this [rad] [chosen: 3 deg]: a
+    #: hysteresis against the swing of the EKF's angle at the limit (its noise at low speed with sigma = 1 A
+    #: is of the order of a degree), so that a vector held there and turning with the rotor does not flicker
+    #: in and out of the guard, and with it the current's rate (``i_rate_load``)
+    guard_band: float = math.radians(3.0)
+    #: in I-f at low speed the EKF is believed (``trust_rotor``) once it says the rotor has moved on the
+    #: vector by more than this since it was last believed [rad] [chosen: 30 deg]: a load that changed pushes
+    #: the rotor along the vector's spring, T = N psi i sin(e), and the motion shows the EKF the back-EMF.
+    #: 30 deg is the move of a load change of half the vector's pull-out torque N psi i (sin 30 deg = 1/2;
+    #: 10.8 N m at 60 A), half the design load angle (``if_load_angle``): the sizing follows while the
+    #: other half is in reserve. What an EKF on a mismatched model drifts at a stop stays mostly below it
+    #: (docs/sensorless.md, "What the stand is anchored on")
+    trust_move: float = math.radians(30.0)
+    #: a relocked vector (``relock``: after a slip at low speed, or a rotor running away under the alignment)
+    #: leads the rotor in the direction of the torque that holds the EKF's load and brings the speed to the
+    #: reference within this time [s] [chosen: 0.5 s]: the period of the rotor's swing on the vector
+    #: (2 pi sqrt(J_eq / (N^2 psi i)): 0.49 s at 60 A, 0.19 s at 400 A), so that the direction is set by
+    #: the load and the speed error, not by the swing's momentary speed
+    relock_time: float = 0.5
+    #: a stand in I-f ends once |omega_hat| has been above ``still_speed`` this long [s] [chosen: 50 ms]: the
+    #: EKF's speed noise at a stand with sigma = 1 A of current noise crosses 0.5 rad/s for a few periods at a
+    #: time; a rotor that really moves (a load beyond the vector) keeps above it. Half the slip detector's
+    #: ``slip_time``, so that the stand's end (the EKF put back on the anchor) comes before a slip is declared
+    still_time: float = 0.05
 
     @property
     def align_time(self) -> float:
@@ -1363,7 +1391,7 @@ class StartupParams:
                  f"if_load_angle must be in (0, pi/2) rad (got {self.if_load_angle})")
         _require(self.if_load_angle <= self.guard_angle < math.pi,
                  f"guard_angle must be in [if_load_angle, pi) rad (got {self.guard_angle})")
-        for name in ("i_rate_load", "slip_time", "recover_time"):
+        for name in ("i_rate_load", "slip_time", "recover_time", "relock_time"):
             _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
         _require(self.fault_time > self.recover_time,
                  f"fault_time must be > recover_time (got {self.fault_time} <= {self.recover_time} s)")

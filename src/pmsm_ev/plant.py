@@ -107,8 +107,54 @@ def battery_slot_values(b: BatteryParams, p: PlantParams) -> dict:
     return values
 
 
+#: the slots of ``io`` that hold ``step``'s results (i_alpha .. v_vehicle, in the layout's order)
+_OUTPUTS = slice(_k.PIO_I_ALPHA, _k.PIO_V_VEHICLE + 1)
+
+
+def _io_slot(slot: int, doc: str) -> property:
+    """An attribute of ``Plant`` held in its buffer ``io`` at ``slot``."""
+    def get(self) -> float:
+        return self._io_items[slot]
+
+    def set_(self, value: float) -> None:
+        self._io_items[slot] = value
+
+    return property(get, set_, doc=doc)
+
+
 class Plant:
-    """Vehicle + PMSM with state (i_d, i_q, omega_m, theta_e)."""
+    """Vehicle + PMSM with state (i_d, i_q, omega_m, theta_e).
+
+    Its state and outputs after the last step live in its buffer ``io`` (``pmsm_ev.kernels.PLANT_IO_LAYOUT``),
+    the attributes of the same names read and write it: the plant FMU's compiled step and the whole loop step the
+    plant on it (``pmsm_ev.kernels.plant_fmu_step``), ``step`` with the same kernel, ``plant_advance``."""
+
+    i_d = _io_slot(_k.PIO_I_D, "d current [A]")
+    i_q = _io_slot(_k.PIO_I_Q, "q current [A]")
+    omega_m = _io_slot(_k.PIO_OMEGA_M, "mechanical rotor speed [rad/s]")
+    theta_e = _io_slot(_k.PIO_THETA_E, "electrical rotor angle, wrapped to [-pi, pi) [rad]")
+    i_alpha = _io_slot(_k.PIO_I_ALPHA, "alpha current as measured [A]")
+    i_beta = _io_slot(_k.PIO_I_BETA, "beta current as measured [A]")
+    T_e = _io_slot(_k.PIO_T_E, "electromagnetic torque [N m]")
+    T_L_mech = _io_slot(_k.PIO_T_L_MECH, "road load torque on the motor shaft [N m]")
+    v_vehicle = _io_slot(_k.PIO_V_VEHICLE, "vehicle speed [m/s]")
+    x_vehicle = _io_slot(_k.PIO_X_VEHICLE, "distance travelled since the start [m] (eqs 1, 6 integrated)")
+    delta = _io_slot(_k.PIO_PLANT_DELTA, "the road elevation of the last step [rad]")
+    T_brake = _io_slot(_k.PIO_PLANT_T_BRAKE, "the friction-brake torque of the last step [N m at the wheels], >= 0")
+    clock = _io_slot(_k.PIO_CLOCK, "time since the start [s]: the sum of the steps (the inverter delay's clock)")
+    v_alpha_applied = _io_slot(_k.PIO_V_ALPHA_APPLIED, "the alpha voltage applied over the last step [V]")
+    v_beta_applied = _io_slot(_k.PIO_V_BETA_APPLIED, "the beta voltage applied over the last step [V]")
+    i_alpha_true = _io_slot(_k.PIO_I_ALPHA_TRUE, "alpha current, true [A]")
+    i_beta_true = _io_slot(_k.PIO_I_BETA_TRUE, "beta current, true [A]")
+
+    @property
+    def samples(self) -> int:
+        """The measurements taken so far (the noise counter)."""
+        return int(self._io_items[_k.PIO_SAMPLES])
+
+    @samples.setter
+    def samples(self, value: int) -> None:
+        self._io_items[_k.PIO_SAMPLES] = value
 
     def __init__(self, motor: MotorParams | None = None, vehicle: VehicleParams | None = None,
                  plant: PlantParams | None = None, battery: BatteryParams | None = None):
@@ -162,13 +208,25 @@ class Plant:
             self._pp[slot] = float(value)
         #: the energies since the start [J] (``pmsm_ev.kernels.PLANT_ENERGY_LAYOUT``, ``energies`` by name)
         self.energy = accel.vector(_k.PLANT_ENERGY)
-        self._plant_step = accel.direct(self._kernels.plant_step)
-        self._plant_step_measured = accel.direct(self._kernels.plant_step_measured)
+        self._advance = accel.direct(self._kernels.plant_advance)
         #: the current sensors' noise: stream sensor_seed (its low 64 bits), sample k at the k-th measurement
         self._seed64 = int(p.sensor_seed) & _k.MASK64
         self._measured = accel.direct(self._kernels.measured_currents)
         self._sensor_args = tuple(float(x) for x in (p.sensor_gain_a, p.sensor_offset_a, p.sensor_gain_b,
                                                      p.sensor_offset_b, p.sensor_noise, self._lsb, p.adc_range))
+        #: the state, the outputs and the constants of the step (``PLANT_IO_LAYOUT``); the plant FMU's inputs
+        #: are written there by the FMU
+        self.io = accel.vector(_k.PLANT_IO)
+        #: ``io`` read and written from Python: a memoryview of the numpy vector, whose items are Python floats
+        #: (the same doubles, without numpy's scalar per read), or the list
+        self._io_items = self.io if isinstance(self.io, list) else memoryview(self.io)
+        io = self._io_items
+        io[_k.PIO_U_LIM] = self._u_lim
+        io[_k.PIO_SENSORS] = 1.0 if self._sensors else 0.0
+        io[_k.PIO_SEED] = float(self._seed64 >> 32)
+        io[_k.PIO_SEED + 1] = float(self._seed64 & 0xFFFFFFFF)
+        for i, value in enumerate(self._sensor_args):
+            io[_k.PIO_SENSOR_ARGS + i] = value
         self.reset()
 
     def reset(self) -> None:
@@ -264,15 +322,12 @@ class Plant:
         as 0: a brake only opposes the motion.
 
         Returns (i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle)
-        after the step, also set as attributes (i_alpha, i_beta as measured). The plant FMU's compiled step
-        (``pmsm_ev.kernels.plant_fmu_step``) is this method on a buffer: a change here is made there too."""
-        self.delta = delta
-        if T_brake != self.T_brake:
-            self.T_brake = T_brake if T_brake > 0.0 else 0.0
-            self._pp[_k.P_T_BRAKE] = self.T_brake
+        after the step, also set as attributes (i_alpha, i_beta as measured). The step is the kernel
+        ``plant_advance`` on ``io``, which the plant FMU's compiled step (``pmsm_ev.kernels.plant_fmu_step``)
+        calls too; what is here, the inverter's delay and limit and the thermal model, the compiled step does not
+        take (it declines a voltage at or near the limit)."""
         if self.delay:
             v_alpha, v_beta = self._delayed(v_alpha, v_beta, dt)
-        self.clock += dt
         u_lim = self._u_lim
         if self.has_battery:  # the battery's terminal voltage of the step before
             u_lim = self._kernels.dc_link_limit(self._pp, self.energy, u_lim)
@@ -281,28 +336,13 @@ class Plant:
             if mag > u_lim:
                 v_alpha *= u_lim / mag
                 v_beta *= u_lim / mag
-        self.v_alpha_applied, self.v_beta_applied = v_alpha, v_beta
-        sample = self.samples
-        self.samples = sample + 1
-        if self._sensors:  # the step and the measurement (``_measure``) in one kernel call
-            (i_d, i_q, omega_m, theta_e, i_alpha_true, i_beta_true, T_e, T_L_mech, v_vehicle, dx, i_alpha,
-             i_beta) = self._plant_step_measured(self.i_d, self.i_q, self.omega_m, self.theta_e, v_alpha, v_beta,
-                                                 delta, dt, self._pp, self.energy, self._seed64, sample,
-                                                 *self._sensor_args)
-        else:
-            (i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle, dx) = self._plant_step(
-                self.i_d, self.i_q, self.omega_m, self.theta_e, v_alpha, v_beta, delta, dt, self._pp, self.energy)
-            i_alpha_true, i_beta_true = i_alpha, i_beta
-        self.i_d, self.i_q, self.omega_m, self.theta_e = i_d, i_q, omega_m, theta_e
-        self.T_e, self.T_L_mech, self.v_vehicle = T_e, T_L_mech, v_vehicle
-        self.x_vehicle += dx
+        self._advance(self.io, self._pp, self.energy, v_alpha, v_beta, delta, T_brake, dt, False)
+        i_alpha, i_beta, i_d, i_q, omega_m, theta_e, T_e, T_L_mech, v_vehicle = self._io_items[_OUTPUTS]
         if self._thermal:  # the copper losses heat the winding; R_s follows for the next step
             p = self.params
             self.T_winding, self._pp[_k.P_R_S] = self._kernels.winding_thermal_step(
                 self.T_winding, i_d, i_q, self.motor.R_s, p.alpha_R, TEMPERATURE_REF, p.T_ambient,
                 p.thermal_R, p.thermal_C, dt, self.motor.k_dq)
-        self.i_alpha_true, self.i_beta_true = i_alpha_true, i_beta_true
-        self.i_alpha, self.i_beta = i_alpha, i_beta
         return i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle
 
     # -- energies ------------------------------------------------------------------

@@ -107,7 +107,7 @@ def elevation_profile(scenario: int | str) -> Profile:
 #: sensorless unit aligns the rotor (``StartupParams().align_time`` = 2.3 s), plus 0.2 s of
 #: standstill on the aligned vector; then the paper's 10 s ramp to 200 rad/s
 SENSORLESS_START_DELAY = 2.5
-#: the ``hill-start`` route [chosen]: level road to 20 s, then 22 deg (scenario 2's slope);
+#: the ``hill-start-if`` route [chosen]: level road to 20 s, then 22 deg (scenario 2's slope);
 #: 0 -> 200 rad/s after the alignment, 200 -> 0 over 30-40 s on the slope, standstill for
 #: 10 s, 0 -> 200 rad/s over 50-60 s; 20 s more at 200 rad/s
 HILL_START_DEG = ((0, 0), (20, 22))
@@ -189,7 +189,7 @@ PACKAGED_ROUTES = ("scenario1", "scenario2")
 
 
 def hill_start_route() -> dict[str, Profile]:
-    """The ``hill-start`` route: stop, stand and restart on a 22 deg slope."""
+    """The ``hill-start-if`` route: stop, stand and restart on a 22 deg slope."""
     w = HILL_START_OMEGA_REF
     return {"delta": _steps_deg(HILL_START_DEG),
             "omega_ref": Profile(tuple(t for t, _ in w), tuple(v for _, v in w), "linear", "omega_ref", "rad/s")}

@@ -59,7 +59,7 @@ def simulate(system="scenario1", *, stop_time: float | None = None, step_size: f
              record=None, output=None, output_dir=None, figures: bool = False, cycle=None) -> tuple[np.ndarray, dict]:
     """Co-simulate and return ``(result, metrics)``.
 
-    ``system``: a shipped scenario (``"scenario1"``, ``"hill-start"``, ...), a system file, an
+    ``system``: a shipped scenario (``"scenario1"``, ``"hill-start-if"``, ...), a system file, an
     SSP package, or a :class:`~pmsm_cosim.engine.system.SystemSpec` (not changed: the
     overrides apply to a copy). Overrides as on the command line, by one function
     (:mod:`pmsm_cosim.app.overrides`): ``stop_time``, ``step_size``, ``output_interval`` [s],

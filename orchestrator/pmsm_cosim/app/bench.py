@@ -17,13 +17,13 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
 11 s, the alignment and the I-f start, then the drive away, 44.5 km/h at 35 s, 14.7 km/h at 60 s),
 
 (e) the sensorless cycle drive: the master with ``PmsmEvPlant`` + ``FocSensorless`` as the shipped
-    scenario ``wltc3b-sensorless`` runs them (the reference generator in field weakening on
+    scenario ``wltc3b-if`` runs them (the reference generator in field weakening on
     360 V, the high-speed current control, Tustin's current model, the speed loop's feedforward,
     the regenerative limit and the friction brake, the plant's inverter losses, power-flow gear
     and 1 A of current noise; a row every 50 ms), the cycle's omega_ref a linear table that
     changes every step;
 (f) the same system, signals and cycle with the pass-through FMUs: the FMI floor of (e);
-(g) the cycle drive with injection at and near zero speed: the shipped scenario ``wltc3b-injection`` (as
+(g) the cycle drive with injection at and near zero speed: the shipped scenario ``wltc3b-sensorless`` (as
     (e), the unit with ``low_speed = "injection"``, the plant's algebraic flux model);
 (h) the whole compiled loop (no FMI) of the system of (e): its plant and controller in one numba-compiled loop
     of the FMUs' own compiled steps (``pmsm_ev.kernels.whole_loop``, ``pmsm_cosim.app.whole_loop``), the
@@ -38,7 +38,7 @@ includes its worker threads). (a)-(c) include the recording of a row every 10 ms
 (figures included) for 100 s and for the full 350 s, each in a fresh process, and prints
 their wall time and peak resident memory (``wait4`` of that process): memory must not grow
 with the duration. With ``cycle_memory`` it runs the whole WLTC 3b sensorless,
-``pmsm-cosim run wltc3b-sensorless`` (figures included), for half the
+``pmsm-cosim run wltc3b-if`` (figures included), for half the
 cycle (900 s) and the whole (1800 s, 18 million steps), likewise.
 
 Timings on a shared machine vary with its load: the 1, 5 and 15 min load averages are
@@ -71,8 +71,8 @@ from .whole_loop import run_whole_loop
 SCENARIO = "scenario1"
 DEFAULT_SLICE = 20.0  #: [s] of simulated time per case
 MEMORY_STOP_TIMES = (100.0, 350.0)
-CYCLE_SYSTEM = "wltc3b-sensorless"  #: cases (e), (f): the shipped sensorless cycle scenario
-INJECTION_SYSTEM = "wltc3b-injection"  #: case (g): the same with injection
+CYCLE_SYSTEM = "wltc3b-if"  #: cases (e), (f): the shipped sensorless cycle scenario
+INJECTION_SYSTEM = "wltc3b-sensorless"  #: case (g): the same with injection
 CYCLE = "wltc3b"
 DEFAULT_CYCLE_SLICE = 60.0  #: [s] of the cycle in cases (e), (f)
 CYCLE_MEMORY_STOP_TIMES = (900.0, 1800.0)  #: half the WLTC, the whole
@@ -104,7 +104,7 @@ def _spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None)
 
 
 def cycle_spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = None, system: str = CYCLE_SYSTEM):
-    """The system of (e) and (f): ``wltc3b-sensorless --cycle wltc3b --stop-time stop_time`` (of (g):
+    """The system of (e) and (f): ``wltc3b-if --cycle wltc3b --stop-time stop_time`` (of (g):
     ``system`` = ``INJECTION_SYSTEM``)."""
     spec = apply_overrides(system, cycle=CYCLE, stop_time=stop_time)
     if plant is not None:
@@ -280,7 +280,7 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
             ("(d) libcosim + PmsmEvPlant/FocEkf5 FMUs", results["d"]),
             ("(e) sensorless cycle drive: FocSensorless FMUs", results["e"]),
             ("(f) the same with pass-through FMUs", results["f"]),
-            ("(g) (e) with injection (wltc3b-injection)", results["g"]),
+            ("(g) (e) with injection (wltc3b-sensorless)", results["g"]),
             ("(h) whole compiled loop (no FMI), system of (e)", results["h"]),
             ("(i) whole compiled loop (no FMI), system of (a)", results["i"]),
         ]

@@ -148,15 +148,16 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
     (``controller='X'``). Checked as far as it can be without opening the FMUs (their
     variables and the values' types are checked by the master)."""
     spec = copy.deepcopy(system) if isinstance(system, SystemSpec) else load_system(system)
+    # a replaced FMU: the start values the system file wrote for the one it had are set where the new FMU has the
+    # variable (``ComponentSpec.optional_start``: e.g. the sensorless unit's ``low_speed`` when ``--controller
+    # sensored`` swaps it out), else left out with a warning by the master; ``--set`` values are the user's own
     for option, instance, value in (("plant", PLANT_INSTANCE, plant), ("controller", CONTROLLER_INSTANCE, controller)):
         if value is not None:
             what = _named(option, value, cli)
-            comp = spec.component(instance, what)
-            comp.fmu, comp.fmu_text = resolve_fmu(value, what), str(value)
+            spec.component(instance, what).replace_fmu(resolve_fmu(value, what), str(value))
     for instance, value in _pairs(fmus or {}, "fmus", "INSTANCE=FMU", cli):
         what = _named_item("fmus", instance, value, cli)
-        comp = spec.component(instance, what)
-        comp.fmu, comp.fmu_text = resolve_fmu(value, what), str(value)
+        spec.component(instance, what).replace_fmu(resolve_fmu(value, what), str(value))
     if cycle is not None:  # omega_ref from the cycle (module cycles); the stop time its duration unless given
         what = _named("cycle", cycle, cli)
         loaded = cycles.load_cycle(str(cycle), what)
@@ -176,7 +177,9 @@ def apply_overrides(system, *, plant=None, controller=None, fmus=None, stop_time
     for target, value in _pairs(set or {}, "set", "INSTANCE.VAR=VALUE", cli):
         what = _named_item("set", target, value, cli)
         instance, variable = split_reference(target, what)
-        spec.component(instance, what).start[variable] = value
+        comp = spec.component(instance, what)
+        comp.start[variable] = value
+        comp.optional_start = comp.optional_start - {variable}  # the user's own: set, or refused
     for signal, csv in _pairs(profiles or {}, "profiles", "SIGNAL=CSV", cli):
         if signal not in spec.signals:
             raise CosimError(f"{_named_item('profiles', signal, csv, cli)}: unknown signal {signal!r}"

@@ -19,16 +19,11 @@ import time
 from pathlib import Path
 
 from pmsm_ev import kernels as _k
-from pmsm_ev.control_unit import ControlUnit
+from pmsm_ev.control_unit import ControlUnit, parameter_groups
 from pmsm_ev.params import (
     DT_DEFAULT,
-    SENSORLESS_EKF,
-    ControllerParams,
-    EkfParams,
-    InjectionParams,
     MotorParams,
     PlantParams,
-    StartupParams,
     VehicleParams,
 )
 from pmsm_ev.plant import ENERGY_SLOTS, Plant
@@ -39,12 +34,8 @@ from ..engine.master import SignalClock
 from ..engine.recording import ResultWriter
 from ..engine.system import COLUMN_CONVERSIONS, SystemSpec
 
-#: the controller FMUs covered: model -> (observer, the parameter groups' defaults, as the slave declares them)
-CONTROLLERS = {
-    "FocEkf5": ("ekf5", (ControllerParams(), EkfParams(), MotorParams())),
-    "FocSensorless": ("sensorless", (ControllerParams(), SENSORLESS_EKF, MotorParams(), StartupParams(),
-                                     InjectionParams())),
-}
+#: the controller FMUs covered: model -> its unit's observer (its parameter groups: ``parameter_groups``)
+CONTROLLERS = {"FocEkf5": "ekf5", "FocSensorless": "sensorless"}
 PLANT = "PmsmEvPlant"
 #: the wiring of the shipped scenarios, which the loop's transfers are
 WIRING = {("plant", "i_alpha", "ctrl", "i_alpha"), ("plant", "i_beta", "ctrl", "i_beta"),
@@ -106,13 +97,14 @@ def build(spec: SystemSpec) -> tuple[WholeLoop, dict[str, str]]:
                          f"{plant_start['battery']!r})")
     plant = Plant(_group(MotorParams(), plant_start), _group(VehicleParams(), plant_start),
                   _group(PlantParams(), plant_start))
-    observer, defaults = CONTROLLERS[Path(comps["ctrl"].fmu).stem]
-    groups = [_group(d, ctrl_start) for d in defaults]
-    controller, ekf, motor = groups[:3]
-    startup, injection = groups[3:] if observer == "sensorless" else (None, None)
+    observer = CONTROLLERS[Path(comps["ctrl"].fmu).stem]
+    groups = {}
+    for default in parameter_groups(observer):  # as the slave declares them: a class, its defaults
+        default = default() if isinstance(default, type) else default
+        groups[type(default)] = _group(default, ctrl_start)
     dt = float(ctrl_start.get("dt", 0.0))
-    unit = ControlUnit(observer, str(ctrl_start.get("angle_source", "measured")), motor, controller, ekf,
-                       dt or DT_DEFAULT, startup, injection)
+    unit = ControlUnit.from_groups(observer, str(ctrl_start.get("angle_source", "measured")), groups.__getitem__,
+                                   dt or DT_DEFAULT)
     return WholeLoop(plant, unit, dt), roles
 
 

@@ -124,6 +124,19 @@ def check_wiring(s: SystemSpec, instances: dict[str, FmuInstance]) -> None:
         for var in comp.start:
             inst.check_settable(var, f"start value {comp.name}.{var}")
 
+def drop_foreign_starts(spec: SystemSpec, instances: dict[str, FmuInstance]) -> list[str]:
+    """Take out of each component's start values those written for the FMU it replaced
+    (``ComponentSpec.optional_start``) that its FMU has no variable for; a warning for each."""
+    out = []
+    for comp in spec.components:
+        inst = instances[comp.name]
+        foreign = [var for var in comp.start if var in comp.optional_start and var not in inst.variables]
+        for var in foreign:
+            out.append(f"start value {comp.name}.{var} = {comp.start.pop(var)!r} (written for the FMU that "
+                       f"{inst.path.name} replaced) not set: {inst.path.name} has no such variable")
+    return out
+
+
 def unconnected_inputs(spec: SystemSpec, instances: dict[str, FmuInstance]) -> list[str]:
     """A warning per input that nothing drives (it keeps its start value)."""
     driven = {(c.dst, c.dst_var) for c in spec.connections}

@@ -75,7 +75,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .checks import check_wiring, time_grid, unconnected_inputs
+from .checks import check_wiring, drop_foreign_starts, time_grid, unconnected_inputs
 from .errors import CosimError, one_line
 from .fmu import FMI2_DISCARD, STATUS, FmuInstance, real_array, vr_array
 from .recording import ResultWriter, write_metrics
@@ -219,11 +219,12 @@ class Master:
         try:
             for comp in spec.components:
                 self.instances[comp.name] = FmuInstance(comp.name, comp.fmu)
+            dropped = drop_foreign_starts(spec, self.instances)
             check_wiring(spec, self.instances)
         except BaseException:
             self.close()
             raise
-        self.warnings: list[str] = unconnected_inputs(spec, self.instances)
+        self.warnings: list[str] = dropped + unconnected_inputs(spec, self.instances)
         self._stop_requested = False
         self._stop_signal = ""  #: the name of the signal that asked for the stop
         self._finishing = False

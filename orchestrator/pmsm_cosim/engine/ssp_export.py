@@ -143,6 +143,8 @@ def export_ssp(spec: SystemSpec, dest, *, signal_fmu=None, carries_starts=None, 
             values, packaged = [], {}
             by_name = {sv.name: sv for sv in descriptions[comp.name].modelVariables}
             for var, value in comp.start.items():
+                if var in comp.optional_start and var not in by_name:
+                    continue  # written for the FMU this one replaced (ComponentSpec.optional_start)
                 sv = by_name[var]
                 if sv.type not in TYPES:
                     raise CosimError(f"{where}export-ssp: start value {comp.name}.{var}: {sv.type} "
@@ -165,7 +167,7 @@ def export_ssp(spec: SystemSpec, dest, *, signal_fmu=None, carries_starts=None, 
 
         # -- the .ssd ---------------------------------------------------------------
         # OMSimulator takes these names for its model and system: identifiers only (a hyphen,
-        # as in "hill-start", leaves it with no model); the run record keeps the system's name
+        # as in "hill-start-if", leaves it with no model); the run record keeps the system's name
         ident = re.sub(r"\W", "_", spec.name, flags=re.ASCII)
         ident = ident if ident[:1].isalpha() else f"s_{ident}"
         root = ET.Element(qname("ssd:SystemStructureDescription"), {

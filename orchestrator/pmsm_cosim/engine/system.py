@@ -51,6 +51,17 @@ class ComponentSpec:
     step_multiple: int = 1  #: stepped every ``step_multiple`` base steps
     start: dict[str, Any] = field(default_factory=dict)  #: start values, by variable name
     fmu_text: str = ""  #: ``fmu`` as written (for messages and metrics)
+    #: the names in ``start`` written for the FMU this instance had before another replaced it (``--controller``,
+    #: ``--plant``, ``--fmu``): set where the new FMU has the variable, else left out with a warning
+    #: (:func:`~pmsm_cosim.engine.checks.drop_foreign_starts`)
+    optional_start: frozenset[str] = frozenset()
+
+    def replace_fmu(self, fmu: Path, text: str) -> None:
+        """Another FMU for this instance: the start values written for the one it had become optional
+        (``optional_start``)."""
+        if fmu != self.fmu:
+            self.optional_start = frozenset(self.start)
+        self.fmu, self.fmu_text = fmu, text
 
 
 @dataclass(frozen=True)
@@ -132,7 +143,7 @@ class SystemSpec:
     def set_fmu(self, instance: str, path, context: str = "") -> None:
         """Replace the FMU of an instance (``--fmu INSTANCE=FMU``, ``--plant``, ``--controller``)."""
         comp = self.component(instance, context or f"--fmu {instance}={path}")
-        comp.fmu, comp.fmu_text = user_path(str(path), where=f"--fmu {instance}"), str(path)
+        comp.replace_fmu(user_path(str(path), where=f"--fmu {instance}"), str(path))
 
     def set_signal_csv(self, assignment: str) -> None:
         """Apply ``SIGNAL=CSV``: the signal's values come from a (time, value) CSV file."""

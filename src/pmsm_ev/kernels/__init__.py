@@ -13,7 +13,10 @@ each function's docstring citing its equations:
 * ``references``: the reference generator (torque, speed and voltage to the current references: MTPA,
   field weakening, MTPV, the current and torque limits), the regenerative-braking limit and the friction
   brake's share;
-* ``startup``: the sensorless unit's step (alignment, I-f, handover, synchronism);
+* ``machine``: the sensorless unit's two state machines' events, entry actions and their one ordered
+  transition table ``TRANSITIONS`` (looked up by ``lookup``);
+* ``startup``: the sensorless unit with the I-f strategy as a state machine (alignment, I-f, handover, the
+  stand, synchronism; its step);
 * ``injection``: high-frequency injection at and near zero speed (the square wave, its demodulation, the
   tracking observer, the blend with the EKF);
 * ``modes``: the sensorless unit with injection as a state machine (modes, detectors, the transition
@@ -32,7 +35,8 @@ module re-exports them all: ``from pmsm_ev.kernels import plant_step``, ``kernel
 FMUs and the tests share one implementation whether numba is there or not. The other modules of
 ``pmsm_ev`` keep the readable, dataclass-based interface (``pmsm.current_derivatives(..., m)``,
 ``Plant``, ``ControlUnit``, the observer classes) on top of these functions. The package imports
-nothing outside itself but ``math`` (and numba): ``pmsm_ev.accel`` compiles a copy of it.
+nothing outside itself but ``math`` (and numba, with numpy for its constant tables, ``jit.table``):
+``pmsm_ev.accel`` compiles a copy of it.
 
 Floating-point results are the same compiled or not: the operations are written in the
 order of the plain-Python formulas they replaced (numba does not reorder or fuse them
@@ -49,6 +53,7 @@ from .injection import *  # noqa: F403
 from .jit import CACHE, JIT  # noqa: F401 - how this copy was loaded (pmsm_ev.accel reads it)
 from .layout import *  # noqa: F403
 from .loop import *  # noqa: F403
+from .machine import *  # noqa: F403
 from .modes import *  # noqa: F403
 from .observers import *  # noqa: F403
 from .plant import *  # noqa: F403

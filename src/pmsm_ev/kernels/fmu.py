@@ -7,15 +7,17 @@ A slave of ``pmsm_ev_fmus`` that runs with compiled kernels hands the binding, w
 outputs and the little state its ``do_step`` keeps outside the kernels' vectors (the plant's clock and sample
 counter, the controller's sample clock), with two more vectors: the plant's parameter and energy vectors
 (``PLANT_PARAMS_LAYOUT``, ``PLANT_ENERGY_LAYOUT``), the control unit's state and parameter vectors
-(``UNIT_STATE_LAYOUT``, ``UNIT_PARAMS_LAYOUT``). The binding writes the inputs into ``io``, calls the C
-function at ``fmu_step_address(kind)`` with the three pointers and the communication point and step, and reads
-the outputs from ``io``: no Python on the way.
+(``UNIT_STATE_LAYOUT``, ``UNIT_PARAMS_LAYOUT``). The buffer is the physics object's own: ``Plant.io``, where the
+plant keeps its state, and ``ControlUnit.io``, which the slave fills (``ControlUnit.load_io``). The binding writes
+the inputs into ``io``, calls the C function at ``fmu_step_address(kind)`` with the three pointers and the
+communication point and step, and reads the outputs from ``io``: no Python on the way.
 
-``plant_fmu_step`` and ``unit_fmu_step`` are ``PmsmEvPlant.do_step`` (``pmsm_ev.plant.Plant.step``) and
-``FocSlave.do_step`` (the sample clock, ``ControlUnit.kernel_step``) written on these buffers: the physics are
-the kernels they call (``plant_step``, ``plant_step_measured``, ``control_step``, ``sensorless_step``,
-``injection_unit_step``), the same functions with the same arguments in the same order, so the numbers are
-the same, bit for bit; what they add is the bookkeeping of those two methods. A step they do not take returns
+``plant_fmu_step`` and ``unit_fmu_step`` are ``PmsmEvPlant.do_step`` and ``FocSlave.do_step`` on these buffers,
+and they call the kernels those Python steps call, so the numbers are the same, bit for bit, and nothing is
+written twice: the plant's step is ``plant_advance`` (``Plant.step`` calls it after the inverter's delay and
+limit, which are Python's), the controller's periods ``unit_periods`` and its sample clock ``sample_instant``
+(``FocSlave.do_step`` calls both), the brake's demand ``unit_t_brake`` (``ControlUnit.T_brake``); what is here is
+what decides whether the compiled step is taken. A step they do not take returns
 ``STEP_DECLINED`` with nothing changed, and the binding runs the slave's Python ``do_step`` instead: a plant
 with the inverter's delay or the thermal model (the slave does not offer those), a plant voltage at or near the
 DC link's limit (the ideal link's v_dc / sqrt 3, or the battery's terminal voltage over sqrt 3, ``dc_link_limit``;
@@ -31,38 +33,19 @@ import math
 
 from .control import control_step, unit_dc_link
 from .jit import CACHE, JIT, kernel
+from .jit import F as _F
+from .jit import V as _V
+from .jit import sig as _sig
 from .layout import (
-    E_BAT_V,
     MODE_EKF,
     MODE_INJECTION,
     P_T_BRAKE,
-    PIO_CLOCK,
     PIO_DELTA,
-    PIO_I_ALPHA,
-    PIO_I_ALPHA_TRUE,
-    PIO_I_BETA,
-    PIO_I_BETA_TRUE,
-    PIO_I_D,
-    PIO_I_Q,
-    PIO_OMEGA_M,
-    PIO_PLANT_DELTA,
-    PIO_PLANT_T_BRAKE,
-    PIO_SAMPLES,
     PIO_SAVE,
-    PIO_SEED,
-    PIO_SENSOR_ARGS,
-    PIO_SENSORS,
     PIO_T_BRAKE,
-    PIO_T_E,
-    PIO_T_L_MECH,
-    PIO_THETA_E,
     PIO_U_LIM,
     PIO_V_ALPHA,
-    PIO_V_ALPHA_APPLIED,
     PIO_V_BETA,
-    PIO_V_BETA_APPLIED,
-    PIO_V_VEHICLE,
-    PIO_X_VEHICLE,
     PLANT_ENERGY,
     PLANT_IO,
     PLANT_PARAMS,
@@ -108,7 +91,7 @@ from .layout import (
     UNIT_STATE,
 )
 from .modes import injection_unit_step
-from .plant import dc_link_limit, plant_step, plant_step_measured
+from .plant import dc_link_limit, plant_advance
 from .startup import sensorless_step
 
 if JIT:
@@ -131,9 +114,10 @@ UNIT_KIND_CONTROL, UNIT_KIND_SENSORLESS, UNIT_KIND_INJECTION = 0.0, 1.0, 2.0
 
 @kernel()
 def plant_fmu_step(io, pp, ee, h):
-    """``PmsmEvPlant.do_step`` over ``h`` on the buffer ``io`` (``PLANT_IO_LAYOUT``), the plant's parameter
-    vector ``pp`` and energy vector ``ee``: ``Plant.step`` with the inputs held (without its inverter delay and
-    thermal model), then the outputs. ``STEP_TAKEN``, or ``STEP_DECLINED`` with nothing changed (the module
+    """``PmsmEvPlant.do_step`` over ``h`` on the plant's buffer ``io`` (``PLANT_IO_LAYOUT``: ``Plant.io``, the
+    slave's inputs written into it), its parameter vector ``pp`` and energy vector ``ee``: ``Plant.step`` with the
+    inputs held (without its inverter delay and thermal model), that is its kernel ``plant_advance`` with the
+    voltage inside the DC link's limit. ``STEP_TAKEN``, or ``STEP_DECLINED`` with nothing changed (the module
     doc)."""
     if not h > 0.0:
         return STEP_DECLINED
@@ -142,88 +126,36 @@ def plant_fmu_step(io, pp, ee, h):
     u_lim = dc_link_limit(pp, ee, io[PIO_U_LIM])  # the ideal link's, or the battery's of the step before
     if u_lim != 0.0 and not v_alpha * v_alpha + v_beta * v_beta < u_lim * u_lim * U_LIMIT_MARGIN:
         return STEP_DECLINED  # at or near the limit: math.hypot decides, in Python
-    for i in range(PLANT_ENERGY):
-        io[PIO_SAVE + i] = ee[i]
-    delta = io[PIO_DELTA]
-    t_brake_in = io[PIO_T_BRAKE]
-    t_brake = io[PIO_PLANT_T_BRAKE]
-    pp_t_brake = pp[P_T_BRAKE]
-    if t_brake_in != t_brake:
-        t_brake = t_brake_in if t_brake_in > 0.0 else 0.0
-        pp[P_T_BRAKE] = t_brake
-    sample = io[PIO_SAMPLES]
-    if io[PIO_SENSORS] != 0.0:
-        seed = (int(io[PIO_SEED]) << 32) | int(io[PIO_SEED + 1])
-        (i_d, i_q, omega_m, theta_e, i_alpha_true, i_beta_true, t_e, t_l, v_v, dx, i_alpha,
-         i_beta) = plant_step_measured(io[PIO_I_D], io[PIO_I_Q], io[PIO_OMEGA_M], io[PIO_THETA_E], v_alpha, v_beta,
-                                       delta, h, pp, ee, seed, int(sample), io[PIO_SENSOR_ARGS],
-                                       io[PIO_SENSOR_ARGS + 1], io[PIO_SENSOR_ARGS + 2], io[PIO_SENSOR_ARGS + 3],
-                                       io[PIO_SENSOR_ARGS + 4], io[PIO_SENSOR_ARGS + 5], io[PIO_SENSOR_ARGS + 6])
-    else:
-        i_d, i_q, omega_m, theta_e, i_alpha, i_beta, t_e, t_l, v_v, dx = plant_step(
-            io[PIO_I_D], io[PIO_I_Q], io[PIO_OMEGA_M], io[PIO_THETA_E], v_alpha, v_beta, delta, h, pp, ee)
-        i_alpha_true = i_alpha
-        i_beta_true = i_beta
-    if not math.isfinite(omega_m + i_d + i_q + ee[E_BAT_V]):  # the slave raises (a state, or the battery's
-        # voltage when it cannot give the power: 0 with the ideal link): its Python step, from the state before
-        for i in range(PLANT_ENERGY):
-            ee[i] = io[PIO_SAVE + i]
-        pp[P_T_BRAKE] = pp_t_brake
-        return STEP_DECLINED
-    io[PIO_PLANT_DELTA] = delta
-    io[PIO_PLANT_T_BRAKE] = t_brake
-    io[PIO_CLOCK] += h
-    io[PIO_SAMPLES] = sample + 1.0
-    io[PIO_V_ALPHA_APPLIED] = v_alpha
-    io[PIO_V_BETA_APPLIED] = v_beta
-    io[PIO_I_D] = i_d
-    io[PIO_I_Q] = i_q
-    io[PIO_OMEGA_M] = omega_m
-    io[PIO_THETA_E] = theta_e
-    io[PIO_T_E] = t_e
-    io[PIO_T_L_MECH] = t_l
-    io[PIO_V_VEHICLE] = v_v
-    io[PIO_X_VEHICLE] += dx
-    io[PIO_I_ALPHA_TRUE] = i_alpha_true
-    io[PIO_I_BETA_TRUE] = i_beta_true
-    io[PIO_I_ALPHA] = i_alpha
-    io[PIO_I_BETA] = i_beta
+    if not plant_advance(io, pp, ee, v_alpha, v_beta, io[PIO_DELTA], io[PIO_T_BRAKE], h, True):
+        return STEP_DECLINED  # a state that is not finite: the slave raises, in its Python step
     return STEP_TAKEN
 
 
-@kernel()
+@kernel(_sig(_F, _V, _V))
 def unit_t_brake(io, s):
-    """``ControlUnit.T_brake`` of the state ``s``: the friction brake's demand, 0 in the paper's mode and in the
-    sensorless unit's modes without FOC."""
+    """``ControlUnit.T_brake`` of the state ``s`` (the unit's buffer ``io`` says its kind and reference mode): the
+    friction brake's demand, 0 in the paper's mode and in the sensorless unit's modes without FOC."""
     if io[UIO_REFERENCE] != 0.0 and (io[UIO_KIND] == UNIT_KIND_CONTROL or s[S_MODE] == MODE_EKF
                                      or s[S_MODE] == MODE_INJECTION):
         return s[S_T_BRAKE]
     return 0.0
 
 
-@kernel()
-def unit_fmu_step(io, s, c, t, h):
-    """``FocSlave.do_step(t, h)`` on the buffer ``io`` (``UNIT_IO_LAYOUT``) and the unit's state and parameter
-    vectors ``s``, ``c``: one control period at each sample instant in [t, t + h) not yet run, on the inputs
-    held. ``STEP_TAKEN``, or ``STEP_DECLINED`` with nothing changed (the module doc)."""
-    if not h > 0.0:
-        return STEP_DECLINED
-    tolerance = io[UIO_TOLERANCE]
-    dt = io[UIO_DT]
-    if io[UIO_CLOCK] == 0.0:  # the first step starts the clock (FocSlave._start_clock)
-        if dt == 0.0:
-            if h != io[UIO_UNIT_DT]:
-                return STEP_DECLINED  # the unit is rebuilt for dt = h: in Python
-            dt = h
-        k_next = math.ceil((t - io[UIO_T0]) / dt - tolerance)
-        io[UIO_DT] = dt
-        io[UIO_K_NEXT] = k_next
-        io[UIO_CLOCK] = 1.0
-    else:
-        k_next = int(io[UIO_K_NEXT])
-    k_end = math.ceil((t + h - io[UIO_T0]) / dt - tolerance)
-    n = k_end - k_next
-    if io[UIO_V_DC_MEAS] > 0.0:  # a measured DC link (FocSlave.do_step: ControlUnit.dc_link)
+@kernel(_sig("int64", _F, _F, _F, _F))
+def sample_instant(t, t0, dt, tolerance):
+    """The index of the first sample instant t0 + k dt at or after t of a controller FMU's sample clock, an
+    instant within ``tolerance`` dt before t counting as t (``pmsm_ev_fmus.foc_slave``)."""
+    return math.ceil((t - t0) / dt - tolerance)
+
+
+@kernel(_sig("void", _V, _V, _V, "int64"))
+def unit_periods(io, s, c, n):
+    """n control periods of a controller FMU's unit on the inputs held in its buffer ``io`` (``UNIT_IO_LAYOUT``:
+    ``ControlUnit.io``) and its state and parameter vectors ``s``, ``c``, the outputs written into ``io``: the
+    unit's kernel (``control_step``, ``sensorless_step``, ``injection_unit_step`` by ``UIO_KIND``), then the control
+    frame. ``FocSlave.do_step`` and the compiled step (``unit_fmu_step``) both run the periods so. On a measured DC
+    link (the input v_dc_meas > 0, a battery's) the unit's limits follow it first (``unit_dc_link``)."""
+    if io[UIO_V_DC_MEAS] > 0.0:
         unit_dc_link(c, io[UIO_V_DC_MEAS], io[UIO_P_CHARGE_MAX], io[UIO_P_DISCHARGE_MAX])
     kind = io[UIO_KIND]
     while n > 0:
@@ -233,7 +165,7 @@ def unit_fmu_step(io, s, c, t, h):
                 s, c, io[UIO_I_ALPHA], io[UIO_I_BETA], io[UIO_OMEGA_REF], io[UIO_THETA_MEAS], io[UIO_OMEGA_MEAS])
             io[UIO_OMEGA_CTRL] = io[UIO_OMEGA_HAT]
             io[UIO_THETA_CTRL] = io[UIO_THETA_MEAS] if io[UIO_MEASURED] != 0.0 else io[UIO_THETA_HAT]
-        elif kind == UNIT_KIND_SENSORLESS:
+        elif kind == UNIT_KIND_SENSORLESS:  # never reads theta_meas, omega_meas
             (io[UIO_V_ALPHA], io[UIO_V_BETA], io[UIO_V_D], io[UIO_V_Q], io[UIO_I_D], io[UIO_I_Q], io[UIO_I_QREF],
              io[UIO_I_D_HAT], io[UIO_I_Q_HAT], io[UIO_OMEGA_HAT], io[UIO_THETA_HAT], io[UIO_T_L_HAT], io[UIO_MODE],
              io[UIO_FAULT], io[UIO_THETA_CTRL], io[UIO_OMEGA_CTRL]) = sensorless_step(
@@ -244,6 +176,32 @@ def unit_fmu_step(io, s, c, t, h):
              io[UIO_FAULT], io[UIO_THETA_CTRL], io[UIO_OMEGA_CTRL]) = injection_unit_step(
                 s, c, io[UIO_I_ALPHA], io[UIO_I_BETA], io[UIO_OMEGA_REF])
         n -= 1
+
+
+@kernel()
+def unit_fmu_step(io, s, c, t, h):
+    """``FocSlave.do_step(t, h)`` on the unit's buffer ``io`` (``UNIT_IO_LAYOUT``: ``ControlUnit.io``, the slave's
+    inputs, outputs and sample clock written into it) and its state and parameter vectors ``s``, ``c``: the sample
+    clock, then ``unit_periods`` for the instants in [t, t + h) not yet run, on the inputs held. ``STEP_TAKEN``, or
+    ``STEP_DECLINED`` with nothing changed (the module doc)."""
+    if not h > 0.0:
+        return STEP_DECLINED
+    tolerance = io[UIO_TOLERANCE]
+    dt = io[UIO_DT]
+    if io[UIO_CLOCK] == 0.0:  # the first step starts the clock (FocSlave._start_clock)
+        if dt == 0.0:
+            if h != io[UIO_UNIT_DT]:
+                return STEP_DECLINED  # the unit is rebuilt for dt = h: in Python
+            dt = h
+        k_next = sample_instant(t, io[UIO_T0], dt, tolerance)
+        io[UIO_DT] = dt
+        io[UIO_K_NEXT] = k_next
+        io[UIO_CLOCK] = 1.0
+    else:
+        k_next = int(io[UIO_K_NEXT])
+    k_end = sample_instant(t + h, io[UIO_T0], dt, tolerance)
+    if k_end > k_next:
+        unit_periods(io, s, c, k_end - k_next)
         io[UIO_K_NEXT] = k_end
     io[UIO_T_BRAKE] = unit_t_brake(io, s)
     return STEP_TAKEN

@@ -32,6 +32,17 @@ else:
             return fn
         return wrap
 
+def table(rows):
+    """A constant table of float rows as the kernels read it: compiled, a numpy array (numba keeps a
+    global array as read-only data: a lookup reads memory, where a tuple of tuples is rebuilt on the
+    stack at each call); plain Python, the rows as they are."""
+    if not JIT:
+        return rows
+    import numpy as np  # noqa: PLC0415 - numpy is there wherever numba is
+
+    return np.array(rows, dtype=np.float64)
+
+
 F = "float64"  #: numba's type of a float argument
 V = "float64[::1]"  #: ... of a vector (contiguous)
 

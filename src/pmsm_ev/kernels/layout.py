@@ -283,13 +283,13 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_I_TGT", 1, "... its target magnitude [A]"),
     ("S_OMEGA_IF", 1, "the I-f speed [rad/s]"),
     ("S_AGREE", 1, "how long omega_hat has agreed with the I-f speed [s]"),
-    ("S_SLIP", 1, "I-f: omega_hat - omega_if, low-pass filtered (the damping's input) [rad/s]"),
+    ("S_SLIP", 1, "I-f: omega_hat - omega_if, low-pass filtered (the damping's input and the slip detector's) [rad/s]"),
     ("S_V_OUT_ALPHA", 1, "with dead-time compensation: the vector sent to the inverter, alpha [V]"),
     ("S_V_OUT_BETA", 1, "... beta [V]"),
     ("S_PSI_RATIO", 1, "with psi adaptation: the EKF's magnet flux over the nominal psi [-]"),
     # the sensorless unit's synchronism (``sync_guard``, ``slip_detector``)
     ("S_GUARD", 1, "the load-angle guard holding the I-f vector back (GUARD_SOFT, GUARD_HARD; 0 = not)"),
-    ("S_LOS", 1, "how long the slip has exceeded its bound [s]"),
+    ("S_LOS", 1, "I-f: how long the unit has been in trouble (the slip beyond its bound, or the limit reached) [s]"),
     ("S_EPISODE", 1, "the age of the present loss-of-synchronism episode [s] (0: none)"),
     ("S_INSYNC", 1, "how long it has been in synchronism since [s]"),
     ("S_FAULT", 1, "the fault (FAULT_*)"),
@@ -297,10 +297,10 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_OMEGA_CTRL", 1, "the control frame's speed of the last period [rad/s]"),
     # the car standing in I-f (``C_STILL``)
     ("S_ANCHOR", 1, "the rotor's angle when the stand began [rad]: the vector's and S_TRUST_OFF"),
-    ("S_ANCHORED", 1, "1.0 while the car stands"),
+    ("S_ANCHORED", 1, "the stand's state: STAND_HELD (1.0) while the car stands, else STAND_FREE (0.0)"),
     ("S_ANCHOR_TL", 1, "the load when the stand began [N m]: S_TRUST_TL"),
     ("S_STILL_OUT", 1, "how long |omega_hat| has been above C_STILL while standing [s] (the stand ends at "
-                       "C_SLIP_TIME / 2)"),
+                       "C_STILL_TIME)"),
     # reference generator
     ("S_I_DREF", 1, "the d-current reference of the reference generator [A] (``C_REF_MODE`` != 0)"),
     ("S_T_REF", 1, "the motor's torque reference after the limits [N m] (``C_REF_MODE`` != 0)"),
@@ -353,7 +353,11 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
                    "cross-saturation's offset"),
     ("S_POL_AXIS", 1, "the polarity test's frame [rad]: the axis the acquisition found, moved only where the "
                       "tracking observer gets more than C_POL_BAND from it"),
-), size=196)
+    # the I-f strategy's alignment (``kernels.startup``)
+    ("S_RUNAWAY_T", 1, "alignment: how long |omega_hat| has been above C_ALIGN_SLIP [s]"),
+    ("S_ALIGN_SPEED", 1, "alignment: the rotor's speed the back-EMF shows on the vector's q axis less the sweep's, "
+                         "low-pass filtered (the alignment damping's input) [rad/s]"),
+), size=198)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -488,6 +492,13 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_INJ_I_MAX", 1, "the q current limit while the injection carries the angle [A]"),
     ("C_POL_BAND", 1, "the polarity test's frame: how far the tracking observer may move from it before it follows "
                       "[rad]"),
+    # the I-f strategy's guard, trust, relock and stand (``pmsm_ev.params.StartupParams``)
+    ("C_SOFT_GUARD", 1, "beyond this lead of the I-f vector over the rotor's angle it turns no faster than the rotor "
+                        "[rad]"),
+    ("C_GUARD_BAND", 1, "the guard lets go once the lead is back within C_SOFT_GUARD less this [rad]"),
+    ("C_TRUST_MOVE", 1, "in I-f the EKF is believed once the rotor has moved this far on the vector since [rad]"),
+    ("C_RELOCK_TIME", 1, "a relocked vector's torque brings the speed to the reference in this time [s]"),
+    ("C_STILL_TIME", 1, "a stand ends once |omega_hat| has been above C_STILL this long [s]"),
     # the DC link measured (the controller's inputs v_dc, P_charge_max, P_discharge_max; ``unit_dc_link``)
     ("C_FW_MARGIN", 1, "the field weakening's share of the voltage limit [-] (``ControllerParams.fw_margin``; 0 "
                        "without field weakening): C_U_FW = C_FW_MARGIN x C_U_MAX at the measured DC link"),
@@ -497,7 +508,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                    "at most this"),
     ("C_P_DIS", 1, "the battery's discharge power [W] (input P_discharge_max): a motoring torque's power at the shaft "
                    "at most this"),
-), size=142)
+), size=147)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24

@@ -14,7 +14,8 @@ Modes (``S_MODE``):
 
 Each period the detectors (small functions, each of one purpose and timer) return at most one event
 (``EV_*``, by priority); ``transition`` looks the (mode, event) pair up in ``TRANSITIONS``, the one
-ordered table, and runs the row's entry action. A pair not in the table changes nothing.
+ordered table, and runs the row's entry action. A pair not in the table changes nothing. The mechanism
+is the I-f strategy's too (``kernels.machine``).
 
 The fault output, as the I-f strategy's: a loss of synchronism begins an episode (``FAULT_RECOVERING``),
 which ends after ``C_RECOVER_TIME`` without trouble, or latches the safe state after ``C_FAULT_TIME``:
@@ -125,50 +126,32 @@ from .layout import (
     S_W_INT,
     S_X,
 )
+from .machine import (
+    A_ACQUIRE,
+    A_EKF_ALONE,
+    A_FLIP_TORQUE,
+    A_INJECTION_ON,
+    A_POLARITY,
+    A_REACQUIRE,
+    A_RESEAT,
+    A_RESTART_EKF,
+    A_RETRY,
+    A_TORQUE,
+    EV_ACQUIRED,
+    EV_DISAGREE,
+    EV_EKF_LOST,
+    EV_FAST,
+    EV_INJECTION_LOST,
+    EV_NONE,
+    EV_POLARITY_FLIPPED,
+    EV_POLARITY_RIGHT,
+    EV_POLARITY_UNRESOLVED,
+    EV_SLOW,
+    next_mode,
+)
 from .observers import ekf5ab_period
 from .startup import age_episode
 from .transforms import park, wrap_angle
-
-# -- events: what a detector saw this period (``S_EVENT``); 0 none -------------------------------
-EV_NONE = 0.0
-EV_ACQUIRED = 1.0  #: the acquisition and the tracking observer's settling are over
-EV_POLARITY_RIGHT = 2.0  #: the polarity test found the tracking observer's direction right
-EV_POLARITY_FLIPPED = 3.0  #: ... found it pi off
-EV_POLARITY_UNRESOLVED = 4.0  #: ... could not tell (the answers at +-i differ by less than C_POL_CONTRAST)
-EV_FAST = 5.0  #: the speed reached C_BLEND_HI: the EKF alone
-EV_SLOW = 6.0  #: the speed fell below C_BLEND_HI - C_BLEND_HYST: the injection back on
-EV_INJECTION_LOST = 7.0  #: the tracking observer's angle error stayed beyond C_INJ_LOS_ANGLE
-EV_DISAGREE = 8.0  #: in the blend, the EKF's angle stayed that far from the tracking observer's
-EV_EKF_LOST = 9.0  #: the EKF's current innovation stayed beyond C_EKF_LOS_I
-EVENT_NAMES = ("none", "acquired", "polarity right", "polarity flipped", "polarity unresolved", "fast", "slow",
-               "injection lost", "disagree", "EKF lost")
-
-# -- entry actions --------------------------------------------------------------------------------
-A_ACQUIRE = 0.0  #: start the acquisition afresh (``enter_acquire``)
-A_POLARITY = 1.0  #: start the polarity test (``enter_polarity``)
-A_TORQUE = 2.0  #: FOC on the injection, the speed loop from rest (``enter_torque``)
-A_FLIP_TORQUE = 3.0  #: the tracking observer turned by pi, then as A_TORQUE (``flip_frame``)
-A_RETRY = 4.0  #: count an unresolved test; the second latches the fault; then as A_ACQUIRE
-A_EKF_ALONE = 5.0  #: the injection off (``enter_ekf``)
-A_INJECTION_ON = 6.0  #: the injection on again, the tracking observer on the EKF (``enter_injection``)
-A_REACQUIRE = 7.0  #: an episode; then as A_ACQUIRE
-A_RESEAT = 8.0  #: an episode; the EKF put on the tracking observer (``reseat``)
-A_RESTART_EKF = 9.0  #: an episode; the EKF's covariance back to an unknown start's (``restart_ekf_search``)
-
-#: the transition table: (mode, event, next mode, entry action), looked up in order, the first match
-#: taken. Each row is tested on its own (tests/test_modes.py)
-TRANSITIONS = (
-    (MODE_ACQUIRE, EV_ACQUIRED, MODE_POLARITY, A_POLARITY),
-    (MODE_POLARITY, EV_POLARITY_RIGHT, MODE_INJECTION, A_TORQUE),
-    (MODE_POLARITY, EV_POLARITY_FLIPPED, MODE_INJECTION, A_FLIP_TORQUE),
-    (MODE_POLARITY, EV_POLARITY_UNRESOLVED, MODE_ACQUIRE, A_RETRY),
-    (MODE_POLARITY, EV_INJECTION_LOST, MODE_ACQUIRE, A_REACQUIRE),
-    (MODE_INJECTION, EV_INJECTION_LOST, MODE_ACQUIRE, A_REACQUIRE),
-    (MODE_INJECTION, EV_DISAGREE, MODE_INJECTION, A_RESEAT),
-    (MODE_INJECTION, EV_FAST, MODE_EKF, A_EKF_ALONE),
-    (MODE_EKF, EV_EKF_LOST, MODE_EKF, A_RESTART_EKF),
-    (MODE_EKF, EV_SLOW, MODE_INJECTION, A_INJECTION_ON),
-)
 
 
 # -- the schedules of the acquisition and the polarity test ----------------------------------------
@@ -466,15 +449,6 @@ def enter(s, c, action, i_alpha, i_beta):
         begin_episode_now(s, c)
         restart_ekf_search(s, c)
         clear_detectors(s)
-
-
-@kernel()
-def next_mode(mode, event):
-    """The table's row for (mode, event): (next mode, entry action), or (mode, -1.0) where none."""
-    for row in TRANSITIONS:
-        if row[0] == mode and row[1] == event:
-            return row[2], row[3]
-    return mode, -1.0
 
 
 @kernel()

@@ -109,6 +109,29 @@ from .layout import (
     P_T_M0,
     P_V_A,
     P_V_EPS,
+    PIO_CLOCK,
+    PIO_I_ALPHA,
+    PIO_I_ALPHA_TRUE,
+    PIO_I_BETA,
+    PIO_I_BETA_TRUE,
+    PIO_I_D,
+    PIO_I_Q,
+    PIO_OMEGA_M,
+    PIO_PLANT_DELTA,
+    PIO_PLANT_T_BRAKE,
+    PIO_SAMPLES,
+    PIO_SAVE,
+    PIO_SEED,
+    PIO_SENSOR_ARGS,
+    PIO_SENSORS,
+    PIO_T_E,
+    PIO_T_L_MECH,
+    PIO_THETA_E,
+    PIO_V_ALPHA_APPLIED,
+    PIO_V_BETA_APPLIED,
+    PIO_V_VEHICLE,
+    PIO_X_VEHICLE,
+    PLANT_ENERGY,
 )
 from .transforms import inverse_park, wrap_angle
 
@@ -986,3 +1009,60 @@ def plant_step_measured(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, 
     r = plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee)
     m = measured_currents(r[4], r[5], seed, n, gain_a, offset_a, gain_b, offset_b, noise, lsb, adc_range)
     return r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], m[0], m[1]
+
+
+#: the slots ``plant_advance`` writes as runs: the outputs i_alpha .. v_vehicle, the state delta .. i_beta_true
+_PIO_OUTPUTS, _PIO_STATE = 9, 8
+if ((PIO_I_ALPHA, PIO_I_BETA, PIO_I_D, PIO_I_Q, PIO_OMEGA_M, PIO_THETA_E, PIO_T_E, PIO_T_L_MECH, PIO_V_VEHICLE)
+        != tuple(range(PIO_I_ALPHA, PIO_I_ALPHA + _PIO_OUTPUTS))
+        or (PIO_PLANT_DELTA, PIO_PLANT_T_BRAKE, PIO_CLOCK, PIO_SAMPLES, PIO_V_ALPHA_APPLIED, PIO_V_BETA_APPLIED,
+            PIO_I_ALPHA_TRUE, PIO_I_BETA_TRUE) != tuple(range(PIO_PLANT_DELTA, PIO_PLANT_DELTA + _PIO_STATE))):
+    raise ImportError("PLANT_IO_LAYOUT: the outputs and the plant's state are not in plant_advance's order")
+
+
+@kernel(_sig("boolean", _V, _V, _V, _F, _F, _F, _F, _F, "boolean"))
+def plant_advance(io, pp, ee, v_alpha, v_beta, delta, t_brake_in, h, finite_only):
+    """One step of ``Plant`` over h on its buffer ``io`` (``PLANT_IO_LAYOUT``: its state, outputs and constants),
+    its parameter and energy vectors ``pp``, ``ee``, with the voltage (v_alpha, v_beta) as applied (after the
+    inverter's delay and limit, which ``Plant.step`` takes before), the elevation and the friction brake's torque
+    (a negative or NaN one taken as 0) held: ``plant_step``, with the current sensors ``plant_step_measured``, and
+    the plant's bookkeeping (the brake, its clock, the sample counter, the distance, the applied voltage). Both
+    ``Plant.step`` and the plant FMU's compiled step (``plant_fmu_step``) are this kernel. True; with
+    ``finite_only``, False where the state after the step is not finite, with nothing changed (the energy vector
+    saved in ``io``'s ``PIO_SAVE`` before the step and restored)."""
+    if finite_only:
+        for i in range(PLANT_ENERGY):
+            io[PIO_SAVE + i] = ee[i]
+    t_brake = io[PIO_PLANT_T_BRAKE]
+    pp_t_brake = pp[P_T_BRAKE]
+    if t_brake_in != t_brake:
+        t_brake = t_brake_in if t_brake_in > 0.0 else 0.0
+        pp[P_T_BRAKE] = t_brake
+    sample = io[PIO_SAMPLES]
+    if io[PIO_SENSORS] != 0.0:
+        seed = (int(io[PIO_SEED]) << 32) | int(io[PIO_SEED + 1])
+        (i_d, i_q, omega_m, theta_e, i_alpha_true, i_beta_true, t_e, t_l, v_v, dx, i_alpha,
+         i_beta) = plant_step_measured(io[PIO_I_D], io[PIO_I_Q], io[PIO_OMEGA_M], io[PIO_THETA_E], v_alpha, v_beta,
+                                       delta, h, pp, ee, seed, int(sample), io[PIO_SENSOR_ARGS],
+                                       io[PIO_SENSOR_ARGS + 1], io[PIO_SENSOR_ARGS + 2], io[PIO_SENSOR_ARGS + 3],
+                                       io[PIO_SENSOR_ARGS + 4], io[PIO_SENSOR_ARGS + 5], io[PIO_SENSOR_ARGS + 6])
+    else:
+        i_d, i_q, omega_m, theta_e, i_alpha, i_beta, t_e, t_l, v_v, dx = plant_step(
+            io[PIO_I_D], io[PIO_I_Q], io[PIO_OMEGA_M], io[PIO_THETA_E], v_alpha, v_beta, delta, h, pp, ee)
+        i_alpha_true = i_alpha
+        i_beta_true = i_beta
+    if finite_only and not math.isfinite(omega_m + i_d + i_q + ee[E_BAT_V]):  # a state, or the battery's voltage
+        # when it cannot give the power (0 with the ideal link)
+        for i in range(PLANT_ENERGY):
+            ee[i] = io[PIO_SAVE + i]
+        pp[P_T_BRAKE] = pp_t_brake
+        return False
+    # the outputs and the plant's other state, each a run of slots in the layout's order
+    outputs = (i_alpha, i_beta, i_d, i_q, omega_m, theta_e, t_e, t_l, v_v)
+    for j in range(_PIO_OUTPUTS):
+        io[PIO_I_ALPHA + j] = outputs[j]
+    io[PIO_X_VEHICLE] += dx
+    state = (delta, t_brake, io[PIO_CLOCK] + h, sample + 1.0, v_alpha, v_beta, i_alpha_true, i_beta_true)
+    for j in range(_PIO_STATE):
+        io[PIO_PLANT_DELTA + j] = state[j]
+    return True

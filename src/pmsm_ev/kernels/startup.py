@@ -1,7 +1,9 @@
-"""The sensorless unit's kernels: alignment, I-f drive (eq 12 sizes the vector's current, eq 13
-turns it), handover to and from FOC (eqs 14-20) on the stationary-frame EKF5 (eqs 23-27), the
-load-angle guard and the loss-of-synchronism detection and recovery: ``sensorless_step``, one
-control period (docs/sensorless.md).
+"""The sensorless unit's I-f strategy (``InjectionParams.low_speed`` = "if"): alignment, I-f drive (eq 12
+sizes the vector's current, eq 13 turns it), handover to and from FOC (eqs 14-20) on the stationary-frame
+EKF5 (eqs 23-27), the load-angle guard, the stand, and the loss-of-synchronism detection and recovery
+(docs/sensorless.md): a state machine in the form of ``kernels.modes``' (``kernels.machine``): modes,
+detectors that return events, the I-f rows of the unit's one ordered table ``machine.TRANSITIONS`` (and
+the stand's, ``STAND_TRANSITIONS``), entry actions; ``sensorless_step`` is one control period.
 
 The vectors ``s`` and ``c`` are laid out by ``pmsm_ev.kernels.layout`` (``S_*``, ``C_*``).
 """
@@ -39,6 +41,7 @@ from .layout import (
     C_FAULT_TIME,
     C_FF,
     C_GUARD,
+    C_GUARD_BAND,
     C_HALF_PERIOD_N,
     C_I_ALIGN,
     C_I_D_REF,
@@ -66,16 +69,20 @@ from .layout import (
     C_REALIGN_MAX,
     C_RECOVER_TIME,
     C_REF_MODE,
+    C_RELOCK_TIME,
     C_SIN_E,
     C_SLIP_FILTER,
     C_SLIP_TIME,
     C_SLIP_TOL,
+    C_SOFT_GUARD,
     C_STALL_TIME,
     C_STILL,
+    C_STILL_TIME,
     C_T_HOLD,
     C_T_RAMP,
     C_T_SETTLE,
     C_T_SWEEP,
+    C_TRUST_MOVE,
     C_W_DOWN,
     C_W_UP,
     FAULT_LATCHED,
@@ -85,6 +92,7 @@ from .layout import (
     MODE_EKF,
     MODE_IF,
     S_AGREE,
+    S_ALIGN_SPEED,
     S_ANCHOR,
     S_ANCHOR_REL,
     S_ANCHOR_TL,
@@ -108,6 +116,7 @@ from .layout import (
     S_P,
     S_PHI,
     S_REALIGN,
+    S_RUNAWAY_T,
     S_SLIP,
     S_STILL_OUT,
     S_T_FF,
@@ -121,11 +130,43 @@ from .layout import (
     S_W_INT,
     S_X,
 )
+from .machine import (
+    A_ANCHOR,
+    A_CATCH,
+    A_FLYING,
+    A_FORCED_UP,
+    A_HANDOVER_DOWN,
+    A_HANDOVER_UP,
+    A_LATCH,
+    A_REALIGN,
+    A_RELOCK,
+    A_RESTART_ON_ANCHOR,
+    A_STALL_FOC,
+    A_START_IF,
+    EV_AGREED,
+    EV_ALIGNED,
+    EV_LIMIT,
+    EV_NONE,
+    EV_OVERDUE,
+    EV_ROTOR_MOVES,
+    EV_RUNAWAY,
+    EV_SLIP,
+    EV_SLIP_AT_SPEED,
+    EV_SLOWED,
+    EV_STALL,
+    EV_STALL_LAST,
+    EV_STALL_TURNING,
+    EV_STANDS,
+    EV_VECTOR_TURNS,
+    STAND_FREE,
+    STAND_TABLE,
+    TRANSITION_TABLE,
+    lookup,
+)
 from .observers import adapt_psi, ekf5ab_period
 from .transforms import park, wrap_angle
 
-# -- the sensorless unit: alignment, I-f, handover to and from the stationary-frame EKF5 --------
-_HALF_PI = 0.5 * math.pi
+# -- the I-f strategy's physics: the handovers' seating, the EKF's restart, the vector's sizing ----
 
 
 @kernel()
@@ -273,20 +314,6 @@ def if_vector_step(s, c, omega_ref, t_l):
     s[S_I_MAG] += min(max(s[S_I_TGT] - s[S_I_MAG], -rate), rate)
 
 
-#: the guard: beyond this lead of the vector over the EKF's angle [rad] the vector turns no faster than
-#: the rotor away from it (90 deg: past it, more lead gives more torque only through the reluctance term)
-_SOFT_GUARD = 0.5 * math.pi
-#: the EKF is believed at low speed once it says the rotor has moved on the I-f vector by more than this
-#: since it was last believed [rad] (``trust_rotor``) [chosen: 30 deg]: a load that changed (a grade
-#: step under a creeping car moves the rotor that far on the vector within ~20 ms, and the EKF sees the
-#: motion); the drift of a mismatched EKF at a restart stays below it in most cases, and where it does
-#: not the current sized on its load stays below the limit (the cycle Monte-Carlo's sample 0017:
-#: 100 % in the band with 30 deg, 0.3 rad and 60 deg alike). At 60 deg the matrix's creep5 rolled back
-#: 6.3 cm, at 30 deg 5.1 cm, before the anchoring 3.4 cm
-_TRUST_MOVE = math.radians(30.0)
-#: it counts as holding the vector until the vector is back by this much [rad]: 3 deg, so that a vector
-#: held there and turning with the rotor does not flicker in and out
-_GUARD_BAND = math.radians(3.0)
 #: ``S_GUARD`` values: the soft limit holds the vector's speed, the hard one its angle
 GUARD_SOFT, GUARD_HARD = 1.0, 2.0
 
@@ -297,20 +324,21 @@ def sync_guard(s, c, omega_hat, lag, theta):
     +-``C_E_GUARD`` of the rotor's angle ``theta`` (electrical: the EKF's, or while the car stands
     the one it had when the stand began): a vector that would lead (or trail) the
     rotor by more is held there and turns at the rotor's speed, so the rotor cannot fall out of
-    step while the EKF holds its angle (``GUARD_HARD``). Beyond ``_SOFT_GUARD`` its speed is held to
+    step while the EKF holds its angle (``GUARD_HARD``). Beyond ``C_SOFT_GUARD`` its speed is held to
     the rotor's (``GUARD_SOFT``): the lead stops growing before the EKF, whose load state lags a
     sudden load, shows the rotor slowing. ``S_GUARD`` is released once the vector is back within
-    ``_SOFT_GUARD`` by ``_GUARD_BAND``."""
+    ``C_SOFT_GUARD`` by ``C_GUARD_BAND``."""
     e = wrap_angle(s[S_PHI] - lag - theta)
     e_max = c[C_E_GUARD]
+    soft = c[C_SOFT_GUARD]
     if e > e_max or e < -e_max:
         s[S_PHI] = wrap_angle(theta + lag + (e_max if e > 0.0 else -e_max))
         s[S_OMEGA_IF] = omega_hat
         s[S_GUARD] = GUARD_HARD
-    elif (e > _SOFT_GUARD and s[S_OMEGA_IF] > omega_hat) or (e < -_SOFT_GUARD and s[S_OMEGA_IF] < omega_hat):
+    elif (e > soft and s[S_OMEGA_IF] > omega_hat) or (e < -soft and s[S_OMEGA_IF] < omega_hat):
         s[S_OMEGA_IF] = omega_hat
         s[S_GUARD] = GUARD_SOFT
-    elif abs(e) < _SOFT_GUARD - _GUARD_BAND:
+    elif abs(e) < soft - c[C_GUARD_BAND]:
         s[S_GUARD] = 0.0
 
 
@@ -319,9 +347,9 @@ def relock(s, c, omega_hat, omega_ref):
     """Recovery at low speed (a loss of synchronism, or a rotor running away under the alignment):
     the vector put on the EKF's angle, leading it by the design load angle in the direction of the
     torque needed to hold the load the EKF sees and to bring the speed to the reference within
-    ``_RELOCK_TIME``, turning at the EKF's speed, its current set to the limit at once; the rotor's
+    ``C_RELOCK_TIME``, turning at the EKF's speed, its current set to the limit at once; the rotor's
     place on it trusted (``trust_rotor``)."""
-    push = s[S_X + 4] + c[C_J_IF] * (omega_ref - omega_hat) / _RELOCK_TIME
+    push = s[S_X + 4] + c[C_J_IF] * (omega_ref - omega_hat) / c[C_RELOCK_TIME]
     s[S_PHI] = wrap_angle(s[S_X + 3] + (c[C_E_MAX] if push >= 0.0 else -c[C_E_MAX]))
     s[S_OMEGA_IF] = omega_hat
     s[S_I_TGT] = c[C_I_Q_MAX]
@@ -353,225 +381,405 @@ def age_episode(s, c, trouble):
             s[S_FAULT] = FAULT_LATCHED
 
 
-#: the time in which a relocked vector's torque is meant to bring the speed to the reference [s]
-_RELOCK_TIME = 0.5
+# == the I-f strategy as a state machine (``kernels.machine``: its codes and tables) ===============
+# -- detectors: each returns an event or EV_NONE -------------------------------------------------
+@kernel()
+def car_stands(s, c):
+    """The car stands on the I-f vector: in I-f (the last period's mode), the vector's speed below
+    ``C_STILL`` (a back-EMF of 0.18 V at 0.5 rad/s: none to see the angle by), and the EKF's too, or, while a
+    stand lasts, above it for less than ``C_STILL_TIME`` (``S_STILL_OUT``: its noise, not a motion)."""
+    return (s[S_MODE] == MODE_IF and abs(s[S_OMEGA_IF]) < c[C_STILL]
+            and (abs(s[S_X + 2]) < c[C_STILL] or (s[S_ANCHORED] != 0.0 and s[S_STILL_OUT] < c[C_STILL_TIME])))
+
+
+@kernel()
+def detect_stand(s, c):
+    """EV_STANDS when the car begins to stand (``car_stands``); when a stand ends, EV_VECTOR_TURNS with the
+    EKF's speed below ``C_STILL`` (the vector has begun to turn: a restart), else EV_ROTOR_MOVES."""
+    stands = car_stands(s, c)
+    if s[S_ANCHORED] == STAND_FREE:
+        return EV_STANDS if stands else EV_NONE
+    if stands:
+        return EV_NONE
+    return EV_VECTOR_TURNS if abs(s[S_X + 2]) < c[C_STILL] else EV_ROTOR_MOVES
+
+
+@kernel()
+def ekf_believed(s, c):
+    """In I-f, outside a stand: the EKF is believed on the rotor's place on the vector and on the load
+    (``trust_rotor``) where it sees the rotor turn (``C_ANCHOR_SPEED``), or the guard holds the vector, or it
+    says that the vector leads (or trails) the rotor by more than the design load angle, or that the rotor
+    has moved on the vector by more than ``C_TRUST_MOVE`` since it was last believed (a load that changed:
+    the EKF saw the motion). Else, at low speed, not: with a mismatched motor model its angle and load
+    drift there with the current (the resistance's error), and an I-f current sized on that load would
+    feed the drift (docs/sensorless.md)."""
+    lead = wrap_angle(s[S_PHI] - s[S_X + 3])
+    return (abs(s[S_X + 2]) >= c[C_ANCHOR_SPEED] or s[S_GUARD] != 0.0 or abs(lead) > c[C_E_MAX]
+            or abs(wrap_angle(lead + s[S_TRUST_OFF])) > c[C_TRUST_MOVE])
+
+
+@kernel()
+def alignment_over(c, t):
+    """The alignment's schedule is over at the time ``t`` [s] in it: ramp, hold, sweep and settle."""
+    t_hold = c[C_T_RAMP] + c[C_T_HOLD]
+    t_sweep = t_hold + c[C_T_SWEEP]
+    return t >= t_sweep + c[C_T_SETTLE]
+
+
+@kernel()
+def detect_alignment_end(s, c, t):
+    """EV_RUNAWAY once the EKF has seen the rotor turn faster than ``C_ALIGN_SLIP`` for
+    ``C_ALIGN_SLIP_TIME`` (its timer ``S_RUNAWAY_T``): a load beyond the vector, faster than the alignment's
+    own swing; else EV_ALIGNED at the end of the schedule."""
+    dt = c[C_DT]
+    runaway = c[C_ALIGN_SLIP] > 0.0 and abs(s[S_X + 2]) > c[C_ALIGN_SLIP]
+    s[S_RUNAWAY_T] = s[S_RUNAWAY_T] + dt if runaway else 0.0
+    if s[S_RUNAWAY_T] >= c[C_ALIGN_SLIP_TIME]:
+        return EV_RUNAWAY
+    return EV_ALIGNED if alignment_over(c, t) else EV_NONE
+
+
+@kernel()
+def detect_slowed(s, c):
+    """EV_SLOWED on FOC below |omega_hat| = ``C_W_DOWN`` (the hysteresis against ``C_W_UP``)."""
+    return EV_SLOWED if abs(s[S_X + 2]) < c[C_W_DOWN] else EV_NONE
+
+
+@kernel()
+def slipping(s, c):
+    """The rotor out of step with the I-f vector: |omega_hat - omega_if| (filtered, ``S_SLIP``) beyond
+    ``C_SLIP_TOL`` + ``C_AGREE_TOL`` |omega_if| (a locked vector's swing stays within +-3 rad/s)."""
+    return abs(s[S_SLIP]) > c[C_SLIP_TOL] + c[C_AGREE_TOL] * abs(s[S_OMEGA_IF])
+
+
+@kernel()
+def at_limit(s, c, omega_ref, omega_hat):
+    """A limit reached: the guard holding the vector with the current at ``C_I_Q_MAX`` while the rotor is as
+    far from the reference as a slip (a load beyond what the drive gives)."""
+    return (s[S_GUARD] != 0.0 and s[S_I_MAG] >= c[C_I_Q_MAX] and abs(omega_ref - omega_hat)
+            > c[C_SLIP_TOL] + c[C_AGREE_TOL] * abs(omega_ref))
+
+
+@kernel()
+def detect_trouble(s, c, slip, limit, omega_hat):
+    """In trouble (``slip``: ``slipping``; ``limit``: ``at_limit``) for ``C_SLIP_TIME`` (its timer ``S_LOS``):
+    EV_SLIP_AT_SPEED where the rotor slips at ``C_W_DOWN`` or faster, EV_SLIP slower, EV_LIMIT at the limit
+    without a slip."""
+    dt = c[C_DT]
+    s[S_LOS] = s[S_LOS] + dt if (slip or limit) else 0.0
+    if s[S_LOS] >= c[C_SLIP_TIME]:
+        s[S_LOS] = 0.0
+        if not slip:
+            return EV_LIMIT
+        return EV_SLIP_AT_SPEED if abs(omega_hat) >= c[C_W_DOWN] else EV_SLIP
+    return EV_NONE
+
+
+@kernel()
+def detect_agreed(s, c, omega_hat):
+    """EV_AGREED once the EKF's speed has agreed with the I-f speed, above ``C_W_UP``, to within
+    ``C_AGREE_TOL`` for ``C_AGREE_TIME`` (its timer ``S_AGREE``): the back-EMF shows the angle, the handover up."""
+    w_if = s[S_OMEGA_IF]
+    if abs(w_if) > c[C_W_UP] and abs(omega_hat - w_if) < c[C_AGREE_TOL] * abs(w_if):
+        s[S_AGREE] += c[C_DT]
+    else:
+        s[S_AGREE] = 0.0
+    return EV_AGREED if s[S_AGREE] >= c[C_AGREE_TIME] else EV_NONE
+
+
+@kernel()
+def detect_due(s, c, omega_ref, omega_hat, slip):
+    """The handover up due: its timer ``S_IF_DUE`` counts the time in I-f with |omega_ref| above ``C_W_UP``
+    (the reference asks for FOC's speed range; not in the safe state), which a healthy launch ends
+    ``C_AGREE_TIME`` after the reference passes ``C_W_UP``. After ``C_IF_DEADLINE``, EV_OVERDUE where the
+    rotor turns with the vector (the I-f speed above ``C_W_UP``, the EKF's of the same sign at ``C_W_DOWN``
+    or faster, not ``slip``); after ``C_STALL_TIME``, a stall: EV_STALL_TURNING where the rotor turns the
+    vector's way at ``C_W_DOWN`` or faster, EV_STALL where not, EV_STALL_LAST with no realignment left
+    (``C_REALIGN_MAX``). 0 turns either off."""
+    if s[S_FAULT] != FAULT_LATCHED and abs(omega_ref) > c[C_W_UP]:
+        s[S_IF_DUE] += c[C_DT]
+    else:
+        s[S_IF_DUE] = 0.0
+    w_if = s[S_OMEGA_IF]
+    turning = abs(omega_hat) >= c[C_W_DOWN] and omega_hat * w_if > 0.0
+    if 0.0 < c[C_IF_DEADLINE] <= s[S_IF_DUE] and not slip and abs(w_if) > c[C_W_UP] and turning:
+        return EV_OVERDUE
+    if 0.0 < c[C_STALL_TIME] <= s[S_IF_DUE]:
+        if s[S_REALIGN] >= c[C_REALIGN_MAX]:
+            return EV_STALL_LAST
+        return EV_STALL_TURNING if turning else EV_STALL
+    return EV_NONE
+
+
+# -- entry actions -------------------------------------------------------------------------------
+@kernel()
+def catch_runaway(s, c, omega_ref):
+    """The rotor runs away under the alignment's vector (a car parked on a slope). Its motion has shown the
+    EKF the angle (back-EMF): the EKF is kept (not restarted) and I-f takes over on its angle, the vector put
+    ahead of the rotor against the load at the current limit (``relock``), as a new loss-of-synchronism
+    episode (one still running from a realignment is not continued: its age starts again)."""
+    relock(s, c, s[S_X + 2], omega_ref)
+    s[S_RUNAWAY_T] = 0.0
+    s[S_EPISODE] = c[C_DT]
+    s[S_INSYNC] = 0.0
+    s[S_AGREE] = 0.0
+
+
+@kernel()
+def start_if(s, c, i_alpha, i_beta):
+    """Aligned: the magnet is on the vector; the EKF restarts there, at rest (``restart_ekf``); I-f from
+    rest, its current at least ``C_I_IF``."""
+    i_d, i_q = park(i_alpha, i_beta, s[S_PHI])
+    restart_ekf(s, c, s[S_PHI], i_d, i_q)
+    s[S_OMEGA_IF] = 0.0
+    s[S_SLIP] = 0.0
+    s[S_I_TGT] = max(c[C_I_IF], s[S_I_MAG])
+
+
+@kernel()
+def hand_down(s, c, i_alpha, i_beta):
+    """Handover down: the vector stays where the current is, its magnitude ramps up to ``C_IF_MARGIN`` times
+    it (at least ``C_I_IF``), the I-f speed starts at the EKF's; the current PIs seated on the voltage held
+    (``seat_current_pis``); FOC's angle is the rotor's place on the vector (``trust_rotor``)."""
+    dt = c[C_DT]
+    omega_hat = s[S_X + 2]
+    i_mag = math.sqrt(i_alpha * i_alpha + i_beta * i_beta)
+    s[S_PHI] = math.atan2(i_beta, i_alpha)
+    s[S_I_MAG] = i_mag
+    s[S_I_TGT] = max(c[C_IF_MARGIN] * i_mag, c[C_I_IF])
+    s[S_OMEGA_IF] = omega_hat
+    s[S_AGREE] = 0.0
+    s[S_SLIP] = 0.0
+    seat_current_pis(s, c, s[S_PHI] + c[C_ADVANCE] * omega_hat, c[C_N] * omega_hat * dt,
+                     i_mag, 0.0, i_mag, 0.0, 0.0)
+    trust_rotor(s)
+
+
+@kernel()
+def realign(s):
+    """The alignment from standstill again: its clock from the next period, the vector off, the I-f
+    detectors' timers and filters, the stand and the current PIs' integrators cleared."""
+    s[S_CLOCK] = 0.0
+    s[S_I_MAG] = 0.0
+    s[S_I_TGT] = 0.0
+    s[S_OMEGA_IF] = 0.0
+    s[S_SLIP] = 0.0
+    s[S_ALIGN_SPEED] = 0.0
+    s[S_AGREE] = 0.0
+    s[S_GUARD] = 0.0
+    s[S_LOS] = 0.0
+    s[S_RUNAWAY_T] = 0.0
+    s[S_ANCHORED] = STAND_FREE
+    s[S_INT_D] = 0.0
+    s[S_INT_Q] = 0.0
+
+
+@kernel()
+def enter_if(s, c, action, i_alpha, i_beta, omega_ref):
+    """Run an entry action of the I-f strategy (``A_*``). The handover up's due timer (``S_IF_DUE``) is
+    cleared where the handover comes by agreement, by a slip at speed or by a stall; a forced handover
+    keeps it (a handover down while the reference still asks for FOC's range is forced again at once)."""
+    if action == A_CATCH:
+        catch_runaway(s, c, omega_ref)
+    elif action == A_START_IF:
+        start_if(s, c, i_alpha, i_beta)
+    elif action == A_HANDOVER_DOWN:
+        hand_down(s, c, i_alpha, i_beta)
+    elif action == A_HANDOVER_UP:
+        seat_foc(s, c, omega_ref, s[S_X + 2], i_alpha, i_beta, False)
+        s[S_REALIGN] = 0.0
+        s[S_IF_DUE] = 0.0
+    elif action == A_FORCED_UP:
+        seat_foc(s, c, omega_ref, s[S_X + 2], i_alpha, i_beta, True)
+        s[S_REALIGN] = 0.0
+        begin_episode(s, c)
+    else:  # a loss of synchronism, a limit or a stall: an episode
+        if action == A_STALL_FOC or action == A_REALIGN or action == A_LATCH:
+            s[S_IF_DUE] = 0.0
+        begin_episode(s, c)
+        if action == A_FLYING:
+            seat_foc(s, c, omega_ref, s[S_X + 2], i_alpha, i_beta, True)
+            s[S_IF_DUE] = 0.0
+        elif action == A_RELOCK:
+            relock(s, c, s[S_X + 2], omega_ref)
+        elif action == A_STALL_FOC:
+            s[S_REALIGN] += 1.0
+            seat_foc(s, c, omega_ref, s[S_X + 2], i_alpha, i_beta, True)
+        elif action == A_REALIGN:
+            s[S_REALIGN] += 1.0
+            realign(s)
+        elif action == A_LATCH:
+            s[S_FAULT] = FAULT_LATCHED
+
+
+@kernel()
+def if_transition(s, c, mode, event, i_alpha, i_beta, omega_ref):
+    """Take the table's (``TRANSITIONS``) transition for (mode, event), if any: the entry action run. Returns the mode
+    (``S_MODE`` is written at the end of the period: ``sensorless_step`` reads the last period's)."""
+    if event == EV_NONE:
+        return mode
+    new, action = lookup(TRANSITION_TABLE, mode, event)
+    if action < 0.0:
+        return mode
+    enter_if(s, c, action, i_alpha, i_beta, omega_ref)
+    return new
+
+
+@kernel()
+def anchor(s):
+    """The stand begins: anchored on the rotor's place on the vector and the load of when the EKF was last
+    believed (``trust_rotor``): the rotor is held by the vector, so its angle is the vector's plus that
+    offset."""
+    s[S_ANCHOR_REL] = s[S_TRUST_OFF]
+    s[S_ANCHOR] = wrap_angle(s[S_PHI] + s[S_TRUST_OFF])
+    s[S_ANCHOR_TL] = s[S_TRUST_TL]
+
+
+@kernel()
+def release(s, c, restart, i_alpha, i_beta):
+    """The stand ends; the rotor has turned with the vector since it began: the EKF put on the vector's angle
+    now plus the anchor's offset, on the stand's load; with ``restart`` (the vector starts to turn) restarted
+    there at rest, as after the alignment, else (the rotor moves: the EKF sees it) its angle set there."""
+    theta = wrap_angle(s[S_PHI] + s[S_ANCHOR_REL])
+    if restart:
+        i_d, i_q = park(i_alpha, i_beta, theta)
+        restart_ekf(s, c, theta, i_d, i_q)
+    else:
+        s[S_X + 3] = theta
+    s[S_X + 4] = s[S_ANCHOR_TL]
+    trust_rotor(s)
+
+
+@kernel()
+def stand_transition(s, c, event, i_alpha, i_beta):
+    """Take ``STAND_TRANSITIONS``' transition for (``S_ANCHORED``, event), if any."""
+    if event == EV_NONE:
+        return
+    new, action = lookup(STAND_TABLE, s[S_ANCHORED], event)
+    if action < 0.0:
+        return
+    s[S_ANCHORED] = new
+    if action == A_ANCHOR:
+        anchor(s)
+    else:
+        release(s, c, action == A_RESTART_ON_ANCHOR, i_alpha, i_beta)
+
+
+# -- the modes' control --------------------------------------------------------------------------
+#: the alignment's first axis [rad]: +90 deg, whose unstable point (-90 deg) the sweep to 0 deg then
+#: carries the rotor away from (docs/sensorless.md, "Alignment")
+_HALF_PI = 0.5 * math.pi
+
+
+@kernel()
+def align_schedule(s, c, t):
+    """The alignment's vector at the time ``t`` [s] in it (``C_T_RAMP`` .. ``C_T_SETTLE``): its current ramped
+    up on +90 deg, held, swept to 0 deg, held."""
+    t_hold = c[C_T_RAMP] + c[C_T_HOLD]
+    t_sweep = t_hold + c[C_T_SWEEP]
+    s[S_I_MAG] = c[C_I_ALIGN] * min(t / c[C_T_RAMP], 1.0) if c[C_T_RAMP] > 0.0 else c[C_I_ALIGN]
+    if t < t_hold:
+        s[S_PHI] = _HALF_PI
+        s[S_OMEGA_IF] = 0.0
+    elif t < t_sweep:
+        s[S_PHI] = _HALF_PI * (1.0 - (t - t_hold) / c[C_T_SWEEP])
+        s[S_OMEGA_IF] = -_HALF_PI / (c[C_T_SWEEP] * c[C_N])  # the sweep's speed [rad/s]
+    else:
+        s[S_PHI] = 0.0
+        s[S_OMEGA_IF] = 0.0
+
+
+@kernel()
+def turn_vector(s, c, omega_ref, omega_hat):
+    """I-f, every period but the one the vector was placed in: the vector turned and sized
+    (``if_vector_step``) for the load the EKF had when it was last believed (the stand's while the car
+    stands); the damping's input omega_hat - omega_if filtered (``S_SLIP``); the guard (``sync_guard``) on
+    the EKF's angle (the stand's anchor while the car stands), on with ``C_GUARD``, while an episode lasts
+    and in the safe state."""
+    if s[S_FAULT] == FAULT_LATCHED:
+        s[S_I_TGT] = c[C_I_Q_MAX]
+    anchored = s[S_ANCHORED] != STAND_FREE
+    if_vector_step(s, c, omega_ref, s[S_ANCHOR_TL] if anchored else s[S_TRUST_TL])
+    s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - s[S_OMEGA_IF] - s[S_SLIP])
+    if c[C_GUARD] != 0.0 or s[S_EPISODE] > 0.0 or s[S_FAULT] == FAULT_LATCHED:
+        sync_guard(s, c, omega_hat, c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP],
+                   s[S_ANCHOR] if anchored else s[S_X + 3])
 
 
 @kernel(_sig(f"UniTuple({_F}, 16)", _V, _V, _F, _F, _F))
 def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
-    """One control period of the sensorless unit (``pmsm_ev.control_unit``, observer
-    "sensorless"): never reads the rotor angle or speed. Returns ``control_step``'s outputs,
-    the mode (``MODE_ALIGN``, ``MODE_IF``, ``MODE_EKF``), the fault (``FAULT_*``) and the control
+    """One control period of the sensorless unit with the I-f strategy (``pmsm_ev.control_unit``, observer
+    "sensorless", ``C_LOW_SPEED`` = I-f): never reads the rotor angle or speed. Returns ``control_step``'s
+    outputs, the mode (``MODE_ALIGN``, ``MODE_IF``, ``MODE_EKF``), the fault (``FAULT_*``) and the control
     frame's angle [rad] and speed [rad/s].
 
-    1. The stationary-frame EKF5 (eqs 23-27 with h = inverse Park) runs in every mode.
-    2. Alignment (``C_T_RAMP`` .. ``C_T_SETTLE``): the current vector ramped up on +90 deg,
-       held, swept to 0 deg, held (damped on the back-EMF); then the EKF restarts at the aligned
-       angle, at rest. The speed reference is not read. A rotor that runs away under the vector
-       (|omega_hat| > ``C_ALIGN_SLIP`` for ``C_ALIGN_SLIP_TIME``: a load beyond it) ends the alignment: I-f on the EKF's
-       angle (``relock``), as a loss-of-synchronism episode.
-    3. I-f: the vector turns at the I-f speed (the reference, slew-limited by what the vector's
-       torque allows: ``if_vector_step``), within the guard angle of the EKF's angle
-       (``sync_guard``); handover up once omega_hat agrees with the I-f speed.
-    4. EKF: FOC (eqs 14-20) on the EKF's angle and speed; back to I-f at low speed.
-    5. Loss of synchronism (I-f): |omega_hat - omega_if| (filtered) above ``C_SLIP_TOL`` +
-       ``C_AGREE_TOL`` |omega_if| for ``C_SLIP_TIME`` (or a limit reached: the guard holding the
-       vector with the current at ``C_I_Q_MAX`` and the rotor as far from the reference, that long:
-       an episode, nothing more to give); recovery:
-       a flying handover to FOC when |omega_hat| >= ``C_W_DOWN``, else ``relock``; the guard is on
-       while an episode lasts (also when ``C_GUARD`` is off) and in the safe state. An episode
-       ends after ``C_RECOVER_TIME`` in synchronism; one older than ``C_FAULT_TIME`` latches the
-       fault: the safe state is a stop and hold (the reference taken as 0, the I-f current at the limit).
-    6. Handover deadline and stall (I-f with |omega_ref| above ``C_W_UP``, ``S_IF_DUE``): after
-       ``C_IF_DEADLINE`` the handover up is forced if the rotor turns with the vector (FOC on the EKF, an
-       episode); after ``C_STALL_TIME`` the rotor is aligned again from standstill (an episode), at most
-       ``C_REALIGN_MAX`` times without a handover up in between, then the fault latches.
-    In alignment and I-f the current PIs work in the vector's frame (reference on its d
-    axis, no decoupling: the back-EMF is small there and the integrators carry it).
+    1. The stationary-frame EKF5 (eqs 23-27 with h = inverse Park) in every mode.
+    2. The stand (``STAND_TRANSITIONS``): a car standing on the I-f vector is anchored (``anchor``), and the
+       EKF put back on the anchor when the stand ends (``release``); outside a stand, in I-f, the EKF believed
+       where it has something to say (``ekf_believed``, ``trust_rotor``).
+    3. The modes' detectors, in order, each in the mode the one before left, with ``TRANSITIONS``: in
+       alignment ``detect_alignment_end`` (else the schedule, ``align_schedule``); on FOC ``detect_slowed``; in
+       I-f (after ``turn_vector``, but in the period the vector was placed) ``detect_trouble``, then
+       ``detect_agreed``, then ``detect_due``.
+    4. The episode's clock (``age_episode``): trouble is the trouble timer running or an episode's event.
+    5. The mode's control: FOC (eqs 14-20) on the EKF's angle and speed; in alignment and I-f the current PIs
+       in the vector's frame (reference on its d axis, no decoupling: the back-EMF is small there and the
+       integrators carry it), the vector pulled back by the damping (I-f: on ``S_SLIP``; alignment: on the
+       back-EMF of its q axis, ``S_ALIGN_SPEED``).
+    In the safe state (the fault latched) the reference is taken as 0: stop and hold.
     """
     dt = c[C_DT]
     ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
-    # the rotor's speed above C_STILL counts only once it lasts (the EKF's speed noise at a stand with
-    # 1 A of sensor noise crosses 0.5 rad/s for a few periods at a time)
+    # the rotor's speed above C_STILL, how long (the stand's end)
     s[S_STILL_OUT] = s[S_STILL_OUT] + c[C_DT] if abs(s[S_X + 2]) >= c[C_STILL] else 0.0
-    if (s[S_MODE] == MODE_IF and abs(s[S_OMEGA_IF]) < c[C_STILL]
-            and (abs(s[S_X + 2]) < c[C_STILL] or (s[S_ANCHORED] != 0.0 and s[S_STILL_OUT] < 0.5 * c[C_SLIP_TIME]))):
-        # the car stands on the I-f vector: no back-EMF shows the angle, and the EKF's (and with it its
-        # load) drifts with the sensors' noise and offsets; the rotor is held, so the guard and the I-f
-        # sizing take the angle and the load of when the EKF last saw it turn (at C_ANCHOR_SPEED or
-        # faster: the rotor's place on the vector, ``trust_rotor``), and the EKF is put back there,
-        # on the vector as it is then, when the stand ends
-        if s[S_ANCHORED] == 0.0:
-            s[S_ANCHOR_REL] = s[S_TRUST_OFF]
-            s[S_ANCHOR] = wrap_angle(s[S_PHI] + s[S_TRUST_OFF])
-            s[S_ANCHOR_TL] = s[S_TRUST_TL]
-            s[S_ANCHORED] = 1.0
-    elif s[S_ANCHORED] != 0.0:  # the stand ends; the rotor has turned with the vector since it began
-        theta = wrap_angle(s[S_PHI] + s[S_ANCHOR_REL])
-        if abs(s[S_X + 2]) < c[C_STILL]:  # the vector starts to turn (a restart): the EKF restarted
-            i_d, i_q = park(i_alpha, i_beta, theta)  # there, at rest (as after the alignment), on the
-            restart_ekf(s, c, theta, i_d, i_q)  # stand's load
-        else:  # the rotor moves (a load that changed): the EKF, which sees it, put back on that angle
-            s[S_X + 3] = theta
-        s[S_X + 4] = s[S_ANCHOR_TL]
-        s[S_ANCHORED] = 0.0
+    event = detect_stand(s, c)
+    if event != EV_NONE:
+        stand_transition(s, c, event, i_alpha, i_beta)
+    elif s[S_ANCHORED] == STAND_FREE and s[S_MODE] == MODE_IF and ekf_believed(s, c):
         trust_rotor(s)
-    elif s[S_MODE] == MODE_IF:
-        # the EKF believed on the rotor's place on the vector and on the load where it sees the rotor turn
-        # (C_ANCHOR_SPEED), or the guard holds the vector, or it says that the vector leads (or trails) the
-        # rotor by more than the design load angle or that the rotor has moved on the vector by more than
-        # _TRUST_MOVE since it was last believed (a load that changed: the EKF saw the motion). Else, at low speed, not:
-        # with a mismatched motor model its angle and load drift there with the current (the resistance's
-        # error), and an I-f current sized on that load would feed the drift (docs/sensorless.md)
-        lead = wrap_angle(s[S_PHI] - s[S_X + 3])
-        if (abs(s[S_X + 2]) >= c[C_ANCHOR_SPEED] or s[S_GUARD] != 0.0 or abs(lead) > c[C_E_MAX]
-                or abs(wrap_angle(lead + s[S_TRUST_OFF])) > _TRUST_MOVE):
-            trust_rotor(s)
     if c[C_PSI_ADAPT] != 0.0 and s[S_MODE] == MODE_EKF:
         adapt_psi(s, c)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
         omega_ref = 0.0
     if c[C_FF] != 0.0:  # the speed loop's feedforward, its slope kept up in every mode
         speed_feedforward(s, c, omega_ref)
-    t = s[S_CLOCK] * dt
+    t = s[S_CLOCK] * dt  # the alignment's clock
     s[S_CLOCK] += 1.0
-    mode = s[S_MODE]
-    omega_hat = s[S_X + 2]
-    if mode == MODE_ALIGN:  # how long the EKF has seen the rotor turn faster than C_ALIGN_SLIP
-        s[S_LOS] = s[S_LOS] + dt if (c[C_ALIGN_SLIP] > 0.0 and abs(omega_hat) > c[C_ALIGN_SLIP]) else 0.0
-    if mode == MODE_ALIGN and s[S_LOS] >= c[C_ALIGN_SLIP_TIME]:
-        # the rotor runs away under the alignment's vector, faster than the alignment's own swing: a
-        # load beyond the vector (a car parked on a slope). Its motion has shown the EKF the angle
-        # (back-EMF): the EKF is kept (not restarted) and I-f takes over on its angle, the vector put
-        # ahead of the rotor against the load at the current limit, as a loss-of-synchronism episode
-        s[S_OMEGA_IF] = omega_hat
-        relock(s, c, omega_hat, omega_ref)
-        s[S_LOS] = 0.0
-        s[S_EPISODE] = dt
-        s[S_INSYNC] = 0.0
-        s[S_AGREE] = 0.0
-        mode = MODE_IF
-    elif mode == MODE_ALIGN:
-        t_hold = c[C_T_RAMP] + c[C_T_HOLD]
-        t_sweep = t_hold + c[C_T_SWEEP]
-        if t < t_sweep + c[C_T_SETTLE]:
-            s[S_I_MAG] = c[C_I_ALIGN] * min(t / c[C_T_RAMP], 1.0) if c[C_T_RAMP] > 0.0 else c[C_I_ALIGN]
-            if t < t_hold:
-                s[S_PHI] = _HALF_PI
-                s[S_OMEGA_IF] = 0.0
-            elif t < t_sweep:
-                s[S_PHI] = _HALF_PI * (1.0 - (t - t_hold) / c[C_T_SWEEP])
-                s[S_OMEGA_IF] = -_HALF_PI / (c[C_T_SWEEP] * c[C_N])  # the sweep's speed [rad/s]
-            else:
-                s[S_PHI] = 0.0
-                s[S_OMEGA_IF] = 0.0
-        else:  # aligned: the magnet is on the vector; the EKF restarts there, at rest
-            i_d, i_q = park(i_alpha, i_beta, s[S_PHI])
-            restart_ekf(s, c, s[S_PHI], i_d, i_q)
-            omega_hat = 0.0
-            s[S_OMEGA_IF] = 0.0
-            s[S_SLIP] = 0.0
-            s[S_I_TGT] = max(c[C_I_IF], s[S_I_MAG])
-            mode = MODE_IF
-    elif mode == MODE_EKF and abs(omega_hat) < c[C_W_DOWN]:
-        # handover down: the vector stays where the current is, its magnitude ramps up
-        i_mag = math.sqrt(i_alpha * i_alpha + i_beta * i_beta)
-        s[S_PHI] = math.atan2(i_beta, i_alpha)
-        s[S_I_MAG] = i_mag
-        s[S_I_TGT] = max(c[C_IF_MARGIN] * i_mag, c[C_I_IF])
-        s[S_OMEGA_IF] = omega_hat
-        s[S_AGREE] = 0.0
-        s[S_SLIP] = 0.0
-        seat_current_pis(s, c, s[S_PHI] + c[C_ADVANCE] * omega_hat, c[C_N] * omega_hat * dt,
-                         i_mag, 0.0, i_mag, 0.0, 0.0)
-        trust_rotor(s)  # FOC's angle: the rotor's place on the vector
-        mode = MODE_IF
+    last = s[S_MODE]
+    mode = last
     trouble = False  # this period, in I-f: out of step, or a limit reached (the episode's clock)
-    if mode == MODE_IF:
-        if t > 0.0 and s[S_MODE] == MODE_IF:  # turn the vector (not in the period it was placed)
-            if s[S_FAULT] == FAULT_LATCHED:
-                s[S_I_TGT] = c[C_I_Q_MAX]
-            anchored = s[S_ANCHORED] != 0.0
-            # sized for the load the EKF had when it was last believed (``trust_rotor``, above), the stand's
-            # while the car stands
-            if_vector_step(s, c, omega_ref, s[S_ANCHOR_TL] if anchored else s[S_TRUST_TL])
-            # the damping's input, omega_hat - omega_if low-pass filtered (see below)
-            s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - s[S_OMEGA_IF] - s[S_SLIP])
-            if c[C_GUARD] != 0.0 or s[S_EPISODE] > 0.0 or s[S_FAULT] == FAULT_LATCHED:  # on while recovering
-                sync_guard(s, c, omega_hat, c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP],
-                           s[S_ANCHOR] if anchored else s[S_X + 3])
-        w_if = s[S_OMEGA_IF]
-        slipping = abs(s[S_SLIP]) > c[C_SLIP_TOL] + c[C_AGREE_TOL] * abs(w_if)
-        # in trouble: out of step, or a limit reached: the guard holding the vector at the current
-        # limit while the rotor does not follow the reference (a load beyond what the drive gives)
-        trouble = slipping or (s[S_GUARD] != 0.0 and s[S_I_MAG] >= c[C_I_Q_MAX] and abs(omega_ref - omega_hat)
-                               > c[C_SLIP_TOL] + c[C_AGREE_TOL] * abs(omega_ref))
-        s[S_LOS] = s[S_LOS] + dt if trouble else 0.0
-        if s[S_LOS] >= c[C_SLIP_TIME]:
-            s[S_LOS] = 0.0
-            begin_episode(s, c)
-            # at the limit (not slipping) there is nothing more to give: the episode runs on to the fault
-            if slipping and abs(omega_hat) >= c[C_W_DOWN]:  # loss of synchronism, the rotor turns and the
-                seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)  # EKF holds its angle: flying handover
-                mode = MODE_EKF
-            elif slipping:  # at low speed: the vector put back on the rotor
-                relock(s, c, omega_hat, omega_ref)
-            w_if = s[S_OMEGA_IF]
-        if mode == MODE_IF:
-            if abs(w_if) > c[C_W_UP] and abs(omega_hat - w_if) < c[C_AGREE_TOL] * abs(w_if):
-                s[S_AGREE] += dt
-            else:
-                s[S_AGREE] = 0.0
-            if s[S_AGREE] >= c[C_AGREE_TIME]:  # handover up: FOC on the EKF, seated on the present state
-                seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, False)
-                s[S_REALIGN] = 0.0
-                mode = MODE_EKF
-        if mode == MODE_IF and s[S_FAULT] != FAULT_LATCHED and abs(omega_ref) > c[C_W_UP]:
-            s[S_IF_DUE] += dt  # the reference asks for FOC's speed range, the unit is still in I-f
+    slip = False
+    # the detectors in their order, each in the mode the one before left (the table's comment); the
+    # transitions taken in one place (one inlined copy of the entry actions: the step stays small)
+    for stage in range(4):
+        event = EV_NONE
+        if stage == 0:  # the mode's own: the alignment's end (else its schedule), FOC's handover down
+            if mode == MODE_ALIGN:
+                event = detect_alignment_end(s, c, t)
+                if event == EV_NONE:
+                    align_schedule(s, c, t)
+            elif mode == MODE_EKF:
+                event = detect_slowed(s, c)
+        elif mode != MODE_IF:
+            break
+        elif stage == 1:  # I-f: the vector turned (not in the period it was placed), then in trouble?
+            omega_hat = s[S_X + 2]
+            if last == MODE_IF:
+                turn_vector(s, c, omega_ref, omega_hat)
+            slip = slipping(s, c)
+            event = detect_trouble(s, c, slip, at_limit(s, c, omega_ref, omega_hat), omega_hat)
+            trouble = s[S_LOS] > 0.0 or event != EV_NONE
+        elif stage == 2:
+            event = detect_agreed(s, c, s[S_X + 2])
         else:
-            s[S_IF_DUE] = 0.0
-        if (0.0 < c[C_IF_DEADLINE] <= s[S_IF_DUE] and not slipping and abs(w_if) > c[C_W_UP]
-                and abs(omega_hat) >= c[C_W_DOWN] and omega_hat * w_if > 0.0):
-            # the handover up overdue (the EKF's speed swings about the I-f speed and never agrees for
-            # C_AGREE_TIME): forced, FOC on the EKF, which holds the angle at this speed (back-EMF), an episode
-            seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)
-            s[S_REALIGN] = 0.0
-            trouble = True
-            begin_episode(s, c)
-            mode = MODE_EKF
-        elif 0.0 < c[C_STALL_TIME] <= s[S_IF_DUE]:
-            # stalled (a limit reached): the rotor does not follow the vector; at a stand no back-EMF shows
-            # its angle, so it is aligned again from standstill, an episode; realign_max times at most
-            # without a handover up in between, then the fault latches (the safe state). A rotor that
-            # turns the vector's way at |omega_hat| >= C_W_DOWN at that moment (a 400 A vector's swing
-            # catches it again and again) shows the EKF its angle: FOC on the EKF instead (as after a
-            # loss of synchronism at speed), counted as a realignment
-            s[S_IF_DUE] = 0.0
-            trouble = True
-            begin_episode(s, c)
-            if s[S_REALIGN] < c[C_REALIGN_MAX] and abs(omega_hat) >= c[C_W_DOWN] and omega_hat * w_if > 0.0:
-                s[S_REALIGN] += 1.0
-                seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, True)
-                mode = MODE_EKF
-            elif s[S_REALIGN] < c[C_REALIGN_MAX]:
-                s[S_REALIGN] += 1.0
-                s[S_CLOCK] = 0.0  # the alignment's clock: it starts with the next period
-                s[S_I_MAG] = 0.0
-                s[S_I_TGT] = 0.0
-                s[S_OMEGA_IF] = 0.0
-                s[S_SLIP] = 0.0
-                s[S_AGREE] = 0.0
-                s[S_GUARD] = 0.0
-                s[S_LOS] = 0.0
-                s[S_ANCHORED] = 0.0
-                s[S_INT_D] = 0.0
-                s[S_INT_Q] = 0.0
-                mode = MODE_ALIGN
-            else:
-                s[S_FAULT] = FAULT_LATCHED
+            event = detect_due(s, c, omega_ref, s[S_X + 2], slip)
+            trouble = trouble or event != EV_NONE
+        if event != EV_NONE:
+            mode = if_transition(s, c, mode, event, i_alpha, i_beta, omega_ref)
     age_episode(s, c, trouble)  # a loss-of-synchronism episode: recovered, or the fault latched
     s[S_MODE] = mode
     if mode == MODE_EKF:
+        omega_hat = s[S_X + 2]
         theta_ctrl = s[S_X + 3]
         omega_ctrl = omega_hat
         i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
@@ -592,10 +800,10 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
             # on the vector's q axis, v_q / (N psi) = omega_m cos(e) (e the vector's lead; the EKF's
             # angle is unknown here), less the sweep's own speed: the torque it adds is
             # -N psi i k omega_m cos^2(e), a damping whatever the angle (docs/sensorless.md)
-            s[S_SLIP] += c[C_SLIP_FILTER] * (s[S_V_Q] / (c[C_N] * c[C_PSI]) - omega_ctrl - s[S_SLIP])
-            theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP]
+            s[S_ALIGN_SPEED] += c[C_SLIP_FILTER] * (s[S_V_Q] / (c[C_N] * c[C_PSI]) - omega_ctrl - s[S_ALIGN_SPEED])
+            theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_ALIGN_SPEED]
         else:
-            s[S_SLIP] = 0.0
+            s[S_ALIGN_SPEED] = 0.0
         i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
         i_qref = 0.0
         v_d, v_q = current_step(s, c, s[S_I_MAG], 0.0, i_d, i_q, 0.0)  # (15)-(16), no decoupling

@@ -24,7 +24,7 @@ BAND_SHARE_MIN = 0.99
 #: a torque at least this share of the envelope's at its speed counts as at the drive's limit
 AT_LIMIT = 0.98
 #: the WLTC pair the phase tables and the figures compare
-WLTC_PAIR = ("cyc-wltc3b", "cyc-wltc3b-sensorless")
+WLTC_PAIR = ("cyc-wltc3b", "cyc-wltc3b-if")
 #: the angle error is drawn where the rotor turns faster than this [rad/s] (at standstill no back-EMF shows it)
 ANGLE_FROM_SPEED = 20.0
 #: the kinds of energy of the bars, in stacking order: (label, path in phase_energy's energy block); with the

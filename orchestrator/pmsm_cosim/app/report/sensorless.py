@@ -1,5 +1,5 @@
 """The report's section "Sensorless from standstill": the sensorless unit (FocSensorless)
-against the sensored drive on the same runs: both paper scenarios and ``hill-start`` from
+against the sensored drive on the same runs: both paper scenarios and ``hill-start-if`` from
 standstill, with exact sensors, sigma = 1 A noise and +2 / -1 A offsets, and scenario 1's
 start-up from eight initial rotor angles over [-pi, pi).
 
@@ -32,7 +32,7 @@ from pmsm_ev.scenarios import SENSORLESS_START_DELAY
 
 #: the runs: (short name, shipped scenario, title)
 SCENARIOS = (("s1", "scenario1-sensorless", "Scenario 1"), ("s2", "scenario2-sensorless", "Scenario 2"),
-             ("hill", "hill-start", "Hill start"))
+             ("hill", "hill-start-if", "Hill start"))
 #: sensor conditions: (short name, --set assignments, description)
 CONDITIONS = (("exact", (), "exact sensors"),
               ("noisy1A", ("plant.sensor_noise=1.0",), "σ = 1 A noise"),
@@ -135,7 +135,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
         axes[1].set_ylabel(f"x − x({window[0]:g} s) [m]")
         axes[2].set_ylabel("T_e [N m]")
         axes[2].legend(fontsize=7)
-        axes[0].set_title("hill-start on 22°: stop (30-40 s), stand (40-50 s), restart (50-60 s)")
+        axes[0].set_title("hill-start-if on 22°: stop (30-40 s), stand (40-50 s), restart (50-60 s)")
         made.append(_finish(plt, fig, axes, fig_dir / "sensorless_hill.png", axes[3]))
         # the position over the stand, zoomed: the roll-back in millimetres
         fig, ax = plt.subplots(figsize=(7.5, 3.0))
@@ -146,7 +146,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
             ax.plot(r["time"][sel], 1000.0 * (r["x_vehicle"][sel] - x45), lw=0.9, label=label, color=f"C{i}", ls=ls)
         ax.set_ylabel("x − x(45 s) [mm]")
         ax.set_ylim(-100.0, 40.0)
-        ax.set_title("hill-start: vehicle position around the stand (below 0: rolled back)")
+        ax.set_title("hill-start-if: vehicle position around the stand (below 0: rolled back)")
         ax.legend(fontsize=7)
         made.append(_finish(plt, fig, [ax], fig_dir / "sensorless_hill_position.png"))
     return made
@@ -319,10 +319,10 @@ def _targets(data) -> tuple[list[str], list[str]]:
         h = _hill_figures(data, f"sl-hill-{cond}-sensorless")
         if not h or h["roll_back_stop"] is None:
             continue
-        add(f"hill-start, {desc}: roll-back ≤ {100 * ROLL_BACK_LIMIT:g} cm at the stop and the restart",
+        add(f"hill-start-if, {desc}: roll-back ≤ {100 * ROLL_BACK_LIMIT:g} cm at the stop and the restart",
             f"{100 * h['roll_back_stop']:.2f} / {100 * h['roll_back_restart']:.2f} cm",
             max(h["roll_back_stop"], h["roll_back_restart"]) <= ROLL_BACK_LIMIT)
-        add(f"hill-start, {desc}: holds for the 10 s",
+        add(f"hill-start-if, {desc}: holds for the 10 s",
             f"moves {1000 * h['stand_travel']:.1f} mm, abs(ω_m) ≤ {h['stand_speed_max']:.3f} rad/s over 41-50 s",
             h["stand_travel"] < 0.01)
     return ["| target | measured | |", "|---|---|---|"] + rows, misses
@@ -346,7 +346,7 @@ def render(data, fig_names) -> list[str]:
         f"{100 * s.agree_tol:g} % for {s.agree_time:g} s above {s.omega_up:g} rad/s, and hands back to I-f "
         f"below {s.omega_down:g} rad/s with the vector left where the current is and its magnitude raised to "
         f"{s.if_margin:g} × the present current (at least {s.if_margin:g} × the EKF's load). The routes "
-        f"`scenario1-sensorless`, `scenario2-sensorless` and `hill-start` hold ω_ref = 0 for "
+        f"`scenario1-sensorless`, `scenario2-sensorless` and `hill-start-if` hold ω_ref = 0 for "
         f"{SENSORLESS_START_DELAY:g} s (the alignment) and then ramp as the paper's scenarios do. Each row is "
         f"against the sensored drive (`FocSensored.fmu`) on the same run. Angle errors here have the "
         f"row-timing term −N ω dt removed{lag}.\n")

@@ -1,7 +1,7 @@
 """The report's section "The whole speed range": the data sheet's acceleration run, full torque from
 standstill (or a flying start) on a level road to the top speed, 131 km/h, then regenerative braking,
 with three controllers: the sensored drive (``acceleration``), the stationary-frame EKF5 from a flying
-start (``acceleration-flying``) and the sensorless unit from standstill (``acceleration-sensorless``).
+start (``acceleration-flying``) and the sensorless unit from standstill (``acceleration-if``).
 The figures of merit are ``pmsm_ev.results.acceleration_figures`` and ``energy_metrics`` of each run
 (metrics.json), the angle error with the row-timing term removed (``row_timing_corrected_angle_error``);
 the envelope is the scenario's controller's (``pmsm_ev.references``, docs/speed-range.md)."""
@@ -137,7 +137,7 @@ def render(data, fig_names) -> list[str]:
     speeds = references.region_speeds(lim)
     L.append(
         "The EV data sheet's test (shipped scenarios `acceleration`, `acceleration-flying`, "
-        "`acceleration-sensorless`; docs/speed-range.md): on a level road the speed reference steps to the top "
+        "`acceleration-if`; docs/speed-range.md): on a level road the speed reference steps to the top "
         "speed, 131 km/h at the wheels, so the speed PI asks for the most torque the drive has; from 22.5 s it "
         "ramps down at 3 m/s² (the driver easing off below 7.2 km/h). The reference generator works in field "
         f"weakening on the 360 V DC link (I_max {lim.i_max:g} A, T_max {lim.T_max:.1f} N m on MTPA, the voltage "

@@ -281,7 +281,7 @@ def dead_time_text(dead: list, figs: dict) -> list[str]:
     if "dead" in figs:
         L += [f"![dead time](robustness/{figs['dead'].name})", ""]
     if raw is not None:
-        L += [f"`hill-start` with the sensorless unit and a {raw.v_dc:g} V DC link (`{DEAD_TIME}.toml`): the "
+        L += [f"`hill-start-if` with the sensorless unit and a {raw.v_dc:g} V DC link (`{DEAD_TIME}.toml`): the "
               f"inverter's dead time of {raw.dead_time * 1e6:g} µs at {1 / raw.dt:g} Hz takes "
               f"{raw.figures['v_error']:.2g} V from each phase in the sign of its current (`plant.dead_time`); "
               "`ctrl.dead_time_comp` adds the value it is given back from the measured currents.", ""]
