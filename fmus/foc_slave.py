@@ -80,6 +80,16 @@ class FocSlave(DriveSlave):
                                             "sensored observer)")
         self.add_input("omega_meas", "rad/s", "measured mechanical rotor speed (sensored observer)",
                        display_unit="rpm")
+        self.add_input("v_dc_meas", "V", "the DC link's measured voltage (a battery's: the plant's v_bat output); "
+                                         "> 0: the voltage limit follows it (v_dc_meas / sqrt 3, field weakening at "
+                                         "fw_margin of it) and the torque is held within P_charge_max, "
+                                         "P_discharge_max; 0 (unconnected): the parameters' constant DC link")
+        self.add_input("P_charge_max", "W", "the battery's charge acceptance (the plant's P_charge_max output): a "
+                                            "braking torque's power at the shaft at most this, the friction brake "
+                                            "takes the rest (read only when v_dc_meas > 0)", display_unit="kW")
+        self.add_input("P_discharge_max", "W", "the battery's discharge power (the plant's P_discharge_max output): a "
+                                               "motoring torque's power at the shaft at most this (read only when "
+                                               "v_dc_meas > 0)", display_unit="kW")
 
         hold = ", computed at the last step"
         self.add_output("v_alpha", "V", "commanded stator voltage, alpha axis, to be held until the next "
@@ -255,6 +265,9 @@ class FocSlave(DriveSlave):
                 io[_k.UIO_OMEGA_REF] = self.omega_ref
                 io[_k.UIO_THETA_MEAS] = self.theta_meas
                 io[_k.UIO_OMEGA_MEAS] = self.omega_meas
+                io[_k.UIO_V_DC_MEAS] = self.v_dc_meas  # a measured DC link (0: the parameters')
+                io[_k.UIO_P_CHARGE_MAX] = self.P_charge_max
+                io[_k.UIO_P_DISCHARGE_MAX] = self.P_discharge_max
                 self._periods(u.io, u._s, u._c, k_end - self._k_next)
                 (self.v_alpha, self.v_beta, self.v_d, self.v_q, self.i_d, self.i_q, self.i_qref, self.i_d_hat,
                  self.i_q_hat, self.omega_hat, self.theta_hat, self.T_L_hat, self.mode, self.fault, self.theta_ctrl,

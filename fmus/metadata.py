@@ -52,6 +52,7 @@ UNITS: dict[str, dict[str, float]] = {
     "K/W": {"K": 1, "kg": -1, "m": -2, "s": 3},
     "J/K": {"kg": 1, "m": 2, "s": -2, "K": -1},
     "J": {"kg": 1, "m": 2, "s": -2},
+    "C": {"A": 1, "s": 1},
 }
 
 #: unit name -> [(display unit, factor)], display value = factor * value
@@ -78,6 +79,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "B_m": ("N.m.s/rad", "viscous friction coefficient of eq 8"),
     "T_m0": ("N.m", "constant (Coulomb) friction torque of eq 8"),
     "omega_eps": ("rad/s", "speed scale of the smooth sign of T_m0 (load_model 'physical')"),
+    "k_wind": (None, "windage coefficient k_wind [N m s^2/rad^2] of the drag k_wind omega |omega| beside eq 8, a "
+                     "power k_wind |omega|^3 (0 = off)"),
     "dq_convention": (None, "dq convention: 'paper' (eq 12 as printed, power v_d i_d + v_q i_q) or "
                             "'amplitude_invariant' (amplitude-invariant dq quantities: torque and power x 3/2)"),
     # VehicleParams: Table II
@@ -174,9 +177,12 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                        "switching_period in the sign of the phase current; needs v_dc > 0"),
     "dead_time_i0": ("A", "current scale of the dead-time error's soft sign tanh(i / dead_time_i0)"),
     "inverter_losses": (None, "inverter conduction and switching losses on, drawn from the DC link: per phase "
-                              "(inv_v0 + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref)) |i| + inv_r_on i^2 (needs v_dc)"),
-    "inv_v0": ("V", "inverter: threshold voltage of the IGBT and the diode (straight-line on-state model)"),
-    "inv_r_on": ("Ohm", "inverter: on-state slope resistance of the IGBT and the diode"),
+                              "d (inv_v0 |i| + inv_r_on i^2) + (1 - d) (inv_vf0 |i| + inv_r_f i^2) + f_sw inv_e_sw "
+                              "v_dc / (inv_v_ref inv_i_ref) |i|, d the IGBT's share of the period (needs v_dc)"),
+    "inv_v0": ("V", "inverter: the IGBT's knee V_CE0 (straight-line on-state model V_CE = V_CE0 + r_CE i)"),
+    "inv_r_on": ("Ohm", "inverter: the IGBT's on-state slope resistance r_CE"),
+    "inv_vf0": ("V", "inverter: the diode's knee V_F0 (straight-line forward model V_F = V_F0 + r_F i)"),
+    "inv_r_f": ("Ohm", "inverter: the diode's forward slope resistance r_F"),
     "inv_e_sw": ("J", "inverter: switching energy of one leg per switching period (E_on + E_off + E_rec) at "
                       "inv_v_ref, inv_i_ref"),
     "inv_v_ref": ("V", "inverter: DC voltage at which inv_e_sw is given"),
@@ -313,4 +319,21 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     # the controller FMUs' sample clock (fmus/foc_slave.py)
     "dt": ("s", "sample period of the controller and observer: one control period at each instant "
                 "start + k dt; 0 (default): the size of the first communication step"),
+    # BatteryParams (the plant's DC link)
+    "battery": (None, "the DC link: 'ideal' (a constant source of v_dc, the paper's) or 'ecm' (the battery's "
+                      "equivalent circuit: OCV(soc) - R0 i - v_rc, one RC pair; the plant's v_dc, losses and voltage "
+                      "limit follow its terminal voltage)"),
+    "bat_soc0": (None, "the battery's state of charge at the start, in [0, 1]"),
+    "bat_capacity": (None, "the battery's capacity [Ah], > 0"),
+    "bat_ocv_soc": (None, "the open-circuit voltage table's states of charge, comma-separated, rising from 0 to 1"),
+    "bat_ocv_v": (None, "the open-circuit voltage table's voltages [V], comma-separated, rising with the state of "
+                        "charge"),
+    "bat_R0": ("Ohm", "the battery's series resistance R0"),
+    "bat_R1": ("Ohm", "the battery's RC pair: its resistance R1 (0 = no RC pair)"),
+    "bat_C1": (None, "the battery's RC pair: its capacitance C1 [F]"),
+    "bat_i_discharge_max": ("A", "the battery's discharge current limit"),
+    "bat_i_charge_max": ("A", "the battery's charge current limit (charge acceptance)"),
+    "bat_v_max": ("V", "the terminal voltage a charge current may raise the battery to"),
+    "bat_v_min": ("V", "the terminal voltage a discharge current may lower the battery to"),
+    "bat_soc_taper": (None, "above this state of charge the charge current limit falls linearly to 0 at 1"),
 }

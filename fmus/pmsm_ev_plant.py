@@ -11,8 +11,8 @@ import math
 
 from pmsm_ev import __version__
 from pmsm_ev import kernels as _k
-from pmsm_ev.params import MotorParams, PlantParams, VehicleParams
-from pmsm_ev.plant import ENERGY_SLOTS, Plant
+from pmsm_ev.params import BatteryParams, MotorParams, PlantParams, VehicleParams
+from pmsm_ev.plant import BATTERY_SLOTS, ENERGY_SLOTS, Plant
 from pmsm_ev_fmus.slave_support import COMPILED_BUFFER, DriveSlave, FmuUsageError, SimulationError
 
 _MOTOR = ("N", "psi", "L_d", "L_q")  # the motor parameters of eq 12
@@ -45,7 +45,8 @@ _ENERGY_OUTPUTS = {
     "E_dc_abs": "the DC link's energy throughput since the start, the integral of |P_dc|",
     "E_regen": "energy returned to the DC link since the start, the integral of max(-P_dc, 0)",
     "E_copper": "copper losses since the start, k_dq R_s (i_d^2 + i_q^2)",
-    "E_friction": "motor friction losses since the start, omega_m T_f (eq 8)",
+    "E_friction": "motor friction losses since the start, omega_m T_f (eq 8, and the windage k_wind "
+                  "omega_m^2 |omega_m|)",
     "E_shaft": "electromagnetic work at the shaft since the start, omega_m T_e",
     "E_gear": "gear losses since the start (gear_model 'paper': (1/eta - 1) times the wheel forces' power, "
               "signed)",
@@ -55,6 +56,23 @@ _ENERGY_OUTPUTS = {
     "E_brake": "energy taken by the friction brake since the start",
     "E_inverter": "inverter conduction and switching losses since the start (inverter_losses)",
     "E_iron": "iron losses since the start (iron_c_h, iron_c_e), a drag on the shaft",
+}
+
+#: the battery's outputs (battery 'ecm'; 0 with the ideal link): name -> (unit, description, display unit)
+_BATTERY_OUTPUTS = {
+    "soc": (None, "the battery's state of charge: bat_soc0 less the charge drawn over bat_capacity", None),
+    "v_bat": ("V", "the DC link's voltage, the battery's terminal voltage at the end of the last step (what the "
+                  "inverter and a controller's v_dc_meas input see over the next)", None),
+    "i_bat": ("A", "the battery's current over the last step, discharge positive", None),
+    "P_charge_max": ("W", "the power the battery accepts now (charge acceptance: the charge current limit, tapered "
+                          "above bat_soc_taper, within bat_v_max): a controller's P_charge_max input", "kW"),
+    "P_discharge_max": ("W", "the power the battery gives now (the discharge current limit within bat_v_min): a "
+                             "controller's P_discharge_max input", "kW"),
+    "Q_bat": ("C", "the charge drawn from the battery since the start (negative: charged)", None),
+    "E_chemical": ("J", "the battery's chemical energy since the start: the open-circuit voltage times its current, "
+                        "integrated (E_dc + E_battery + W_battery)", "Wh"),
+    "E_battery": ("J", "the battery's losses since the start: R0 i^2 and the RC pair's R1", "Wh"),
+    "W_battery": ("J", "energy in the battery's RC pair's capacitor, C1 v_rc^2 / 2", "Wh"),
 }
 
 
@@ -139,14 +157,19 @@ class PmsmEvPlant(DriveSlave):
                         display_unit="Wh")
         self.add_output("P_dc", "W", "mean DC-link power over the last step (0 before the first step)",
                         start=None, start_dependencies=(), display_unit="kW")
+        for name, (unit, text, display) in _BATTERY_OUTPUTS.items():
+            self.add_output(name, unit, text + " (battery 'ecm'; 0 with the ideal link; before the first step: at "
+                                               "rest at bat_soc0)", start=None,
+                            start_dependencies=("battery", "bat_soc0", "bat_ocv_soc", "bat_ocv_v"),
+                            display_unit=display)
 
-        self.add_parameters(MotorParams, VehicleParams, PlantParams)
+        self.add_parameters(MotorParams, VehicleParams, PlantParams, BatteryParams)
         self._plant = None
 
     # -- physics hooks ---------------------------------------------------------------
     def build(self) -> None:
         self._plant = Plant(self.parameters(MotorParams), self.parameters(VehicleParams),
-                            self.parameters(PlantParams))  # validates all three groups
+                            self.parameters(PlantParams), self.parameters(BatteryParams))  # validates the groups
         self.mark_built()
         self._copy_outputs()
 
@@ -194,6 +217,7 @@ class PmsmEvPlant(DriveSlave):
     def compiled_slots(self) -> dict[str, int]:
         slots = dict(_IO_SLOTS)
         slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in ENERGY_SLOTS.items()})
+        slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in BATTERY_SLOTS.items()})
         slots["P_dc"] = 2 * COMPILED_BUFFER + _k.E_P_DC
         return slots
 
@@ -231,6 +255,10 @@ class PmsmEvPlant(DriveSlave):
             if not math.isfinite(self.omega_m + self.i_d + self.i_q):
                 raise SimulationError(f"plant state is not finite at t = {current_time + step_size!r} s "
                                       f"(omega_m={self.omega_m!r}, i_d={self.i_d!r}, i_q={self.i_q!r})")
+            if not math.isfinite(self._plant.energy[_k.E_BAT_V]):
+                raise SimulationError(f"the battery cannot give the DC power the drive draws at t = "
+                                      f"{current_time + step_size!r} s ({self._plant.P_dc!r} W, more than "
+                                      f"OCV^2 / (4 R))")
         except Exception as exc:
             self._fail("fmi2DoStep", exc)
             raise
@@ -242,3 +270,5 @@ for _name, _slot in ENERGY_SLOTS.items():
 PmsmEvPlant.W_magnetic = _Energy(lambda plant: plant.stored[0])
 PmsmEvPlant.E_kinetic = _Energy(lambda plant: plant.stored[1])
 PmsmEvPlant.P_dc = _Energy(lambda plant: plant.P_dc)
+for _name, _slot in BATTERY_SLOTS.items():
+    setattr(PmsmEvPlant, _name, _energy_slot(_slot))

@@ -22,7 +22,7 @@ from pmsm_ev import cycles
 
 CYCLES = ("wltc3b", "udds", "hwfet", "us06")
 SCENARIOS = ([c for c in CYCLES] + [f"{c}-sensorless" for c in CYCLES] + [f"{c}-if" for c in CYCLES]
-             + ["wltc3b-hilly"])
+             + ["wltc3b-hilly", "wltc3b-battery", "wltc3b-battery-sensorless"])
 
 
 @pytest.fixture(scope="module")
@@ -56,6 +56,9 @@ def test_a_shipped_cycle_scenario_lasts_its_cycle_with_the_drive_of_the_speed_ra
         ("if", None) if name.endswith("-if") else (None, None))
     assert ctrl.start["reference"] == "fw" and ctrl.start["speed_feedforward"] == "inertia+road"
     assert plant.start["sensor_noise"] == 1.0
+    # on the battery (docs/speed-range.md, "The battery"): from 90 %, the controller on the measured DC link
+    assert (plant.start.get("battery"), plant.start.get("bat_soc0")) == (
+        ("ecm", 0.9) if "-battery" in name else (None, None))
     roads = [c for c in spec.components if c.name == "road"]
     assert len(roads) == (1 if name.endswith("-hilly") else 0)
     # the reference's top speed is the cycle's at the motor: v n_g / r_w, Table II

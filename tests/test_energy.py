@@ -15,6 +15,9 @@ from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.losses import steady_state
 from pmsm_ev.params import (
+    SOURCED_IRON,
+    SOURCED_K_WIND,
+    SOURCED_T_M0,
     ControllerParams,
     MotorParams,
     ParameterError,
@@ -85,6 +88,12 @@ CASES = {
         {}, {"gear_model": "power_flow"},
         {"v_dc": 360.0, "dead_time": 2e-6, "thermal_R": 1.0, "thermal_C": 20.0, "sat_i_q": 900.0,
          "sat_i_d": 2000.0, "inverter_losses": True, "iron_c_h": 9.9, "iron_c_e": 3.9e-3, "rk4_substeps": 4}),
+    # the drive-cycle scenarios' sourced losses, all on: bearings and windage, iron, the data sheet's inverter
+    # with its IGBT and diode apart (the modulation's share)
+    "sourced friction, windage, iron and inverter losses": (
+        {"dq_convention": "amplitude_invariant", "B_m": 0.0, "T_m0": SOURCED_T_M0, "k_wind": SOURCED_K_WIND},
+        {"gear_model": "power_flow"},
+        {"v_dc": 360.0, "inverter_losses": True, "iron_c_h": SOURCED_IRON[0], "iron_c_e": SOURCED_IRON[1]}),
 }
 
 
@@ -178,7 +187,8 @@ def test_steady_state_losses_and_efficiency_are_the_analytic_ones():
     """Copper, friction, iron and inverter losses (conduction + switching) at an operating point,
     against their closed forms; P_dc = losses + shaft power; the efficiency motoring and generating."""
     m = MotorParams(dq_convention="amplitude_invariant")
-    pl = PlantParams(v_dc=360.0, inverter_losses=True, iron_c_h=9.9, iron_c_e=3.9e-3)
+    # the IGBT and the diode alike here (the modulation's share: tests/test_losses_sourced.py)
+    pl = PlantParams(v_dc=360.0, inverter_losses=True, iron_c_h=9.9, iron_c_e=3.9e-3, inv_vf0=0.70, inv_r_f=2.375e-3)
     i_d, i_q, w = -40.0, 150.0, 300.0
     s = steady_state(m, pl, VehicleParams(), i_d, i_q, w)
     amp = math.hypot(i_d, i_q)

@@ -39,6 +39,7 @@ from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import __version__
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import (
+    BatteryParams,
     ControllerParams,
     DriveParams,
     EkfParams,
@@ -50,7 +51,7 @@ from pmsm_ev.params import (
     StartupParams,
     VehicleParams,
 )
-from pmsm_ev.plant import Plant
+from pmsm_ev.plant import BATTERY_SLOTS, Plant
 from pmsm_ev_fmus import build as fmu_build
 from pmsm_ev_fmus.metadata import PARAMETERS, UNITS
 
@@ -59,8 +60,10 @@ OBSERVER = {fmu: observer for observer, fmu in pmsm_ev_fmus.OBSERVER_FMUS.items(
 PLANT_INPUTS = ("v_alpha", "v_beta", "delta", "T_brake")
 PLANT_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle",
                  "x_vehicle", "E_dc", "E_dc_abs", "E_regen", "E_copper", "E_friction", "E_shaft", "E_gear", "E_aero",
-                 "E_rolling", "E_grade", "E_brake", "E_inverter", "E_iron", "W_magnetic", "E_kinetic", "P_dc")
-CTRL_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
+                 "E_rolling", "E_grade", "E_brake", "E_inverter", "E_iron", "W_magnetic", "E_kinetic", "P_dc",
+                 *BATTERY_SLOTS)
+CTRL_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas", "v_dc_meas", "P_charge_max",
+               "P_discharge_max")
 CTRL_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d_hat", "i_q_hat", "omega_hat", "theta_hat", "T_L_hat",
                 "i_d", "i_q", "i_qref", "mode", "fault", "theta_ctrl", "omega_ctrl", "i_dref", "T_ref", "T_brake",
                 "ref_region")
@@ -132,7 +135,8 @@ class Instance:
 def plant_outputs(p: Plant):
     e = p.energies()
     return [p.i_alpha, p.i_beta, p.i_d, p.i_q, p.omega_m, p.theta_e, p.T_e, p.T_L_mech, p.v_vehicle, p.x_vehicle,
-            *(e[name] for name in PLANT_OUTPUTS[10:-3]), e["W_magnetic"], e["E_kinetic"], p.P_dc]
+            *(e[name] for name in PLANT_OUTPUTS[10:23]), e["W_magnetic"], e["E_kinetic"], p.P_dc,
+            *(float(p.energy[slot]) for slot in BATTERY_SLOTS.values())]
 
 
 def unit_outputs(u: ControlUnit, theta_meas: float = 0.0):
@@ -395,7 +399,7 @@ def test_model_description_is_complete(fmus, name):
             assert PARAMETERS[v.name][0] == v.unit
         if v.unit is not None:
             assert v.unit in units
-    groups = (MotorParams, VehicleParams, PlantParams) if name == "PmsmEvPlant" else \
+    groups = (MotorParams, VehicleParams, PlantParams, BatteryParams) if name == "PmsmEvPlant" else \
         (ControllerParams, EkfParams, MotorParams, StartupParams, InjectionParams) if name == "FocSensorless" else \
         (ControllerParams, EkfParams, MotorParams)
     expected = {f.name for cls in groups for f in dataclasses.fields(cls)}
@@ -407,9 +411,9 @@ def test_model_description_is_complete(fmus, name):
     outputs = PLANT_OUTPUTS if name == "PmsmEvPlant" else CTRL_OUTPUTS
     assert [v.name for v in md.modelVariables if v.causality == "input"] == list(inputs)
     assert [v.name for v in md.modelVariables if v.causality == "output"] == list(outputs)
-    for n in inputs + outputs:  # all with units, but the mode, the fault and the region (codes 0 / 1 / 2 ...)
-        assert by_name[n].type == "Real" and (by_name[n].unit in units if n not in ("mode", "fault", "ref_region")
-                                              else by_name[n].unit is None)
+    for n in inputs + outputs:  # all with units, but the mode, the fault, the region (codes 0 / 1 / 2 ...), soc
+        unitless = n in ("mode", "fault", "ref_region", "soc")
+        assert by_name[n].type == "Real" and (by_name[n].unit is None if unitless else by_name[n].unit in units)
     assert by_name["omega_m" if name == "PmsmEvPlant" else "omega_hat"].unit == "rad/s"
     # no direct feedthrough: every output's dependency list is empty
     assert len(md.outputs) == len(outputs)
@@ -505,7 +509,8 @@ def test_plant_fmu_dead_time_and_delay_follow_the_switching_period(fmus, step):
 @pytest.mark.parametrize("angle_source", ["measured", "estimated"])
 def test_controller_with_constant_inputs_gives_bounded_voltages(fmus, name, angle_source):
     u_max = ControllerParams().u_max
-    signals = np.array([(0.0, 20.0, -5.0, 100.0, 0.4, 10.0), (1.0, 20.0, -5.0, 100.0, 0.4, 10.0)],
+    signals = np.array([(0.0, 20.0, -5.0, 100.0, 0.4, 10.0, 0.0, 0.0, 0.0),
+                        (1.0, 20.0, -5.0, 100.0, 0.4, 10.0, 0.0, 0.0, 0.0)],
                        dtype=[("time", float)] + [(n, float) for n in CTRL_INPUTS])
     r = simulate_fmu(str(fmus[name]), stop_time=0.2, step_size=DT, output_interval=DT, input=signals,
                           start_values={"angle_source": angle_source})
@@ -549,7 +554,7 @@ def test_cosimulation_is_bit_identical_to_the_classes(unzipped, name, angle_sour
     c = Instance(unzipped, name, instance_name="ctrl", start={"angle_source": angle_source, **extra})
     plant, unit = Plant(), ControlUnit(OBSERVER[name], angle_source, dt=DT, controller=ControllerParams(**extra))
     p_out, c_out = p.refs(PLANT_OUTPUTS), c.refs(CTRL_OUTPUTS)
-    c_in, p_in = c.refs(CTRL_INPUTS), p.refs(PLANT_INPUTS)
+    c_in, p_in = c.refs(CTRL_INPUTS[:5]), p.refs(PLANT_INPUTS)
     for k in range(1500):
         t = k * DT
         po = p.fmu.getReal(p_out)

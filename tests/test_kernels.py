@@ -169,13 +169,16 @@ def test_each_slot_is_a_module_constant_and_no_two_overlap(table, size):
 
 def test_the_offsets_are_those_the_kernels_were_written_with():
     assert (kernels.P_SUBSTEPS, kernels.P_DT_V, kernels.P_SAT_AQ, kernels.P_T_BRAKE, kernels.PLANT_PARAMS) == (
-        21, 22, 26, 29, 52)
-    assert (kernels.E_DC, kernels.E_P_DC, kernels.E_IRON, kernels.PLANT_ENERGY) == (0, 12, 13, 14)
+        21, 22, 26, 29, 120)
+    assert (kernels.E_DC, kernels.E_P_DC, kernels.E_IRON, kernels.PLANT_ENERGY) == (0, 12, 13, 24)
+    # the battery's slots, after the ideal link's (0 there with the ideal link)
+    assert (kernels.P_BAT, kernels.P_BAT_OCV, kernels.P_DT_K, kernels.E_BAT_SOC, kernels.E_BAT_P_DIS) == (
+        56, 69, 119, 14, 23)
     assert (kernels.S_X, kernels.S_THETA_PRIOR, kernels.S_P, kernels.S_PHT, kernels.S_K, kernels.S_A,
             kernels.S_STARTED, kernels.S_MODE, kernels.S_STILL_OUT, kernels.UNIT_STATE) == (
         15, 20, 21, 46, 56, 66, 91, 92, 113, 199)
     assert (kernels.C_Q, kernels.C_C_MID, kernels.C_P0, kernels.C_T_RAMP, kernels.C_P0_ALIGNED,
-            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 144)
+            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 148)
     # the reference generator's slots, at the end of both unit vectors
     assert (kernels.S_I_DREF, kernels.S_T_AVAIL, kernels.C_REF_MODE, kernels.C_BRAKE_GAIN) == (114, 118, 87, 94)
     # the speed loop's feedforward, after them
@@ -184,9 +187,11 @@ def test_the_offsets_are_those_the_kernels_were_written_with():
     assert (kernels.S_IF_DUE, kernels.S_REALIGN, kernels.C_IF_DEADLINE, kernels.C_REALIGN_MAX) == (122, 123, 100, 102)
     # the injection's hill hold, last of the injection strategy's slots
     assert (kernels.S_HOLD, kernels.C_HOLD_BRAKE) == (196, 138)
-    # the I-f strategy's alignment timer and damping input, and its guard, trust, relock and stand parameters, last
+    # the I-f strategy's alignment timer and damping input, and its guard, trust, relock and stand parameters
     assert (kernels.S_RUNAWAY_T, kernels.S_ALIGN_SPEED, kernels.C_SOFT_GUARD, kernels.C_STILL_TIME) == (
         197, 198, 139, 143)
+    # the measured DC link's, last
+    assert (kernels.C_FW_MARGIN, kernels.C_P_DIS) == (144, 147)
 
 
 @pytest.mark.parametrize("rows,size,message", [

@@ -43,7 +43,8 @@ def test_shipped_scenarios_equal_the_library(n, table):
     assert {str(c) for c in spec.connections} == {
         "plant.i_alpha -> ctrl.i_alpha", "plant.i_beta -> ctrl.i_beta", "plant.theta_e -> ctrl.theta_meas",
         "plant.omega_m -> ctrl.omega_meas", "ctrl.v_alpha -> plant.v_alpha", "ctrl.v_beta -> plant.v_beta",
-        "ctrl.T_brake -> plant.T_brake"}
+        "ctrl.T_brake -> plant.T_brake", "plant.v_bat -> ctrl.v_dc_meas", "plant.P_charge_max -> ctrl.P_charge_max",
+        "plant.P_discharge_max -> ctrl.P_discharge_max"}
     # recorded columns: exactly the result contract, mapped as documented
     assert tuple(c.name for c in spec.columns) == ALL_COLUMNS
     src = {c.name: c.source for c in spec.columns}

@@ -15,7 +15,7 @@ from orchestrator_support import project_fmus
 from pmsm_cosim.app import envelope
 from pmsm_cosim.app.cli import main
 from pmsm_cosim.engine.recording import read_results
-from pmsm_ev import references
+from pmsm_ev import losses, references
 from pmsm_ev.params import ControllerParams, MotorParams
 
 #: the launch's first seconds: past 50 km/h (about 2.2 s after the 2.5 s launch, sensored) into field weakening
@@ -110,6 +110,25 @@ def test_efficiency_map_follows_the_losses():
     ideal = envelope.efficiency_map(p_ideal, lim, 1500.0, n_speeds=6, n_torques=6)["efficiency"]
     both = np.isfinite(eff) & np.isfinite(ideal)
     assert np.all(ideal[both] > eff[both])
+
+
+def test_the_efficiency_contour_starts_where_the_losses_say():
+    """level_torques: at each speed the plant's steady-state efficiency is below 90 % just under the torque it
+    gives and above it just over (the losses of that operating point, not a grid's value)."""
+    p = envelope.parameters()
+    lim = references.limits(p["controller"], p["motor"])
+    found = envelope.level_torques(p, lim, speeds=(150.0, 1500.0))
+    for f in found:
+        effs = []
+        for t in (f["T_from"] - 0.5, f["T_from"] + 0.5):
+            ops = references.operating_points(np.array([t]), np.array([f["omega"]]), lim)
+            s = losses.steady_state(p["motor"], p["plant"], p["vehicle"], float(ops.i_d[0, 0]), float(ops.i_q[0, 0]),
+                                    f["omega"])
+            effs.append(s["efficiency"])
+        assert effs[0] < 0.9 < effs[1], (f, effs)
+        assert 0.9 < f["best"] < 1.0
+    # the iron losses at full flux raise the contour at low speed; field weakening lowers it at high speed
+    assert found[0]["T_from"] > found[1]["T_from"]
 
 
 def test_the_envelope_is_the_controllers():

@@ -147,7 +147,7 @@ def test_ssd_and_ssv_validate_against_the_ssp_schemas_fmpy_ships(bound):
     assert schema_errors(broken, "SystemStructureDescription.xsd")  # the validation can fail
     ssd = read_ssd(str(bound), validate=True)  # fmpy's reader, with its schema validation
     assert [e.name for e in ssd.system.elements] == ["ctrl", "plant", "route"]
-    assert len(ssd.system.connections) == 9  # the drive's 7 (with the friction brake) and the route's 2
+    assert len(ssd.system.connections) == 12  # the drive's 10 (the friction brake, the DC link) and the route's 2
     (binding,) = ssd.system.elements[1].parameterBindings
     assert [(p.name, p.type, p.value) for p in binding.parameterValues[0].parameters] == [("m_v", "Real", "1200.0")]
     assert ssd.system.elements[0].parameterBindings == []
@@ -167,8 +167,9 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
     now in the system), and still valid SSP 1.0."""
     # the paper's 2, their 4 variants, 4 sensorless (the paper's 2 and the hill start with injection and I-f),
-    # 4 acceleration (sensorless with injection and I-f), 13 drive-cycle runs (sensored, injection, I-f; hilly)
-    assert len(SCENARIOS) == 27
+    # 4 acceleration (sensorless with injection and I-f), 15 drive-cycle runs (sensored, injection, I-f; hilly; the
+    # battery's, sensored and with injection)
+    assert len(SCENARIOS) == 29
     # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit (its String travels in
     # a copy of the FMU); the rest swap in FocEkf5
     ctrl = "FocSensorless" if "low_speed" in load_system(scenario).component("ctrl").start else "FocEkf5"
@@ -445,7 +446,7 @@ def test_cli_export_and_run(fmus, tmp_path, capsys, monkeypatch):
     assert main(["export-ssp", "scenario2", "-o", "s2.ssp", "--stop-time", "0.3", "--set", "plant.m_v=1200",
                  *args]) == 0
     out = capsys.readouterr().out
-    assert "wrote s2.ssp: components ctrl, plant, route; 9 connections; 1 parameter value;" in out
+    assert "wrote s2.ssp: components ctrl, plant, route; 12 connections; 1 parameter value;" in out
     with zipfile.ZipFile("s2.ssp") as z:
         assert b'<ssv:Real value="1200.0" />' in z.read("resources/plant.ssv")
     assert main(["run", "s2.ssp", "--out", "a", "--no-figures", "-q"]) == 0

@@ -97,6 +97,10 @@ def test_a_system_it_does_not_cover_is_refused(tmp_path):
     s.stop_time, s.algorithm = 0.01, "jacobi"
     with pytest.raises(NotCovered, match="Gauss-Seidel only"):
         run_whole_loop(s)
+    s = load_system("wltc3b-battery-sensorless")  # the battery's link to the controller: not in the loop
+    s.stop_time = 0.01
+    with pytest.raises(NotCovered, match="the ideal DC link only"):
+        run_whole_loop(s)
 
 
 def test_bench_has_the_whole_loop_cases(monkeypatch):

@@ -104,7 +104,8 @@ _REFERENCE_STATE = (_k.S_I_DREF, _k.S_T_REF, _k.S_T_BRAKE, _k.S_REGION, _k.S_T_A
 SAMPLE_TOLERANCE = 1.0e-2
 #: a controller FMU's Real inputs and the outputs its step writes, in the unit's buffer ``ControlUnit.io``
 #: (``pmsm_ev.kernels.UNIT_IO_LAYOUT``; the outputs in the layout's order)
-IO_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas")
+IO_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas", "v_dc_meas", "P_charge_max",
+             "P_discharge_max")
 IO_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d", "i_q", "i_qref", "i_d_hat", "i_q_hat", "omega_hat",
               "theta_hat", "T_L_hat", "mode", "fault", "theta_ctrl", "omega_ctrl")
 #: their slots there, by name
@@ -236,6 +237,7 @@ class ControlUnit:
         c[_k.C_I_MAX] = float(pr.i_max)
         c[_k.C_T_MAX] = float(pr.T_max or pr.torque_at_current_limit(m))
         c[_k.C_U_FW] = pr.fw_margin * pr.u_limit if pr.reference == "fw" else 0.0
+        c[_k.C_FW_MARGIN] = pr.fw_margin if pr.reference == "fw" else 0.0  # on a measured DC link (``dc_link``)
         c[_k.C_K_T] = m.k_dq * m.N * m.psi
         c[_k.C_K_DQN] = m.k_dq * m.N
         c[_k.C_P_REGEN] = float(pr.P_regen_max)
@@ -428,6 +430,11 @@ class ControlUnit:
     def mode(self) -> float:
         """The sensorless unit's mode: 0 alignment, 1 I-f, 2 EKF (``MODES``); 2 for the others."""
         return float(self._s[_k.S_MODE]) if self.sensorless else _k.MODE_EKF
+
+    def dc_link(self, v_dc: float, p_charge: float, p_discharge: float) -> None:
+        """On a measured DC link of ``v_dc`` [V] > 0: the voltage limits follow it and the torque is held within the
+        battery's charge acceptance and discharge power [W] (``pmsm_ev.kernels.unit_dc_link``)."""
+        self._kernels.unit_dc_link(self._c, v_dc, p_charge, p_discharge)
 
     def step(self, i_alpha: float, i_beta: float, omega_ref: float,
              theta_meas: float = 0.0, omega_meas: float = 0.0) -> tuple:

@@ -80,6 +80,12 @@ class MotorParams:
     #: speed scale of the smooth sign of T_m0 in the "physical" load model [rad/s]
     #: [chosen]: 0.1 rad/s (2.3 mm/s at the wheel), smooth enough for RK4 at 10 kHz.
     omega_eps: float = 0.1
+    #: windage [N m s^2/rad^2]: a drag k_wind omega |omega| beside eq 8, a power k_wind |omega|^3; 0 = off
+    #: (the paper's motor, eq 8 alone). The drive-cycle and speed-range scenarios take the sourced friction
+    #: and windage of a traction motor of this power instead of the paper's B_m, T_m0 (docs/speed-range.md,
+    #: "The losses"): ``SOURCED_T_M0`` (bearings, the constant-coefficient friction moment) and
+    #: ``SOURCED_K_WIND`` (the rotor's air friction, ``rotor_windage_power``), with B_m = 0.
+    k_wind: float = 0.0
     #: the dq convention, stated once (docs/speed-range.md). The project's Clarke and Park transforms,
     #: current sensors and voltage limit (u_max = v_dc / sqrt 3) are amplitude-invariant: a dq current
     #: of 1 A is a phase current of 1 A peak. With those, the power into the winding is
@@ -108,6 +114,8 @@ class MotorParams:
         _require(self.B_m >= 0, f"B_m must be >= 0 N m s/rad (got {self.B_m})")
         _require(self.T_m0 >= 0, f"T_m0 must be >= 0 N m (got {self.T_m0})")
         _require(self.omega_eps > 0, f"omega_eps must be > 0 rad/s (got {self.omega_eps})")
+        _require(math.isfinite(self.k_wind) and self.k_wind >= 0,
+                 f"k_wind must be finite and >= 0 N m s^2/rad^2, 0 = off (got {self.k_wind})")
 
 
 @dataclass(frozen=True)
@@ -183,6 +191,158 @@ def road_load_coefficients(vehicle: VehicleParams) -> tuple[float, float, float]
 
 _ROAD_LOAD = road_load_coefficients(VehicleParams())
 
+
+# -- the sourced losses of the drive-cycle and speed-range scenarios (docs/speed-range.md, "The losses") ----
+#: the motor the geometry is taken from [source]: the 2004 Toyota Prius traction motor, an interior-PM motor
+#: of 50 kW ("the motor can deliver a peak-power output of 50 kW over the speed range of 1200-1540 rpm": R. H.
+#: Staunton et al., "Evaluation of 2004 Toyota Prius Hybrid Electric Drive System", ORNL/TM-2006/423, 2006,
+#: abstract), 8 poles (N = 4, as Table I) and 48 slots, the size of this drive's ~55 kW. Its dimensions as
+#: the open-source machine model of it gives them (pyleecan, Eomys/pyleecan, pyleecan/Data/Machine/
+#: Toyota_Prius.json, "TOYOTA Prius 2004 interior magnet (V shape) with distributed winding"): stator
+#: Rext 0.13462 m, Rint 0.08095 m, L1 0.08382 m, Kf1 0.95 (the stacking factor), 48 slots of type SlotW11
+#: (H0 1 mm, W0 1.93 mm, H1 0, W1 5 mm, W2 8 mm, H2 33.3 mm, R1 4 mm); rotor Rext 0.0802 m, its bore (the
+#: shaft, Drsh) 0.11064 m. [m]
+PRIUS2004 = {"D_so": 2 * 0.13462, "D_si": 2 * 0.08095, "l": 0.08382, "k_stack": 0.95, "D_r": 2 * 0.0802,
+             "D_ri": 0.11064, "slots": 48,
+             "slot": {"H0": 1e-3, "W0": 1.93e-3, "W1": 5e-3, "W2": 8e-3, "H2": 33.3e-3, "R1": 4e-3}}
+#: air at 20 degC and 101.325 kPa [kg/m^3, Pa s]: the ideal gas law, 101325 / (287.05 x 293.15) = 1.204, and
+#: Sutherland's law, 1.716e-5 (293.15/273.15)^1.5 (273.15 + 110.4) / (293.15 + 110.4) = 1.81e-5 (warm air in
+#: a motor at 80 degC is 17 % lighter and its windage ~15 % lower)
+AIR_RHO, AIR_MU = 1.204, 1.81e-5
+
+
+def _saari_cylinder_cm(re: float, gap_ratio: float) -> float:
+    """The torque coefficient C_M of a cylinder turning in a coaxial one (Saari's fits, laminar to
+    turbulent, of the Couette flow in the air gap): gap_ratio = 2 delta / D_r, re = rho Omega r delta / mu.
+    The two upper regimes (500 < Re < 1e4: 1.03, above: 0.065) are those FAST-OAD_CS23-HE's PMSM model uses
+    (perf_windage_friction_coeff.py: 0.515 (e_g / r)^0.3 Re^-0.5 and 0.0325 (e_g / r)^0.3 Re^-0.2 with the
+    power c_f pi rho r^4 Omega^3 l, perf_air_gap_windage_losses.py: the same power); the two laminar ones
+    below Re = 500 [not checked against a source here] only matter below ~125 rad/s, where the windage is
+    below 0.2 W."""
+    k = gap_ratio ** 0.3
+    if re < 64.0:
+        return 10.0 * k / re
+    if re < 500.0:
+        return 2.0 * k / re ** 0.6
+    if re < 1.0e4:
+        return 1.03 * k / re ** 0.5
+    return 0.065 * k / re ** 0.2
+
+
+def rotor_windage_power(omega: float, D_r: float, l_r: float, delta: float, D_ri: float = 0.0,
+                        rho: float = AIR_RHO, mu: float = AIR_MU) -> float:
+    """The air friction of a smooth rotor [W] at omega [rad/s]: its surface, (1/32) C_M pi rho Omega^3 D_r^4 l_r,
+    and its two end faces, (1/64) C_M rho Omega^3 (D_r^5 - D_ri^5) = 1/2 C_M rho Omega^3 (r^5 - r_i^5), with
+    Saari's moment coefficients C_M for the cylinder (``_saari_cylinder_cm`` of Re_delta = rho Omega (D_r/2)
+    delta / mu) and, for the faces, 3.87 / Re_r^0.5 below Re_r = 3e5 and 0.146 / Re_r^0.2 above, Re_r = rho
+    Omega (D_r/2)^2 / mu (the coefficients and the face power 0.5 c_f rho Omega^3 R^5 of eMach's windage
+    analyser, Severson-Group/eMach, mach_eval/analyzers/general/windage_loss.py, after Riemer, Lessmann,
+    Hameyer, ECCE 2010; FAST-OAD_CS23-HE's perf_rotor_windage_loss.py has the same coefficients but a factor pi
+    more in the power, which would make the faces' windage pi times larger: eMach's is taken). D_r, l_r, delta,
+    D_ri in m (D_ri: the faces' inner diameter, the shaft's)."""
+    w = abs(omega)
+    if w == 0.0:
+        return 0.0
+    re_gap = rho * w * 0.5 * D_r * delta / mu
+    cm = _saari_cylinder_cm(re_gap, 2.0 * delta / D_r)
+    p_cyl = cm * math.pi * rho * w**3 * D_r**4 * l_r / 32.0
+    re_r = rho * w * (0.5 * D_r) ** 2 / mu
+    cm_face = 3.87 / re_r**0.5 if re_r < 3.0e5 else 0.146 / re_r**0.2
+    p_faces = cm_face * rho * w**3 * (D_r**5 - D_ri**5) / 64.0
+    return p_cyl + p_faces
+
+
+def bearing_friction_torque(mu: float, load: float, bore: float) -> float:
+    """The friction moment of a rolling bearing [N m] with a constant coefficient of friction, M = 1/2 mu P d
+    (JTEKT/Koyo catalogue, "Friction coefficient of bearings": M = mu P d / 2; SKF, "Rolling bearings",
+    "Friction", "Estimating the frictional moment", with its table of mu for open bearings): mu the bearing
+    type's coefficient, P the bearing's load [N], d the bore [m]."""
+    return 0.5 * mu * load * bore
+
+
+#: the top speed at which the windage coefficient is fitted [rad/s]: 131 km/h at the wheels (acceleration.toml)
+WINDAGE_SPEED = 1550.8
+#: the rotor's air gap [m]: half the stator bore less the rotor's diameter, (161.9 - 160.4) / 2 = 0.75 mm
+PRIUS2004_GAP = 0.5 * (PRIUS2004["D_si"] - PRIUS2004["D_r"])
+#: the windage of the reference motor at ``WINDAGE_SPEED`` [W]: ``rotor_windage_power`` with the 2004 Prius
+#: rotor (160.4 mm x 83.82 mm, air gap 0.75 mm, faces from its 110.64 mm bore out): 78.7 W on its surface,
+#: 62.9 W on its faces, 141.6 W
+SOURCED_WINDAGE_POWER = rotor_windage_power(WINDAGE_SPEED, PRIUS2004["D_r"], PRIUS2004["l"], PRIUS2004_GAP,
+                                            PRIUS2004["D_ri"])
+#: the windage as k_wind omega |omega| [N m s^2/rad^2] (``MotorParams.k_wind``): the power at top speed over
+#: its cube, 3.80e-8. Saari's C_M falls as Re^-0.5 there (Re_delta = 6.2e3), so the exact power goes as
+#: omega^2.5 and the cubic law under-states it at lower speed (at 500 rad/s 6.4 W against 4.7 W): both are
+#: below 0.1 % of the drive's power
+SOURCED_K_WIND = SOURCED_WINDAGE_POWER / WINDAGE_SPEED**3
+#: the bearings' Coulomb friction [N m] (``MotorParams.T_m0`` with B_m = 0 and load model "physical"): two
+#: deep-groove ball bearings, mu = 0.0015 (SKF, "Rolling bearings", "Friction", table 1, "Constant
+#: coefficient of friction mu for open bearings": "Deep groove ball bearings 0,0015"; JTEKT/Koyo give
+#: 0.0010 to 0.0015), bore d = 35 mm [chosen: a 6207, a common deep-groove size for the shaft of a motor of
+#: this power; the Prius's bearings are not in the sources above], P = 250 N each [chosen: a wave spring's
+#: axial preload of ~200 N, as motors' deep-groove bearing pairs carry to keep the balls rolling, plus half
+#: the rotor's weight, its laminations 6.5 kg by the geometry above, ~9 kg with magnets and shaft]:
+#: 2 x 6.6e-3 = 0.0131 N m, 20 W at top speed
+SOURCED_T_M0 = 2.0 * bearing_friction_torque(0.0015, 250.0, 0.035)
+
+
+#: the lamination: 0.35 mm non-oriented fully processed electrical steel of grade M330-35A (EN 10106,
+#: IEC 60404-8-4; the name gives 3.30 W/kg, the grade's largest specific total loss at 1.5 T, 50 Hz, and
+#: the 0.35 mm thickness [the designation's figure: the standard's table itself not consulted here]); its
+#: density 7650 kg/m^3 and resistivity 0.48 uOhm m as stem_material's record of this grade has them
+#: (docs.rs stem_material 0.3.4, stem_test_database/src/Material/M330-35A.yaml: "mass_density: 7650.0
+#: kg / m^3", "electrical_resistivity: 0.48e-6 Ohm * m", after EMT's "Allgemeine Informationen zu
+#: Elektroblechen")
+M330_35A = {"P15_50": 3.30, "d": 0.35e-3, "gamma": 7650.0, "rho_e": 0.48e-6}
+
+
+def lamination_loss_coefficients(lam: dict = M330_35A) -> tuple[float, float]:
+    """(k_h [W/(kg Hz T^2)], k_e [W/(kg Hz^2 T^2)]) of the specific loss p = k_h f B^2 + k_e f^2 B^2 of a
+    lamination: k_e the classical eddy-current loss of a sheet of thickness d in a sinusoidal field,
+    pi^2 d^2 / (6 rho_e gamma) (Steinmetz's separation, textbook), k_h the rest of the grade's loss at
+    1.5 T, 50 Hz (hysteresis and the excess loss there): (P15_50 - k_e 50^2 1.5^2) / (50 x 1.5^2)."""
+    k_e = math.pi**2 * lam["d"] ** 2 / (6.0 * lam["rho_e"] * lam["gamma"])
+    k_h = (lam["P15_50"] - k_e * 50.0**2 * 1.5**2) / (50.0 * 1.5**2)
+    return k_h, k_e
+
+
+def iron_loss_coefficients(mass: float, B_ref: float, psi_ref: float, k_build: float = 1.5,
+                           lam: dict = M330_35A) -> tuple[float, float]:
+    """(c_h, c_e) of ``PlantParams.iron_c_h``, ``iron_c_e`` for a stator of ``mass`` [kg] of the lamination
+    ``lam`` whose flux density is B_ref [T] at the flux linkage psi_ref [Wb] (B = B_ref psi_s / psi_ref),
+    with the build factor k_build (punching, rotating fields and harmonics over the Epstein figure):
+    P_fe = k_build mass (k_h f + k_e f^2) B^2, f = omega_e / (2 pi), so
+    c_h = k_build mass k_h B_ref^2 / (2 pi psi_ref^2), c_e = k_build mass k_e B_ref^2 / (4 pi^2 psi_ref^2)."""
+    k_h, k_e = lamination_loss_coefficients(lam)
+    b2 = k_build * mass * (B_ref / psi_ref) ** 2
+    return k_h * b2 / (2.0 * math.pi), k_e * b2 / (4.0 * math.pi**2)
+
+
+def slot_w11_area(slot: dict) -> float:
+    """The cross-section of a slot of pyleecan's type SlotW11 [m^2]: its opening H0 W0 (H1 = 0: no wedge
+    trapezoid) and its winding area 1/2 (W1 + W2) (H2 - R1) + pi R1^2 / 2 + R1 (W2 - 2 R1) (pyleecan,
+    pyleecan/Methods/Slot/SlotW11/comp_surface_opening.py and comp_surface_active.py; the opening's arc on
+    the bore, below 1e-8 m^2 here, left out)."""
+    s_open = slot["H0"] * slot["W0"]
+    s_wind = (0.5 * (slot["W1"] + slot["W2"]) * (slot["H2"] - slot["R1"]) + 0.5 * math.pi * slot["R1"] ** 2
+              + slot["R1"] * (slot["W2"] - 2.0 * slot["R1"]))
+    return s_open + s_wind
+
+
+#: the stator iron of the reference motor [kg]: the 2004 Prius stator's annulus (269.24 / 161.9 mm) less its
+#: 48 slots of 217.5 mm^2 (``slot_w11_area``), over its 83.82 mm stack at the stacking factor 0.95, in
+#: M330-35A's 7650 kg/m^3: 15.8 kg
+SOURCED_IRON_MASS = ((0.25 * math.pi * (PRIUS2004["D_so"] ** 2 - PRIUS2004["D_si"] ** 2)
+                      - PRIUS2004["slots"] * slot_w11_area(PRIUS2004["slot"]))
+                     * PRIUS2004["l"] * PRIUS2004["k_stack"] * M330_35A["gamma"])
+#: (c_h, c_e) of the drive-cycle and speed-range scenarios: ``iron_loss_coefficients`` of
+#: ``SOURCED_IRON_MASS`` with B_ref = 1.5 T at Table I's psi = 0.08975 Wb [chosen: a PM motor's no-load flux
+#: density lies near 1.5 T in the stator iron, above it in the teeth, below it in the yoke; one figure for
+#: both] and k_build = 1.5 [chosen: punching, pressing, rotating fields and the PWM's harmonics raise a
+#: stator's losses over the grade's Epstein figure; a factor of 1.5]: see their values in
+#: docs/speed-range.md (28.0 and 9.19e-3). At no load, 6000 rpm: 1.03 kW; at top speed in field weakening
+#: (psi_s ~ 0.034 Wb): ~0.6 kW
+SOURCED_IRON = iron_loss_coefficients(SOURCED_IRON_MASS, 1.5, 0.08975)
+
 #: reference temperature of Table I's R_s and psi [degC] [chosen]: data-sheet values are
 #: usually given at 20-25 degC; 20 degC, the reference of copper's alpha = 0.00393 1/K
 TEMPERATURE_REF = 20.0
@@ -197,6 +357,127 @@ def winding_resistance(R_s20: float, T: float, alpha_R: float) -> float:
 def magnet_flux(psi20: float, T: float, alpha_psi: float) -> float:
     """psi(T) = psi20 (1 + alpha_psi (T - 20 degC)) [V s/rad]: the remanence's linear law."""
     return psi20 * (1.0 + alpha_psi * (T - TEMPERATURE_REF))
+
+
+# -- the battery (off by default: the DC link is an ideal source of PlantParams.v_dc) -------------------------------
+#: the ideal link or the battery's equivalent circuit (``BatteryParams.battery``)
+BATTERY_MODELS = ("ideal", "ecm")
+#: the most points of the open-circuit voltage table (``pmsm_ev.kernels.BAT_OCV_MAX``)
+BATTERY_OCV_POINTS = 24
+
+
+def parse_table(text: str, name: str) -> tuple[float, ...]:
+    """The numbers of a comma-separated table (``BatteryParams.bat_ocv_soc``, ``bat_ocv_v``); ``ParameterError``
+    names ``name`` when an entry is not a finite number."""
+    values = []
+    for item in str(text).split(","):
+        try:
+            value = float(item)
+        except ValueError:
+            raise ParameterError(f"{name}: {item.strip()!r} is not a number (a comma-separated table)") from None
+        _require(math.isfinite(value), f"{name}: {item.strip()!r} is not finite")
+        values.append(value)
+    return tuple(values)
+
+
+@dataclass(frozen=True)
+class BatteryParams:
+    """The traction battery that feeds the DC link (docs/speed-range.md, "The battery"), off by default: the DC link
+    is then an ideal source of ``PlantParams.v_dc``, as in the paper's scenarios.
+
+    "ecm": a Thevenin equivalent circuit, v = OCV(soc) - R0 i - v_rc, C1 dv_rc/dt = i - v_rc / R1, the state of
+    charge falling with the charge drawn, soc = soc0 - integral(i) / capacity (coulombic efficiency 1), inside the
+    plant FMU (``pmsm_ev.kernels.battery_step``). The pack is a 2013 Nissan Leaf's: 48 modules of 2s2p cells,
+    96s2p, 192 cells ("The 24 kWh Leaf battery pack has 48 modules. Each module has 4 cells. Each module's cells
+    are in two pairs. Each pair is in parallel. The two pairs are in series.", "The fully charged voltage is
+    403.2 volts with a nominal voltage of 360 volts": mobility.lk, "Leaf 24 kWh Battery", 2021). Its cell's
+    figures are fitted here to ORNL's hybrid-pulse (HPPC) test of the 2013 Leaf cell at 25 degC
+    (batterysim/equiv-circ-model, examples/data/cell-low-current-hppc-25c-2.csv, MIT licence: a full charge to
+    4.2 V, then per 10 % of charge an hour's rest, a 30 A discharge pulse of 30 s, a 22 A charge pulse of 10 s
+    and 3 Ah at 10 A, to 3.0 V): the rest voltages are the open-circuit voltages, the 30 A pulses fitted by
+    least squares with v = OCV - R0 i - R1 i (1 - exp(-t / tau)) at 1 s samples (R0 then holds what happens
+    within the first second); a cell discharged 30.50 Ah to 3.0 V. The pack: 96 x the cell's voltages, 48 x its
+    resistances, 2 x its capacity, C1 = tau / R1."""
+
+    #: the DC link: "ideal" (default; ``PlantParams.v_dc``, constant) or "ecm" (this equivalent circuit)
+    battery: str = "ideal"
+    #: state of charge at the start [-], in [0, 1] [chosen: 0.9, a car charged to 90 %, the WLTP's
+    #: "fully charged" less the margin most EVs keep]
+    bat_soc0: float = 0.9
+    #: capacity [Ah]: 2 x 30.50 Ah, the cell's charge from 4.2 V to 3.0 V in ORNL's HPPC test at 10 A (C/3), 25 degC
+    #: (the cell's rating is 33.1 Ah: batterysim/equiv-circ-model, examples/cell/params.py); 61.0 Ah x ~375 V
+    #: = 22.9 kWh, of the Leaf's 24 kWh
+    bat_capacity: float = 61.0
+    #: the open-circuit voltage table's states of charge [-], comma-separated, rising from 0 to 1: the HPPC test's
+    #: rest points by coulomb counting from the full charge (1) and 0 at its end of discharge
+    bat_ocv_soc: str = "0, 0.0610, 0.1653, 0.2697, 0.3740, 0.4783, 0.5826, 0.6869, 0.7912, 0.8956, 1"
+    #: ... its open-circuit voltages [V], rising: 96 x the cell's rest voltage at the end of each hour's rest (3.531,
+    #: 3.723, 3.802, 3.869, 3.909, 3.949, 3.984, 4.048, 4.086 V from 6 % to 90 %, 4.182 V at 100 %); at 0, 96 x
+    #: 3.00 V [chosen: the test's end of discharge under 10 A, a lower bound of the open-circuit voltage there]
+    bat_ocv_v: str = ("288.0, 338.976, 357.408, 364.992, 371.424, 375.264, 379.104, 382.464, 388.608, 392.256, "
+                      "401.472")
+    #: series resistance R0 [Ohm]: 48 x 1.60 mOhm, the median of the cell's fits from 10 % to 90 % (1.58 .. 1.64
+    #: mOhm; 1.85 at 100 %, 1.70 at 6 %)
+    bat_R0: float = 0.0768
+    #: the RC pair's resistance R1 [Ohm]: 48 x 1.34 mOhm, the median of the fits from 10 % to 90 % (1.08 .. 1.74)
+    bat_R1: float = 0.0643
+    #: the RC pair's capacitance C1 [F]: tau / R1 with tau = 25 s, the median of the fits (19.5 .. 29.5 s)
+    bat_C1: float = 389.0
+    #: discharge current limit [A] [chosen: 250 A, ~4 C of the 61 Ah pack, a power cell's 10 s rating; 90 kW at
+    #: 360 V, above the ~55 kW this drive draws at its peak]
+    bat_i_discharge_max: float = 250.0
+    #: charge current limit [A] [chosen: 125 A, ~2 C, the order of a power cell's pulse charge rating; ~49 kW at
+    #: 390 V, the drive's former constant regenerative limit of 50 kW]
+    bat_i_charge_max: float = 125.0
+    #: the terminal voltage a charge current may raise the pack to [V]: 96 x 4.2 V = 403.2 V, the fully charged
+    #: voltage (mobility.lk, above)
+    bat_v_max: float = 403.2
+    #: the terminal voltage a discharge current may lower it to [V]: 96 x 3.0 V, the HPPC test's end of discharge
+    bat_v_min: float = 288.0
+    #: above this state of charge the charge current limit falls linearly to 0 at 1 [-] [chosen: 0.95, a battery
+    #: management system's taper near full; regeneration then refused, the friction brake takes it]
+    bat_soc_taper: float = 0.95
+
+    @property
+    def enabled(self) -> bool:
+        return self.battery == "ecm"
+
+    def ocv_table(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(states of charge, open-circuit voltages) of the table, as numbers."""
+        return parse_table(self.bat_ocv_soc, "bat_ocv_soc"), parse_table(self.bat_ocv_v, "bat_ocv_v")
+
+    def validate(self) -> None:
+        _require(self.battery in BATTERY_MODELS,
+                 f"battery must be one of {BATTERY_MODELS} (got {self.battery!r})")
+        _require(math.isfinite(self.bat_capacity) and self.bat_capacity > 0,
+                 f"bat_capacity must be > 0 Ah (got {self.bat_capacity})")
+        _require(math.isfinite(self.bat_soc0) and 0.0 <= self.bat_soc0 <= 1.0,
+                 f"bat_soc0 must be in [0, 1] (got {self.bat_soc0})")
+        for name in ("bat_R0", "bat_R1"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0 Ohm (got {value})")
+        _require(math.isfinite(self.bat_C1) and self.bat_C1 > 0, f"bat_C1 must be > 0 F (got {self.bat_C1})")
+        for name in ("bat_i_discharge_max", "bat_i_charge_max"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0 A (got {value})")
+        _require(math.isfinite(self.bat_soc_taper) and 0.0 <= self.bat_soc_taper < 1.0,
+                 f"bat_soc_taper must be in [0, 1) (got {self.bat_soc_taper})")
+        socs, volts = self.ocv_table()
+        _require(len(socs) == len(volts),
+                 f"bat_ocv_soc and bat_ocv_v must have as many points (got {len(socs)} and {len(volts)})")
+        _require(2 <= len(socs) <= BATTERY_OCV_POINTS,
+                 f"the open-circuit voltage table must have 2 to {BATTERY_OCV_POINTS} points (got {len(socs)})")
+        _require(socs[0] == 0.0 and socs[-1] == 1.0,
+                 f"bat_ocv_soc must run from 0 to 1 (got {socs[0]:g} .. {socs[-1]:g})")
+        _require(all(b > a for a, b in zip(socs, socs[1:])), "bat_ocv_soc is not monotonic: it must rise")
+        _require(volts[0] > 0, f"bat_ocv_v must be > 0 V (got {volts[0]:g} at a state of charge of 0)")
+        _require(all(b > a for a, b in zip(volts, volts[1:])),
+                 "bat_ocv_v (the open-circuit voltage table) is not monotonic: it must rise with the state of charge")
+        for name in ("bat_v_max", "bat_v_min"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, f"{name} must be > 0 V (got {value})")
+        _require(self.bat_v_min < self.bat_v_max,
+                 f"bat_v_min ({self.bat_v_min:g} V) must be below bat_v_max ({self.bat_v_max:g} V)")
 
 
 @dataclass(frozen=True)
@@ -254,35 +535,56 @@ class PlantParams:
     #: current charges the switches' output capacitance within the dead time, i0 ~ C_oss v_dc / t_d
     #: = 10 nF x 360 V / 2 us = 1.8 A for a module of this size: 2 A.
     dead_time_i0: float = 2.0
-    #: the inverter's conduction and switching losses (``pmsm_ev.kernels.inverter_loss``), drawn from
-    #: the DC link only (the winding's voltage is unchanged); off by default (the paper's inverter is
-    #: ideal). Each phase loses (inv_v0 + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref)) |i_x| +
-    #: inv_r_on i_x^2, f_sw = 1 / switching_period; needs v_dc > 0. The defaults are those of a
-    #: 650 V / 400 A IGBT six-pack for EV inverters (Infineon HybridPACK 1, FS400R07A1E3, data sheet
-    #: V3.4 2018: V_CEsat = 1.45 V typ. at 400 A, 25 degC); docs/speed-range.md
+    #: the inverter's conduction and switching losses (``pmsm_ev.kernels.inverter_loss``,
+    #: ``inverter_modulation_loss``), drawn from the DC link only (the winding's voltage is unchanged); off
+    #: by default (the paper's inverter is ideal). A phase current flows through the IGBT of its leg for the
+    #: duty d (i > 0; 1 - d for i < 0) and through the opposite diode for the rest: each phase loses
+    #: d (V_CE0 |i| + r_CE i^2) + (1 - d) (V_F0 |i| + r_F i^2) + f_sw inv_e_sw v_dc / (inv_v_ref inv_i_ref) |i|,
+    #: f_sw = 1 / switching_period; needs v_dc > 0. The figures are for one module, Infineon's HybridPACK 1
+    #: FS400R07A1E3 (final data sheet V3.4, 2018-08-09, page 1: "HybridPACK 1 module with Trench/Fieldstop
+    #: IGBT3 and Emitter Controlled 3 diode and NTC", "VCES = 650V", "IC nom = 400A", "Optimized for
+    #: automotive applications with DC link voltages up to 420V", T_vj op = 150 degC), at T_vj = 150 degC,
+    #: where the losses are largest. Its characteristic-value tables were not at hand: V_CEsat = 1.45 V typical is
+    #: the module's headline figure as its distributors quote it (slw-ele.com, FS400R07A1E3: "an extremely
+    #: low VCE(sat) of 1.45V (typ)"; its conditions not stated there, taken as I_C nom = 400 A, 25 degC);
+    #: every other figure below is [chosen] and should give way to the data sheet's tables;
+    #: docs/speed-range.md
     inverter_losses: bool = False
-    #: threshold voltage of the IGBT and the diode [V] (V_CE0 = V_F0, the straight-line model of the
-    #: output characteristic) [chosen]: 0.8 V, a trench-field-stop IGBT3's and its diode's knee
-    inv_v0: float = 0.8
-    #: on-state slope resistance of the IGBT and the diode [Ohm] [chosen]: (1.45 V - 0.8 V) / 400 A =
-    #: 1.6 mOhm, from the data sheet's V_CEsat at the rated current
-    inv_r_on: float = 1.6e-3
-    #: switching energy per switching period, E_on + E_off + E_rec of one leg [J] at inv_v_ref and
-    #: inv_i_ref [chosen]: 20 mJ, the order of 650 V / 400 A IGBT3 modules' data-sheet values at
-    #: 300 V, 400 A, 150 degC (check the module you model); scaled linearly with current and voltage
-    inv_e_sw: float = 0.02
-    inv_v_ref: float = 300.0  #: DC voltage at which inv_e_sw is given [V] (the data sheet's test condition)
-    inv_i_ref: float = 400.0  #: current at which inv_e_sw is given [A] (the module's rated current)
+    #: the IGBT's knee V_CE0 [V] (the straight-line model V_CE = V_CE0 + r_CE i of the output characteristic
+    #: at V_GE = 15 V, T_vj = 150 degC: its intercept) [chosen]: 0.70 V, the knee of a silicon IGBT's
+    #: collector junction at 150 degC
+    inv_v0: float = 0.70
+    #: the IGBT's slope r_CE [Ohm]: (V_CEsat - V_CE0) / I_C = (1.65 V - 0.70 V) / 400 A = 2.375 mOhm, with
+    #: V_CEsat = 1.65 V at 400 A, 150 degC [chosen: the 1.45 V at 25 degC above raised by the 13 % a 650 V
+    #: Infineon trench-field-stop module's typical V_CEsat rises from 25 to 150 degC at its rated current,
+    #: FS200R07N3E4R (IGBT4), technical information rev. 2.0, 2013-11-05: 1.55 V at 25 degC, 1.75 V at 150 degC;
+    #: 1.64 V, rounded up]
+    inv_r_on: float = 2.375e-3
+    #: the diode's knee V_F0 [V] (V_F = V_F0 + r_F i, the forward characteristic at T_vj = 150 degC: its
+    #: intercept) [chosen]: 0.80 V, a silicon pin diode's knee, a little above the IGBT's
+    inv_vf0: float = 0.80
+    #: the diode's slope r_F [Ohm]: (V_F - V_F0) / I_F = (1.45 V - 0.80 V) / 400 A = 1.625 mOhm, with
+    #: V_F = 1.45 V at 400 A, 150 degC [chosen: an emitter-controlled diode's forward voltage at the module's
+    #: rated current, of the order of its IGBT's V_CEsat and falling a little with temperature]
+    inv_r_f: float = 1.625e-3
+    #: switching energy per switching period of one leg, E_on + E_off (IGBT) + E_rec (diode) [J] at
+    #: inv_v_ref and inv_i_ref [chosen]: 28.5 mJ at 300 V, 400 A, 150 degC, the order of a 650 V / 400 A
+    #: trench-field-stop module's typical switching energies at its rated current (tens of mJ; the data
+    #: sheet's switching table should replace it); scaled linearly with the current and the DC voltage
+    #: (D. Graovac, M. Puerschel, "IGBT Power Losses Calculation Using the Data-Sheet Parameters", Infineon
+    #: application note, 2009)
+    inv_e_sw: float = 0.0285
+    inv_v_ref: float = 300.0  #: DC voltage at which inv_e_sw is given [V] [chosen: its reference point]
+    inv_i_ref: float = 400.0  #: current at which inv_e_sw is given [A] (the module's rated current, I_C nom)
 
     # -- iron losses (off by default: the paper's motor has none) ------------------------------
     #: hysteresis coefficient c_h of the iron losses P_fe = (c_h |omega_e| + c_e omega_e^2) psi_s^2,
     #: psi_s^2 = psi_d^2 + psi_q^2 (Steinmetz's loss separation, ``pmsm_ev.kernels.iron_torque``), taken
-    #: from the shaft as a drag [W / (rad/s Wb^2)]; 0 = off. Typical size [chosen]: the no-load losses
-    #: of a ~50 kW EV motor at 6000 rpm are ~1 % of its power; 400 W at 628 rad/s (N = 4, psi = Table I's
-    #: 0.08975 Wb), half of it hysteresis: 200 W / (2513 rad/s x 0.08975^2 Wb^2) = 9.9
+    #: from the shaft as a drag [W / (rad/s Wb^2)]; 0 = off. The drive-cycle and speed-range scenarios take
+    #: ``SOURCED_IRON`` (``iron_loss_coefficients``: a 0.35 mm M330-35A lamination's grade figure and
+    #: classical eddy currents on the stator iron of the 2004 Prius motor; docs/speed-range.md)
     iron_c_h: float = 0.0
-    #: eddy-current coefficient c_e [W / ((rad/s)^2 Wb^2)]; 0 = off. Typical [chosen]: the other half of
-    #: the 400 W above, 200 W / (2513^2 x 0.08975^2) = 3.9e-3
+    #: eddy-current coefficient c_e [W / ((rad/s)^2 Wb^2)]; 0 = off; see ``iron_c_h``
     iron_c_e: float = 0.0
 
     # -- magnetic saturation (off by default: Table I's constant inductances) ------------
@@ -401,7 +703,7 @@ class PlantParams:
                  f"dead_time = {self.dead_time} s needs the DC-link voltage: set v_dc > 0 V")
         _require(math.isfinite(self.dead_time_i0) and self.dead_time_i0 > 0,
                  f"dead_time_i0 must be > 0 A (got {self.dead_time_i0})")
-        for name in ("inv_v0", "inv_r_on", "inv_e_sw"):
+        for name in ("inv_v0", "inv_r_on", "inv_vf0", "inv_r_f", "inv_e_sw"):
             value = getattr(self, name)
             _require(math.isfinite(value) and value >= 0, f"{name} must be finite and >= 0 (got {value})")
         for name in ("inv_v_ref", "inv_i_ref"):

@@ -40,6 +40,7 @@ from . import kernels as _k
 from .kernels.layout import LayoutError, restore_fields
 from .params import (
     TEMPERATURE_REF,
+    BatteryParams,
     MotorParams,
     PlantParams,
     VehicleParams,
@@ -56,18 +57,54 @@ ENERGY_SLOTS = {"E_dc": _k.E_DC, "E_dc_abs": _k.E_DC_ABS, "E_regen": _k.E_REGEN,
                 "E_friction": _k.E_FRICTION, "E_shaft": _k.E_SHAFT, "E_gear": _k.E_GEAR, "E_aero": _k.E_AERO,
                 "E_rolling": _k.E_ROLL, "E_grade": _k.E_GRADE, "E_brake": _k.E_BRAKE,
                 "E_inverter": _k.E_INVERTER, "E_iron": _k.E_IRON}
+#: the battery's outputs by name (``BatteryParams.battery`` 'ecm'; 0 with the ideal link): its state of charge
+#: [-], terminal voltage [V] and current [A], its charge acceptance and discharge power [W], the charge drawn [C],
+#: its chemical energy, losses and the energy in its RC pair's capacitor [J] (docs/speed-range.md, "The battery")
+BATTERY_SLOTS = {"soc": _k.E_BAT_SOC, "v_bat": _k.E_BAT_V, "i_bat": _k.E_BAT_I, "P_charge_max": _k.E_BAT_P_CHG,
+                 "P_discharge_max": _k.E_BAT_P_DIS, "Q_bat": _k.E_BAT_Q, "E_chemical": _k.E_BAT_CHEM,
+                 "E_battery": _k.E_BAT_LOSS, "W_battery": _k.E_BAT_W}
 #: the terms whose sum is E_dc (the energy balance, docs/speed-range.md)
 BALANCE_TERMS = ("E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling", "E_grade",
                  "E_brake", "dE_kinetic", "dW_magnetic")
 
 
 def inverter_loss_voltage(p: PlantParams) -> float:
-    """The inverter's per-phase loss voltage [V] (``pmsm_ev.kernels.inverter_loss``): the threshold
-    ``inv_v0`` plus the switching losses per ampere, f_sw E_sw v_dc / (V_ref I_ref); 0 when
-    ``inverter_losses`` is off."""
+    """The inverter's per-phase loss voltage [V] (``pmsm_ev.kernels.inverter_loss``): the mean of the IGBT's
+    and the diode's knees, (``inv_v0`` + ``inv_vf0``) / 2, plus the switching losses per ampere,
+    f_sw E_sw v_dc / (V_ref I_ref); 0 when ``inverter_losses`` is off."""
     if not p.inverter_losses:
         return 0.0
-    return p.inv_v0 + p.inv_e_sw * p.v_dc / (p.switching_period * p.inv_v_ref * p.inv_i_ref)
+    return 0.5 * (p.inv_v0 + p.inv_vf0) + p.inv_e_sw * p.v_dc / (p.switching_period * p.inv_v_ref * p.inv_i_ref)
+
+
+def inverter_slot_values(p: PlantParams) -> dict:
+    """The inverter's slots of the plant's vector: the loss voltage (``inverter_loss_voltage``), the mean
+    slope (r_CE + r_F) / 2, the IGBT's knee and slope less the diode's and 1 / v_dc
+    (``pmsm_ev.kernels.inverter_modulation_loss``); all 0 when ``inverter_losses`` is off."""
+    if not p.inverter_losses:
+        return {_k.P_INV_V: 0.0, _k.P_INV_R: 0.0, _k.P_INV_DV: 0.0, _k.P_INV_DR: 0.0, _k.P_INV_VDC: 0.0}
+    return {_k.P_INV_V: inverter_loss_voltage(p), _k.P_INV_R: 0.5 * (p.inv_r_on + p.inv_r_f),
+            _k.P_INV_DV: p.inv_v0 - p.inv_vf0, _k.P_INV_DR: p.inv_r_on - p.inv_r_f, _k.P_INV_VDC: 1.0 / p.v_dc}
+
+
+def battery_slot_values(b: BatteryParams, p: PlantParams) -> dict:
+    """The battery's slots of the plant's vector (``pmsm_ev.kernels.battery_step``) and the inverter's figures that
+    follow its voltage each step (``pmsm_ev.kernels.battery_link``): the mean knee, the switching losses' loss
+    voltage per volt, the dead time's t_d / T_s."""
+    socs, volts = b.ocv_table()
+    values = {_k.P_BAT: 1.0, _k.P_BAT_Q: 3600.0 * b.bat_capacity, _k.P_BAT_SOC0: b.bat_soc0, _k.P_BAT_R0: b.bat_R0,
+              _k.P_BAT_R1: b.bat_R1, _k.P_BAT_TAU: b.bat_R1 * b.bat_C1, _k.P_BAT_C1: b.bat_C1,
+              _k.P_BAT_I_CHG: b.bat_i_charge_max, _k.P_BAT_I_DIS: b.bat_i_discharge_max,
+              _k.P_BAT_V_MAX: b.bat_v_max, _k.P_BAT_V_MIN: b.bat_v_min, _k.P_BAT_SOC_TAPER: b.bat_soc_taper,
+              _k.P_BAT_N: float(len(socs)),
+              _k.P_DT_K: p.dead_time / p.switching_period if p.dead_time else 0.0}
+    for j, (z, v) in enumerate(zip(socs, volts)):
+        values[_k.P_BAT_OCV + j] = z
+        values[_k.P_BAT_OCV + _k.BAT_OCV_MAX + j] = v
+    if p.inverter_losses:
+        values[_k.P_INV_V0] = 0.5 * (p.inv_v0 + p.inv_vf0)
+        values[_k.P_INV_KSW] = p.inv_e_sw / (p.switching_period * p.inv_v_ref * p.inv_i_ref)
+    return values
 
 
 #: the slots of ``io`` that hold ``step``'s results (i_alpha .. v_vehicle, in the layout's order)
@@ -120,12 +157,15 @@ class Plant:
         self._io_items[_k.PIO_SAMPLES] = value
 
     def __init__(self, motor: MotorParams | None = None, vehicle: VehicleParams | None = None,
-                 plant: PlantParams | None = None):
+                 plant: PlantParams | None = None, battery: BatteryParams | None = None):
         self.motor = motor or MotorParams()
         self.vehicle = vehicle or VehicleParams()
         self.params = plant or PlantParams()
-        for group in (self.motor, self.vehicle, self.params):
+        self.battery = battery or BatteryParams()
+        for group in (self.motor, self.vehicle, self.params, self.battery):
             group.validate()
+        #: the DC link is the battery's equivalent circuit (``BatteryParams.battery`` 'ecm')
+        self.has_battery = self.battery.enabled
         self.J_eq = equivalent_inertia(self.motor, self.vehicle)  # eq 9, left side
         p = self.params
         self._sensors = (p.sensor_noise > 0 or p.sensor_offset_a != 0 or p.sensor_offset_b != 0
@@ -146,8 +186,8 @@ class Plant:
                   _k.P_K_DQ: m.k_dq, _k.P_SUBSTEP_ANGLE: p.substep_angle,
                   _k.P_GEAR_PF: 1.0 if v.gear_model == "power_flow" else 0.0, _k.P_J_M: m.J_m,
                   _k.P_M_R: v.m_v * v.r_w**2 / v.n_g**2,
-                  _k.P_INV: 1.0 if p.inverter_losses else 0.0, _k.P_INV_V: inverter_loss_voltage(p),
-                  _k.P_INV_R: p.inv_r_on, _k.P_INV_K: m.k_dq / 1.5, _k.P_FE_H: p.iron_c_h,
+                  _k.P_INV: 1.0 if p.inverter_losses else 0.0, **inverter_slot_values(p),
+                  _k.P_INV_K: m.k_dq / 1.5, _k.P_FE_H: p.iron_c_h, _k.P_K_W: m.k_wind,
                   _k.P_FE_E: p.iron_c_e,
                   _k.P_SAT: 1.0 if (p.sat_i_d > 0 or p.sat_i_q > 0) else 0.0,
                   _k.P_SAT_AD: 1.0 / p.sat_i_d if p.sat_i_d > 0 else 0.0,
@@ -161,6 +201,8 @@ class Plant:
             values[_k.P_FLUX] = 1.0
             for j, value in enumerate(flux_model_coefficients(m, p, self.psi)):
                 values[_k.P_FLUX_C + j] = value
+        if self.has_battery:
+            values.update(battery_slot_values(self.battery, p))
         self._pp = accel.vector(_k.PLANT_PARAMS)
         for slot, value in values.items():
             self._pp[slot] = float(value)
@@ -206,6 +248,8 @@ class Plant:
         self._pp[_k.P_T_BRAKE] = 0.0
         for i in range(_k.PLANT_ENERGY):
             self.energy[i] = 0.0
+        if self.has_battery:  # at rest at its initial state of charge
+            self._kernels.battery_reset(self._pp, self.energy)
         self._update_outputs()
         #: the stored energies at the start (W_mag, E_kin) [J]
         self.stored0 = self.stored
@@ -285,6 +329,8 @@ class Plant:
         if self.delay:
             v_alpha, v_beta = self._delayed(v_alpha, v_beta, dt)
         u_lim = self._u_lim
+        if self.has_battery:  # the battery's terminal voltage of the step before
+            u_lim = self._kernels.dc_link_limit(self._pp, self.energy, u_lim)
         if u_lim:  # linear range of the inverter: |v| <= v_dc / sqrt(3)
             mag = math.hypot(v_alpha, v_beta)
             if mag > u_lim:
@@ -320,6 +366,9 @@ class Plant:
         out.update(W_magnetic=w_mag, E_kinetic=e_kin, dW_magnetic=w_mag - self.stored0[0],
                    dE_kinetic=e_kin - self.stored0[1])
         out["residual"] = out["E_dc"] - sum(out[name] for name in BALANCE_TERMS)
+        if self.has_battery:  # the battery's side: chemical = terminal (E_dc) + its losses + its capacitor's change
+            out.update({name: float(self.energy[slot]) for name, slot in BATTERY_SLOTS.items()})
+            out["residual_battery"] = out["E_chemical"] - (out["E_dc"] + out["E_battery"] + out["W_battery"])
         return out
 
     def _delayed(self, v_alpha: float, v_beta: float, dt: float) -> tuple[float, float]:

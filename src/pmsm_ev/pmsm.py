@@ -22,9 +22,12 @@ def electromagnetic_torque(i_d: float, i_q: float, m: MotorParams) -> float:
 
 
 def friction_torque(omega_m: float, m: MotorParams, load_model: str = "physical") -> float:
-    """B_m omega_m + T_m0 [N m] (eq 8).
+    """B_m omega_m + T_m0 [N m] (eq 8), plus the windage k_wind omega_m |omega_m| when ``k_wind`` > 0.
 
     "paper": T_m0 as printed, a constant; "physical": T_m0 tanh(omega_m/omega_eps)
     so that it opposes rotation and vanishes at standstill.
     """
-    return _k.friction_torque(omega_m, m.B_m, m.T_m0, m.omega_eps, load_model == "paper")
+    t_f = _k.friction_torque(omega_m, m.B_m, m.T_m0, m.omega_eps, load_model == "paper")
+    if m.k_wind:
+        t_f += _k.windage_torque(omega_m, m.k_wind)
+    return t_f

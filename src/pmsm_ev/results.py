@@ -33,6 +33,9 @@ SENSORLESS_COLUMNS = ("x_vehicle", "mode", "fault", "theta_ctrl", "omega_ctrl")
 #: (``energy_metrics``); the acceleration and drive-cycle scenarios record them (``pmsm_ev.cycle_energy``: per phase)
 ENERGY_COLUMNS = ("E_dc", "E_regen", "E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling",
                   "E_grade", "E_brake", "E_kinetic", "W_magnetic", "x_vehicle")
+#: the battery's outputs (``pmsm_ev.plant.BATTERY_SLOTS``; plant start value battery = "ecm"): a run that records them
+#: with ``ENERGY_COLUMNS`` gets the battery's figures in its energy block (``battery_metrics``)
+BATTERY_COLUMNS = ("soc", "v_bat", "i_bat", "Q_bat", "E_chemical", "E_battery", "W_battery")
 #: the least distance [m] for a figure per kilometre: 10 m, a car's length or two (below it, a run
 #: that stands, aligns or creeps would divide by almost nothing)
 ENERGY_MIN_DISTANCE = 10.0
@@ -128,6 +131,8 @@ def compute_metrics(r: dict[str, np.ndarray]) -> dict:
             m["acceleration"] = accel
     if all(c in r for c in ENERGY_COLUMNS):
         m["energy"] = energy_metrics(r)
+        if all(c in r for c in BATTERY_COLUMNS) and m["energy"].get("rows") != 0:
+            m["energy"]["battery"] = battery_metrics(r, m["energy"])
     return m
 
 
@@ -167,6 +172,28 @@ def energy_metrics(r: dict[str, np.ndarray]) -> dict:
         "dc_Wh_per_km": dc / (distance / 1000.0) if per_km else None,
         "drawn_Wh_per_km": (dc + regen) / (distance / 1000.0) if per_km else None,
     }
+
+
+def battery_metrics(r: dict[str, np.ndarray], energy: dict) -> dict:
+    """The battery's figures of a run that recorded ``BATTERY_COLUMNS`` and ``ENERGY_COLUMNS``, from its first to its
+    last row: the state of charge at both ends, the charge drawn ``charge_Ah`` (negative: charged), the terminal
+    energy (the DC link's, ``energy['dc_Wh']``), the chemical energy (the open-circuit voltage times the current),
+    the battery's losses, the change of the RC pair's stored energy and ``residual_Wh`` (chemical less the three:
+    the battery's balance), the terminal voltage's least and largest over the rows, and Wh/km at the terminals and
+    from the chemistry where ``energy`` has a distance for it. The energy the friction brake took
+    (``energy['brake_Wh']``) is the braking the battery refused (its charge acceptance) or the motor could not give."""
+    def wh(name: str) -> float:
+        return float(r[name][-1] - r[name][0]) * _WH
+
+    chemical, losses, stored = wh("E_chemical"), wh("E_battery"), wh("W_battery")
+    km = energy["distance_m"] / 1000.0 if energy.get("dc_Wh_per_km") is not None else None
+    return {"soc_start": float(r["soc"][0]), "soc_end": float(r["soc"][-1]),
+            "charge_Ah": float(r["Q_bat"][-1] - r["Q_bat"][0]) / 3600.0,
+            "terminal_Wh": energy["dc_Wh"], "chemical_Wh": chemical, "losses_Wh": losses, "rc_change_Wh": stored,
+            "residual_Wh": chemical - energy["dc_Wh"] - losses - stored,
+            "v_bat_min": float(np.min(r["v_bat"])), "v_bat_max": float(np.max(r["v_bat"])),
+            "terminal_Wh_per_km": energy["dc_Wh_per_km"],
+            "chemical_Wh_per_km": chemical / km if km else None}
 
 
 #: a start-up target: |omega_m - omega_ref| within this band [rad/s] ...

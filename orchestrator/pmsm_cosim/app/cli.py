@@ -111,6 +111,14 @@ def cmd_run(a) -> int:
             print(f"energy: {energy['dc_Wh_per_km']:.1f} Wh/km at the DC link ({energy['dc_Wh']:.1f} Wh over "
                   f"{energy['distance_m'] / 1e3:.2f} km), {energy['regen_Wh']:.1f} Wh regenerated "
                   f"({100 * share:.1f} % of the {energy['drawn_Wh']:.1f} Wh drawn)")
+            bat = energy.get("battery")
+            if isinstance(bat, dict) and bat.get("chemical_Wh_per_km") is not None:
+                print(f"battery: {bat['terminal_Wh_per_km']:.2f} Wh/km at the terminals, "
+                      f"{bat['chemical_Wh_per_km']:.2f} from the chemistry; state of charge "
+                      f"{100 * bat['soc_start']:.2f} -> {100 * bat['soc_end']:.2f} %, "
+                      f"{bat['charge_Ah']:.3f} Ah drawn, {bat['losses_Wh']:.1f} Wh lost in the battery, terminal "
+                      f"voltage {bat['v_bat_min']:.1f} .. {bat['v_bat_max']:.1f} V; {energy['brake_Wh']:.1f} Wh to the "
+                      f"friction brake (regeneration refused or beyond the motor)")
     figures = None
     if not a.no_figures and m["rows"] >= 2:
         figures = draw_figures(out, spec.name, a.quiet)

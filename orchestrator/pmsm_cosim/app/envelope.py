@@ -32,14 +32,27 @@ from pathlib import Path
 import numpy as np
 
 from pmsm_ev import kernels, losses, references
-from pmsm_ev.params import ControllerParams, MotorParams, ParameterError, PlantParams, VehicleParams
+from pmsm_ev.params import (
+    SOURCED_IRON,
+    SOURCED_K_WIND,
+    SOURCED_T_M0,
+    ControllerParams,
+    MotorParams,
+    ParameterError,
+    PlantParams,
+    VehicleParams,
+)
 
 from ..engine.errors import CosimError, close_matches
 from ..engine.recording import read_results
 
 #: the groups ``--set`` reaches, and the defaults of the envelope (field weakening on a 360 V DC link)
 GROUPS = {"motor": MotorParams, "controller": ControllerParams, "plant": PlantParams, "vehicle": VehicleParams}
-DEFAULTS = {"controller": {"reference": "fw", "v_dc": 360.0}, "plant": {"v_dc": 360.0, "inverter_losses": True}}
+#: and the drive-cycle scenarios' sourced losses (docs/speed-range.md, "The losses"): the bearings and windage
+#: instead of eq 8's B_m, T_m0, the iron losses, the data sheet's inverter
+DEFAULTS = {"controller": {"reference": "fw", "v_dc": 360.0},
+            "motor": {"B_m": 0.0, "T_m0": SOURCED_T_M0, "k_wind": SOURCED_K_WIND},
+            "plant": {"v_dc": 360.0, "inverter_losses": True, "iron_c_h": SOURCED_IRON[0], "iron_c_e": SOURCED_IRON[1]}}
 #: the speed axis reaches at least this vehicle speed [km/h] (where the motor can): an EV's top speed
 AXIS_KMH = 150.0
 #: the region colours of the figures, by region code (``pmsm_ev.references.REGIONS``)
@@ -135,6 +148,52 @@ def efficiency_map(p: dict, lim, omega_max: float, n_speeds: int = MAP_SPEEDS, n
                 eff[a, b] = s["efficiency"]
             loss[a, b] = s["P_loss"]
     return {"omega": w, "T": t, "efficiency": eff, "P_loss": loss}
+
+
+def efficiency_summary(em: dict, level: float = 0.9) -> dict:
+    """The figures a published efficiency map is compared by (docs/speed-range.md): the peak and where it sits
+    (omega_m [rad/s], T [N m], motoring), and the extent of the ``level`` contour on the motoring side: the
+    share of the motoring points at or above it, and the speeds and torques it spans."""
+    e = em["efficiency"]
+    mot = np.isfinite(e) & (em["T"][:, None] > 0.0)
+    out = {"max": None, "grid": [len(em["omega"]), len(em["T"])]}
+    if not np.any(mot):
+        return out
+    em_mot = np.where(mot, e, -np.inf)
+    a, b = np.unravel_index(int(np.argmax(em_mot)), e.shape)
+    above = mot & (e >= level)
+    out.update({"max": float(e[a, b]), "at_omega": float(em["omega"][b]), "at_T": float(em["T"][a]),
+                "level": level, "share_above": float(above.sum() / mot.sum())})
+    if np.any(above):
+        rows, cols = np.nonzero(above)
+        out.update({"omega_above": [float(em["omega"][cols.min()]), float(em["omega"][cols.max()])],
+                    "T_above": [float(em["T"][rows.min()]), float(em["T"][rows.max()])]})
+    return out
+
+
+#: the speeds [rad/s] at which ``level_torques`` gives where the efficiency contour starts (docs/speed-range.md)
+LEVEL_SPEEDS = (150.0, 300.0, 600.0, 1000.0, 1500.0)
+
+
+def level_torques(p: dict, lim, speeds=LEVEL_SPEEDS, level: float = 0.9, n_torques: int = 400) -> list:
+    """Where the motoring efficiency reaches ``level`` at each of ``speeds``: the lowest motoring torque T_from
+    [N m] at which it does (``efficiency_map`` on that one speed and ``n_torques`` torques, the crossing
+    interpolated linearly; None where it never does) and the best efficiency there, [{"omega", "T_from",
+    "best"}]: the figures a published map's contour is read at."""
+    out = []
+    for w in speeds:
+        em = efficiency_map(p, lim, float(w), n_speeds=1, n_torques=n_torques)
+        mot = em["T"] > 0.0
+        t, e = em["T"][mot], em["efficiency"][mot, 0]
+        ok = np.flatnonzero(np.isfinite(e) & (e >= level))
+        t_from = None
+        if ok.size:
+            i = int(ok[0])
+            t_from = float(t[i]) if i == 0 or not np.isfinite(e[i - 1]) else float(
+                t[i - 1] + (level - e[i - 1]) / (e[i] - e[i - 1]) * (t[i] - t[i - 1]))
+        best = float(np.nanmax(e)) if np.any(np.isfinite(e)) else None
+        out.append({"omega": float(w), "T_from": t_from, "best": best})
+    return out
 
 
 def mtpv_line(lim, n: int = 200):
@@ -253,8 +312,8 @@ def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency
         for i, (d, r) in enumerate(points):
             ax.plot(r["omega_m"], r["T_e"], ".", ms=1.0, color="w", alpha=0.4)
         pl = p["plant"]
-        kinds = ["copper", "friction"] + (["inverter"] if pl.inverter_losses else []) + (
-            ["iron"] if (pl.iron_c_h or pl.iron_c_e) else [])
+        kinds = ["copper", "friction"] + (["windage"] if p["motor"].k_wind else []) + (
+            ["inverter"] if pl.inverter_losses else []) + (["iron"] if (pl.iron_c_h or pl.iron_c_e) else [])
         ax.set_title(f"motor + inverter efficiency, losses: {', '.join(kinds)} (generating: P_dc / P_shaft)",
                      fontsize=9)
         ax.set_xlabel("ω_m [rad/s]")
@@ -263,9 +322,8 @@ def draw(p: dict, out: Path, runs=(), omega_max: float | None = None, efficiency
         made.append(out / "efficiency.png")
         fig.savefig(made[-1], dpi=100)
         plt.close(fig)
-        finite = em["efficiency"][np.isfinite(em["efficiency"])]
-        summary["efficiency"] = {"max": float(finite.max()) if finite.size else None,
-                                 "grid": [MAP_SPEEDS, MAP_TORQUES]}
+        summary["efficiency"] = efficiency_summary(em)
+        summary["efficiency"]["level_from"] = level_torques(p, lim)
         summary["figures"] = [str(m) for m in made]
     (out / "envelope.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary

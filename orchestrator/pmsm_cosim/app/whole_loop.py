@@ -41,7 +41,11 @@ PLANT = "PmsmEvPlant"
 WIRING = {("plant", "i_alpha", "ctrl", "i_alpha"), ("plant", "i_beta", "ctrl", "i_beta"),
           ("plant", "theta_e", "ctrl", "theta_meas"), ("plant", "omega_m", "ctrl", "omega_meas"),
           ("ctrl", "v_alpha", "plant", "v_alpha"), ("ctrl", "v_beta", "plant", "v_beta"),
-          ("ctrl", "T_brake", "plant", "T_brake")}
+          ("ctrl", "T_brake", "plant", "T_brake"),
+          # the battery's DC link: 0 with the ideal link, which the controller then ignores (a plant on the battery
+          # is not covered, ``build``), so the loop does not transfer them
+          ("plant", "v_bat", "ctrl", "v_dc_meas"), ("plant", "P_charge_max", "ctrl", "P_charge_max"),
+          ("plant", "P_discharge_max", "ctrl", "P_discharge_max")}
 #: the signal inputs it sets: (instance role, variable) -> (target kind, slot)
 SIGNAL_INPUTS = {("plant", "delta"): (_k.TARGET_PLANT, _k.PIO_DELTA),
                  ("ctrl", "omega_ref"): (_k.TARGET_UNIT, _k.UIO_OMEGA_REF)}
@@ -88,6 +92,9 @@ def build(spec: SystemSpec) -> tuple[WholeLoop, dict[str, str]]:
     roles = _roles(spec)
     comps = {roles[c.name]: c for c in spec.components}
     plant_start, ctrl_start = comps["plant"].start, comps["ctrl"].start
+    if plant_start.get("battery", "ideal") != "ideal":  # the battery's link to the controller is not in the loop
+        raise NotCovered(f"{spec.name}: the whole loop covers the ideal DC link only (battery = "
+                         f"{plant_start['battery']!r})")
     plant = Plant(_group(MotorParams(), plant_start), _group(VehicleParams(), plant_start),
                   _group(PlantParams(), plant_start))
     observer = CONTROLLERS[Path(comps["ctrl"].fmu).stem]

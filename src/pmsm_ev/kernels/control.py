@@ -17,6 +17,7 @@ from .jit import kernel
 from .jit import sig as _sig
 from .layout import (
     C_ADVANCE,
+    C_BAT_LINK,
     C_BRAKE_GAIN,
     C_CC_HS,
     C_CC_PRED,
@@ -29,6 +30,7 @@ from .layout import (
     C_FF_T0,
     C_FF_T1,
     C_FF_T2,
+    C_FW_MARGIN,
     C_HALF_PERIOD_N,
     C_I_D_REF,
     C_I_MAX,
@@ -46,6 +48,8 @@ from .layout import (
     C_L_Q,
     C_N,
     C_OBSERVER,
+    C_P_CHG,
+    C_P_DIS,
     C_P_REGEN,
     C_PAPER_SIGNS,
     C_PSI,
@@ -236,9 +240,43 @@ def generate_references(s, c, t_dem, omega_est):
 
 
 @kernel()
+def unit_dc_link(c, v_dc, p_charge, p_discharge):
+    """The control unit on a measured DC link (the controller's inputs; a battery's, ``pmsm_ev.kernels.battery_step``):
+    with ``v_dc`` > 0 [V] the voltage limit of the current control becomes v_dc / sqrt 3 and that of the field
+    weakening ``C_FW_MARGIN`` of it, so that the references follow the battery's sag; the battery's charge acceptance
+    ``p_charge`` and discharge power ``p_discharge`` [W] bound the torque's power at the shaft
+    (``battery_power_limit``). ``v_dc`` <= 0 (unconnected): nothing changes (the parameters' constant link)."""
+    if v_dc > 0.0:
+        c[C_BAT_LINK] = 1.0
+        c[C_U_MAX] = v_dc / math.sqrt(3.0)
+        c[C_U_FW] = c[C_FW_MARGIN] * c[C_U_MAX]
+        c[C_P_CHG] = p_charge
+        c[C_P_DIS] = p_discharge
+
+
+@kernel()
+def battery_power_limit(t, omega, p_charge, p_discharge):
+    """The torque ``t`` [N m] at the speed ``omega`` held within the battery's powers at the shaft: a braking torque
+    (t omega < 0) to ``p_charge`` / |omega| (what the battery accepts: the rest is the friction brake's), a motoring
+    one to ``p_discharge`` / |omega|. The motor's and the inverter's losses lie between the shaft and the battery:
+    braking, the battery gets less than the shaft's power (the bound holds), motoring it gives more (by the losses)."""
+    p = t * omega
+    if p < 0.0:
+        cap = p_charge / abs(omega)
+        return -cap if t < -cap else (cap if t > cap else t)
+    if p > 0.0:
+        cap = p_discharge / abs(omega)
+        return -cap if t < -cap else (cap if t > cap else t)
+    return t
+
+
+@kernel()
 def references_of(s, c, t_dem, omega_est, t_env, lam, d_top, region_top):
-    """``generate_references`` on the limits ``envelope`` gives at ``omega_est``."""
+    """``generate_references`` on the limits ``envelope`` gives at ``omega_est`` (and the battery's powers,
+    ``battery_power_limit``, on a measured DC link)."""
     t_motor = regen_limit(t_dem, omega_est, c[C_P_REGEN])
+    if c[C_BAT_LINK] != 0.0:
+        t_motor = battery_power_limit(t_motor, omega_est, c[C_P_CHG], c[C_P_DIS])
     i_dref, i_qref, t_given, t_avail, region = references_within(
         t_motor, c[C_K_DQN], c[C_PSI], c[C_L_D], c[C_L_Q], c[C_I_MAX], c[C_T_MAX], t_env, lam, d_top, region_top)
     s[S_I_DREF] = i_dref

@@ -20,7 +20,8 @@ limit, which are Python's), the controller's periods ``unit_periods`` and its sa
 what decides whether the compiled step is taken. A step they do not take returns
 ``STEP_DECLINED`` with nothing changed, and the binding runs the slave's Python ``do_step`` instead: a plant
 with the inverter's delay or the thermal model (the slave does not offer those), a plant voltage at or near the
-DC link's limit (CPython's ``math.hypot``, which numba does not reproduce to the last bit, decides the limit
+DC link's limit (the ideal link's v_dc / sqrt 3, or the battery's terminal voltage over sqrt 3, ``dc_link_limit``;
+CPython's ``math.hypot``, which numba does not reproduce to the last bit, decides the limit
 there), a controller's first step that rebuilds its unit, a non-finite plant state (the slave raises), a step
 size <= 0. An exception in a kernel returns ``STEP_FAILED`` with the vectors as they were before the step (the
 binding then hands the step to Python, which raises it as it would have).
@@ -30,7 +31,7 @@ from __future__ import annotations
 
 import math
 
-from .control import control_step
+from .control import control_step, unit_dc_link
 from .jit import CACHE, JIT, kernel
 from .jit import F as _F
 from .jit import V as _V
@@ -69,6 +70,8 @@ from .layout import (
     UIO_OMEGA_HAT,
     UIO_OMEGA_MEAS,
     UIO_OMEGA_REF,
+    UIO_P_CHARGE_MAX,
+    UIO_P_DISCHARGE_MAX,
     UIO_REFERENCE,
     UIO_SAVE,
     UIO_T0,
@@ -82,13 +85,14 @@ from .layout import (
     UIO_V_ALPHA,
     UIO_V_BETA,
     UIO_V_D,
+    UIO_V_DC_MEAS,
     UIO_V_Q,
     UNIT_IO,
     UNIT_PARAMS,
     UNIT_STATE,
 )
 from .modes import injection_unit_step
-from .plant import plant_advance
+from .plant import dc_link_limit, plant_advance
 from .startup import sensorless_step
 
 if JIT:
@@ -120,7 +124,7 @@ def plant_fmu_step(io, pp, ee, h):
         return STEP_DECLINED
     v_alpha = io[PIO_V_ALPHA]
     v_beta = io[PIO_V_BETA]
-    u_lim = io[PIO_U_LIM]
+    u_lim = dc_link_limit(pp, ee, io[PIO_U_LIM])  # the ideal link's, or the battery's of the step before
     if u_lim != 0.0 and not v_alpha * v_alpha + v_beta * v_beta < u_lim * u_lim * U_LIMIT_MARGIN:
         return STEP_DECLINED  # at or near the limit: math.hypot decides, in Python
     if not plant_advance(io, pp, ee, v_alpha, v_beta, io[PIO_DELTA], io[PIO_T_BRAKE], h, True):
@@ -153,7 +157,10 @@ def unit_periods(io, s, c, n):
     """n control periods of a controller FMU's unit on the inputs held in its buffer ``io`` (``UNIT_IO_LAYOUT``:
     ``ControlUnit.io``) and its state and parameter vectors ``s``, ``c``, the outputs written into ``io``: the
     unit's kernel (``control_step``, ``sensorless_step``, ``injection_unit_step`` by ``UIO_KIND``), then the control
-    frame. ``FocSlave.do_step`` and the compiled step (``unit_fmu_step``) both run the periods so."""
+    frame. ``FocSlave.do_step`` and the compiled step (``unit_fmu_step``) both run the periods so. On a measured DC
+    link (the input v_dc_meas > 0, a battery's) the unit's limits follow it first (``unit_dc_link``)."""
+    if io[UIO_V_DC_MEAS] > 0.0:
+        unit_dc_link(c, io[UIO_V_DC_MEAS], io[UIO_P_CHARGE_MAX], io[UIO_P_DISCHARGE_MAX])
     kind = io[UIO_KIND]
     while n > 0:
         if kind == UNIT_KIND_CONTROL:

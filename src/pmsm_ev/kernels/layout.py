@@ -189,7 +189,35 @@ PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
                   "integrates psi_d, psi_q); 0.0: eqs 10-12 (or the per-axis saturation, P_SAT)"),
     ("P_FLUX_C", 12, "its coefficients in the order FX_AD0 .. FX_W0 (``pmsm_ev.kernels.plant``; "
                      "``pmsm_ev.params.flux_model_coefficients``)"),
-), size=52)
+    # the windage and the inverter's modulation-dependent conduction (``plant_rates``, ``inverter_loss``)
+    ("P_K_W", 1, "windage: k_w of the drag k_w omega_m |omega_m| [N m s^2/rad^2] (0 = off; ``MotorParams.k_wind``)"),
+    ("P_INV_DV", 1, "inverter: V_CE0 - V_F0, the IGBT's knee less the diode's [V] (``PlantParams.inv_v0``, "
+                    "``inv_vf0``)"),
+    ("P_INV_DR", 1, "inverter: r_CE - r_F, the IGBT's slope less the diode's [Ohm] (``inv_r_on``, ``inv_r_f``)"),
+    ("P_INV_VDC", 1, "inverter: 1 / v_dc [1/V] (a phase's duty from its pole voltage; 0 = no DC link)"),
+    # the battery (``PlantParams.battery`` 'ecm', ``pmsm_ev.kernels.battery_step``): the DC link's voltage from an
+    # equivalent circuit; the inverter's slots above that depend on v_dc follow it each step (``battery_link``)
+    ("P_BAT", 1, "1.0: the DC link is the battery's equivalent circuit; 0.0: an ideal source of v_dc (or none)"),
+    ("P_BAT_Q", 1, "battery: capacity [C] (``BatteryParams.bat_capacity`` x 3600)"),
+    ("P_BAT_SOC0", 1, "battery: state of charge at the start [-]"),
+    ("P_BAT_R0", 1, "battery: series (ohmic) resistance R0 [Ohm]"),
+    ("P_BAT_R1", 1, "battery: the RC pair's resistance R1 [Ohm] (0 = no RC pair)"),
+    ("P_BAT_TAU", 1, "battery: the RC pair's time constant R1 C1 [s]"),
+    ("P_BAT_C1", 1, "battery: the RC pair's capacitance C1 [F]"),
+    ("P_BAT_I_CHG", 1, "battery: the charge current limit [A]"),
+    ("P_BAT_I_DIS", 1, "battery: the discharge current limit [A]"),
+    ("P_BAT_V_MAX", 1, "battery: the terminal voltage the charge current may raise it to [V]"),
+    ("P_BAT_V_MIN", 1, "battery: the terminal voltage the discharge current may lower it to [V]"),
+    ("P_BAT_SOC_TAPER", 1, "battery: the state of charge above which the charge current limit falls linearly to 0 "
+                           "at 1 [-]"),
+    ("P_BAT_N", 1, "battery: the points of the open-circuit voltage table [-] (2 .. BAT_OCV_MAX)"),
+    ("P_BAT_OCV", 2 * 24, "battery: the table's states of charge [-] (BAT_OCV_MAX slots from P_BAT_OCV), then its "
+                          "open-circuit voltages [V] (BAT_OCV_MAX slots from P_BAT_OCV + BAT_OCV_MAX)"),
+    ("P_INV_V0", 1, "inverter: the mean knee (inv_v0 + inv_vf0) / 2 [V] (P_INV_V at the battery's voltage)"),
+    ("P_INV_KSW", 1, "inverter: the switching losses' loss voltage per volt of the DC link [-] (P_INV_V at the "
+                     "battery's voltage)"),
+    ("P_DT_K", 1, "inverter dead time: t_d / T_s [-] (P_DT_V at the battery's voltage)"),
+), size=56 + 64)
 
 #: the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``; ``plant_step`` adds each step's
 #: RK4-integrated energies): joules since the start, in the dq convention's power scaling (``P_K_DQ``)
@@ -199,7 +227,7 @@ PLANT_ENERGY_LAYOUT = Layout("plant energy vector", "E_", (
     ("E_DC_ABS", 1, "the DC link's energy throughput, the integral of |P_dc| [J]"),
     ("E_REGEN", 1, "energy returned to the DC link, the integral of max(-P_dc, 0) [J]"),
     ("E_COPPER", 1, "copper losses k_dq R_s (i_d^2 + i_q^2) [J]"),
-    ("E_FRICTION", 1, "motor friction omega_m T_f (eq 8) [J]"),
+    ("E_FRICTION", 1, "motor friction omega_m T_f (eq 8, and the windage k_w omega_m |omega_m|) [J]"),
     ("E_SHAFT", 1, "electromagnetic work at the shaft omega_m T_e [J]"),
     ("E_GEAR", 1, "gear losses [J] (the paper's gear: (1/eta - 1) times the wheel forces' power, signed)"),
     ("E_AERO", 1, "work against the aerodynamic drag v f_a (eq 4) [J]"),
@@ -209,7 +237,18 @@ PLANT_ENERGY_LAYOUT = Layout("plant energy vector", "E_", (
     ("E_INVERTER", 1, "inverter conduction and switching losses [J]"),
     ("E_P_DC", 1, "mean DC-link power over the last step [W]"),
     ("E_IRON", 1, "iron losses, the drag omega_m T_fe on the shaft [J]"),
-), size=14)
+    # the battery (``P_BAT``; ``battery_step``): its state and its energies, 0 with the ideal link
+    ("E_BAT_SOC", 1, "battery: state of charge [-] (the start's less the charge drawn over the capacity)"),
+    ("E_BAT_VRC", 1, "battery: the RC pair's voltage [V]"),
+    ("E_BAT_V", 1, "battery: terminal voltage, the DC link's, at the end of the last step [V]"),
+    ("E_BAT_I", 1, "battery: current over the last step, discharge positive [A]"),
+    ("E_BAT_Q", 1, "battery: charge drawn since the start [C] (negative: charged)"),
+    ("E_BAT_CHEM", 1, "battery: chemical energy, the open-circuit voltage times the current integrated [J]"),
+    ("E_BAT_LOSS", 1, "battery: losses, R0 i^2 and the RC pair's R1 [J]"),
+    ("E_BAT_W", 1, "battery: energy stored in the RC pair's capacitor, C1 v_rc^2 / 2 [J]"),
+    ("E_BAT_P_CHG", 1, "battery: the charge power it accepts now (charge acceptance) [W]"),
+    ("E_BAT_P_DIS", 1, "battery: the discharge power it gives now [W]"),
+), size=24)
 
 #: the control unit's state vector (controller + observer)
 UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
@@ -464,7 +503,19 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_TRUST_MOVE", 1, "in I-f the EKF is believed once the rotor has moved this far on the vector since [rad]"),
     ("C_RELOCK_TIME", 1, "a relocked vector's torque brings the speed to the reference in this time [s]"),
     ("C_STILL_TIME", 1, "a stand ends once |omega_hat| has been above C_STILL this long [s]"),
-), size=144)
+    # the DC link measured (the controller's inputs v_dc, P_charge_max, P_discharge_max; ``unit_dc_link``)
+    ("C_FW_MARGIN", 1, "the field weakening's share of the voltage limit [-] (``ControllerParams.fw_margin``; 0 "
+                       "without field weakening): C_U_FW = C_FW_MARGIN x C_U_MAX at the measured DC link"),
+    ("C_BAT_LINK", 1, "1.0: the DC link is measured (the input v_dc > 0): the voltage limit follows it and the torque "
+                      "is held within the battery's powers C_P_CHG, C_P_DIS"),
+    ("C_P_CHG", 1, "the battery's charge acceptance [W] (input P_charge_max): a braking torque's power at the shaft "
+                   "at most this"),
+    ("C_P_DIS", 1, "the battery's discharge power [W] (input P_discharge_max): a motoring torque's power at the shaft "
+                   "at most this"),
+), size=148)
+
+#: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
+BAT_OCV_MAX = 24
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())
@@ -509,7 +560,7 @@ PLANT_IO_LAYOUT = Layout("plant FMU buffer", "PIO_", (
     ("PIO_SENSOR_ARGS", 7, "gain_a, offset_a, gain_b, offset_b, noise, lsb, adc_range (Plant._sensor_args)"),
     # scratch
     ("PIO_SAVE", PLANT_ENERGY, "the energy vector before the step (restored when a kernel raises) [J]"),
-), size=47)
+), size=33 + PLANT_ENERGY)
 
 UNIT_IO_LAYOUT = Layout("controller FMU buffer", "UIO_", (
     # the Real inputs (FocSlave's)
@@ -546,9 +597,13 @@ UNIT_IO_LAYOUT = Layout("controller FMU buffer", "UIO_", (
     ("UIO_KIND", 1, "the step's kernel: 0 control_step, 1 sensorless_step, 2 injection_unit_step"),
     ("UIO_MEASURED", 1, "1.0: the control frame is the measured angle (theta_ctrl = theta_meas)"),
     ("UIO_REFERENCE", 1, "the reference generator's mode (ControlUnit.reference; T_brake is 0 with 0)"),
+    # the DC link's inputs (FocSlave's; 0 = unconnected: the parameters' constant link)
+    ("UIO_V_DC_MEAS", 1, "input v_dc_meas: the DC link's measured voltage [V] (0: not measured)"),
+    ("UIO_P_CHARGE_MAX", 1, "input P_charge_max: the battery's charge acceptance [W]"),
+    ("UIO_P_DISCHARGE_MAX", 1, "input P_discharge_max: the battery's discharge power [W]"),
     # scratch
     ("UIO_SAVE", UNIT_STATE, "the state vector before the step (restored when a kernel raises)"),
-), size=31 + UNIT_STATE)
+), size=34 + UNIT_STATE)
 PLANT_IO_LAYOUT.export(globals())
 UNIT_IO_LAYOUT.export(globals())
 PLANT_IO = PLANT_IO_LAYOUT.size  #: length of the plant FMU's buffer

@@ -22,7 +22,18 @@ from .jit import V as _V
 from .jit import kernel
 from .jit import sig as _sig
 from .layout import (
+    BAT_OCV_MAX,
     E_AERO,
+    E_BAT_CHEM,
+    E_BAT_I,
+    E_BAT_LOSS,
+    E_BAT_P_CHG,
+    E_BAT_P_DIS,
+    E_BAT_Q,
+    E_BAT_SOC,
+    E_BAT_V,
+    E_BAT_VRC,
+    E_BAT_W,
     E_BRAKE,
     E_COPPER,
     E_DC,
@@ -38,9 +49,24 @@ from .layout import (
     E_SHAFT,
     P_A_F,
     P_B_M,
+    P_BAT,
+    P_BAT_C1,
+    P_BAT_I_CHG,
+    P_BAT_I_DIS,
+    P_BAT_N,
+    P_BAT_OCV,
+    P_BAT_Q,
+    P_BAT_R0,
+    P_BAT_R1,
+    P_BAT_SOC0,
+    P_BAT_SOC_TAPER,
+    P_BAT_TAU,
+    P_BAT_V_MAX,
+    P_BAT_V_MIN,
     P_C_D,
     P_C_R,
     P_DT_I0,
+    P_DT_K,
     P_DT_V,
     P_ETA,
     P_FE_E,
@@ -50,12 +76,18 @@ from .layout import (
     P_G,
     P_GEAR_PF,
     P_INV,
+    P_INV_DR,
+    P_INV_DV,
     P_INV_K,
+    P_INV_KSW,
     P_INV_R,
     P_INV_V,
+    P_INV_V0,
+    P_INV_VDC,
     P_J_EQ,
     P_J_M,
     P_K_DQ,
+    P_K_W,
     P_L_D,
     P_L_Q,
     P_M_R,
@@ -126,6 +158,24 @@ def friction_torque(omega_m, B_m, T_m0, omega_eps, paper):
     if paper:
         return B_m * omega_m + T_m0
     return B_m * omega_m + T_m0 * math.tanh(omega_m / omega_eps)
+
+
+@kernel()
+def windage_torque(omega_m, k_w):
+    """The rotor's windage, k_w omega_m |omega_m| [N m]: the air's drag on a turning cylinder and its end
+    faces at a constant moment coefficient (turbulent flow), a power k_w |omega_m|^3
+    (``MotorParams.k_wind``)."""
+    return k_w * omega_m * abs(omega_m)
+
+
+@kernel()
+def plant_friction(omega_m, pp):
+    """The motor's mechanical drag with the plant's vector [N m]: eq 8's friction (``friction_torque``)
+    plus the windage (``windage_torque``) when ``P_K_W`` is not 0 (eq 8 alone otherwise, unchanged)."""
+    t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], pp[P_PAPER] != 0.0)
+    if pp[P_K_W] != 0.0:
+        t_f = t_f + windage_torque(omega_m, pp[P_K_W])
+    return t_f
 
 
 # -- departures of a real motor and inverter from eqs 10-12 (plant only, each off by default) ----
@@ -213,18 +263,42 @@ def thermal_step(T, P, T_amb, R_th, C_th, dt):
 def inverter_loss(i_alpha, i_beta, v_loss, r_on):
     """Conduction and switching losses of a two-level three-phase inverter [W] for the current vector
     (i_alpha, i_beta) (amplitude-invariant Clarke: the phase currents are i_a = i_alpha, i_b, i_c):
-    each phase x loses v_loss |i_x| + r_on i_x^2. Conduction: the threshold-and-slope model of the
-    data sheets, V_CE = V_CE0 + r_CE i (IGBT), V_F = V_F0 + r_F i (diode), with V_CE0 = V_F0 and
-    r_CE = r_F, so that a phase current loses the same through the IGBT or the diode of its leg and
-    the loss does not depend on the duty cycle (the modulation). Switching: E_sw (v_dc / V_ref)
-    (|i_x| / I_ref) per switching period, linear in current and voltage (Graovac and Puerschel,
-    "IGBT Power Losses Calculation Using the Data-Sheet Parameters", Infineon application note,
-    2009; the SEMIKRON application manual, ch. 3.10), a voltage f_sw E_sw v_dc / (V_ref I_ref) per
-    ampere: ``v_loss`` is V_CE0 plus that."""
+    each phase x loses v_loss |i_x| + r_on i_x^2, the part of the losses that does not depend on the
+    modulation (``inverter_modulation_loss`` adds the part that does). Conduction: the threshold-and-slope
+    model of the data sheets, V_CE = V_CE0 + r_CE i (IGBT), V_F = V_F0 + r_F i (diode); a phase current
+    flows through the IGBT for the duty d and the opposite diode for 1 - d (i > 0: upper IGBT, lower diode;
+    i < 0: lower IGBT for 1 - d, upper diode for d), so that v_loss holds (V_CE0 + V_F0) / 2 and r_on
+    (r_CE + r_F) / 2. Switching: E_sw (v_dc / V_ref) (|i_x| / I_ref) per switching period, linear in
+    current and voltage (Graovac and Puerschel, "IGBT Power Losses Calculation Using the Data-Sheet
+    Parameters", Infineon application note, 2009; the SEMIKRON application manual, ch. 3.10), a voltage
+    f_sw E_sw v_dc / (V_ref I_ref) per ampere: ``v_loss`` holds it too."""
     i_b = -0.5 * i_alpha + _SQRT3_2 * i_beta
     i_c = -0.5 * i_alpha - _SQRT3_2 * i_beta
     return (v_loss * (abs(i_alpha) + abs(i_b) + abs(i_c))
             + r_on * (i_alpha * i_alpha + i_b * i_b + i_c * i_c))
+
+
+@kernel()
+def inverter_modulation_loss(i_alpha, i_beta, v_alpha, v_beta, dv, dr, inv_vdc):
+    """The conduction losses' part that depends on the modulation [W]: where the IGBT's knee and slope differ
+    from the diode's (dv = V_CE0 - V_F0, dr = r_CE - r_F), a phase x loses (d_x - 1/2) (dv i_x + dr i_x |i_x|)
+    besides ``inverter_loss``'s mean (the IGBT conducts for the duty d_x when i_x > 0, for 1 - d_x when
+    i_x < 0). The duty is the pole voltage's, d_x = 1/2 + (v_x + v_0) inv_vdc, with the space-vector
+    modulation's common mode v_0 = -(max + min) / 2 of the phase voltages (the linear range up to
+    v_dc / sqrt 3 that the plant's limit allows), clipped to [0, 1]. Averaged over a sinusoidal period it
+    gives the textbook forms (the IGBT's V_CE0 I (1/(2 pi) + M cos(phi) / 8), the diode's V_F0 I (1/(2 pi)
+    - M cos(phi) / 8) for the knees, M = 2 |v| / v_dc; the forms of Graovac and Puerschel's application note,
+    2009, checked against this kernel in tests/test_losses_sourced.py)."""
+    v_b = -0.5 * v_alpha + _SQRT3_2 * v_beta
+    v_c = -0.5 * v_alpha - _SQRT3_2 * v_beta
+    v_0 = -0.5 * (max(v_alpha, v_b, v_c) + min(v_alpha, v_b, v_c))
+    i_b = -0.5 * i_alpha + _SQRT3_2 * i_beta
+    i_c = -0.5 * i_alpha - _SQRT3_2 * i_beta
+    p = 0.0
+    for v_x, i_x in ((v_alpha, i_alpha), (v_b, i_b), (v_c, i_c)):
+        m = min(max((v_x + v_0) * inv_vdc, -0.5), 0.5)
+        p += m * (dv * i_x + dr * i_x * abs(i_x))
+    return p
 
 
 @kernel()
@@ -481,7 +555,7 @@ def shaft_load(i_d, i_q, omega_m, delta, t_e, pp):
               + rolling_force(v_v, delta, pp[P_C_R], pp[P_M_V], pp[P_G], pp[P_V_EPS], paper)
               + aero_force(v_v, pp[P_RHO_A], pp[P_C_D], pp[P_A_F], pp[P_V_A], paper))
     y = pp[P_R_W] / pp[P_N_G] * forces + brake_torque(omega_m, pp)
-    x = t_e - friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)
+    x = t_e - plant_friction(omega_m, pp)
     if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
         if pp[P_FLUX] != 0.0:  # the algebraic model's flux linkages
             psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
@@ -526,6 +600,7 @@ def plant_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
         psi_d = psi_q = 0.0
     c = math.cos(theta_e)
     s = math.sin(theta_e)
+    v_alpha0, v_beta0 = v_alpha, v_beta  # the commanded voltage: the pole voltages' duties
     if pp[P_DT_V] != 0.0:  # the inverter's dead time: the applied voltage loses its error
         e_alpha, e_beta = dead_time_error(c * i_d - s * i_q, s * i_d + c * i_q, pp[P_DT_V], pp[P_DT_I0])
         v_alpha = v_alpha + e_alpha
@@ -548,7 +623,7 @@ def plant_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
                                        pp[P_R_S], pp[P_L_D], pp[P_L_Q], pp[P_PSI], N)  # (10), (11)
         t_e = k * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12) x k_dq
     paper = pp[P_PAPER] != 0.0
-    t_f = friction_torque(omega_m, pp[P_B_M], pp[P_T_M0], pp[P_OMEGA_EPS], paper)  # (8)
+    t_f = plant_friction(omega_m, pp)  # (8), and the windage when on
     t_drag = t_f  # the shaft's drag: friction, and the iron losses when on
     p_iron = 0.0
     if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
@@ -584,7 +659,13 @@ def plant_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     p_term = k * (v_d * i_d + v_q * i_q)
     p_inv = 0.0
     if pp[P_INV] != 0.0:  # drawn from the DC link only: the winding's voltage is the same
-        p_inv = pp[P_INV_K] * inverter_loss(c * i_d - s * i_q, s * i_d + c * i_q, pp[P_INV_V], pp[P_INV_R])
+        i_alpha = c * i_d - s * i_q
+        i_beta = s * i_d + c * i_q
+        p_inv = inverter_loss(i_alpha, i_beta, pp[P_INV_V], pp[P_INV_R])
+        if pp[P_INV_DV] != 0.0 or pp[P_INV_DR] != 0.0:  # the IGBT's and the diode's shares differ
+            p_inv = p_inv + inverter_modulation_loss(i_alpha, i_beta, v_alpha0, v_beta0, pp[P_INV_DV],
+                                                     pp[P_INV_DR], pp[P_INV_VDC])
+        p_inv = pp[P_INV_K] * p_inv
     return (did, diq, dw, dth, p_term + p_inv, k * pp[P_R_S] * (i_d * i_d + i_q * i_q), omega_m * t_f,
             omega_m * t_e, p_gear, v_v * f_a, v_v * f_f, v_v * f_g, omega_m * y_b, p_inv, p_iron)
 
@@ -644,6 +725,128 @@ def stored_energies(i_d, i_q, omega_m, pp):
     return pp[P_K_DQ] * w, e_kin
 
 
+# -- the battery (``PlantParams.battery`` 'ecm'; docs/speed-range.md, "The battery") ------------------------------
+@kernel()
+def battery_ocv(soc, pp):
+    """The battery's open-circuit voltage [V] at the state of charge ``soc`` [-]: the table ``P_BAT_OCV`` (``P_BAT_N``
+    points, states of charge rising from 0 to 1), interpolated linearly, held at its ends outside [0, 1]."""
+    n = int(pp[P_BAT_N])
+    o = P_BAT_OCV
+    v = P_BAT_OCV + BAT_OCV_MAX
+    if soc <= pp[o]:
+        return pp[v]
+    if soc >= pp[o + n - 1]:
+        return pp[v + n - 1]
+    k = 1
+    while soc > pp[o + k]:
+        k += 1
+    z0 = pp[o + k - 1]
+    v0 = pp[v + k - 1]
+    return v0 + (pp[v + k] - v0) * (soc - z0) / (pp[o + k] - z0)
+
+
+@kernel()
+def battery_link(pp, ee):
+    """The inverter's slots that depend on the DC link's voltage set at the battery's terminal voltage ``E_BAT_V``
+    (held over the step, as the inverter measures its DC link once a period): the switching losses' share of the
+    loss voltage (``P_INV_V``), 1 / v_dc of the duties (``P_INV_VDC``) and the dead time's error (``P_DT_V``)."""
+    v_dc = ee[E_BAT_V]
+    if pp[P_INV] != 0.0:
+        pp[P_INV_V] = pp[P_INV_V0] + pp[P_INV_KSW] * v_dc
+        pp[P_INV_VDC] = 1.0 / v_dc
+    if pp[P_DT_K] != 0.0:
+        pp[P_DT_V] = v_dc * pp[P_DT_K]
+
+
+@kernel()
+def dc_link_limit(pp, ee, u_lim):
+    """The inverter's voltage limit for the next step [V]: ``u_lim`` (v_dc / sqrt 3 of the ideal link, 0 = none), or
+    with the battery its terminal voltage over sqrt 3 (the linear range of the space-vector modulation)."""
+    if pp[P_BAT] != 0.0:
+        return ee[E_BAT_V] / math.sqrt(3.0)
+    return u_lim
+
+
+@kernel()
+def battery_limits(pp, ee):
+    """The battery's charge acceptance and discharge power now [W] (``E_BAT_P_CHG``, ``E_BAT_P_DIS``), what a battery
+    management system tells the drive: the charge current ``P_BAT_I_CHG``, falling linearly to 0 from the state of
+    charge ``P_BAT_SOC_TAPER`` to 1 and bounded so that the terminal voltage stays at or below ``P_BAT_V_MAX``; the
+    discharge current ``P_BAT_I_DIS`` (0 at a state of charge of 0 or less), bounded so that it stays at or above
+    ``P_BAT_V_MIN``; each power at the terminal voltage that current gives through R0 behind the open-circuit voltage
+    less the RC pair's (the pair's own response left out: an instant's limit, as a 10 s pulse power is quoted)."""
+    soc = ee[E_BAT_SOC]
+    e = battery_ocv(soc, pp) - ee[E_BAT_VRC]
+    r0 = pp[P_BAT_R0]
+    i_c = pp[P_BAT_I_CHG]
+    taper = pp[P_BAT_SOC_TAPER]
+    if soc >= 1.0:
+        i_c = 0.0
+    elif soc > taper:
+        i_c = i_c * (1.0 - soc) / (1.0 - taper)
+    i_d = pp[P_BAT_I_DIS] if soc > 0.0 else 0.0
+    if r0 > 0.0:
+        i_c = min(i_c, max((pp[P_BAT_V_MAX] - e) / r0, 0.0))
+        i_d = min(i_d, max((e - pp[P_BAT_V_MIN]) / r0, 0.0))
+    ee[E_BAT_P_CHG] = (e + r0 * i_c) * i_c
+    ee[E_BAT_P_DIS] = (e - r0 * i_d) * i_d
+
+
+@kernel()
+def battery_reset(pp, ee):
+    """The battery at rest at its initial state of charge: the RC pair discharged, the terminal voltage the
+    open-circuit voltage, its limits (``battery_limits``)."""
+    ee[E_BAT_SOC] = pp[P_BAT_SOC0]
+    ee[E_BAT_VRC] = 0.0
+    ee[E_BAT_V] = battery_ocv(pp[P_BAT_SOC0], pp)
+    ee[E_BAT_I] = 0.0
+    battery_limits(pp, ee)
+
+
+@kernel()
+def battery_step(p_dc, dt, pp, ee):
+    """The battery over a step of ``dt`` [s] delivering the DC power ``p_dc`` [W] (the step's mean, from the RK4 of the
+    motor; negative: charging): the equivalent circuit v = OCV(soc) - R0 i - v_rc, C1 dv_rc/dt = i - v_rc / R1, with
+    the current i held over the step. The current is the one whose mean terminal voltage times it is ``p_dc``: with
+    v_rc exact over the step, its mean is phi v_rc0 + R1 (1 - phi) i (phi = tau / dt (1 - exp(-dt / tau))), so that
+    p_dc = (E - R i) i with E = OCV(soc0) - phi v_rc0, R = R0 + R1 (1 - phi): the algebraic loop of the DC link
+    through the internal resistance, closed within the step (the smaller root, 2 p / (E + sqrt(E^2 - 4 R p)); a power
+    beyond E^2 / (4 R), more than the battery can give, leaves the current NaN: the plant fails the step). Then the
+    charge, the state of charge (the start's less the charge over the capacity), v_rc (exact), the terminal voltage at
+    the end of the step (the next step's DC link) and the energies: chemical OCV(soc0) i dt, the losses R0 i^2 dt plus
+    the RC pair's R1 share (the energy into the pair less the change of its capacitor's), the capacitor's energy; then
+    the limits (``battery_limits``). Chemical = terminal + losses + the capacitor's change, to round-off."""
+    soc0 = ee[E_BAT_SOC]
+    v_rc0 = ee[E_BAT_VRC]
+    ocv = battery_ocv(soc0, pp)
+    r0 = pp[P_BAT_R0]
+    r1 = pp[P_BAT_R1]
+    a = 0.0
+    phi = 0.0
+    if r1 > 0.0:
+        tau = pp[P_BAT_TAU]
+        a = math.exp(-dt / tau)
+        phi = tau / dt * (1.0 - a)
+    e = ocv - phi * v_rc0
+    r = r0 + r1 * (1.0 - phi)
+    disc = e * e - 4.0 * r * p_dc
+    i = 2.0 * p_dc / (e + math.sqrt(disc)) if disc >= 0.0 else math.nan
+    v_rc_mean = phi * v_rc0 + r1 * (1.0 - phi) * i
+    v_rc = r1 * i + (v_rc0 - r1 * i) * a
+    w0 = ee[E_BAT_W]
+    w1 = 0.5 * pp[P_BAT_C1] * v_rc * v_rc
+    ee[E_BAT_CHEM] += ocv * i * dt
+    ee[E_BAT_LOSS] += r0 * i * i * dt + (v_rc_mean * i * dt - (w1 - w0))
+    ee[E_BAT_W] = w1
+    ee[E_BAT_Q] += i * dt
+    soc = pp[P_BAT_SOC0] - ee[E_BAT_Q] / pp[P_BAT_Q]
+    ee[E_BAT_SOC] = soc
+    ee[E_BAT_VRC] = v_rc
+    ee[E_BAT_I] = i
+    ee[E_BAT_V] = battery_ocv(soc, pp) - r0 * i - v_rc
+    battery_limits(pp, ee)
+
+
 @kernel()
 def _stage_sum(ra, rb, rc, rd, i):
     """RK4's weighted sum of power i of the four stages, a + 2 b + 2 c + d (times h/6 by the caller)."""
@@ -675,6 +878,9 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     starts from ``flux_linkages`` of the state's currents (Newton, to round-off) and returns the
     currents ``flux_currents`` of the fluxes it ends with; the state and the outputs stay the
     currents."""
+    battery = pp[P_BAT] != 0.0
+    if battery:  # the inverter at the battery's terminal voltage of the step before
+        battery_link(pp, ee)
     n = int(pp[P_SUBSTEPS])
     if pp[P_SUBSTEP_ANGLE] > 0.0:  # at most that angle per sub-step: accurate at top speed
         m = abs(pp[P_N] * omega_m) * dt / pp[P_SUBSTEP_ANGLE]
@@ -731,6 +937,8 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     ee[E_INVERTER] += w * s_inv
     ee[E_IRON] += w * s_fe
     ee[E_P_DC] = w * s_dc / dt
+    if battery:  # the battery delivers the step's DC power
+        battery_step(ee[E_P_DC], dt, pp, ee)
     dx = pp[P_R_W] / (pp[P_N_G] * pp[P_N]) * (x3 - theta_e)
     x3 = wrap_angle(x3)
     if flux:  # the currents of the new fluxes
@@ -843,7 +1051,8 @@ def plant_advance(io, pp, ee, v_alpha, v_beta, delta, t_brake_in, h, finite_only
             io[PIO_I_D], io[PIO_I_Q], io[PIO_OMEGA_M], io[PIO_THETA_E], v_alpha, v_beta, delta, h, pp, ee)
         i_alpha_true = i_alpha
         i_beta_true = i_beta
-    if finite_only and not math.isfinite(omega_m + i_d + i_q):
+    if finite_only and not math.isfinite(omega_m + i_d + i_q + ee[E_BAT_V]):  # a state, or the battery's voltage
+        # when it cannot give the power (0 with the ideal link)
         for i in range(PLANT_ENERGY):
             ee[i] = io[PIO_SAVE + i]
         pp[P_T_BRAKE] = pp_t_brake
