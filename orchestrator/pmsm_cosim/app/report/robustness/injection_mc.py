@@ -72,6 +72,25 @@ def beside_lines(rows: list[dict], beside: Path) -> list[str]:
     return lines
 
 
+def sample_facts(rows: list[dict], f, median: bool) -> list[str]:
+    """The samples' facts beside the failures: the least share inside the band, the loss-of-synchronism
+    episodes, the Wh/km at the DC link (``f``: their ``findings``; with its median or not)."""
+    inside = [r["inside_share"] for r in rows if math.isfinite(r["inside_share"])]
+    episodes = [r["episodes"] for r in rows if math.isfinite(r.get("episodes", math.nan))]
+    wh = f.wh
+    facts = []
+    if inside:
+        facts.append(f"Inside the band: the least {100 * min(inside):.2f} % of the cycle.")
+    if episodes:
+        facts.append(f"Loss-of-synchronism episodes: {sum(episodes):g} over {len(episodes)} samples (in "
+                     f"{sum(e > 0 for e in episodes)} of them).")
+    if wh["count"]:
+        mid = f"{wh['median']:.1f} median, " if median else ""
+        facts.append(f"Energy at the DC link: {wh['mean']:.1f} Wh/km mean, {mid}{wh['min']:.1f} … {wh['max']:.1f} "
+                     f"over {wh['count']} samples.")
+    return facts
+
+
 def fresh_lines(fresh: Path) -> list[str]:
     """A fresh draw of the same design (the sweep file's copy in ``fresh``, ``sweep.toml``: another seed, maybe
     fewer samples), run with the unit as it is now, judged by the same rule."""
@@ -91,16 +110,8 @@ def fresh_lines(fresh: Path) -> list[str]:
     for r in rows:
         if r["failed"]:
             lines.append(f"- {r['run']}: {', '.join(r['reasons'])}; {where_text(r)}")
-    inside = [r["inside_share"] for r in rows if math.isfinite(r["inside_share"])]
-    episodes = [r["episodes"] for r in rows if math.isfinite(r.get("episodes", math.nan))]
-    if inside:
-        lines += ["", f"Inside the band: the least {100 * min(inside):.2f} % of the cycle."]
-    if episodes:
-        lines += ["", f"Loss-of-synchronism episodes: {sum(episodes):g} over {len(episodes)} samples (in "
-                  f"{sum(e > 0 for e in episodes)} of them)."]
-    if f.wh["count"]:
-        lines += ["", f"Energy at the DC link: {f.wh['mean']:.1f} Wh/km mean, {f.wh['min']:.1f} … {f.wh['max']:.1f} "
-                  f"over {f.wh['count']} samples."]
+    for fact in sample_facts(rows, f, median=False):
+        lines += ["", fact]
     return lines
 
 
@@ -130,18 +141,7 @@ def section(out: Path, machine: str, beside: Path | None = None, fresh: Path | N
                 lines.append(f"| {r['run']} | {', '.join(r['reasons'])} | {where_text(r)} |")
     else:
         lines.append(f"None: {', '.join(REASONS)}: 0 each.")
-    inside = [r["inside_share"] for r in rows if math.isfinite(r["inside_share"])]
-    episodes = [r["episodes"] for r in rows if math.isfinite(r.get("episodes", math.nan))]
-    wh = f.wh
-    facts = []
-    if inside:
-        facts.append(f"Inside the band: the least {100 * min(inside):.2f} % of the cycle.")
-    if episodes:
-        facts.append(f"Loss-of-synchronism episodes: {sum(episodes):g} over {len(episodes)} samples (in "
-                     f"{sum(e > 0 for e in episodes)} of them).")
-    if wh["count"]:
-        facts.append(f"Energy at the DC link: {wh['mean']:.1f} Wh/km mean, {wh['median']:.1f} median, "
-                     f"{wh['min']:.1f} … {wh['max']:.1f} over {wh['count']} samples.")
+    facts = sample_facts(rows, f, median=True)
     cost = f.cost
     if cost:
         facts.append(f"A sample cost {cost['wall_time_s']:.0f} s of wall time ({cost['us_per_step']:.1f} us/step, "
