@@ -10,9 +10,9 @@ import sys
 from pathlib import Path
 
 import pytest
-import tomllib
 
 import pmsm_cosim.app
+from pmsm_cosim.engine.system import read_toml
 from pmsm_ev.losses import steady_state
 from pmsm_ev.params import (
     M330_35A,
@@ -198,7 +198,7 @@ def test_the_physical_scenarios_carry_the_sourced_losses_and_the_paper_scenarios
                "iron_c_e": SOURCED_IRON[1]}
     physical = 0
     for path in sorted(folder.glob("*.toml")):
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = read_toml(path, "scenario")  # the engine's reader: tomllib, or tomli on Python 3.10
         plant = next(c for c in doc["components"] if c["name"] == "plant").get("start", {})
         if plant.get("inverter_losses"):
             physical += 1
