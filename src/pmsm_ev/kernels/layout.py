@@ -217,7 +217,10 @@ PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
     ("P_INV_KSW", 1, "inverter: the switching losses' loss voltage per volt of the DC link [-] (P_INV_V at the "
                      "battery's voltage)"),
     ("P_DT_K", 1, "inverter dead time: t_d / T_s [-] (P_DT_V at the battery's voltage)"),
-), size=56 + 64)
+    # not a parameter: a memo the algebraic model's kernels keep (``plant_flux_linkages``), 0 in a new vector
+    ("P_FLUX_MEMO", 5, "the last psi(i) solved: 1.0 when valid (0 = empty; clear it where P_FLUX_C changes), "
+                       "i_d, i_q [A], psi_d, psi_q [Wb]"),
+), size=56 + 64 + 5)
 
 #: the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``; ``plant_step`` adds each step's
 #: RK4-integrated energies): joules since the start, in the dq convention's power scaling (``P_K_DQ``)

@@ -73,6 +73,7 @@ from .layout import (
     P_FE_H,
     P_FLUX,
     P_FLUX_C,
+    P_FLUX_MEMO,
     P_G,
     P_GEAR_PF,
     P_INV,
@@ -339,33 +340,29 @@ FLUX_NEWTON_MAX = 30
 
 
 @kernel()
-def flux_currents(psi_d, psi_q, c, o):
-    """The currents (i_d, i_q) [A] of the flux linkages (psi_d, psi_q) [Wb]: the algebraic magnetic
-    model of Hinkkanen, Pescetto, Moelsae, Saarakkala, Pellegrino and Bojoi ("Sensorless
-    self-commissioning of synchronous reluctance motors at standstill without rotor locking", IEEE
-    Trans. Ind. Appl. 53(3), 2017), the magnet as a constant current i_f on the d axis in
-    series with the stator's (Awan, Song, Saarakkala and Hinkkanen, "Optimal torque control of
-    saturated synchronous motors: plug-and-play method", IEEE Trans. Ind. Appl. 54(6), 2018):
-    i_d = (a_d0 + a_dd |psi_d|^S + a_dq / (V + 2) |psi_d|^U |psi_q|^(V + 2)) psi_d - i_f,
-    i_q = (a_q0 + a_qq |psi_q|^T + a_dq / (U + 2) |psi_d|^(U + 2) |psi_q|^V) psi_q.
-    The gradient of the energy ``flux_energy`` (so reciprocal: di_d/dpsi_q = di_q/dpsi_d); the
-    coefficients from ``c[o + FX_*]``."""
-    ad = abs(psi_d)
-    aq = abs(psi_q)
-    a_dq = c[o + FX_ADQ]
-    u = c[o + FX_U]
-    v = c[o + FX_V]
-    du = ad ** u
-    qv = aq ** v
-    g_d = c[o + FX_AD0] + c[o + FX_ADD] * ad ** c[o + FX_S] + a_dq / (v + 2.0) * du * qv * aq * aq
-    g_q = c[o + FX_AQ0] + c[o + FX_AQQ] * aq ** c[o + FX_T] + a_dq / (u + 2.0) * du * ad * ad * qv
-    return g_d * psi_d - c[o + FX_IF], g_q * psi_q
+def flux_pow(x, e):
+    """x ** e for x >= 0, the powers of the algebraic model's terms: x itself where e = 1 (pow(x, 1) is x
+    exactly, so the result is the same), the library's pow otherwise. The cross-saturation's default
+    exponents U = V = 1 then cost no call: a pow is most of the model's arithmetic."""
+    if e == 1.0:
+        return x
+    return x ** e
 
 
 @kernel()
-def flux_jacobian(psi_d, psi_q, c, o):
-    """The Jacobian of ``flux_currents``, the incremental inverse inductances [1/H]:
-    (di_d/dpsi_d, di_d/dpsi_q = di_q/dpsi_d, di_q/dpsi_q), in closed form."""
+def flux_model(psi_d, psi_q, c, o):
+    """The algebraic magnetic model at the flux linkages (psi_d, psi_q) [Wb]: its currents (i_d, i_q) [A]
+    (``flux_currents``) and their Jacobian (g_dd, g_dq, g_qq) [1/H] (``flux_jacobian``) from one evaluation
+    of the terms' powers, which both share: the model of Hinkkanen, Pescetto, Moelsae, Saarakkala, Pellegrino
+    and Bojoi ("Sensorless self-commissioning of synchronous reluctance motors at standstill without rotor
+    locking", IEEE Trans. Ind. Appl. 53(3), 2017), the magnet as a constant current i_f on the d axis in
+    series with the stator's (Awan, Song, Saarakkala and Hinkkanen, "Optimal torque control of saturated
+    synchronous motors: plug-and-play method", IEEE Trans. Ind. Appl. 54(6), 2018):
+    i_d = (a_d0 + a_dd |psi_d|^S + a_dq / (V + 2) |psi_d|^U |psi_q|^(V + 2)) psi_d - i_f,
+    i_q = (a_q0 + a_qq |psi_q|^T + a_dq / (U + 2) |psi_d|^(U + 2) |psi_q|^V) psi_q,
+    the gradient of the energy ``flux_energy`` (so reciprocal: di_d/dpsi_q = di_q/dpsi_d), and in closed
+    form g_dd = di_d/dpsi_d, g_dq = di_d/dpsi_q = di_q/dpsi_d, g_qq = di_q/dpsi_q; the coefficients from
+    ``c[o + FX_*]``."""
     ad = abs(psi_d)
     aq = abs(psi_q)
     a_dq = c[o + FX_ADQ]
@@ -373,14 +370,34 @@ def flux_jacobian(psi_d, psi_q, c, o):
     t = c[o + FX_T]
     u = c[o + FX_U]
     v = c[o + FX_V]
-    du = ad ** u
-    qv = aq ** v
-    g_dd = (c[o + FX_AD0] + (s + 1.0) * c[o + FX_ADD] * ad ** s
+    ds = flux_pow(ad, s)
+    qt = flux_pow(aq, t)
+    du = flux_pow(ad, u)
+    qv = flux_pow(aq, v)
+    g_d = c[o + FX_AD0] + c[o + FX_ADD] * ds + a_dq / (v + 2.0) * du * qv * aq * aq
+    g_q = c[o + FX_AQ0] + c[o + FX_AQQ] * qt + a_dq / (u + 2.0) * du * ad * ad * qv
+    g_dd = (c[o + FX_AD0] + (s + 1.0) * c[o + FX_ADD] * ds
             + a_dq * (u + 1.0) / (v + 2.0) * du * qv * aq * aq)
-    g_qq = (c[o + FX_AQ0] + (t + 1.0) * c[o + FX_AQQ] * aq ** t
+    g_qq = (c[o + FX_AQ0] + (t + 1.0) * c[o + FX_AQQ] * qt
             + a_dq * (v + 1.0) / (u + 2.0) * du * ad * ad * qv)
     g_dq = a_dq * du * psi_d * qv * psi_q
-    return g_dd, g_dq, g_qq
+    return g_d * psi_d - c[o + FX_IF], g_q * psi_q, g_dd, g_dq, g_qq
+
+
+@kernel()
+def flux_currents(psi_d, psi_q, c, o):
+    """The currents (i_d, i_q) [A] of the flux linkages (psi_d, psi_q) [Wb] in the algebraic magnetic
+    model (``flux_model``, whose first two results they are)."""
+    r = flux_model(psi_d, psi_q, c, o)
+    return r[0], r[1]
+
+
+@kernel()
+def flux_jacobian(psi_d, psi_q, c, o):
+    """The Jacobian of ``flux_currents``, the incremental inverse inductances [1/H]:
+    (di_d/dpsi_d, di_d/dpsi_q = di_q/dpsi_d, di_q/dpsi_q), in closed form (``flux_model``'s last three)."""
+    r = flux_model(psi_d, psi_q, c, o)
+    return r[2], r[3], r[4]
 
 
 @kernel()
@@ -389,38 +406,65 @@ def flux_linkages(i_d, i_q, c, o):
     Newton on the 2x2 system from the linear guess psi0 + L_d0 i_d, L_q0 i_q (the incremental
     inductances at zero current), each step shortened while it does not lower the residual (the
     model's energy is convex: the residual has one zero), until the step is below 1e-14 of the flux
-    (then the flux is exact to round-off), ``FLUX_NEWTON_MAX`` iterations at most."""
+    (then the flux is exact to round-off), ``FLUX_NEWTON_MAX`` iterations at most. Each point is
+    evaluated once (``flux_model``: the currents and the Jacobian together); the Jacobian of the point a
+    step lands on is the next step's."""
     psi0 = c[o + FX_PSI0]
-    g_dd, _, g_qq = flux_jacobian(psi0, 0.0, c, o)
+    _, _, g_dd, _, g_qq = flux_model(psi0, 0.0, c, o)
     psi_d = psi0 + i_d / g_dd
     psi_q = i_q / g_qq
-    f_d, f_q = flux_currents(psi_d, psi_q, c, o)
+    f_d, f_q, j_dd, j_dq, j_qq = flux_model(psi_d, psi_q, c, o)
     r_d = f_d - i_d
     r_q = f_q - i_q
     res = abs(r_d) + abs(r_q)
     for _ in range(FLUX_NEWTON_MAX):
-        g_dd, g_dq, g_qq = flux_jacobian(psi_d, psi_q, c, o)
+        g_dd, g_dq, g_qq = j_dd, j_dq, j_qq  # at (psi_d, psi_q)
         det = g_dd * g_qq - g_dq * g_dq
         s_d = (g_qq * r_d - g_dq * r_q) / det
         s_q = (g_dd * r_q - g_dq * r_d) / det
         h = 1.0
         n_d = psi_d - s_d
         n_q = psi_q - s_q
+        landed = False  # the last point evaluated is the one the step lands on
         for _ in range(8):
-            f_d, f_q = flux_currents(n_d, n_q, c, o)
+            f_d, f_q, j_dd, j_dq, j_qq = flux_model(n_d, n_q, c, o)
             new = abs(f_d - i_d) + abs(f_q - i_q)
             if new <= res or res < 1e-9:
+                landed = True
                 break
             h = 0.5 * h
             n_d = psi_d - h * s_d
             n_q = psi_q - h * s_q
         psi_d = n_d
         psi_q = n_q
-        r_d = f_d - i_d
+        r_d = f_d - i_d  # (after eight halvings: the residual of the last point evaluated, as it was)
         r_q = f_q - i_q
         res = abs(r_d) + abs(r_q)
         if h * (abs(s_d) + abs(s_q)) <= 1e-14 * (abs(psi_d) + abs(psi_q) + psi0):
             break
+        if not landed:  # the Jacobian where the step landed
+            _, _, j_dd, j_dq, j_qq = flux_model(psi_d, psi_q, c, o)
+    return psi_d, psi_q
+
+
+@kernel()
+def plant_flux_linkages(i_d, i_q, pp):
+    """``flux_linkages`` of the plant's algebraic model (``P_FLUX_C``) with a memo of one entry in ``P_FLUX_MEMO``:
+    the currents a step ends with are those the outputs' torque, the shaft's iron losses and the next step's
+    start need, so the same Newton solve is asked for three times; the memo answers the repeats with the very
+    result (the key compares the currents and their signs, so -0.0 and 0.0 are told apart). A vector whose
+    coefficients change must clear the memo (``P_FLUX_MEMO`` = 0)."""
+    m = P_FLUX_MEMO
+    if (pp[m] != 0.0 and pp[m + 1] == i_d and pp[m + 2] == i_q
+            and math.copysign(1.0, pp[m + 1]) == math.copysign(1.0, i_d)
+            and math.copysign(1.0, pp[m + 2]) == math.copysign(1.0, i_q)):
+        return pp[m + 3], pp[m + 4]
+    psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+    pp[m] = 1.0
+    pp[m + 1] = i_d
+    pp[m + 2] = i_q
+    pp[m + 3] = psi_d
+    pp[m + 4] = psi_q
     return psi_d, psi_q
 
 
@@ -558,7 +602,7 @@ def shaft_load(i_d, i_q, omega_m, delta, t_e, pp):
     x = t_e - plant_friction(omega_m, pp)
     if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
         if pp[P_FLUX] != 0.0:  # the algebraic model's flux linkages
-            psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+            psi_d, psi_q = plant_flux_linkages(i_d, i_q, pp)
             x = x - iron_torque(omega_m, psi_d, psi_q, pp[P_N], pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
         else:
             f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
@@ -675,7 +719,7 @@ def plant_derivatives(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, pp):
     """d/dt of (i_d, i_q, omega_m, theta_e) for a stationary-frame voltage (``plant_rates``' first four;
     with the algebraic magnetic model di/dt = (di/dpsi) dpsi/dt at the fluxes of the currents)."""
     if pp[P_FLUX] != 0.0:
-        psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+        psi_d, psi_q = plant_flux_linkages(i_d, i_q, pp)
         r = plant_rates(psi_d, psi_q, omega_m, theta_e, v_alpha, v_beta, delta, pp)
         g_dd, g_dq, g_qq = flux_jacobian(psi_d, psi_q, pp, P_FLUX_C)
         return g_dd * r[0] + g_dq * r[1], g_dq * r[0] + g_qq * r[1], r[2], r[3]
@@ -689,7 +733,7 @@ def plant_outputs(i_d, i_q, omega_m, theta_e, delta, pp):
     ``shaft_load`` with the brake or the power_flow gear), eqs 1, 6."""
     i_alpha, i_beta = inverse_park(i_d, i_q, theta_e)
     if pp[P_FLUX] != 0.0:  # the algebraic model: eq 12's flux form x k_dq
-        psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+        psi_d, psi_q = plant_flux_linkages(i_d, i_q, pp)
         t_e = pp[P_K_DQ] * flux_torque(i_d, i_q, psi_d, psi_q, pp[P_N])
     elif pp[P_SAT] != 0.0:
         t_e = pp[P_K_DQ] * saturated_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], pp[P_N], pp[P_SAT_AD],
@@ -712,7 +756,7 @@ def stored_energies(i_d, i_q, omega_m, pp):
     with the paper's gear (eq 9's inertia, the vehicle's mass over eta) or 1/2 J_m omega^2 + 1/2 m_v v^2
     with the power_flow gear."""
     if pp[P_FLUX] != 0.0:
-        psi_d, psi_q = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+        psi_d, psi_q = plant_flux_linkages(i_d, i_q, pp)
         w = flux_energy(psi_d, psi_q, pp, P_FLUX_C)
     elif pp[P_SAT] != 0.0:
         w = field_energy(i_d, pp[P_L_D], pp[P_SAT_AD]) + field_energy(i_q, pp[P_L_Q], pp[P_SAT_AQ])
@@ -891,7 +935,7 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
     flux = pp[P_FLUX] != 0.0
     if flux:  # the algebraic model: RK4 on the flux linkages (``plant_rates``), from the state's currents
-        x0, x1 = flux_linkages(i_d, i_q, pp, P_FLUX_C)
+        x0, x1 = plant_flux_linkages(i_d, i_q, pp)
     for _ in range(n):
         ra = plant_rates(x0, x1, x2, x3, v_alpha, v_beta, delta, pp)
         a0, a1, a2, a3 = ra[0], ra[1], ra[2], ra[3]
