@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import hashlib
 import html
 import importlib
@@ -241,10 +242,19 @@ def check_pythonfmu(version: str | None = None) -> None:
 
 
 # -- sources and their hash ------------------------------------------------------------
+@functools.lru_cache(maxsize=256)
+def _import_nodes(source: str, where: str) -> tuple:
+    """The ``import`` and ``from ... import`` statements of a module's source, in ``ast.walk``'s order: every
+    run checks that its FMUs are up to date, and the FMUs share most of their files, so each text is parsed
+    and walked once a process (the text is the key: a file that changes is parsed again)."""
+    return tuple(node for node in ast.walk(ast.parse(source, where))
+                 if isinstance(node, (ast.Import, ast.ImportFrom)))
+
+
 def _project_imports(source: str, where: str) -> list[str]:
     """Modules of the project imported by ``source`` (only ``from X import ...`` allowed)."""
     found = []
-    for node in ast.walk(ast.parse(source, where)):
+    for node in _import_nodes(source, where):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 if alias.name.split(".")[0] in (PHYSICS_PACKAGE, PROJECT_MODULE_PREFIX):
@@ -307,8 +317,7 @@ def _physics_files(script: str) -> list[Path]:
                 todo.append(f"{dotted}.{name}".strip("."))
 
     for module in _fmus_modules(script):
-        tree = ast.parse((HERE / module).read_text(encoding="utf-8"), module)
-        for node in ast.walk(tree):
+        for node in _import_nodes((HERE / module).read_text(encoding="utf-8"), module):
             if isinstance(node, ast.ImportFrom) and not node.level and node.module:
                 head, _, rest = node.module.partition(".")
                 if head == PHYSICS_PACKAGE:
@@ -326,7 +335,7 @@ def _physics_files(script: str) -> list[Path]:
         if parts:
             todo.append(".".join(parts[:-1]))  # the enclosing package's __init__.py
         package = parts if path.name == "__init__.py" else parts[:-1]
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        for node in _import_nodes(path.read_text(encoding="utf-8"), str(path)):
             if isinstance(node, ast.ImportFrom) and node.level:
                 if node.level - 1 > len(package):
                     raise BuildError(f"{path}:{node.lineno}: import from outside the package")
