@@ -223,7 +223,8 @@ class FocSlave(DriveSlave):
 
     # -- the compiled step (``pmsm_ev.kernels.fmu``: ``unit_fmu_step`` on these buffers) -------------------------
     def compiled_slots(self) -> dict[str, int]:
-        return {**IO_SLOTS, "T_brake": _k.UIO_T_BRAKE}
+        return {**IO_SLOTS, "T_brake": _k.UIO_T_BRAKE, "i_dref": _k.UIO_I_DREF, "T_ref": _k.UIO_T_REF,
+                "ref_region": _k.UIO_REF_REGION}
 
     def compiled_step(self):
         """(the controllers' C step, the unit's buffer ``ControlUnit.io`` filled from the slave, the unit's state and

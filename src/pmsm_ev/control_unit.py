@@ -254,6 +254,7 @@ class ControlUnit:
         #: sample clock (``load_io``), which ``pmsm_ev.kernels.unit_fmu_step`` and ``unit_periods`` step on
         self.io = accel.vector(_k.UNIT_IO)
         self._t_brake = accel.direct(self._kernels.unit_t_brake)
+        self._reference_outputs = accel.direct(self._kernels.unit_reference_outputs)
         #: ``io`` read and written from Python (``FocSlave.do_step``): a memoryview of the numpy vector, whose items
         #: are Python floats (the same doubles, without numpy's scalar per read), or the list
         self._io_items = self.io if isinstance(self.io, list) else memoryview(self.io)
@@ -297,6 +298,7 @@ class ControlUnit:
         for name, slot in IO_SLOTS.items():
             io[slot] = values.get(name, 0.0)
         io[_k.UIO_T_BRAKE] = self.T_brake
+        io[_k.UIO_I_DREF], io[_k.UIO_T_REF], io[_k.UIO_REF_REGION] = self._reference_outputs(self.io, self._s, self._c)
         io[_k.UIO_DT] = dt or 0.0
         io[_k.UIO_T0] = t0
         io[_k.UIO_CLOCK] = 0.0 if k_next is None else 1.0
@@ -393,18 +395,15 @@ class ControlUnit:
     @property
     def i_dref(self) -> float:
         """The d-current reference of the last period [A]: the generator's (``reference`` "mtpa", "fw"), else
-        ``i_d_ref``; the sensorless unit in alignment and I-f: the vector's magnitude (on its d axis)."""
-        if not self._foc():
-            return float(self._s[_k.S_I_MAG])
-        return float(self._s[_k.S_I_DREF]) if self.reference else float(self._c[_k.C_I_D_REF])
+        ``i_d_ref``; the sensorless unit in alignment and I-f: the vector's magnitude (on its d axis) (the kernel
+        ``unit_reference_outputs``, which the compiled step calls too)."""
+        return float(self._reference_outputs(self.io, self._s, self._c)[0])
 
     @property
     def T_ref(self) -> float:
         """The motor's torque reference of the last period, after the limits [N m]: the generator's torque
-        given, else k_t i_qref (k_t = k_dq N psi); 0 in alignment and I-f."""
-        if not self._foc():
-            return 0.0
-        return float(self._s[_k.S_T_REF]) if self.reference else float(self._c[_k.C_K_T] * self._s[_k.S_I_QREF])
+        given, else k_t i_qref (k_t = k_dq N psi); 0 in alignment and I-f (``unit_reference_outputs``)."""
+        return float(self._reference_outputs(self.io, self._s, self._c)[1])
 
     @property
     def T_brake(self) -> float:
@@ -417,8 +416,8 @@ class ControlUnit:
     def ref_region(self) -> float:
         """The reference generator's region of the last period (``pmsm_ev.kernels.references`` REGION_*: 0 MTPA,
         1 field weakening, 2 MTPV, 3 current and voltage limits, 4 torque or current limit on MTPA, 5 no
-        torque within the limits); 0 in the paper's mode and in alignment and I-f."""
-        return float(self._s[_k.S_REGION]) if self.reference and self._foc() else 0.0
+        torque within the limits); 0 in the paper's mode and in alignment and I-f (``unit_reference_outputs``)."""
+        return float(self._reference_outputs(self.io, self._s, self._c)[2])
 
     @property
     def T_avail(self) -> float:

@@ -37,6 +37,8 @@ from .jit import F as _F
 from .jit import V as _V
 from .jit import sig as _sig
 from .layout import (
+    C_I_D_REF,
+    C_K_T,
     MODE_EKF,
     MODE_INJECTION,
     P_T_BRAKE,
@@ -50,8 +52,13 @@ from .layout import (
     PLANT_IO,
     PLANT_PARAMS,
     S_HOLD,
+    S_I_DREF,
+    S_I_MAG,
+    S_I_QREF,
     S_MODE,
+    S_REGION,
     S_T_BRAKE,
+    S_T_REF,
     UIO_CLOCK,
     UIO_DT,
     UIO_FAULT,
@@ -59,6 +66,7 @@ from .layout import (
     UIO_I_BETA,
     UIO_I_D,
     UIO_I_D_HAT,
+    UIO_I_DREF,
     UIO_I_Q,
     UIO_I_Q_HAT,
     UIO_I_QREF,
@@ -72,11 +80,13 @@ from .layout import (
     UIO_OMEGA_REF,
     UIO_P_CHARGE_MAX,
     UIO_P_DISCHARGE_MAX,
+    UIO_REF_REGION,
     UIO_REFERENCE,
     UIO_SAVE,
     UIO_T0,
     UIO_T_BRAKE,
     UIO_T_L_HAT,
+    UIO_T_REF,
     UIO_THETA_CTRL,
     UIO_THETA_HAT,
     UIO_THETA_MEAS,
@@ -145,6 +155,20 @@ def unit_t_brake(io, s):
     return 0.0
 
 
+@kernel(_sig(f"UniTuple({_F}, 3)", _V, _V, _V))
+def unit_reference_outputs(io, s, c):
+    """(``ControlUnit.i_dref``, ``T_ref``, ``ref_region``) of the state ``s`` (the unit's buffer ``io`` says its kind
+    and reference mode; ``c`` its parameters): the reference generator's d-current reference [A], torque given
+    [N m] and region where the unit runs FOC and has a generator; with no generator (the paper's references) the
+    d-current reference ``C_I_D_REF`` and k_t i_qref, region 0; in the sensorless unit's alignment and I-f the
+    vector's magnitude (on its d axis), 0, 0."""
+    if not (io[UIO_KIND] == UNIT_KIND_CONTROL or s[S_MODE] == MODE_EKF or s[S_MODE] == MODE_INJECTION):
+        return s[S_I_MAG], 0.0, 0.0
+    if io[UIO_REFERENCE] != 0.0:
+        return s[S_I_DREF], s[S_T_REF], s[S_REGION]
+    return c[C_I_D_REF], c[C_K_T] * s[S_I_QREF], 0.0
+
+
 @kernel(_sig("int64", _F, _F, _F, _F))
 def sample_instant(t, t0, dt, tolerance):
     """The index of the first sample instant t0 + k dt at or after t of a controller FMU's sample clock, an
@@ -208,6 +232,7 @@ def unit_fmu_step(io, s, c, t, h):
         unit_periods(io, s, c, k_end - k_next)
         io[UIO_K_NEXT] = k_end
     io[UIO_T_BRAKE] = unit_t_brake(io, s)
+    io[UIO_I_DREF], io[UIO_T_REF], io[UIO_REF_REGION] = unit_reference_outputs(io, s, c)
     return STEP_TAKEN
 
 

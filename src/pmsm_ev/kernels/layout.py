@@ -604,9 +604,14 @@ UNIT_IO_LAYOUT = Layout("controller FMU buffer", "UIO_", (
     ("UIO_V_DC_MEAS", 1, "input v_dc_meas: the DC link's measured voltage [V] (0: not measured)"),
     ("UIO_P_CHARGE_MAX", 1, "input P_charge_max: the battery's charge acceptance [W]"),
     ("UIO_P_DISCHARGE_MAX", 1, "input P_discharge_max: the battery's discharge power [W]"),
+    # the reference generator's outputs of the state (``unit_reference_outputs``), written after each step as
+    # T_brake is: the FMU's outputs i_dref, T_ref and ref_region, read from here with no Python
+    ("UIO_I_DREF", 1, "output i_dref: ControlUnit.i_dref of the state [A]"),
+    ("UIO_T_REF", 1, "output T_ref: ControlUnit.T_ref of the state [N m]"),
+    ("UIO_REF_REGION", 1, "output ref_region: ControlUnit.ref_region of the state"),
     # scratch
     ("UIO_SAVE", UNIT_STATE, "the state vector before the step (restored when a kernel raises)"),
-), size=34 + UNIT_STATE)
+), size=37 + UNIT_STATE)
 PLANT_IO_LAYOUT.export(globals())
 UNIT_IO_LAYOUT.export(globals())
 PLANT_IO = PLANT_IO_LAYOUT.size  #: length of the plant FMU's buffer
