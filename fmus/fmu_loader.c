@@ -25,8 +25,8 @@
  * compiled kernels have loaded numba's LLVM, before LLVM's (plan_release): the kernels are compiled in such a host
  * as in a Python program.
  *
- * Every other fmi2 function, and pmsm_fmu_fast_calls and pmsm_fmu_compiled_calls, are the binding's, called with
- * the same arguments: the instance is the binding's own. Python's C API is reached through dlsym only.
+ * Every other fmi2 function, and pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls and pmsm_fmu_pulls, are the
+ * binding's, called with the same arguments: the instance is the binding's own. Python's C API is reached through dlsym only.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -599,6 +599,14 @@ EXPORT unsigned long long pmsm_fmu_fast_calls(fmi2Component c)
 EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi2Component c)
 {
     calls_t f = (calls_t)fn("pmsm_fmu_compiled_calls");
+    return f ? f(c) : 0;
+}
+
+/* pmsm_fmu_pulls(instance): the lean binding's count of the compiled step's buffers handed back to Python, 0
+ * without one */
+EXPORT unsigned long long pmsm_fmu_pulls(fmi2Component c)
+{
+    calls_t f = (calls_t)fn("pmsm_fmu_pulls");
     return f ? f(c) : 0;
 }
 

@@ -101,6 +101,9 @@ static void* inner(const char* name)
  * 1 taken, 0 declined (nothing changed), -1 a kernel raised (nothing changed) */
 typedef int (*c_step_t)(double*, double*, double*, double, double);
 #define COMPILED_BUFFER (1L << 20)
+/* a slot of a value read through the slave's Python while the buffers hold its values (compiled_live): its getter
+ * reads the physics object's buffers, not the slave's attributes, so no compiled_pull is needed first */
+#define LIVE_SLOT (-2L)
 
 typedef struct {
     fmi2Component inner;        /* pythonfmu's instance */
@@ -128,12 +131,14 @@ typedef struct {
     /* the compiled step (the slave's compiled_step, compiled_pull, compiled_slots) */
     PyObject* compiled;         /* compiled_step(): None, or (step, io, a, b) addresses, the buffers filled */
     PyObject* pull;             /* compiled_pull(): the slave's attributes from the buffers */
-    long* slots;                /* by value reference: COMPILED_BUFFER * buffer + index, or -1 (read in Python) */
+    long* slots;                /* by value reference: COMPILED_BUFFER * buffer + index, LIVE_SLOT, or -1 (read in
+                                 * Python after compiled_pull) */
     c_step_t c_step;            /* the C function */
     double* buffers[3];         /* io, a, b */
     int c_owned;                /* the buffers hold the slave's inputs, outputs and state; its attributes are behind */
     int c_off;                  /* compiled_step said None: not asked again until re-armed (direct_path) */
     unsigned long long compiled_calls; /* calls served with no Python (pmsm_fmu_compiled_calls) */
+    unsigned long long pulls;   /* the buffers handed back to the slave's Python (pmsm_fmu_pulls) */
 } Instance;
 
 /* the offer made on this thread during the forwarded fmi2EnterInitializationMode */
@@ -292,12 +297,21 @@ EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi2Component c)
     return c == NULL ? 0 : ((Instance*)c)->compiled_calls;
 }
 
+/* pmsm_fmu_pulls(instance): how many times the binding handed the compiled step's buffers back to the slave's Python
+ * (compiled_pull: a forwarded call, a refusal asked, a value read that is neither in the buffers nor live, a step
+ * the C function declines), after which the next compiled call refills them (compiled_step) (0 for NULL) */
+EXPORT unsigned long long pmsm_fmu_pulls(fmi2Component c)
+{
+    return c == NULL ? 0 : ((Instance*)c)->pulls;
+}
+
 /* -- the compiled step: who holds the slave's values ------------------------------------------------------ */
 /* the slave's attributes from the buffers, before any Python runs on it (GIL held) */
 static void to_python(Instance* w)
 {
     if (!w->c_owned) return;
     w->c_owned = 0;
+    w->pulls++;
     PyObject* done = w->pull ? PyObject_CallObject(w->pull, NULL) : NULL;
     if (done == NULL) { /* cannot happen with the project's slaves; the compiled path stays off */
         PyErr_Clear();
@@ -608,14 +622,37 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
     if (!w->ready || nvr == 0) return forward_get_real(c, vr, nvr, value);
     for (size_t i = 0; i < nvr; i++)
         if ((Py_ssize_t)vr[i] >= w->n || w->names[vr[i]] == NULL) return forward_get_real(c, vr, nvr, value);
-    if (w->c_owned) { /* the buffers hold the values: read there, if every one is there */
+    if (w->c_owned) { /* the buffers hold the values: read there, if every one is there (or live) */
         size_t i = 0;
-        while (i < nvr && w->slots[vr[i]] >= 0) i++;
-        if (i == nvr) {
+        int live = 0;
+        while (i < nvr && (w->slots[vr[i]] >= 0 || w->slots[vr[i]] == LIVE_SLOT)) live |= w->slots[vr[i++]] < 0;
+        if (i == nvr && !live) {
             for (i = 0; i < nvr; i++) value[i] = *slot_of(w, vr[i]);
             w->fast_calls++;
             w->compiled_calls++;
             return fmi2OK;
+        }
+        if (i == nvr) { /* some live: their getters on the buffers, the GIL held; the buffers stay the slave's */
+            PyGILState_STATE gil = PyGILState_Ensure();
+            int ok = 1;
+            for (i = 0; ok && i < nvr; i++) {
+                if (w->slots[vr[i]] >= 0) {
+                    value[i] = *slot_of(w, vr[i]);
+                    continue;
+                }
+                PyObject* v = PyObject_GetAttr(w->slave, w->names[vr[i]]);
+                if (v == NULL) {
+                    ok = 0;
+                    break;
+                }
+                value[i] = PyFloat_AsDouble(v);
+                Py_DECREF(v);
+                if (value[i] == -1.0 && PyErr_Occurred()) ok = 0;
+            }
+            if (!ok) PyErr_Clear();
+            else w->fast_calls++;
+            PyGILState_Release(gil);
+            if (ok) return fmi2OK; /* else: the slave's attributes, as below */
         }
     }
     PyGILState_STATE gil = PyGILState_Ensure();

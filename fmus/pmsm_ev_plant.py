@@ -221,6 +221,10 @@ class PmsmEvPlant(DriveSlave):
         slots["P_dc"] = 2 * COMPILED_BUFFER + _k.E_P_DC
         return slots
 
+    def compiled_live(self) -> tuple[str, ...]:
+        # the stored energies of the plant's state: ``Plant.stored`` reads its buffer ``io`` and vector ``pp``
+        return ("W_magnetic", "E_kinetic")
+
     def compiled_step(self):
         """(the plant's C step, the plant's buffer ``Plant.io`` with the slave's inputs and outputs written into it,
         the plant's parameter and energy vectors); None where the kernels run as plain Python or the plant has an

@@ -150,6 +150,8 @@ def _release_wrapper_libraries() -> None:
 LEAN_OFFER = "pmsm_fmu_offer"
 #: the slots of ``DriveSlave.compiled_slots``: buffer b's element i is ``COMPILED_BUFFER * b + i``
 COMPILED_BUFFER = 1 << 20
+#: the slot of a ``DriveSlave.compiled_live`` output in the lean binding's table (``fmus/lean_binding.c``)
+LIVE_SLOT = -2
 #: the lean binding's offer function of each FMU library folder of this process (None: pythonfmu's own binary)
 _LEAN_OFFERS: dict[str, object] = {}
 
@@ -524,6 +526,8 @@ class DriveSlave(Fmi2Slave):
             slots = [-1] * len(self._real_names)
             for name, slot in self.compiled_slots().items():
                 slots[names[name]] = slot
+            for name in self.compiled_live():
+                slots[names[name]] = LIVE_SLOT
             offer((self, self.__dict__, raw.__get__(self) if raw is not None else step, self._defer_step,
                    self.log_queue, tuple(self._real_names), tuple(name is not None for name in self._real_inputs),
                    self.refusal, self.compiled_step if self._compiled_is_the_step() else None, self.compiled_pull,
@@ -544,6 +548,12 @@ class DriveSlave(Fmi2Slave):
         slot, ``COMPILED_BUFFER * b + i`` for element i of buffer b (0 the slave's buffer, 1 and 2 the vectors
         ``compiled_step`` names); the others are read through Python. None by default."""
         return {}
+
+    def compiled_live(self) -> tuple[str, ...]:
+        """Real outputs outside the compiled step's buffers whose getters read the physics object's buffers (not the
+        slave's attributes, which are behind while the buffers hold its values): the lean binding reads them
+        through Python without ``compiled_pull`` first, so that the buffers stay the slave's. None by default."""
+        return ()
 
     def compiled_step(self):
         """Called by the lean binding (the GIL held) before it steps in compiled code: None where this slave has

@@ -210,7 +210,11 @@ def fast_calls(fmu):
 def compiled_calls(fmu):
     return counter(fmu, "pmsm_fmu_compiled_calls")
 
+def pulls(fmu):
+    return counter(fmu, "pmsm_fmu_pulls")
+
 COUNTERS = os.environ.get("PAIR_COUNTERS", "1") == "1"
+READ_ALL = os.environ.get("PAIR_READ_ALL", "0") == "1"  # also every Real output of both, each step (a recorder)
 V_DC = float(os.environ.get("PAIR_V_DC", "0"))  # the plant's DC link (0: no voltage limit)
 
 class Pair:
@@ -222,6 +226,9 @@ class Pair:
         self.p_in = [pv["v_alpha"], pv["v_beta"]]
         self.p_out = [pv[n] for n in ("i_alpha", "i_beta", "theta_e", "omega_m")]
         self.ref, self.y, self.trace = ref, [0.0, 0.0, 0.0, 0.0], []
+        self.all = {fmu: [v.valueReference for v in unpacked[path][0].modelVariables
+                          if v.causality == "output" and v.type == "Real"]
+                    for fmu, path in ((self.ctrl, ctrl_path), (self.plant, plant_path))}
         self.calls = {"ctrl": 0, "plant": 0}
         for fmu in (self.ctrl, self.plant):
             fmu.instantiate()
@@ -236,7 +243,8 @@ class Pair:
         if not COUNTERS:
             return {}
         return {"fast": {"ctrl": fast_calls(self.ctrl), "plant": fast_calls(self.plant)},
-                "compiled": {"ctrl": compiled_calls(self.ctrl), "plant": compiled_calls(self.plant)}}
+                "compiled": {"ctrl": compiled_calls(self.ctrl), "plant": compiled_calls(self.plant)},
+                "pulls": {"ctrl": pulls(self.ctrl), "plant": pulls(self.plant)}}
 
     def step(self, k):
         t = k * H
@@ -250,6 +258,10 @@ class Pair:
         self.calls["ctrl"] += 3
         self.calls["plant"] += 3
         self.trace.append(u + self.y)
+        if READ_ALL:
+            for fmu, name in ((self.ctrl, "ctrl"), (self.plant, "plant")):
+                self.trace.append(fmu.getReal(self.all[fmu]))
+                self.calls[name] += 1
 
     def run(self):
         for k in range(steps):
@@ -290,7 +302,8 @@ def _all_fast(pair: dict) -> None:
     """Every fmi2SetReal, fmi2DoStep and fmi2GetReal made after the initialisation served by the binding itself,
     in compiled code: no Python on the way (``pmsm_fmu_compiled_calls``)."""
     none = {"ctrl": 0, "plant": 0}
-    assert pair["start"] == {"fast": none, "compiled": none}  # nothing before (initialisation: pythonfmu's path)
+    assert pair["start"] == {"fast": none, "compiled": none, "pulls": none}  # nothing before (pythonfmu's path)
+    assert pair["pulls"] == none  # the buffers never handed back to Python
     assert pair["calls"] == {"ctrl": 3 * STEPS, "plant": 3 * STEPS}
     assert pair["fast"] == pair["calls"]
     assert pair["compiled"] == pair["calls"]
@@ -323,6 +336,20 @@ def test_every_per_step_call_runs_compiled_code_with_the_python_step_still_there
     (plain,) = _pairs(builds, "lean", "serial", 80.0, PMSM_EV_JIT="0")
     assert plain["fast"] == plain["calls"] and plain["compiled"] == {"ctrl": 0, "plant": 0}
     assert plain["trace"] == pair["trace"]
+
+
+def test_a_recorder_reading_every_output_keeps_the_steps_compiled(builds):
+    """A master that records every Real output of both FMUs at each step (as a row is recorded): the controller's
+    are all in its buffers (every call compiled); the plant's stored energies W_magnetic and E_kinetic are computed
+    by its Python from the plant's buffers (``compiled_live``), so that get is direct but not compiled, and the
+    buffers stay the compiled step's: no pull, no refill (``pmsm_fmu_pulls`` 0). pythonfmu's numbers, bit for bit."""
+    (pair,) = _pairs(builds, "lean", "serial", 80.0, PAIR_READ_ALL="1")
+    (stock,) = _pairs(builds, "pythonfmu", "serial", 80.0, PAIR_READ_ALL="1", PAIR_COUNTERS="0")
+    assert pair["trace"] == stock["trace"]
+    assert pair["calls"] == {"ctrl": 4 * STEPS, "plant": 4 * STEPS}
+    assert pair["fast"] == pair["calls"]
+    assert pair["compiled"] == {"ctrl": 4 * STEPS, "plant": 3 * STEPS}
+    assert pair["pulls"] == {"ctrl": 0, "plant": 0}
 
 
 def test_a_step_the_compiled_code_declines_is_pythons(builds):
