@@ -26,7 +26,8 @@
  * as in a Python program.
  *
  * Every other fmi2 function, and pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls and pmsm_fmu_pulls, are the
- * binding's, called with the same arguments: the instance is the binding's own. Python's C API is reached through dlsym only.
+ * binding's, called with the same arguments: the instance is the binding's own. Python's C API is reached through
+ * dlsym only.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
