@@ -36,7 +36,7 @@ import pmsm_ev_fmus
 from fmpy_process import simulate_fmu
 from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
-from pmsm_ev import __version__
+from pmsm_ev import __version__, accel
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import (
     BatteryParams,
@@ -1002,12 +1002,16 @@ print(json.dumps({"i_d": float(r["i_d"][-1]), "v_q": float(q["v_q"][-1]), "modul
 def test_fmus_run_where_the_project_is_not_installed(fmus, tmp_path, host):
     """``python -S``: no site processing, so the project's editable install is invisible; the
     PYTHONPATH holds only the site-packages directory (numpy, fmpy, numba). Without numba
-    the FMUs run their kernels as plain Python, with the same numbers."""
+    the FMUs run their kernels as plain Python, with the same numbers. With numba they use the kernels' cache
+    ``PMSM_EV_CACHE_DIR`` names, this process's (warm: its compilation from cold is
+    ``tests/test_kernels.py``'s), under a HOME of their own."""
     site_packages = str(Path(np.__file__).resolve().parents[1])
     assert not (Path(site_packages) / "pmsm_ev").exists()
     script = tmp_path / "isolated.py"
     script.write_text(ISOLATED_SCRIPT)
-    env = {"PATH": os.environ.get("PATH", ""), "PYTHONPATH": site_packages, "HOME": str(tmp_path)}
+    cache = accel.cache_dir()
+    env = {"PATH": os.environ.get("PATH", ""), "PYTHONPATH": site_packages, "HOME": str(tmp_path),
+           accel.ENV_CACHE_DIR: str(cache)}
     r = subprocess.run([sys.executable, "-S", str(script), str(fmus["PmsmEvPlant"]), str(fmus["FocEkf5"]), host],
                        capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
@@ -1015,8 +1019,7 @@ def test_fmus_run_where_the_project_is_not_installed(fmus, tmp_path, host):
     tags = {fmu_build.read_build_info(fmus[n])["tag"] for n in ("PmsmEvPlant", "FocEkf5")}
     assert {f"pmsm_ev_{tag}" for tag in tags} <= set(out["modules"])
     # the bundled code, or (compiled with numba) the copy of the bundled kernels package that
-    # pmsm_ev.accel keeps in the user's cache (here under HOME = tmp_path)
-    cache = tmp_path / ".cache" / "pmsm-ev-cosim"
+    # pmsm_ev.accel keeps in the kernels' cache
     compiled = [f for f in out["files"] if Path(f).parent.parent == cache]
     assert all("/resources/" in f and "/work/" not in f.replace(str(tmp_path), "")
                for f in out["files"] if f not in compiled)
