@@ -267,6 +267,13 @@ def cmd_envelope(a) -> int:
           f"{rad_s(sp['base_speed'])}, MTPV from {rad_s(sp['mtpv_speed'])}, max speed {rad_s(sp['max_speed'])}")
     for f in summary["figures"]:
         print(f)
+    if a.published:
+        from . import published  # noqa: PLC0415 - the measured map and its figure: only with --published
+
+        c = published.write(params, Path(a.out))
+        print(c["figure"])
+        print(Path(a.out) / "efficiency_vs_published.md")
+        print(c["table"], end="")
     print(Path(a.out) / "envelope.json")
     return 0
 
@@ -455,6 +462,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--run", nargs="+", metavar="RUN_DIR", help="overlay the operating points of these runs")
     ev.add_argument("--speed-max", type=_positive, metavar="RAD_S", help="the speed axis's end [rad/s]")
     ev.add_argument("--no-efficiency", action="store_true", help="only the envelope (the map takes ~10 s)")
+    ev.add_argument("--published", action="store_true",
+                    help="set the map beside a measured one (the 2004 Prius motor and inverter, ORNL/TM-2006/423 "
+                         "Table B-1) in per-unit: OUT/efficiency_vs_published.png and .md, envelope.json's "
+                         "'published' (~10 s more)")
     ev.add_argument("--out", metavar="DIR", default="runs/envelope", help="output directory (default: runs/envelope)")
     ev.set_defaults(func=cmd_envelope)
 

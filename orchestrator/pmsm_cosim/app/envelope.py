@@ -15,6 +15,10 @@ Two figures and a JSON file into OUT:
   P_dc / P_shaft);
 * ``envelope.json``: the limits and the region speeds.
 
+With ``--published``, ``published.py`` sets the map beside a measured one (the 2004 Prius motor and inverter,
+ORNL/TM-2006/423 Table B-1) in per-unit: ``efficiency_vs_published.png`` and ``.md``, ``envelope.json``'s
+``published``.
+
 The parameters are the package's defaults with the reference generator in field weakening on a 360 V DC
 link (``reference = "fw"``, ``v_dc = 360``); ``--set NAME=VALUE`` changes any field of ``MotorParams``,
 ``ControllerParams``, ``PlantParams`` or ``VehicleParams`` (a name in several groups changes it in each:
