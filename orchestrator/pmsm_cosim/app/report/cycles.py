@@ -1,7 +1,7 @@
 """The report's section "Drive cycles": the shipped cycle scenarios (``wltc3b``, ``udds``, ``hwfet``, ``us06``,
 sensored and truly sensorless from standstill, and ``wltc3b-hilly``), held to the regulatory tolerance band
-(metrics.json's ``trace``, ``pmsm_ev.results.trace_figures``), their synchronism (``synchronism``), and their
-energy over the cycle and per WLTC phase (``pmsm_ev.cycle_energy``: Wh/km, regeneration, losses by kind, the
+(metrics.json's ``trace``, ``metrics.trace.trace_figures``), their synchronism (``synchronism``), and their
+energy over the cycle and per WLTC phase (``metrics.cycle_energy``: Wh/km, regeneration, losses by kind, the
 balance and the wheel energy against the trace's road-load integral). Every number in the text is computed from
 the runs (docs/cycles.md, "The report's cycles")."""
 
@@ -12,10 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev import cycle_energy, cycles, references
-from pmsm_ev.results import KMH, TRACE_BAND_KMH, row_timing_corrected_angle_error, run_timing, trace_band
+from pmsm_ev import cycles, references
+from pmsm_ev.results import row_timing_corrected_angle_error
 
 from .. import envelope
+from ..metrics import cycle_energy
+from ..metrics.rows import KMH
+from ..metrics.trace import TRACE_BAND_KMH, trace_band
+from ..metrics.windows import run_timing
 from .configs import CYCLE_RUNS as RUNS
 from .speed_range import SCENARIO_SETS
 
@@ -85,7 +89,7 @@ def _phase_at(cycle, t: float) -> str:
 
 def excursions_by_phase(r: dict, cycle, trace: dict) -> str:
     """The excursions outside the band by the phase they start in, with their total time: "low 2 (3.10 s), ..."
-    (the rows outside ``trace_band``, as ``pmsm_ev.results.trace_figures`` counts them)."""
+    (the rows outside ``trace_band``, as ``pmsm_cosim.app.metrics.trace.trace_figures`` counts them)."""
     t = r["time"]
     keep = t <= trace["t_end"] + 1e-9
     t, v = t[keep], r["v_vehicle"][keep]

@@ -16,9 +16,9 @@ from pmsm_ev.params import (
     VehicleParams,
     equivalent_inertia,
 )
-from pmsm_ev.results import angle_recovery, plateau_split, run_timing
 
 from ..compare import COLUMNS, Run, format_value, load_run, markdown_table, plot_overlay, summarize
+from ..metrics.windows import angle_recovery, plateau_split, run_timing
 from . import cycles, sensorless, speed_range, synchronism
 from .configs import FIG_NAMES, FLYING_SPEED, REALISM_SCENARIOS, REALISM_SETUPS, SETUPS, T_FROM, Config
 
@@ -114,7 +114,7 @@ SETTLE = 10.0
 
 def load_split(run: Run, t_from: float) -> dict:
     """Angle drift and speed ripple on level (0°) and on inclined plateaus of a run
-    (``pmsm_ev.results.plateau_split``, the peak-to-peak from ``SETTLE`` s after each step)."""
+    (``pmsm_cosim.app.metrics.windows.plateau_split``, the peak-to-peak from ``SETTLE`` s after each step)."""
     return plateau_split(run.r, t_from, SETTLE)
 
 
@@ -188,7 +188,7 @@ RECOVERED_HOLD = 10.0
 
 
 def recovery(run: Run) -> dict:
-    """The angle error's recovery from a wrong start (``pmsm_ev.results.angle_recovery`` with the
+    """The angle error's recovery from a wrong start (``pmsm_cosim.app.metrics.windows.angle_recovery`` with the
     band ``RECOVERED`` held for ``RECOVERED_HOLD``)."""
     return angle_recovery(run.r, RECOVERED, RECOVERED_HOLD)
 

@@ -2,7 +2,7 @@
 standstill (or a flying start) on a level road to the top speed, 131 km/h, then regenerative braking,
 with three controllers: the sensored drive (``acceleration``), the stationary-frame EKF5 from a flying
 start (``acceleration-flying``) and the sensorless unit from standstill (``acceleration-if``).
-The figures of merit are ``pmsm_ev.results.acceleration_figures`` and ``energy_metrics`` of each run
+The figures of merit are ``pmsm_cosim.app.metrics.speed_range.acceleration_figures`` and ``energy_metrics`` of each run
 (metrics.json), the angle error with the row-timing term removed (``row_timing_corrected_angle_error``);
 the envelope is the scenario's controller's (``pmsm_ev.references``, docs/speed-range.md)."""
 
@@ -15,9 +15,12 @@ import numpy as np
 
 from pmsm_ev import references
 from pmsm_ev.params import VehicleParams
-from pmsm_ev.results import KMH, figures_where, row_timing_corrected_angle_error, run_timing, wheel_ratio
+from pmsm_ev.results import row_timing_corrected_angle_error
 
 from .. import envelope
+from ..metrics.rows import KMH
+from ..metrics.speed_range import wheel_ratio
+from ..metrics.windows import figures_where, run_timing
 from .configs import SPEED_RANGE_RUNS as RUNS
 
 #: the scenario's controller settings, for its envelope (acceleration.toml's ctrl start values)

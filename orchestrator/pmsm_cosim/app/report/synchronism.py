@@ -7,7 +7,7 @@ and noise, the sensored drive as the reference. The runs are the monolithic loop
 (``pmsm_cosim.app.reference.run_reference``: the same kernels in the co-simulation's order; equal
 to the FMUs under the master to 1e-9, ``tests/test_sensorless.py``), ``--jobs`` processes at a
 time, into ``RUNS/sync/<case>-<controller>-<k>/``; the figures of merit are
-``pmsm_ev.results.synchronism_metrics`` and the targets those of the issue that asked for it.
+``pmsm_cosim.app.metrics.synchronism.synchronism_metrics`` and the targets those of the issue that asked for it.
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from pmsm_ev.params import LOW_SPEED_STRATEGIES, SENSORLESS_EKF, DriveParams, InjectionParams, PlantParams
-from pmsm_ev.results import synchronism_metrics
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase
 
 from ...engine.recording import read_results
+from ..metrics.synchronism import synchronism_metrics
 from ..reference import run_reference
 
 #: current-sensor noise of every run [A] and the first seed (run k of a case has seed k + 1)

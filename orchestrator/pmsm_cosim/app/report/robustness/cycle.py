@@ -3,7 +3,7 @@ figures from its summary row and metrics.json, the failure rule, the counts with
 distribution, what a sample costs, and its section of the page (its figure: ``figures.cycle_figure``).
 
 **The failure rule** (defined here once; the page quotes it): a sample fails if it did not complete, or its
-speed was inside the tolerance band (``pmsm_ev.results.trace_figures``: +-2 km/h around the trace, taken
+speed was inside the tolerance band (``pmsm_cosim.app.metrics.trace.trace_figures``: +-2 km/h around the trace, taken
 over +-1 s) for less than ``INSIDE_MIN`` of the cycle (metrics.json ``trace`` ``inside_share``; a completed
 run without it fails too), or its angle slipped an electrical turn (``synchronism`` ``slipped_turns``), or
 the controller's safe state latched (``synchronism`` ``fault_latched``).

@@ -13,9 +13,9 @@ import math
 from pathlib import Path
 
 from pmsm_ev.params import MotorParams
-from pmsm_ev.results import slipped_turns
 
 from ....engine.recording import read_results
+from ...metrics.synchronism import slipped_turns
 from ...studies import load_sweep
 from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, failure_reasons, findings, where_text
 from .interval import wilson
@@ -29,7 +29,7 @@ BEGIN, END = "<!-- injection-mc: generated -->", "<!-- /injection-mc -->"
 
 def judged_rows(out: Path) -> list[dict]:
     """``cycle_rows``, each completed sample's slipped turns counted again from its results.csv by
-    ``pmsm_ev.results.slipped_turns`` as it is now (a sample's metrics.json keeps the count of the code that
+    ``metrics.synchronism.slipped_turns`` as it is now (a sample's metrics.json keeps the count of the code that
     ran it), its failure reasons with them; the samples not run yet (a sweep stopped and to be resumed) left out."""
     rows = [r for r in cycle_rows(out) if r["status"] != NOT_RUN]
     for r in rows:
