@@ -16,6 +16,7 @@ from pmsm_ev.params import MotorParams
 
 from ....engine.recording import read_results
 from ...metrics.synchronism import slipped_turns
+from ...metrics.trace import TRACE_BAND_KMH
 from ...studies import load_sweep
 from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, failure_reasons, findings, where_text
 from .interval import wilson
@@ -127,7 +128,8 @@ def section(out: Path, machine: str, beside: Path | None = None, fresh: Path | N
              "R_s 0 … +50 %, ψ −12 % … 0; occupants; a grade offset ±2 %; current-sensor offsets ±1 A and gains "
              "±1 %; 2 µs of dead time, its compensation off by ±20 %; 1 A of noise; seed 36, a draw no earlier "
              "study used), the unit with `low_speed = \"injection\"` through the whole WLTC 3b. A sample fails if "
-             f"it did not complete, or was inside the ±2 km/h band for less than {100 * INSIDE_MIN:.0f} % of the "
+             f"it did not complete, or was inside the ±{TRACE_BAND_KMH:g} km/h band for less than "
+             f"{100 * INSIDE_MIN:.0f} % of the "
              "cycle, or slipped an electrical turn, or latched the safe state.", ""]
     if not rows:
         return lines + ["No sample has run yet.", "", END]
