@@ -10,6 +10,7 @@ KMH = 3.6  #: km/h per m/s
 
 
 def rms(x) -> float:
+    """The root mean square of ``x`` (nan if empty)."""
     return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float("nan")
 
 

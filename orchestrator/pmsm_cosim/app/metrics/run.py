@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pmsm_ev.results import BATTERY_COLUMNS, ENERGY_COLUMNS, SENSORLESS_COLUMNS, wrap_angle
+from pmsm_ev.results import BATTERY_COLUMNS, ENERGY_COLUMNS, SENSORLESS_COLUMNS, angle_error
 
 from .energy import battery_metrics, energy_metrics
 from .rows import rms
@@ -26,7 +26,7 @@ def compute_metrics(r: dict[str, np.ndarray]) -> dict:
     """Figures of merit from recorded columns (``pmsm_ev.results``: the result contract)."""
     t = r["time"]
     speed_err = r["omega_ref"] - r["omega_m"]
-    theta_err = wrap_angle(r["theta_hat"] - r["theta_e"])
+    theta_err = angle_error(r)
     m = {
         "speed_rms_error": rms(speed_err),
         "omega_hat_rms_error": rms(r["omega_hat"] - r["omega_m"]),

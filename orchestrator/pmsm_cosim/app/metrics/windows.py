@@ -11,7 +11,13 @@ import math
 import numpy as np
 
 from pmsm_ev.params import MotorParams
-from pmsm_ev.results import angle_error_unwrapped, eq31_load_torque, row_timing_corrected_angle_error, wrap_angle
+from pmsm_ev.results import (
+    angle_error,
+    angle_error_unwrapped,
+    eq31_load_torque,
+    row_timing_corrected_angle_error,
+    wrap_angle,
+)
 
 from .rows import rms, roll_back
 from .run import compute_metrics
@@ -176,7 +182,7 @@ def angle_recovery(r: dict[str, np.ndarray], band: float, hold: float) -> dict:
     [rad], and the first time it is below ``band`` [rad] and stays there for ``hold`` [s]
     (``t_recovered``; None: never)."""
     t = r["time"]
-    err = (r["theta_hat"] - r["theta_e"] + math.pi) % (2 * math.pi) - math.pi
+    err = angle_error(r)
     ok = np.abs(err) < band
     t_rec = None
     for i in np.nonzero(ok)[0]:

@@ -1,0 +1,86 @@
+"""The report's sentences that state facts of the drive are computed from the parameters and runs they
+describe (docs/architecture.md, "Physics and policy"): with the parameters as shipped each gives the text of
+the generated page (docs/results.md, as `pmsm-cosim report` wrote it), and a changed parameter changes it.
+A whole report is ~70 runs; these check the sentence-producing functions alone."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.report import document, speed_range, synchronism
+from pmsm_cosim.app.report.configs import T_FROM
+from pmsm_ev.params import ControllerParams, EkfParams, MotorParams, StartupParams, VehicleParams
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE = (ROOT / "docs" / "results.md").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("name, text", [
+    ("columns", lambda: document.columns_text(T_FROM)),
+    ("parameters", lambda: "\n".join(document._param_lines(T_FROM))),
+    ("EKF4 tuning", document.ekf4_tuning_text),
+    ("realism", document.realism_text),
+    ("what would change", document.what_would_change_text),
+    ("synchronism", lambda: synchronism.intro(8)),
+    ("acceleration route", lambda: speed_range.route_text(speed_range.route(load_system("acceleration"),
+                                                                               VehicleParams()))),
+])
+def test_the_sentences_are_the_pages(name, text):
+    """As shipped, each computed sentence is the generated page's, byte for byte."""
+    assert text() in PAGE, name
+
+
+def test_the_ekf_sentences_follow_its_covariances(monkeypatch):
+    e = replace(EkfParams(), r_i=1.0, q_omega_ekf4=0.04)
+    monkeypatch.setattr(document, "EkfParams", lambda: e)
+    assert "R = 1 A² (σ = 1 A)" in document.realism_text()
+    assert f"q_ω = 0.04 (rad/s)² per step, {0.04 / e.q_omega:g} times the EKF5's" in document.ekf4_tuning_text()
+
+
+def test_the_columns_follow_the_friction_and_the_bands(monkeypatch):
+    monkeypatch.setattr(document, "MotorParams", lambda: replace(MotorParams(), B_m=2e-3, T_m0=0.1))
+    monkeypatch.setattr(document, "SETTLING_BAND", 2.0)
+    monkeypatch.setattr(document, "PLATEAU_WINDOW", 3.0)
+    text = document.columns_text(T_FROM)
+    assert "B_m ω + T_m0 ≈ 0.5 N m" in text  # 2e-3 x 200 rad/s + 0.1
+    assert "until it stays within 2 rad/s" in text and "the 3 s means" in text
+
+
+def test_what_would_change_follows_the_inertia_and_the_rate(monkeypatch):
+    m, v = MotorParams(), VehicleParams()
+    monkeypatch.setattr(document, "MotorParams", lambda: replace(m, J_m=2 * m.J_m))
+    monkeypatch.setattr(document, "ControllerParams", lambda: replace(ControllerParams(), omega_n=5.0))
+    monkeypatch.setattr(document, "DT_DEFAULT", 5e-5)
+    text = document.what_would_change_text()
+    ratio = (2 * m.J_m + v.reflected_inertia) / (2 * m.J_m)
+    assert f"J_m = J_eq/{ratio:.0f} (eqs 30-31)" in text
+    assert "ω_n = 5 rad/s in every run here" in text and "at 20 kHz" in text
+
+
+def test_the_synchronism_sentence_follows_its_bands_and_the_alignment(monkeypatch):
+    monkeypatch.setattr(synchronism, "SYNC_BAND", 12.0)
+    monkeypatch.setattr(synchronism, "SYNC_REL", 0.2)
+    monkeypatch.setattr(synchronism, "RECOVERY_BAND", 25.0)
+    base = synchronism.drive_params
+
+    def slower(controller, k, strategy="if"):
+        p = base(controller, k, strategy)
+        return replace(p, startup=replace(StartupParams(), t_sweep=2.0))
+
+    monkeypatch.setattr(synchronism, "drive_params", slower)
+    text = synchronism.intro(8)
+    assert "more than 12 rad/s + 20 %" in text and "|ω_m − ω_ref| ≤ 25 rad/s" in text
+    assert "the unit's 3.3 s alignment" in text
+
+
+def test_the_acceleration_route_follows_the_wheel():
+    v = VehicleParams()
+    rt = speed_range.route(load_system("acceleration"), replace(v, r_w=2 * v.r_w))
+    base = speed_range.route(load_system("acceleration"), v)
+    assert math.isclose(rt["top_kmh"], 2 * base["top_kmh"]) and math.isclose(rt["decel"], 2 * base["decel"])
+    assert rt["t_brake"] == base["t_brake"] == 22.5
