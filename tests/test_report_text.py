@@ -1,7 +1,8 @@
 """The report's sentences that state facts of the drive are computed from the parameters and runs they
 describe (docs/architecture.md, "Physics and policy"): with the parameters as shipped each gives the text of
-the generated page (docs/results.md, as `pmsm-cosim report` wrote it), and a changed parameter changes it.
-A whole report is ~70 runs; these check the sentence-producing functions alone."""
+the generated page (docs/results.md as `pmsm-cosim report` wrote it, docs/robustness.md as `pmsm-cosim report
+--robustness` did), and a changed parameter changes it. A whole report is ~70 runs, the robustness page
+hundreds; these check the sentence-producing functions alone."""
 
 from __future__ import annotations
 
@@ -14,6 +15,9 @@ import pytest
 from pmsm_cosim.app.drive import load_system
 from pmsm_cosim.app.report import document, speed_range, synchronism
 from pmsm_cosim.app.report.configs import T_FROM
+from pmsm_cosim.app.report.robustness import cycle as robustness_cycle
+from pmsm_cosim.app.report.robustness import injection_mc
+from pmsm_cosim.app.studies import load_sweep
 from pmsm_ev.params import ControllerParams, EkfParams, MotorParams, StartupParams, VehicleParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -84,3 +88,36 @@ def test_the_acceleration_route_follows_the_wheel():
     base = speed_range.route(load_system("acceleration"), v)
     assert math.isclose(rt["top_kmh"], 2 * base["top_kmh"]) and math.isclose(rt["decel"], 2 * base["decel"])
     assert rt["t_brake"] == base["t_brake"] == 22.5
+
+
+ROBUSTNESS = (ROOT / "docs" / "robustness.md").read_text(encoding="utf-8")
+SUMMARY = ("run,status,plant.m_v,offset.delta,inside_share,slipped_turns,fault_latched,dc_Wh_per_km,wall_time_s,"
+           "us_per_step\n0000_a,completed,900,0.1,1.0,0,0,120.0,75.0,4.0\n")
+
+
+def _failure_rule(lines: list[str]) -> str:
+    text = "\n".join(lines)
+    start = text.index("A sample **fails**")
+    return text[start:text.index(".", text.index("latched", start)) + 1]
+
+
+def test_the_monte_carlo_failure_rules_are_the_pages(tmp_path):
+    """docs/robustness.md (hundreds of whole-cycle runs): its failure rules as the generators state them, the
+    trace band's from ``metrics.trace``, are the page's."""
+    (tmp_path / "summary.csv").write_text(SUMMARY, encoding="utf-8")
+    rule = _failure_rule(robustness_cycle.cycle_text(robustness_cycle.cycle_rows(tmp_path),
+                                                     load_sweep("cycle_montecarlo_wltc3b"), None))
+    assert "±2 km/h / ±1 s tolerance band" in rule and rule in ROBUSTNESS
+    intro = injection_mc.section(tmp_path, "a test machine")[4]
+    assert "inside the ±2 km/h band" in intro and intro in ROBUSTNESS
+
+
+def test_the_monte_carlo_failure_rules_follow_the_band(tmp_path, monkeypatch):
+    (tmp_path / "summary.csv").write_text(SUMMARY, encoding="utf-8")
+    monkeypatch.setattr(robustness_cycle, "TRACE_BAND_KMH", 3.2)
+    monkeypatch.setattr(robustness_cycle, "TRACE_WINDOW_S", 2.0)
+    monkeypatch.setattr(injection_mc, "TRACE_BAND_KMH", 3.2)
+    rule = _failure_rule(robustness_cycle.cycle_text(robustness_cycle.cycle_rows(tmp_path),
+                                                     load_sweep("cycle_montecarlo_wltc3b"), None))
+    assert "±3.2 km/h / ±2 s tolerance band" in rule
+    assert "inside the ±3.2 km/h band" in injection_mc.section(tmp_path, "a test machine")[4]
