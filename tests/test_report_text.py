@@ -30,6 +30,8 @@ PAGE = (ROOT / "docs" / "results.md").read_text(encoding="utf-8")
     ("EKF4 tuning", document.ekf4_tuning_text),
     ("realism", document.realism_text),
     ("what would change", document.what_would_change_text),
+    ("scenario 1", lambda: f"## Scenario 1 ({document.elevation_text('scenario1')})\n"),
+    ("scenario 2", lambda: f"## Scenario 2 ({document.elevation_text('scenario2')})\n"),
     ("synchronism", lambda: synchronism.intro(8)),
     ("acceleration route", lambda: speed_range.route_text(speed_range.route(load_system("acceleration"),
                                                                                VehicleParams()))),
@@ -44,6 +46,33 @@ def test_the_ekf_sentences_follow_its_covariances(monkeypatch):
     monkeypatch.setattr(document, "EkfParams", lambda: e)
     assert "R = 1 A² (σ = 1 A)" in document.realism_text()
     assert f"q_ω = 0.04 (rad/s)² per step, {0.04 / e.q_omega:g} times the EKF5's" in document.ekf4_tuning_text()
+
+
+def test_the_variants_follow_their_system_files(monkeypatch):
+    def changed(name):
+        spec = load_system(name)
+        if name == "scenario2-offset":
+            spec.component("plant").start.update(sensor_offset_a=-0.5, sensor_offset_b=1.5)
+        if name == "scenario2-angle-error":
+            spec.component("ctrl").start["x0_theta"] = 0.25
+        return spec
+
+    monkeypatch.setattr(document, "load_system", changed)
+    text = document.realism_text()
+    assert "(−0.5 A on phase a, +1.5 A on phase b)" in text and "observers guessing 0.25)" in text
+
+
+def test_the_elevation_headings_follow_the_tables(monkeypatch):
+    def changed(name):
+        spec = load_system(name)
+        table = spec.signals["delta"].profile
+        spec.signals["delta"] = replace(spec.signals["delta"], profile=replace(
+            table, values=tuple(2 * v for v in table.values), times=tuple(2 * t for t in table.times)))
+        return spec
+
+    monkeypatch.setattr(document, "load_system", changed)
+    assert document.elevation_text("scenario1") == "elevation 0 → 50 → 0° in 10° steps every 60 s"
+    assert document.elevation_text("scenario2") == "0 / 44° alternating every 60 s from 100 s"
 
 
 def test_the_columns_follow_the_friction_and_the_bands(monkeypatch):

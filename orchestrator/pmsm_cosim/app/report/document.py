@@ -19,6 +19,7 @@ from pmsm_ev.params import (
 from pmsm_ev.scenarios import SCENARIO_STOP_TIME
 
 from ..compare import COLUMNS, Run, format_value, load_run, markdown_table, plot_overlay, summarize
+from ..drive import load_system
 from ..metrics.run import PLATEAU_WINDOW, SETTLING_BAND
 from ..metrics.windows import angle_recovery, plateau_split, run_timing
 from . import cycles, sensorless, speed_range, synchronism
@@ -231,12 +232,25 @@ def ekf4_tuning_text() -> str:
             f"{e.q_omega_ekf4 / e.q_omega:g} times the EKF5's) follows the deceleration without a load state")
 
 
+def _signed(x: float) -> str:
+    return f"{x:+g}".replace("-", "−")
+
+
 def realism_text() -> str:
-    """The section's introduction: the variants, and the EKFs' measurement covariance (``EkfParams.r_i``)."""
-    r = EkfParams().r_i
-    return ("The scenario variants `scenario2-noisy` (σ = 0.1 A per phase current), `scenario2-noisy1A` "
-            "(σ = 1 A), `scenario2-offset` (+2 A on phase a, −1 A on phase b) and `scenario2-angle-error` "
-            "(rotor at θ(0) = 0.5 rad, observers guessing 0), for EKF5 paper mode, EKF5 sensorless, the "
+    """The section's introduction: the variants as their system files set the plant (``REALISM_SCENARIOS``:
+    noise, offsets, initial angle) and the observers' guess, and the EKFs' measurement covariance
+    (``EkfParams.r_i``)."""
+    e = EkfParams()
+    plant = {name: load_system(name).component("plant").start for _, name, _ in REALISM_SCENARIOS}
+    guess = {name: load_system(name).component("ctrl").start.get("x0_theta", e.x0_theta)
+             for _, name, _ in REALISM_SCENARIOS}
+    noisy, noisy1, offset, angle = (name for _, name, _ in REALISM_SCENARIOS)
+    r = e.r_i
+    return (f"The scenario variants `{noisy}` (σ = {plant[noisy]['sensor_noise']:g} A per phase current), "
+            f"`{noisy1}` (σ = {plant[noisy1]['sensor_noise']:g} A), `{offset}` "
+            f"({_signed(plant[offset]['sensor_offset_a'])} A on phase a, {_signed(plant[offset]['sensor_offset_b'])} A "
+            f"on phase b) and `{angle}` (rotor at θ(0) = {plant[angle]['theta_e0']:g} rad, observers guessing "
+            f"{guess[angle]:g}), for EKF5 paper mode, EKF5 sensorless, the "
             f"stationary-frame EKF5 (flying start) and EKF4 paper mode. The EKFs keep R = {r:g} A² "
             f"(σ = {math.sqrt(r):g} A) in all runs.\n")
 
@@ -260,6 +274,23 @@ def what_would_change_text() -> str:
         "alignment and an I-f start (section \"Sensorless from standstill\"). "
         "Ideal inverter and exact sensors unless stated: a dead time, "
         "an actuation delay or a DC-link limit (all available as plant parameters) are not in these runs.\n")
+
+
+def elevation_text(scenario: str) -> str:
+    """A paper scenario's road as its system file gives it (the elevation table, ``delta``): a climb in equal
+    steps and back, or a grade alternating with level road, at equal intervals; else the table itself."""
+    table = load_system(scenario).signals["delta"].profile
+    t, deg = table.times, [round(math.degrees(v), 6) + 0.0 for v in table.values]
+    gaps = {round(b - a, 6) for a, b in zip(t[1:], t[2:])}
+    sizes = {round(abs(b - a), 6) for a, b in zip(deg, deg[1:])}
+    top = max(deg)
+    if len(gaps) == 1 and len(sizes) == 1 and deg[0] == deg[-1] == 0:
+        gap, size = gaps.pop(), sizes.pop()
+        if set(deg) == {0.0, top}:
+            return f"0 / {top:g}° alternating every {gap:g} s from {t[1]:g} s"
+        if deg == sorted(deg[:deg.index(top) + 1]) + sorted(deg[deg.index(top) + 1:], reverse=True):
+            return f"elevation 0 → {top:g} → 0° in {size:g}° steps every {gap:g} s"
+    return "elevation " + ", ".join(f"{d:g}° from {a:g} s" for a, d in zip(t, deg))
 
 
 def _param_lines(t_from: float) -> list[str]:
@@ -305,11 +336,11 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
     L.append("## Parameters and tuning\n")
     L += _param_lines(T_FROM)
     L.append("")
-    L.append("## Scenario 1 (elevation 0 → 25 → 0° in 5° steps every 30 s)\n")
+    L.append(f"## Scenario 1 ({elevation_text('scenario1')})\n")
     L.append(d.table([f"s1-{k}" for k in SETUPS]))
     L.append(f"Per step: largest speed deviation [rad/s] (settling time into ±{_band()}):\n")
     L.append(_step_table(d, "s1"))
-    L.append("## Scenario 2 (0 / 22° alternating every 30 s from 50 s)\n")
+    L.append(f"## Scenario 2 ({elevation_text('scenario2')})\n")
     L.append(d.table([f"s2-{k}" for k in SETUPS]))
     L.append("Per step:\n")
     L.append(_step_table(d, "s2"))
