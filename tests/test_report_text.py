@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from pmsm_cosim.app.drive import load_system
-from pmsm_cosim.app.report import document, speed_range, synchronism
+from pmsm_cosim.app.report import cycles, document, speed_range, synchronism
 from pmsm_cosim.app.report.configs import T_FROM
 from pmsm_cosim.app.report.robustness import cycle as robustness_cycle
 from pmsm_cosim.app.report.robustness import injection_mc
@@ -73,6 +73,21 @@ def test_the_elevation_headings_follow_the_tables(monkeypatch):
     monkeypatch.setattr(document, "load_system", changed)
     assert document.elevation_text("scenario1") == "elevation 0 → 50 → 0° in 10° steps every 60 s"
     assert document.elevation_text("scenario2") == "0 / 44° alternating every 60 s from 100 s"
+
+
+def test_the_cycle_settings_are_the_system_files(monkeypatch):
+    scenarios = [scen for _, scen, _ in cycles.RUNS]
+    assert cycles.setting_text(scenarios) == {"noise": "1", "rows": "0.05", "climb": "10"}
+
+    def changed(name):
+        spec = load_system(name)
+        if name == "udds":
+            spec.component("plant").start["sensor_noise"] = 0.5
+        return spec
+
+    monkeypatch.setattr(cycles, "load_system", changed)
+    assert cycles.setting_text(scenarios)["noise"] == "…"
+    assert cycles.setting_text(["udds"])["noise"] == "0.5"
 
 
 def test_the_columns_follow_the_friction_and_the_bands(monkeypatch):

@@ -16,6 +16,7 @@ from pmsm_ev import cycles, references
 from pmsm_ev.results import row_timing_corrected_angle_error
 
 from .. import envelope
+from ..drive import load_system
 from ..metrics import cycle_energy
 from ..metrics.rows import KMH
 from ..metrics.trace import TRACE_BAND_KMH, TRACE_WINDOW_S, trace_band
@@ -251,6 +252,21 @@ def _cost_table(cost: list[dict]) -> list[str]:
     return L + ["", "(Δ: sensorless minus sensored; energies in Wh)", ""]
 
 
+def setting_text(scenarios) -> dict[str, str]:
+    """What the cycle scenarios' system files set alike, as text: ``noise`` (the plant's current-sensor noise
+    [A]) and ``rows`` (the output interval [s]), each "…" where they differ, and ``climb`` (the steepest grade
+    of the road ``hilly`` [%])."""
+    specs = [load_system(s) for s in scenarios]
+
+    def alike(values, fmt):
+        values = set(values)
+        return format(values.pop(), fmt) if len(values) == 1 else "…"
+
+    return {"noise": alike((s.component("plant").start.get("sensor_noise", 0.0) for s in specs), "g"),
+            "rows": alike((s.output_interval for s in specs), "g"),
+            "climb": f"{100 * float(np.max(cycles.load_road('hilly').grade)):g}"}
+
+
 def render(data, fig_names) -> list[str]:
     """The section's lines, every figure computed from the runs."""
     L = ["## Drive cycles: WLTC, UDDS, HWFET and US06, sensored and truly sensorless\n"]
@@ -258,6 +274,7 @@ def render(data, fig_names) -> list[str]:
     if not any(rows.values()):
         return L + ["(no runs)\n"]
     lim = _limits()
+    st = setting_text(scen for _, scen, _ in RUNS)
     descr = []
     for name in cycles.names():
         c = cycles.load(name)
@@ -267,11 +284,13 @@ def render(data, fig_names) -> list[str]:
         "The shipped cycle scenarios (docs/cycles.md): " + ", ".join(descr) + ", each with the sensored drive "
         "(`FocSensored`, the reference) and truly sensorless from standstill at an unknown angle (`-sensorless`, "
         "`FocSensorless`: alignment, I-f, the stationary-frame EKF5, back to I-f at every stop), and "
-        "`wltc3b-hilly` (sensored, the road `hilly` by position: a stop and restart on its 10 % climb). All with "
-        "σ = 1 A current noise, the speed loop's feedforward (inertia and road load), the reference generator in "
+        f"`wltc3b-hilly` (sensored, the road `hilly` by position: a stop and restart on its {st['climb']} % climb). "
+        f"All with σ = {st['noise']} A current noise, the speed loop's feedforward (inertia and road load), the "
+        "reference generator in "
         f"field weakening on the {envelope.parameters(SCENARIO_SETS)['controller'].v_dc:g} V DC link (T_max "
         f"{lim.T_max:.1f} N m, regeneration up to "
-        f"{lim.P_regen_max / 1e3:g} kW, the friction brake for the rest), rows every 0.05 s. *Inside the band*: "
+        f"{lim.P_regen_max / 1e3:g} kW, the friction brake for the rest), rows every {st['rows']} s. *Inside the "
+        "band*: "
         f"the share of the cycle the car's speed is within ±{TRACE_BAND_KMH:g} km/h of the trace taken over "
         f"±{TRACE_WINDOW_S:g} s "
         f"(GTR No. 15; issue 24 requires {100 * BAND_SHARE_MIN:g} %); *RMSE* and *largest deviation* against the "

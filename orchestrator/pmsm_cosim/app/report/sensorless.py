@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev.params import StartupParams
+from pmsm_ev.params import ScenarioParams, StartupParams
 from pmsm_ev.results import row_timing_corrected_angle_error
 from pmsm_ev.scenarios import SENSORLESS_START_DELAY
 
@@ -326,10 +326,12 @@ def _targets(data) -> tuple[list[str], list[str]]:
 def render(data, fig_names) -> list[str]:
     """The section's lines."""
     s = StartupParams()
-    # the row-timing term of the angle error, N omega dt at 200 rad/s, with the step and pole pairs of the runs
+    # the row-timing term of the angle error, N omega dt at the scenarios' speed, with the step and pole pairs of
+    # the runs
+    w = ScenarioParams().omega_ref
     timings = {run_timing(run.metrics) for cid, run in data.runs.items() if cid.startswith("sl-")}
     lag = (" (every observer's rows trail the rotor by one period: "
-           + " / ".join(f"{n * 200.0 * dt:.2g}" for dt, n in sorted(timings)) + " rad at 200 rad/s)") if timings else ""
+           + " / ".join(f"{n * w * dt:.2g}" for dt, n in sorted(timings)) + f" rad at {w:g} rad/s)") if timings else ""
     L = ["## Sensorless from standstill\n"]
     L.append(
         f"The sensorless unit (`FocSensorless.fmu`, observer `sensorless`; docs/sensorless.md) never reads the "
