@@ -8,8 +8,8 @@ project, compared at the wheels and at the DC link. docs/speed-range.md, "FASTSi
 The project's side is ``pmsm-cosim run CYCLE --set plant.v_a=0 --no-figures`` (the shipped sensored scenario
 with the sourced losses, head wind off: FASTSim has none), in a subprocess, one cycle after the other; its
 metrics.json gives the DC link's energy and the losses by term, its results.csv the wheel work
-(``pmsm_ev.cycle_energy.wheel_check``). FASTSim's side is built from ``VehicleParams`` (``fastsim_vehicle``)
-and the project's own cycle tables (the same 1 Hz samples), twice per cycle:
+(``pmsm_cosim.app.metrics.cycle_energy.wheel_check``). FASTSim's side is built from ``VehicleParams``
+(``fastsim_vehicle``) and the project's own cycle tables (the same 1 Hz samples), twice per cycle:
 
 * generic: the wheel side (the chassis alone decides it: positive wheel energy, FASTSim's ``pwr_tractive``), and
   at the DC link FASTSim's own motor + power-electronics efficiency map (the 2022 Renault Zoe ZE50's, a 1-D curve
@@ -37,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pmsm_cosim.app.metrics.cycle_energy import plant_params, wheel_check
 from pmsm_ev import cycles
-from pmsm_ev.cycle_energy import wheel_check
 from pmsm_ev.params import VehicleParams
 
 #: FASTSim 3.1's effective air density in its drag [kg/m^3], whatever its state's air density reads (1.2, with
@@ -203,7 +203,6 @@ def run_project(name: str, out: Path, reuse: bool) -> Path:
 def project_figures(run_dir: Path) -> dict:
     """The project's energy block, its positive wheel energy and its motor + inverter efficiency curve."""
     from pmsm_cosim.engine.recording import read_results  # noqa: PLC0415 (the application's reader, here only)
-    from pmsm_ev.cycle_energy import plant_params  # noqa: PLC0415
     metrics = json.loads((run_dir / "metrics.json").read_text())
     _, vehicle = plant_params(metrics)
     cols = ["time", "delta_deg", "v_vehicle", "x_vehicle", "E_dc", "E_regen", "E_copper", "E_inverter", "E_iron",

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pmsm_ev.results import acceleration_figures, behind_figures, compute_metrics
+from pmsm_cosim.app.metrics.run import compute_metrics
+from pmsm_cosim.app.metrics.speed_range import acceleration_figures, behind_figures
 
 RATIO = 0.2933 / 12.5  # r_w / n_g [m/rad]
 

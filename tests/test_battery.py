@@ -223,8 +223,8 @@ def test_the_first_60_s_of_wltc3b_battery_close_the_balances(tmp_path):
     battery's voltage (the run completes in the band); from a full pack the charge acceptance refuses the braking
     the friction brake then takes."""
     from pmsm_cosim.app.cli import main
+    from pmsm_cosim.app.metrics import cycle_energy as ce
     from pmsm_cosim.engine.recording import read_results
-    from pmsm_ev import cycle_energy as ce
 
     out = tmp_path / "b60"
     assert main(["run", "wltc3b-battery", "--stop-time", "60", "--out", str(out), "--quiet", "--no-figures"]) == 0

@@ -16,9 +16,10 @@ from orchestrator_support import project_fmus
 from pmsm_cosim.app.cli import main
 from pmsm_cosim.app.compare import COLUMNS, format_value
 from pmsm_cosim.app.drive import PACKAGED_SCENARIOS, load_system
+from pmsm_cosim.app.metrics.windows import figures_where, run_timing
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev.params import MotorParams, VehicleParams
-from pmsm_ev.results import figures_where, row_timing_corrected_angle_error, run_timing
+from pmsm_ev.results import row_timing_corrected_angle_error
 
 T_STEP = 0.3  # [s] elevation step of the test runs
 T_FROM = 1.0  # [s] start of the "after" window

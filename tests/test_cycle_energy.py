@@ -1,4 +1,4 @@
-"""Energy over a drive cycle (pmsm_ev.cycle_energy; docs/cycles.md, "Energy over a cycle"): the per-phase
+"""Energy over a drive cycle (pmsm_cosim.app.metrics.cycle_energy; docs/cycles.md, "Energy over a cycle"): the per-phase
 figures on made-up columns whose answer is known, the two acceptance checks (the balance to 1e-6 of the DC
 throughput, the wheel energy against the trace's road-load integral to 1 %), and both on the first 120 s of
 the shipped wltc3b."""
@@ -13,8 +13,8 @@ import pytest
 
 from orchestrator_support import project_fmus
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.metrics import cycle_energy as ce
 from pmsm_cosim.engine.recording import read_results
-from pmsm_ev import cycle_energy as ce
 from pmsm_ev import cycles
 from pmsm_ev import vehicle as veh
 from pmsm_ev.cycles import Cycle, Phase

@@ -18,6 +18,7 @@ import pytest
 
 from orchestrator_support import project_fmus
 from pmsm_cosim.app.drive import packaged_scenario
+from pmsm_cosim.app.metrics.summary import SUMMARY_METRICS, summary_metrics
 from pmsm_cosim.app.report import robustness as rr
 from pmsm_cosim.app.report.robustness import cycle as rc
 from pmsm_cosim.app.studies import load_sweep, packaged_sweep, parse_sweep
@@ -26,7 +27,6 @@ from pmsm_cosim.engine.system import read_toml
 from pmsm_cosim.sweeps import prepare_runs, read_summary, run_sweep
 from pmsm_ev import cycles as pcycles
 from pmsm_ev.params import VehicleParams
-from pmsm_ev.results import SUMMARY_METRICS, summary_metrics
 
 NAME = rr.CYCLE_MONTE_CARLO
 

@@ -11,6 +11,8 @@ import pytest
 from fmpy.fmi2 import FMU2Slave
 
 import pmsm_ev_fmus
+from pmsm_cosim.app.metrics.energy import ENERGY_MIN_DISTANCE, energy_metrics
+from pmsm_cosim.app.metrics.run import compute_metrics
 from pmsm_ev import kernels as k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.losses import steady_state
@@ -26,7 +28,7 @@ from pmsm_ev.params import (
     winding_resistance,
 )
 from pmsm_ev.plant import BALANCE_TERMS, Plant
-from pmsm_ev.results import ENERGY_COLUMNS, ENERGY_MIN_DISTANCE, compute_metrics, energy_metrics
+from pmsm_ev.results import ENERGY_COLUMNS
 
 DT = 1e-4
 #: the balance must close to this, relative to the DC energy throughput (the integral of |P_dc|)

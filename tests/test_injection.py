@@ -218,7 +218,7 @@ def test_bad_injection_input_is_one_line_exit_2_nothing_written(tmp_path, capsys
 def test_the_acquisitions_jumps_are_not_slipped_turns_but_a_slip_after_it_is():
     """``results.slipped_turns`` counts from the closed loop on: the frame's jumps onto the axis and by pi
     (modes 3 and 4) are the angle being found; a turn lost in mode 5 is a slip."""
-    from pmsm_ev.results import slipped_turns
+    from pmsm_cosim.app.metrics.synchronism import slipped_turns
 
     t = np.arange(0.0, 1.0, 0.01)
     mode = np.where(t < 0.25, np.where(t < 0.12, 3.0, 4.0), 5.0)

@@ -56,8 +56,8 @@ def test_paper_mode_ekf5_whole_scenario(tmp_path, scenario):
     EKF5, angle source measured) in the whole loop (compiled, every step the co-simulation's:
     tests/test_whole_loop.py), whose first 2 s are run_reference's here too."""
     from pmsm_cosim.app.drive import load_system
+    from pmsm_cosim.app.metrics.run import compute_metrics
     from pmsm_cosim.app.whole_loop import run_whole_loop
-    from pmsm_ev.results import compute_metrics
 
     run_whole_loop(load_system(f"scenario{scenario}"), tmp_path)
     m = compute_metrics(read_results(tmp_path))

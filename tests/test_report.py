@@ -168,7 +168,7 @@ SENSORLESS_TINY = [c for c in report.CONFIGS
 def test_sensorless_section_quotes_its_runs(tmp_path):
     """6 s runs (alignment, I-f, handover): the table's handover time and roll-back are the
     runs' own, read back from results.csv; targets without rows to judge show '-'."""
-    from pmsm_ev.results import roll_back
+    from pmsm_cosim.app.metrics.rows import roll_back
 
     project_fmus()
     assert len(SENSORLESS_TINY) == 3

@@ -1,5 +1,5 @@
 """The report's section "Drive cycles" (pmsm_cosim.app.report.cycles) built from the first 30 s of wltc3b and
-wltc3b-if: its table holds the runs' metrics, its per-phase tables pmsm_ev.cycle_energy's figures,
+wltc3b-if: its table holds the runs' metrics, its per-phase tables pmsm_cosim.app.metrics.cycle_energy's figures,
 the text flags a run inside the band for less than 99 % of the time (and says where and why), and the
 figures are written."""
 
@@ -14,11 +14,12 @@ import pytest
 
 from orchestrator_support import project_fmus
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.metrics import cycle_energy
+from pmsm_cosim.app.metrics.rows import KMH
+from pmsm_cosim.app.metrics.trace import trace_figures
 from pmsm_cosim.app.report import CONFIGS, Data, cycles, select
 from pmsm_cosim.engine.recording import read_results
-from pmsm_ev import cycle_energy
 from pmsm_ev import cycles as pcycles
-from pmsm_ev.results import KMH, trace_figures
 
 CYCLE_IDS = ["cyc-wltc3b", "cyc-wltc3b-if", "cyc-udds", "cyc-udds-if", "cyc-hwfet",
              "cyc-hwfet-if", "cyc-us06", "cyc-us06-if", "cyc-wltc3b-hilly"]

@@ -260,7 +260,7 @@ def test_workers_only_for_the_local_cluster(tmp_path, capsys):
 
 
 def test_summary_metrics_of_steps_and_plateaus():
-    from pmsm_ev.results import SUMMARY_METRICS, summary_metrics
+    from pmsm_cosim.app.metrics.summary import SUMMARY_METRICS, summary_metrics
 
     m = {"speed_rms_error": 0.5, "omega_hat_rms_error": 0.1, "theta_error_rms": 0.01, "theta_error_max": 0.02,
          "steps": [{"max_speed_deviation": 3.0, "settling_time": 1.5},

@@ -19,6 +19,7 @@ import pytest
 from orchestrator_support import project_fmus
 from pmsm_cosim.app.cli import main
 from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.metrics.synchronism import slipped_turns, synchronism_metrics, wrong_way_travel
 from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.app.report import synchronism
 from pmsm_cosim.engine.master import Master
@@ -29,7 +30,6 @@ from pmsm_ev import kernels as _k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import SENSORLESS_EKF, DriveParams, MotorParams, PlantParams, StartupParams
 from pmsm_ev.plant import Plant
-from pmsm_ev.results import slipped_turns, synchronism_metrics, wrong_way_travel
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase, hill_start_route
 
 DT = 1e-4

@@ -1,6 +1,6 @@
 """Following a drive cycle (docs/cycles.md, "Following the trace" and "Grade by position"):
 
-* the regulatory tolerance band (``pmsm_ev.results.trace_band``, ``trace_figures``) on synthetic traces
+* the regulatory tolerance band (``pmsm_cosim.app.metrics.trace.trace_band``, ``trace_figures``) on synthetic traces
   whose answers are known: a car 1 s late stays inside; on a 1 m/s^2 ramp a delay of more than
   1 + (2 km/h) / (3.6 km/h per m/s x 1 m/s^2) = 1.556 s leaves it (1.5 s stays inside by 0.2 km/h);
   a constant +2.5 km/h leaves it wherever the trace is flat over +-1 s, and stays inside on the ramp;
@@ -23,13 +23,14 @@ import pytest
 
 from orchestrator_support import project_fmus
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.metrics.rows import KMH
+from pmsm_cosim.app.metrics.trace import EPA_BAND_KMH, trace_band, trace_figures
 from pmsm_cosim.app.overrides import apply_overrides
 from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import cycles
 from pmsm_ev.cycles import ACCEL_MARGIN, Cycle, CycleError, load, load_road, pchip, speed_reference
 from pmsm_ev.params import VehicleParams
-from pmsm_ev.results import EPA_BAND_KMH, KMH, trace_band, trace_figures
 
 ROW = 0.01  #: the rows' interval of results.csv [s]
 BAND = 2.0 / KMH  #: the band [m/s]

@@ -79,7 +79,7 @@ def simulate(system="scenario1", *, stop_time: float | None = None, step_size: f
 
     ``result``: a numpy structured array, one float64 field per recorded column, one row per
     output interval (the numbers of results.csv, bit for bit). ``metrics``: the drive's
-    figures of merit (``pmsm_ev.results.compute_metrics``; a ``metrics_note`` instead for a
+    figures of merit (``pmsm_cosim.app.metrics.run.compute_metrics``; a ``metrics_note`` instead for a
     system without the drive's columns) and the run's bookkeeping (``status``,
     ``wall_time_s``, ...). A run that fails during the steps returns its rows so far with
     ``metrics["status"] = "failed: ..."``; an error in the input raises a

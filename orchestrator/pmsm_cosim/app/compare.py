@@ -23,10 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev.results import CONTRACT_COLUMNS, after_figures, angle_error_unwrapped, compute_metrics, step_figures
+from pmsm_ev.results import CONTRACT_COLUMNS, angle_error_unwrapped
 
 from ..engine.errors import CosimError, one_line
 from ..engine.recording import read_results
+from .metrics.run import compute_metrics
+from .metrics.windows import after_figures, step_figures
 
 #: default start of the "after" window [s]: past the 10 s start-up ramp and its settling
 T_FROM_DEFAULT = 20.0
@@ -104,8 +106,8 @@ def load_run(path, label: str | None = None) -> Run:
 
 def summarize(run: Run, t_from: float = T_FROM_DEFAULT) -> dict:
     """One table row: the run's bookkeeping, the whole-run speed error from its metrics, the step
-    figures of its metrics (``pmsm_ev.results.step_figures``) and the figures of its rows after
-    ``t_from`` (``pmsm_ev.results.after_figures``)."""
+    figures of its metrics (``pmsm_cosim.app.metrics.windows.step_figures``) and the figures of its rows after
+    ``t_from`` (``pmsm_cosim.app.metrics.windows.after_figures``)."""
     m, r = run.metrics, run.r
     speed = m.get("speed_rms_error")
     row = {

@@ -15,7 +15,7 @@ and an ordinary component with its connections. The engine knows FMI and time, n
   signal that drove ``drives`` is dropped and a recorded ``signals.delta`` becomes ``road.delta``.
 
 A run from a cycle adds ``trace`` to its metrics.json (:func:`with_trace_figures`: the tolerance band's
-figures, ``pmsm_ev.results.trace_figures``).
+figures, ``pmsm_cosim.app.metrics.trace.trace_figures``).
 """
 
 from __future__ import annotations
@@ -27,13 +27,13 @@ from pathlib import Path
 
 from pmsm_ev import cycles as pcycles
 from pmsm_ev.params import VehicleParams
-from pmsm_ev.results import trace_figures
 from pmsm_ev_fmus import build as fmu_build
 
 from ..engine.errors import CosimError, close_matches
 from ..engine.recording import read_results
 from ..engine.signals import Table
 from ..engine.system import ColumnSpec, SignalSpec, SystemSpec, split_reference, user_path
+from .metrics.trace import trace_figures
 
 #: the signal a cycle drives, and the input by default
 CYCLE_SIGNAL = "omega_ref"
@@ -298,7 +298,7 @@ def cycle_of(spec: SystemSpec) -> pcycles.Cycle | None:
 
 def with_trace_figures(metrics_of, spec: SystemSpec):
     """``metrics_of`` (the master's, ``drive.drive_metrics``) for a run of ``spec``: as it is without a cycle
-    (every other run's metrics.json unchanged); with one, plus ``trace``: ``pmsm_ev.results.trace_figures`` of
+    (every other run's metrics.json unchanged); with one, plus ``trace``: ``metrics.trace.trace_figures`` of
     the recorded ``v_vehicle`` against the cycle (the tolerance band's figures; docs/cycles.md)."""
     cycle = cycle_of(spec)
     if cycle is None:

@@ -20,7 +20,7 @@ from importlib import resources
 from pathlib import Path
 
 from pmsm_ev import __version__
-from pmsm_ev.results import CONTRACT_COLUMNS, compute_metrics
+from pmsm_ev.results import CONTRACT_COLUMNS
 from pmsm_ev.scenarios import ROUTE_SIGNALS, Profile, ProfileError, route_to_json
 from pmsm_ev_fmus import build as fmu_build
 
@@ -30,6 +30,7 @@ from ..engine.loading import load_system as load_system_file
 from ..engine.recording import read_results
 from ..engine.system import SystemSpec, parse_system, read_toml
 from . import cycles
+from .metrics.run import compute_metrics
 
 #: where the shipped scenarios are (package data)
 SCENARIO_PACKAGE = "pmsm_cosim.app"
@@ -117,7 +118,7 @@ def missing_drive_columns(columns) -> list[str]:
 
 def drive_metrics(out_dir, columns, rows: int) -> dict:
     """The drive's figures of merit of a run in ``out_dir`` (the master's ``metrics_of``):
-    ``pmsm_ev.results.compute_metrics`` of its results.csv; a note instead when the recorded
+    ``pmsm_cosim.app.metrics.run.compute_metrics`` of its results.csv; a note instead when the recorded
     columns are not the drive's (a user's own system), nothing when no row was written."""
     missing = missing_drive_columns(columns)
     if missing:

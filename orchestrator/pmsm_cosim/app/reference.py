@@ -19,10 +19,11 @@ from pathlib import Path
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import ANGLE_SOURCES, OBSERVERS, SENSORLESS_EKF, DriveParams, ParameterError
 from pmsm_ev.plant import Plant
-from pmsm_ev.results import ALL_COLUMNS, SENSORLESS_COLUMNS, compute_metrics
+from pmsm_ev.results import ALL_COLUMNS, SENSORLESS_COLUMNS
 from pmsm_ev.scenarios import SCENARIO_STOP_TIME, Profile, elevation_profile, speed_reference
 
 from ..engine.recording import ResultWriter, read_results, write_metrics
+from .metrics.run import compute_metrics
 
 
 def grid(stop_time: float, dt: float, output_interval: float) -> tuple[int, int]:

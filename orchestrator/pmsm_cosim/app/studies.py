@@ -7,7 +7,6 @@ from importlib import resources
 from pathlib import Path
 
 from pmsm_ev.params import ParameterError
-from pmsm_ev.results import SUMMARY_METRICS, SUMMARY_UNITS, summary_metrics
 from pmsm_ev.scenarios import ProfileError
 from pmsm_ev_fmus.build import FMUS
 
@@ -15,6 +14,7 @@ from .. import sweeps
 from ..engine.errors import CosimError, close_matches
 from . import cycles
 from .drive import PACKAGED_SCENARIOS, draw_figures, drive_metrics, ensure_fmus, load_system, project_fmu_dir
+from .metrics.summary import SUMMARY_METRICS, SUMMARY_UNITS, summary_metrics
 
 #: the sweeps shipped with the package (``pmsm_cosim/app/sweeps/<name>.toml``)
 PACKAGED_SWEEPS = ("ekf5_load_noise",

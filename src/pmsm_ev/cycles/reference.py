@@ -8,8 +8,8 @@ MATLAB's ``pchip`` and SciPy's ``PchipInterpolator``)** through the trace's poin
 * it passes through every point of the trace and is monotone between two points (it never
   overshoots, never undershoots): on each interval it stays between the interval's two speeds, so
   with points at most ``window`` apart (1 s for the shipped cycles, the band's +-1 s) it is inside
-  the tolerance band of ``pmsm_ev.results.trace_band`` everywhere, with the band's whole 2 km/h to
-  spare, and it is never negative;
+  the regulatory tolerance band (+-2 km/h over +-1 s; the application's ``trace_band``) everywhere,
+  with the band's whole 2 km/h to spare, and it is never negative;
 * where two consecutive points are zero (a stop) it is exactly zero between them, and at a point
   where the trace touches zero for one sample (UDDS at 766 s and 1100 s) it is zero there with zero
   slope: standstill is exactly 0, as a stop needs it to be (the sensorless unit's I-f start and

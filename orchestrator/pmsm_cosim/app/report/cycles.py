@@ -1,7 +1,7 @@
 """The report's section "Drive cycles": the shipped cycle scenarios (``wltc3b``, ``udds``, ``hwfet``, ``us06``,
 sensored and truly sensorless from standstill, and ``wltc3b-hilly``), held to the regulatory tolerance band
-(metrics.json's ``trace``, ``pmsm_ev.results.trace_figures``), their synchronism (``synchronism``), and their
-energy over the cycle and per WLTC phase (``pmsm_ev.cycle_energy``: Wh/km, regeneration, losses by kind, the
+(metrics.json's ``trace``, ``metrics.trace.trace_figures``), their synchronism (``synchronism``), and their
+energy over the cycle and per WLTC phase (``metrics.cycle_energy``: Wh/km, regeneration, losses by kind, the
 balance and the wheel energy against the trace's road-load integral). Every number in the text is computed from
 the runs (docs/cycles.md, "The report's cycles")."""
 
@@ -12,10 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev import cycle_energy, cycles, references
-from pmsm_ev.results import KMH, TRACE_BAND_KMH, row_timing_corrected_angle_error, run_timing, trace_band
+from pmsm_ev import cycles, references
+from pmsm_ev.results import row_timing_corrected_angle_error
 
 from .. import envelope
+from ..drive import load_system
+from ..metrics import cycle_energy
+from ..metrics.rows import KMH
+from ..metrics.trace import TRACE_BAND_KMH, TRACE_WINDOW_S, trace_band
+from ..metrics.windows import run_timing
 from .configs import CYCLE_RUNS as RUNS
 from .speed_range import SCENARIO_SETS
 
@@ -85,7 +90,7 @@ def _phase_at(cycle, t: float) -> str:
 
 def excursions_by_phase(r: dict, cycle, trace: dict) -> str:
     """The excursions outside the band by the phase they start in, with their total time: "low 2 (3.10 s), ..."
-    (the rows outside ``trace_band``, as ``pmsm_ev.results.trace_figures`` counts them)."""
+    (the rows outside ``trace_band``, as ``pmsm_cosim.app.metrics.trace.trace_figures`` counts them)."""
     t = r["time"]
     keep = t <= trace["t_end"] + 1e-9
     t, v = t[keep], r["v_vehicle"][keep]
@@ -247,6 +252,21 @@ def _cost_table(cost: list[dict]) -> list[str]:
     return L + ["", "(Δ: sensorless minus sensored; energies in Wh)", ""]
 
 
+def setting_text(scenarios) -> dict[str, str]:
+    """What the cycle scenarios' system files set alike, as text: ``noise`` (the plant's current-sensor noise
+    [A]) and ``rows`` (the output interval [s]), each "…" where they differ, and ``climb`` (the steepest grade
+    of the road ``hilly`` [%])."""
+    specs = [load_system(s) for s in scenarios]
+
+    def alike(values, fmt):
+        values = set(values)
+        return format(values.pop(), fmt) if len(values) == 1 else "…"
+
+    return {"noise": alike((s.component("plant").start.get("sensor_noise", 0.0) for s in specs), "g"),
+            "rows": alike((s.output_interval for s in specs), "g"),
+            "climb": f"{100 * float(np.max(cycles.load_road('hilly').grade)):g}"}
+
+
 def render(data, fig_names) -> list[str]:
     """The section's lines, every figure computed from the runs."""
     L = ["## Drive cycles: WLTC, UDDS, HWFET and US06, sensored and truly sensorless\n"]
@@ -254,6 +274,7 @@ def render(data, fig_names) -> list[str]:
     if not any(rows.values()):
         return L + ["(no runs)\n"]
     lim = _limits()
+    st = setting_text(scen for _, scen, _ in RUNS)
     descr = []
     for name in cycles.names():
         c = cycles.load(name)
@@ -263,11 +284,15 @@ def render(data, fig_names) -> list[str]:
         "The shipped cycle scenarios (docs/cycles.md): " + ", ".join(descr) + ", each with the sensored drive "
         "(`FocSensored`, the reference) and truly sensorless from standstill at an unknown angle (`-sensorless`, "
         "`FocSensorless`: alignment, I-f, the stationary-frame EKF5, back to I-f at every stop), and "
-        "`wltc3b-hilly` (sensored, the road `hilly` by position: a stop and restart on its 10 % climb). All with "
-        "σ = 1 A current noise, the speed loop's feedforward (inertia and road load), the reference generator in "
-        f"field weakening on the 360 V DC link (T_max {lim.T_max:.1f} N m, regeneration up to "
-        f"{lim.P_regen_max / 1e3:g} kW, the friction brake for the rest), rows every 0.05 s. *Inside the band*: "
-        f"the share of the cycle the car's speed is within ±{TRACE_BAND_KMH:g} km/h of the trace taken over ±1 s "
+        f"`wltc3b-hilly` (sensored, the road `hilly` by position: a stop and restart on its {st['climb']} % climb). "
+        f"All with σ = {st['noise']} A current noise, the speed loop's feedforward (inertia and road load), the "
+        "reference generator in "
+        f"field weakening on the {envelope.parameters(SCENARIO_SETS)['controller'].v_dc:g} V DC link (T_max "
+        f"{lim.T_max:.1f} N m, regeneration up to "
+        f"{lim.P_regen_max / 1e3:g} kW, the friction brake for the rest), rows every {st['rows']} s. *Inside the "
+        "band*: "
+        f"the share of the cycle the car's speed is within ±{TRACE_BAND_KMH:g} km/h of the trace taken over "
+        f"±{TRACE_WINDOW_S:g} s "
         f"(GTR No. 15; issue 24 requires {100 * BAND_SHARE_MIN:g} %); *RMSE* and *largest deviation* against the "
         "trace; *slipped turns* and *loss-of-sync episodes* from metrics.json's `synchronism`; *Wh/km (DC)* the "
         "net DC-link energy per km driven; *regenerated / drawn* the DC energy returned as a share of the DC energy "
@@ -353,7 +378,8 @@ def render(data, fig_names) -> list[str]:
     fs, fl = rows.get(WLTC_PAIR[0]), rows.get(WLTC_PAIR[1])
     if fs and fl and fs["phases"] and fl["phases"]:
         L.append("### WLTC class 3b by phase, sensored against sensorless\n")
-        L.append("Per phase (GTR No. 15: low 0-589 s, medium 589-1022 s, high 1022-1477 s, extra high 1477-1800 s; "
+        phases = ", ".join(f"{ph.name.replace('_', ' ')} {ph.start:g}-{ph.end:g} s" for ph in fs["cycle"].phases)
+        L.append(f"Per phase (GTR No. 15: {phases}; "
                  "the plant's cumulative energies differenced from the phase's first row to its last). "
                  "*Regenerated / braking at the wheels*: the DC energy regenerated as a share of the wheels' "
                  "braking work (regeneration through the gear plus the friction brake).\n")
@@ -373,7 +399,8 @@ def render(data, fig_names) -> list[str]:
         d_dc = sum(c["d_dc_Wh"] for c in cost)
         dist = sum(p["energy"]["distance_m"] for p in fl["phases"]) / 1000.0
         L.append(f"Over the cycle the sensorless unit spent {tot_if:.1f} s in I-f ({t_still:.1f} s of it with the car "
-                 f"standing, below 0.1 km/h, where I-f holds its current); its copper and inverter losses there "
+                 f"standing, below {cycles.STANDSTILL_KMH:g} km/h, where I-f holds its current); its copper and "
+                 "inverter losses there "
                  f"exceeded the sensored drive's by {extra:.2f} and {extra_inv:.2f} Wh, of a DC energy difference of "
                  f"{d_dc:+.2f} Wh "
                  f"({d_dc / dist if dist > 0 else float('nan'):+.2f} Wh/km).\n")
@@ -425,7 +452,8 @@ def figures(data, fig_dir: Path) -> list[Path]:
         lower, upper = trace_band(cycle.time, cycle.speed, time=tt)
         v_tr = np.interp(tt, cycle.time, cycle.speed)
         fig, axes = plt.subplots(2, 1, figsize=(9.0, 6.0), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
-        axes[0].fill_between(tt, lower * KMH, upper * KMH, color="0.85", label=f"band ±{TRACE_BAND_KMH:g} km/h, ±1 s")
+        axes[0].fill_between(tt, lower * KMH, upper * KMH, color="0.85",
+                             label=f"band ±{TRACE_BAND_KMH:g} km/h, ±{TRACE_WINDOW_S:g} s")
         axes[0].plot(tt, v_tr * KMH, "k-", lw=0.6, label="trace")
         axes[1].fill_between(tt, (lower - v_tr) * KMH, (upper - v_tr) * KMH, color="0.85")
         for i, (cid, run) in enumerate(pair):

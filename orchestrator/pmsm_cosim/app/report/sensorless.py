@@ -5,7 +5,7 @@ start-up from eight initial rotor angles over [-pi, pi).
 
 The configurations are :class:`pmsm_cosim.app.report.Config` of the shared report machinery
 (one ``pmsm-cosim run`` each, reused while settings and FMU builds are unchanged); the
-figures of merit are ``pmsm_ev.results``' of each run (``sensorless_metrics``,
+figures of merit are ``pmsm_cosim.app.metrics``' of each run (``sensorless_metrics``,
 ``figures_where`` of its windows, the angle error with the row-timing term removed with the
 run's own step and pole pairs, ``run_timing``) and ``compare.summarize``'s; every sentence
 is filled from them.
@@ -18,17 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev.params import StartupParams
-from pmsm_ev.results import (
-    STARTUP_BAND,
-    STARTUP_FROM,
-    figures_where,
-    handovers,
-    row_timing_corrected_angle_error,
-    run_timing,
-    sensorless_metrics,
-)
+from pmsm_ev.params import ScenarioParams, StartupParams
+from pmsm_ev.results import row_timing_corrected_angle_error
 from pmsm_ev.scenarios import SENSORLESS_START_DELAY
+
+from ..metrics.sensorless import STARTUP_BAND, STARTUP_FROM, handovers, sensorless_metrics
+from ..metrics.windows import figures_where, run_timing
 
 #: the runs: (short name, shipped scenario, title)
 SCENARIOS = (("s1", "scenario1-sensorless", "Scenario 1"), ("s2", "scenario2-sensorless", "Scenario 2"),
@@ -331,10 +326,12 @@ def _targets(data) -> tuple[list[str], list[str]]:
 def render(data, fig_names) -> list[str]:
     """The section's lines."""
     s = StartupParams()
-    # the row-timing term of the angle error, N omega dt at 200 rad/s, with the step and pole pairs of the runs
+    # the row-timing term of the angle error, N omega dt at the scenarios' speed, with the step and pole pairs of
+    # the runs
+    w = ScenarioParams().omega_ref
     timings = {run_timing(run.metrics) for cid, run in data.runs.items() if cid.startswith("sl-")}
     lag = (" (every observer's rows trail the rotor by one period: "
-           + " / ".join(f"{n * 200.0 * dt:.2g}" for dt, n in sorted(timings)) + " rad at 200 rad/s)") if timings else ""
+           + " / ".join(f"{n * w * dt:.2g}" for dt, n in sorted(timings)) + f" rad at {w:g} rad/s)") if timings else ""
     L = ["## Sensorless from standstill\n"]
     L.append(
         f"The sensorless unit (`FocSensorless.fmu`, observer `sensorless`; docs/sensorless.md) never reads the "

@@ -2,7 +2,7 @@
 standstill (or a flying start) on a level road to the top speed, 131 km/h, then regenerative braking,
 with three controllers: the sensored drive (``acceleration``), the stationary-frame EKF5 from a flying
 start (``acceleration-flying``) and the sensorless unit from standstill (``acceleration-if``).
-The figures of merit are ``pmsm_ev.results.acceleration_figures`` and ``energy_metrics`` of each run
+The figures of merit are ``pmsm_cosim.app.metrics.speed_range.acceleration_figures`` and ``energy_metrics`` of each run
 (metrics.json), the angle error with the row-timing term removed (``row_timing_corrected_angle_error``);
 the envelope is the scenario's controller's (``pmsm_ev.references``, docs/speed-range.md)."""
 
@@ -15,9 +15,14 @@ import numpy as np
 
 from pmsm_ev import references
 from pmsm_ev.params import VehicleParams
-from pmsm_ev.results import KMH, figures_where, row_timing_corrected_angle_error, run_timing, wheel_ratio
+from pmsm_ev.results import row_timing_corrected_angle_error
 
 from .. import envelope
+from ..drive import load_system
+from ..metrics.cycle_energy import plant_params
+from ..metrics.rows import KMH
+from ..metrics.speed_range import wheel_ratio
+from ..metrics.windows import figures_where, run_timing
 from .configs import SPEED_RANGE_RUNS as RUNS
 
 #: the scenario's controller settings, for its envelope (acceleration.toml's ctrl start values)
@@ -30,6 +35,26 @@ def _num(x, fmt=".2f") -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "-"
     return format(x, fmt)
+
+
+def route(spec, vehicle: VehicleParams) -> dict:
+    """The acceleration route of a system (``spec``: its speed reference's table, the standing start, the
+    step to the top, the braking ramp and the driver's easing off) at the wheels of ``vehicle`` (eqs 1, 6:
+    v = omega r_w / n_g): ``top_kmh``, ``t_brake`` [s], ``decel`` [m/s²] and ``ease_kmh``."""
+    table = spec.signals["omega_ref"].profile
+    t, w = table.times, table.values
+    top = max(w)
+    i = max(j for j, x in enumerate(w) if x == top)  # the braking starts at the plateau's last point
+    k = vehicle.r_w / vehicle.n_g
+    return {"top_kmh": top * k * KMH, "t_brake": t[i], "decel": (w[i] - w[i + 1]) / (t[i + 1] - t[i]) * k,
+            "ease_kmh": w[i + 1] * k * KMH}
+
+
+def route_text(rt: dict) -> str:
+    """The route's sentence (``route``)."""
+    return (f"on a level road the speed reference steps to the top speed, {rt['top_kmh']:.0f} km/h at the wheels, so "
+            f"the speed PI asks for the most torque the drive has; from {rt['t_brake']:g} s it ramps down at "
+            f"{rt['decel']:.0f} m/s² (the driver easing off below {rt['ease_kmh']:.1f} km/h)")
 
 
 def figures_of(data, cid: str) -> dict | None:
@@ -128,20 +153,22 @@ def figures(data, fig_dir: Path) -> list[Path]:
 
 def render(data, fig_names) -> list[str]:
     """The section's lines, every figure computed from the runs."""
-    L = ["## The whole speed range: acceleration to 131 km/h and regenerative braking\n"]
+    run = data.runs.get(RUNS[0][0])
+    rt = route(load_system(RUNS[0][1]), plant_params(run.metrics)[1] if run else VehicleParams())
+    L = [f"## The whole speed range: acceleration to {rt['top_kmh']:.0f} km/h and regenerative braking\n"]
     rows = {cid: figures_of(data, cid) for cid, _, _ in RUNS}
     if not any(rows.values()):
         return L + ["(no runs)\n"]
     p = envelope.parameters(SCENARIO_SETS)
     lim = references.limits(p["controller"], p["motor"])
     speeds = references.region_speeds(lim)
+    v_dc = p["controller"].v_dc
     L.append(
         "The EV data sheet's test (shipped scenarios `acceleration`, `acceleration-flying`, "
-        "`acceleration-if`; docs/speed-range.md): on a level road the speed reference steps to the top "
-        "speed, 131 km/h at the wheels, so the speed PI asks for the most torque the drive has; from 22.5 s it "
-        "ramps down at 3 m/s² (the driver easing off below 7.2 km/h). The reference generator works in field "
-        f"weakening on the 360 V DC link (I_max {lim.i_max:g} A, T_max {lim.T_max:.1f} N m on MTPA, the voltage "
-        f"{lim.u_fw:.0f} V = {p['controller'].fw_margin:g} × 360 V/√3; base speed {speeds['base_speed']:.0f} rad/s, "
+        f"`acceleration-if`; docs/speed-range.md): {route_text(rt)}. The reference generator works in field "
+        f"weakening on the {v_dc:g} V DC link (I_max {lim.i_max:g} A, T_max {lim.T_max:.1f} N m on MTPA, the voltage "
+        f"{lim.u_fw:.0f} V = {p['controller'].fw_margin:g} × {v_dc:g} V/√3; base speed {speeds['base_speed']:.0f} "
+        "rad/s, "
         f"no torque left beyond {speeds['max_speed']:.0f} rad/s), regenerates up to "
         f"{lim.P_regen_max / 1e3:g} kW and leaves the rest of the braking to the friction brake; the current "
         "control is the high-speed one, the observers' current model Tustin's, the gear's efficiency acts in "
@@ -149,8 +176,8 @@ def render(data, fig_names) -> list[str]:
         "the launch (the reference's rise); *recovered* is the DC-link energy regenerated from the braking's "
         "start, as a share of the kinetic energy there.\n")
     head = ("| controller | launch at | to 50 km/h | to 100 km/h | top speed | braking time | kinetic at braking | "
-            "recovered | friction brake | DC drawn | DC regenerated | losses | net Wh/km | θ̂ − θ above 100 rad/s "
-            "(rms, max) | slipped turns |")
+            f"recovered | friction brake | DC drawn | DC regenerated | losses | net Wh/km | θ̂ − θ above "
+            f"{ANGLE_FROM_SPEED:g} rad/s (rms, max) | slipped turns |")
     L.append(head)
     L.append("|" + "---|" * (head.count("|") - 1))
     for cid, _, setup in RUNS:

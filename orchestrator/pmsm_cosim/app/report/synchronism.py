@@ -7,7 +7,7 @@ and noise, the sensored drive as the reference. The runs are the monolithic loop
 (``pmsm_cosim.app.reference.run_reference``: the same kernels in the co-simulation's order; equal
 to the FMUs under the master to 1e-9, ``tests/test_sensorless.py``), ``--jobs`` processes at a
 time, into ``RUNS/sync/<case>-<controller>-<k>/``; the figures of merit are
-``pmsm_ev.results.synchronism_metrics`` and the targets those of the issue that asked for it.
+``pmsm_cosim.app.metrics.synchronism.synchronism_metrics`` and the targets those of the issue that asked for it.
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from pmsm_ev.params import LOW_SPEED_STRATEGIES, SENSORLESS_EKF, DriveParams, InjectionParams, PlantParams
-from pmsm_ev.results import synchronism_metrics
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase
 
 from ...engine.recording import read_results
+from ..metrics.synchronism import RECOVERY_BAND, SYNC_BAND, SYNC_REL, synchronism_metrics
 from ..reference import run_reference
 
 #: current-sensor noise of every run [A] and the first seed (run k of a case has seed k + 1)
@@ -183,6 +183,28 @@ def _ok(ok: bool) -> str:
     return "✓" if ok else "✗"
 
 
+def intro(n_angles: int) -> str:
+    """The section's first paragraph: what was run and how it is judged, every number from what the matrix
+    ran (its angles, its noise, the sensorless unit's alignment in ``drive_params``) and from the bands and
+    targets that judge it (``metrics.synchronism``'s, this module's)."""
+    s = drive_params("sensorless", 0).startup
+    t_align = s.t_ramp + s.t_hold + s.t_sweep + s.t_settle
+    return (
+        f"Each case from {n_angles} initial rotor angles ({', '.join(f'{a:.2f}' for a in SYNC_ANGLES[:n_angles])} rad) "
+        f"with σ = {NOISE:g} A current noise, the sensorless unit (`FocSensorless`) and, on the same angle and noise, "
+        f"the sensored drive (`FocSensored`). No case waits for the unit's {t_align:g} s alignment. Worst over the "
+        "angles; roll-back is the largest travel against the driver's direction, 'out of sync' the time the control "
+        "frame's speed and the rotor's differ by more than "
+        f"{SYNC_BAND:g} rad/s + {100 * SYNC_REL:g} %, 'spin' the longest time the frame turned while the rotor stood, "
+        "'recovered' the time after the disturbance (the reference's start, or the grade's change) from which "
+        f"|ω_m − ω_ref| ≤ {RECOVERY_BAND:g} rad/s "
+        "to the end, and 'episodes' the unit's own loss-of-synchronism detections (output `fault` = 1), "
+        "'faults' the latched safe states (`fault` = 2). Targets (✓/✗): roll-back within the sensored drive's "
+        f"+ {100 * ROLL_BACK_EXTRA:g} cm and wrong-way speed within its + {SPEED_EXTRA:g} rad/s, run by run; spin ≤ "
+        f"{SPIN_LIMIT:g} s; recovered within {RECOVERY_LIMIT:g} s. Generated from `pmsm_ev.scenarios.SYNC_MATRIX` "
+        "by `pmsm-cosim report` (monolithic loop, `pmsm_cosim.app.report.synchronism`).\n")
+
+
 def render(results: list[dict] | None, fig_names) -> list[str]:
     """The section's markdown (nothing without results)."""
     if not results:
@@ -190,19 +212,7 @@ def render(results: list[dict] | None, fig_names) -> list[str]:
     rows = verdicts(results)
     n_angles = rows[0]["n"] if rows else 0
     L = ["## Never lose the car: the synchronism matrix\n"]
-    L.append(
-        f"Each case from {n_angles} initial rotor angles ({', '.join(f'{a:.2f}' for a in SYNC_ANGLES[:n_angles])} rad) "
-        f"with σ = {NOISE:g} A current noise, the sensorless unit (`FocSensorless`) and, on the same angle and noise, "
-        "the sensored drive (`FocSensored`). No case waits for the unit's 2.3 s alignment. Worst over the angles; "
-        "roll-back is the largest travel against the driver's direction, 'out of sync' the time the control frame's "
-        "speed and the rotor's differ by more than "
-        "10 rad/s + 10 %, 'spin' the longest time the frame turned while the rotor stood, 'recovered' the time "
-        "after the disturbance (the reference's start, or the grade's change) from which |ω_m − ω_ref| ≤ 30 rad/s "
-        "to the end, and 'episodes' the unit's own loss-of-synchronism detections (output `fault` = 1), "
-        "'faults' the latched safe states (`fault` = 2). Targets (✓/✗): roll-back within the sensored drive's "
-        f"+ {100 * ROLL_BACK_EXTRA:g} cm and wrong-way speed within its + {SPEED_EXTRA:g} rad/s, run by run; spin ≤ "
-        f"{SPIN_LIMIT:g} s; recovered within {RECOVERY_LIMIT:g} s. Generated from `pmsm_ev.scenarios.SYNC_MATRIX` "
-        "by `pmsm-cosim report` (monolithic loop, `pmsm_cosim.app.report.synchronism`).\n")
+    L.append(intro(n_angles))
     L.append("| case | roll-back [cm], sensored | wrong-way speed [rad/s], sensored | out of sync [s] | turns slipped "
              "| spin [s] | recovered [s], sensored | speed RMS after [rad/s] | episodes | faults |\n"
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")

@@ -3,7 +3,7 @@ figures from its summary row and metrics.json, the failure rule, the counts with
 distribution, what a sample costs, and its section of the page (its figure: ``figures.cycle_figure``).
 
 **The failure rule** (defined here once; the page quotes it): a sample fails if it did not complete, or its
-speed was inside the tolerance band (``pmsm_ev.results.trace_figures``: +-2 km/h around the trace, taken
+speed was inside the tolerance band (``pmsm_cosim.app.metrics.trace.trace_figures``: +-2 km/h around the trace, taken
 over +-1 s) for less than ``INSIDE_MIN`` of the cycle (metrics.json ``trace`` ``inside_share``; a completed
 run without it fails too), or its angle slipped an electrical turn (``synchronism`` ``slipped_turns``), or
 the controller's safe state latched (``synchronism`` ``fault_latched``).
@@ -21,6 +21,7 @@ from pmsm_ev import cycles as pcycles
 from pmsm_ev.params import MotorParams, VehicleParams
 
 from ....sweeps import read_summary
+from ...metrics.trace import TRACE_BAND_KMH, TRACE_WINDOW_S
 from .interval import wilson
 
 #: a sample follows the cycle if its speed is inside the tolerance band for at least this share of it
@@ -234,7 +235,8 @@ def cycle_text(rows: list[dict], design, fig: Path | None, timing: dict | None =
          f"the sensorless unit from standstill through {cycle}"
          + (f" **cut to its first {stop:g} s** (of {duration:g} s): the figures are of that part only"
             if short else "") + ": " + design_text(design) + ", all drawn at once. "
-         f"A sample **fails** if it did not complete, its speed was inside the ±2 km/h / ±1 s tolerance band for "
+         f"A sample **fails** if it did not complete, its speed was inside the ±{TRACE_BAND_KMH:g} km/h / "
+         f"±{TRACE_WINDOW_S:g} s tolerance band for "
          f"less than {100 * INSIDE_MIN:g} % of the cycle, it slipped an electrical turn, or the safe state "
          "latched (`robustness/cycle.py`).", "",
          "| samples | failures | failure rate | 95 % interval (Wilson) | "

@@ -13,9 +13,10 @@ import math
 from pathlib import Path
 
 from pmsm_ev.params import MotorParams
-from pmsm_ev.results import slipped_turns
 
 from ....engine.recording import read_results
+from ...metrics.synchronism import slipped_turns
+from ...metrics.trace import TRACE_BAND_KMH
 from ...studies import load_sweep
 from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, failure_reasons, findings, where_text
 from .interval import wilson
@@ -29,7 +30,7 @@ BEGIN, END = "<!-- injection-mc: generated -->", "<!-- /injection-mc -->"
 
 def judged_rows(out: Path) -> list[dict]:
     """``cycle_rows``, each completed sample's slipped turns counted again from its results.csv by
-    ``pmsm_ev.results.slipped_turns`` as it is now (a sample's metrics.json keeps the count of the code that
+    ``metrics.synchronism.slipped_turns`` as it is now (a sample's metrics.json keeps the count of the code that
     ran it), its failure reasons with them; the samples not run yet (a sweep stopped and to be resumed) left out."""
     rows = [r for r in cycle_rows(out) if r["status"] != NOT_RUN]
     for r in rows:
@@ -127,7 +128,8 @@ def section(out: Path, machine: str, beside: Path | None = None, fresh: Path | N
              "R_s 0 … +50 %, ψ −12 % … 0; occupants; a grade offset ±2 %; current-sensor offsets ±1 A and gains "
              "±1 %; 2 µs of dead time, its compensation off by ±20 %; 1 A of noise; seed 36, a draw no earlier "
              "study used), the unit with `low_speed = \"injection\"` through the whole WLTC 3b. A sample fails if "
-             f"it did not complete, or was inside the ±2 km/h band for less than {100 * INSIDE_MIN:.0f} % of the "
+             f"it did not complete, or was inside the ±{TRACE_BAND_KMH:g} km/h band for less than "
+             f"{100 * INSIDE_MIN:.0f} % of the "
              "cycle, or slipped an electrical turn, or latched the safe state.", ""]
     if not rows:
         return lines + ["No sample has run yet.", "", END]

@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from pmsm_ev.params import MotorParams
-from pmsm_ev.results import figures_where, run_timing, tracking_figures
 
 from ....engine.recording import read_results
 from ....sweeps import read_summary
+from ...metrics.windows import figures_where, run_timing, tracking_figures
 from . import cycle as cycle_mc
 from .interval import wilson
 from .runs import ANGLE_USED, CONTROLLERS, CYCLE_MONTE_CARLO, DEAD_TIME, MAPS, MONTE_CARLOS, Map, sweep_spec
@@ -61,7 +61,7 @@ def classify(figures: dict, completed: bool = True, angle_used: bool = True) -> 
 
 
 def run_metrics(r: dict, dt: float, pole_pairs: float, t_from: float = T_FROM, angle_used: bool = True) -> dict:
-    """A run's figures (``pmsm_ev.results.tracking_figures`` with the run's control period ``dt`` and
+    """A run's figures (``pmsm_cosim.app.metrics.windows.tracking_figures`` with the run's control period ``dt`` and
     pole pairs), its mean i_q and reference after ``t_from`` (the load and the speed the page's
     physics is quoted at), and its class (:func:`classify`; slips count only where the control
     uses the estimated angle, ``angle_used``)."""

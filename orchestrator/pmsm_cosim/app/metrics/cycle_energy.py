@@ -3,7 +3,7 @@ recorded ``pmsm_ev.results.ENERGY_COLUMNS``, per phase of its cycle, and the two
 
 * ``phase_energy(r, cycle)``: per phase (WLTC class 3b: low, medium, high, extra_high; any other cycle one
   phase, ``whole``) the differences of the plant's cumulative energies from the phase's first row to its
-  last (``pmsm_ev.results.energy_metrics`` of those rows) with Wh/km at the DC link, the DC energy drawn and
+  last (``energy.energy_metrics`` of those rows) with Wh/km at the DC link, the DC energy drawn and
   regenerated, the two regeneration shares (``regen_share``: regenerated / drawn; ``regen_of_braking``:
   regenerated / the braking energy at the wheels), the losses by kind, the wheel energy's traction and
   braking parts, the balance residual (absolute and relative to the DC throughput) and the controller's
@@ -22,9 +22,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from . import vehicle as veh
-from .params import MotorParams, VehicleParams
-from .results import ENERGY_COLUMNS, energy_metrics
+from pmsm_ev import vehicle as veh
+from pmsm_ev.params import MotorParams, VehicleParams
+from pmsm_ev.results import ENERGY_COLUMNS
+
+from .energy import energy_metrics
 
 _WH = 1.0 / 3600.0  #: J -> Wh
 #: the balance over a cycle must close to this, relative to the DC throughput (issue 24)
@@ -190,7 +192,7 @@ def interval_sum(r: dict[str, np.ndarray], column: str, mask: np.ndarray) -> flo
 def phase_energy(r: dict[str, np.ndarray], cycle, vehicle: VehicleParams | None = None) -> list[dict]:
     """The energy of each phase of ``cycle`` a run covered (``phase_windows``), from its rows with the
     ``ENERGY_COLUMNS`` (and ``v_vehicle``, ``delta_deg``): per phase ``name``, ``start``, ``end``, ``complete``,
-    ``energy`` (``pmsm_ev.results.energy_metrics`` of the phase's rows: ``dc_Wh_per_km``, ``drawn_Wh``,
+    ``energy`` (``energy.energy_metrics`` of the phase's rows: ``dc_Wh_per_km``, ``drawn_Wh``,
     ``regen_Wh``, ``losses_Wh`` by kind, ``road_Wh``, ``brake_Wh``, ``residual_Wh``, ...), ``regen_share``
     (regenerated / drawn at the DC link: the share of the drawn energy that came back), ``regen_of_braking``
     (regenerated / the braking energy at the wheels, ``wheel_check``'s wheel ``braking_Wh``: the share of the
