@@ -74,7 +74,8 @@ def test_the_steady_state_is_the_losses_through_the_network():
     as stated in ``PlantParams``; the one-node winding at T_cool + P R_th."""
     p = LPTN
     q_cu, q_res = 1000.0, 400.0
-    _, ee = _run_network(p, q_cu, q_res, dt=10.0, steps=12000)  # 1.2e5 s: 30 slowest time constants (stable: dt < 2 x 16 s)
+    # 1.2e5 s: 30 slowest time constants (Euler stable: dt < 2 x the fastest, 16 s)
+    _, ee = _run_network(p, q_cu, q_res, dt=10.0, steps=12000)
     rotor = p.lptn_rotor_share * q_res
     yoke = p.lptn_yoke_share * (q_res - rotor)
     power = np.array([yoke, q_res - rotor - yoke, q_cu, rotor])

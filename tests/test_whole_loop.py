@@ -58,6 +58,18 @@ def test_the_cycle_system_of_bench_e_every_step_is_the_cosimulations(tmp_path):
     assert r["i_dref"][-1] > 0.0  # aligning: the vector's magnitude (the unit's property)
 
 
+def test_the_thermal_network_in_the_whole_loop_is_the_cosimulations(tmp_path):
+    """wltc3b-thermal (the plant's thermal network on: R_s and psi follow its temperatures each step) for 3 s, a row
+    every 10 ms with the temperatures recorded: the same file as the co-simulation's."""
+    def spec():
+        s = load_system("wltc3b-thermal")
+        s.stop_time, s.output_interval = 3.0, 0.01
+        return s
+
+    r = _same(spec, tmp_path)
+    assert r["T_wdg"][-1] > r["T_wdg"][0] and r["Q_heat"][-1] > 0.0 and r["psi_now"][-1] != r["psi_now"][0]
+
+
 def test_the_bench_a_system_is_the_cosimulations(tmp_path):
     """The system of bench case (a) (scenario 1), a row every 10 ms as the benchmark records it."""
     real = project_fmus()
