@@ -12,7 +12,9 @@ import re
 import numpy as np
 import pytest
 
-from pmsm_ev import accel
+from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.thermal_metrics import thermal_figures
+from pmsm_ev import accel, cycles
 from pmsm_ev import kernels as k
 from pmsm_ev.params import (
     SOURCED_IRON,
@@ -24,6 +26,7 @@ from pmsm_ev.params import (
     winding_resistance,
 )
 from pmsm_ev.plant import THERMAL_SLOTS, Plant
+from pmsm_ev.thermal import steady_temperatures
 
 DT = 1e-4
 T_COOL = 65.0
@@ -225,3 +228,67 @@ def test_bad_input_is_one_line_naming_the_field(changes, message):
     with pytest.raises(ParameterError, match=re.escape(message)) as err:
         dataclasses.replace(LPTN, **changes).validate()
     assert "\n" not in str(err.value)
+
+
+# -- the application's figures (metrics.json 'thermal') and the heat run's cycle --------------------------------------
+def _columns(t_w, t_m, time=None):
+    n = len(t_w)
+    time = np.arange(n, dtype=float) if time is None else time
+    p = LPTN
+    psi = np.array([magnet_flux(MotorParams().psi, x, p.alpha_psi) for x in t_m])
+    r_s = np.array([winding_resistance(MotorParams().R_s, x, p.alpha_R) for x in t_w])
+    over = (np.asarray(t_w) >= p.T_winding_max) * 1.0 + (np.asarray(t_m) >= p.T_magnet_max) * 2.0
+    return {"time": time, "T_wdg": np.asarray(t_w, float), "T_pm": np.asarray(t_m, float), "psi_now": psi,
+            "R_s_now": r_s, "over_temperature": over}
+
+
+@pytest.mark.parametrize("t_w,t_m,first,when", [
+    ([65, 120, 181, 185, 170], [65, 90, 140, 151, 152], "winding", 2.0),
+    ([65, 120, 150, 170, 175], [65, 100, 149, 150, 160], "magnet", 3.0),
+    ([65, 100, 120, 110, 100], [65, 80, 90, 95, 99], "neither", None),
+])
+def test_what_limits_first_is_the_first_limit_reached(t_w, t_m, first, when):
+    th = thermal_figures(_columns(t_w, t_m), LPTN.T_winding_max, LPTN.T_magnet_max)
+    assert th["limits_first"] == first
+    assert (th["t_winding_limit"] if first == "winding" else th["t_magnet_limit"]) == when
+    assert th["winding"]["T_peak"] == max(t_w) and th["magnet"]["T_peak"] == max(t_m)
+    assert th["psi_fall"] == pytest.approx(1.0 - (1.0 + LPTN.alpha_psi * (max(t_m) - 20.0))
+                                           / (1.0 + LPTN.alpha_psi * (65.0 - 20.0)), rel=1e-12)
+    assert (th["t_over_temperature"] is None) == (first == "neither")
+
+
+def test_the_sustained_figures_are_the_networks_steady_state_under_the_last_repetitions_losses():
+    """Two repetitions of 10 s: the second's mean losses (copper 800 W, iron 300 W, friction 50 W) held give the
+    network's steady state (``steady_temperatures``, checked against the matrix solved here), the current per torque
+    of each repetition the least-squares slope of |i_s| on |T_e|."""
+    time = np.linspace(0.0, 20.0, 201)
+    r = _columns(np.full(201, 70.0), np.full(201, 66.0), time)
+    ramp = np.where(time > 10.0, time - 10.0, 0.0)
+    r.update(E_copper=100.0 * time + 800.0 * ramp, E_iron=300.0 * ramp, E_friction=50.0 * ramp,
+             T_e=np.where(time >= 10.0, 100.0, 50.0), i_d=np.zeros(201), i_q=np.where(time >= 10.0, 420.0, 200.0))
+    th = thermal_figures(r, LPTN.T_winding_max, LPTN.T_magnet_max, repeats=2, params=LPTN)
+    sus = th["sustained"]
+    assert sus["P_copper_W"] == pytest.approx(900.0) and sus["P_residual_W"] == pytest.approx(350.0)
+    rotor = LPTN.lptn_rotor_share * 350.0
+    yoke = LPTN.lptn_yoke_share * (350.0 - rotor)
+    expected = T_COOL + np.linalg.solve(_conductance_matrix(LPTN), [yoke, 350.0 - rotor - yoke, 900.0, rotor])
+    assert list(steady_temperatures(LPTN, 900.0, 350.0)) == pytest.approx(list(expected), rel=1e-12)
+    assert (sus["T_winding"], sus["T_magnet"]) == pytest.approx((expected[2], expected[3]), rel=1e-12)
+    assert sus["T_coolant_magnet_limit"] == pytest.approx(LPTN.T_magnet_max - (expected[3] - T_COOL))
+    assert sus["limits_first"] == ("magnet" if sus["margin_magnet_K"] < sus["margin_winding_K"] else "winding")
+    assert th["current_per_torque_by_repeat"] == pytest.approx([4.0, 4.2])
+    assert th["current_per_torque_rise"] == pytest.approx(0.05)
+
+
+def test_a_cycle_repeated_is_driven_back_to_back():
+    us06 = cycles.load("us06")
+    five = cycles.repeated(us06, 5)
+    assert five.duration == 5 * us06.duration and five.repeats == 5 and five.name == "us06x5"
+    assert np.array_equal(five.speed[600:1201], us06.speed) and np.all(np.diff(five.time) > 0)
+    wltc = cycles.repeated(cycles.load("wltc3b"), 2)
+    assert [p.name for p in wltc.phases][3:5] == ["extra_high_1", "low_2"] and wltc.phases[4].start == 1800.0
+    assert cycles.repeated(us06, 1) is us06
+    with pytest.raises(cycles.CycleError, match="repeat must be a whole number >= 1"):
+        cycles.repeated(us06, 0)
+    spec = load_system("us06x5-thermal")
+    assert spec.stop_time == 3000.0 and spec.signals["omega_ref"].cycle.repeats == 5

@@ -10,9 +10,12 @@ it states is the plant's output ``over_temperature`` (1 the winding, 2 the magne
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from pmsm_ev.params import PlantParams
+from pmsm_ev.thermal import steady_temperatures
 
 from ..engine.recording import read_results
 from ..engine.system import SystemSpec
@@ -24,17 +27,18 @@ THERMAL_COLUMNS = ("time", "T_wdg", "T_pm", "psi_now", "R_s_now", "over_temperat
 #: loaded points, where the current is the torque's (at light load the field-weakening current and the noise's 1 A
 #: would dominate the ratio)
 LOADED_SHARE = 0.2
-#: the plant instance whose start values give the limits
+#: the plant instance whose start values give the thermal model
 PLANT = "plant"
+#: the losses' columns of the sustained figures (the energies since the start, J)
+LOSS_COLUMNS = ("E_copper", "E_iron", "E_friction")
 
 
-def _limits(spec: SystemSpec) -> tuple[float, float]:
-    """(T_winding_max, T_magnet_max) [degC] of the run's plant: its start values, else ``PlantParams``' defaults."""
+def _plant_params(spec: SystemSpec) -> PlantParams:
+    """The run's ``PlantParams``: its plant's start values of that group, the others the defaults."""
     plant = next((c for c in spec.components if c.name == PLANT), None)
     starts = plant.start if plant is not None else {}
-    defaults = PlantParams()
-    return (float(starts.get("T_winding_max", defaults.T_winding_max)),
-            float(starts.get("T_magnet_max", defaults.T_magnet_max)))
+    fields = {f.name for f in dataclasses.fields(PlantParams)}
+    return PlantParams(**{k: v for k, v in starts.items() if k in fields})
 
 
 def _first_at_or_above(time: np.ndarray, values: np.ndarray, limit: float) -> float | None:
@@ -52,12 +56,17 @@ def current_per_torque(i_d: np.ndarray, i_q: np.ndarray, t_e: np.ndarray, floor:
     return float(np.sum(np.hypot(i_d[loaded], i_q[loaded]) * t) / np.sum(t * t))
 
 
-def thermal_figures(r: dict, t_winding_max: float, t_magnet_max: float, repeats: int = 1) -> dict:
+def thermal_figures(r: dict, t_winding_max: float, t_magnet_max: float, repeats: int = 1,
+                    params: PlantParams | None = None) -> dict:
     """The thermal block of metrics.json from the recorded columns ``r`` (``THERMAL_COLUMNS``; with ``i_d``, ``i_q``,
     ``T_e`` the current per torque): the temperatures at the start, their peaks (and when) and at the end, psi and R_s
     at the start and the end, the first time each limit is reached and ``limits_first`` ('winding', 'magnet' or
     'neither'). With ``repeats`` > 1 (a cycle driven back to back) the current per torque of each repetition (the same
-    speed trace, so the same torques: what the warmer magnet costs in current)."""
+    speed trace, so the same torques: what the warmer magnet costs in current). With the run's ``params`` and the
+    losses' columns (``LOSS_COLUMNS``) ``sustained``: the last repetition's mean losses held, the temperatures the
+    network settles at (``pmsm_ev.thermal.steady_temperatures``), their margins, the node with the smaller margin
+    (what limits first in a longer drive of this kind) and the coolant temperature that would bring each to its
+    limit."""
     time = r["time"]
     t_w, t_m = r["T_wdg"], r["T_pm"]
     out = {"T_winding_max": t_winding_max, "T_magnet_max": t_magnet_max}
@@ -86,6 +95,23 @@ def thermal_figures(r: dict, t_winding_max: float, t_magnet_max: float, repeats:
         out["limits_first"] = "magnet"
     out["margin_winding_K"] = t_winding_max - out["winding"]["T_peak"]
     out["margin_magnet_K"] = t_magnet_max - out["magnet"]["T_peak"]
+    if params is not None and all(c in r for c in LOSS_COLUMNS) and time.size >= 2:
+        # sustained: the drive's last repetition (the whole run without one) driven on and on, its mean losses held:
+        # the network's steady state, and the coolant temperature at which each node would sit at its limit
+        start = int(np.searchsorted(time, time[-1] - (float(time[-1]) - float(time[0])) / repeats))
+        span = float(time[-1] - time[start])
+        if span > 0.0:
+            p_cu = (r["E_copper"][-1] - r["E_copper"][start]) / span
+            p_res = (r["E_iron"][-1] - r["E_iron"][start] + r["E_friction"][-1] - r["E_friction"][start]) / span
+            steady = steady_temperatures(params, p_cu, p_res)
+            t_w_inf, t_m_inf = float(steady[2]), float(steady[3])
+            sus = {"from_s": float(time[start]), "P_copper_W": float(p_cu), "P_residual_W": float(p_res),
+                   "T_winding": t_w_inf, "T_magnet": t_m_inf,
+                   "margin_winding_K": t_winding_max - t_w_inf, "margin_magnet_K": t_magnet_max - t_m_inf,
+                   "T_coolant_winding_limit": t_winding_max - (t_w_inf - params.T_ambient),
+                   "T_coolant_magnet_limit": t_magnet_max - (t_m_inf - params.T_ambient)}
+            sus["limits_first"] = ("magnet" if sus["margin_magnet_K"] < sus["margin_winding_K"] else "winding")
+            out["sustained"] = sus
     if all(c in r for c in ("i_d", "i_q", "T_e")) and time.size >= 2:
         floor = LOADED_SHARE * float(np.max(np.abs(r["T_e"])))
         out["current_per_torque_floor_Nm"] = floor
@@ -110,16 +136,17 @@ def with_thermal_figures(metrics_of, spec: SystemSpec):
     names = {c.name for c in spec.columns}
     if not set(THERMAL_COLUMNS) <= names:
         return metrics_of
-    t_winding_max, t_magnet_max = _limits(spec)
+    params = _plant_params(spec)
+    t_winding_max, t_magnet_max = params.T_winding_max, params.T_magnet_max
     cycle = cycle_of(spec)
     repeats = cycle.repeats if cycle is not None else 1
 
     def measured(out_dir, columns, rows: int) -> dict:
         m = metrics_of(out_dir, columns, rows)
         if rows >= 2:
-            wanted = THERMAL_COLUMNS + tuple(c for c in ("i_d", "i_q", "T_e") if c in names)
+            wanted = THERMAL_COLUMNS + tuple(c for c in ("i_d", "i_q", "T_e") + LOSS_COLUMNS if c in names)
             r = read_results(out_dir, columns=wanted)
-            m["thermal"] = thermal_figures(r, t_winding_max, t_magnet_max, repeats)
+            m["thermal"] = thermal_figures(r, t_winding_max, t_magnet_max, repeats, params)
         return m
 
     return measured
@@ -142,6 +169,14 @@ def summary_line(thermal: dict) -> str:
         per = thermal["current_per_torque_by_repeat"]
         cpt = (f"; current per torque {per[0]:.4f} -> {per[-1]:.4f} A/(N m) from the first repetition to the last "
                f"({100 * thermal['current_per_torque_rise']:+.2f} %)")
+    sus = thermal.get("sustained")
+    if isinstance(sus, dict):
+        part = "repetition" if thermal.get("current_per_torque_by_repeat") else "cycle"
+        first = sus["limits_first"]
+        verdict += (f"; sustained (the last {part}'s {sus['P_copper_W']:.0f} W copper, {sus['P_residual_W']:.0f} W "
+                    f"iron and friction held) the winding would settle at {sus['T_winding']:.1f}, the magnet at "
+                    f"{sus['T_magnet']:.1f} degC: the {first} nearer its limit (reached from a coolant of "
+                    f"{sus['T_coolant_' + first + '_limit']:.1f} degC)")
     return (f"thermal: winding {w['T_start']:.1f} -> peak {w['T_peak']:.1f} degC at {w['t_peak']:.0f} s -> "
             f"{w['T_end']:.1f} degC, magnet {mg['T_start']:.1f} -> peak {mg['T_peak']:.1f} degC at "
             f"{mg['t_peak']:.0f} s; psi {thermal['psi_start']:.5f} -> {thermal['psi_min']:.5f} Wb "
@@ -150,5 +185,5 @@ def summary_line(thermal: dict) -> str:
             f"{100 * thermal['R_s_rise']:+.1f} %{cpt}; {verdict}")
 
 
-__all__ = ["LOADED_SHARE", "THERMAL_COLUMNS", "current_per_torque", "summary_line", "thermal_figures",
+__all__ = ["LOADED_SHARE", "LOSS_COLUMNS", "THERMAL_COLUMNS", "current_per_torque", "summary_line", "thermal_figures",
            "with_thermal_figures"]
