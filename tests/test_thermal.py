@@ -12,7 +12,9 @@ import re
 import numpy as np
 import pytest
 
+from pmsm_cosim.app import thermal_metrics
 from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.overrides import apply_overrides
 from pmsm_cosim.app.thermal_metrics import thermal_figures
 from pmsm_ev import accel, cycles
 from pmsm_ev import kernels as k
@@ -292,3 +294,12 @@ def test_a_cycle_repeated_is_driven_back_to_back():
         cycles.repeated(us06, 0)
     spec = load_system("us06x5-thermal")
     assert spec.stop_time == 3000.0 and spec.signals["omega_ref"].cycle.repeats == 5
+
+
+def test_the_limits_and_the_network_are_the_runs_own():
+    """The verdict's limits and the sustained figures' network are the run's plant's: its system file's values and the
+    command line's (text there: ``--set plant.T_magnet_max=120``)."""
+    spec = apply_overrides("us06x5-thermal", set=["plant.T_ambient=90", "plant.T_magnet_max=120"], cli=True)
+    p = thermal_metrics._plant_params(spec)
+    assert (p.thermal_model, p.T_ambient, p.T_magnet_max, p.T_winding_max, p.T_winding) == (
+        "lptn", 90.0, 120.0, 180.0, 65.0)

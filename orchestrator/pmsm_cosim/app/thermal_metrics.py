@@ -37,8 +37,16 @@ def _plant_params(spec: SystemSpec) -> PlantParams:
     """The run's ``PlantParams``: its plant's start values of that group, the others the defaults."""
     plant = next((c for c in spec.components if c.name == PLANT), None)
     starts = plant.start if plant is not None else {}
-    fields = {f.name for f in dataclasses.fields(PlantParams)}
-    return PlantParams(**{k: v for k, v in starts.items() if k in fields})
+    defaults = PlantParams()
+    values = {}
+    for f in dataclasses.fields(PlantParams):
+        if f.name in starts:  # a system file's number, or the command line's text (--set plant.T_ambient=90)
+            kind, value = type(getattr(defaults, f.name)), starts[f.name]
+            if kind is bool:
+                values[f.name] = value if isinstance(value, bool) else str(value).strip().lower() in ("true", "1")
+            else:
+                values[f.name] = kind(float(value)) if kind in (int, float) else kind(value)
+    return PlantParams(**values)
 
 
 def _first_at_or_above(time: np.ndarray, values: np.ndarray, limit: float) -> float | None:
