@@ -11,6 +11,7 @@ import pytest
 from orchestrator_support import project_fmus
 from pmsm_cosim.app import bench
 from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.overrides import apply_overrides
 from pmsm_cosim.app.whole_loop import run_whole_loop
 from pmsm_cosim.engine.master import Master, SignalClock
 from pmsm_cosim.engine.recording import read_results
@@ -59,12 +60,11 @@ def test_the_cycle_system_of_bench_e_every_step_is_the_cosimulations(tmp_path):
 
 
 def test_the_thermal_network_in_the_whole_loop_is_the_cosimulations(tmp_path):
-    """wltc3b-thermal (the plant's thermal network on: R_s and psi follow its temperatures each step) for 3 s, a row
-    every 10 ms with the temperatures recorded: the same file as the co-simulation's."""
+    """wltc3b-thermal (the plant's thermal network on: R_s and psi follow its temperatures each step) with the
+    sensorless unit (the whole loop's controllers are FocEkf5 and FocSensorless) for 3 s, a row every 10 ms with the
+    temperatures recorded: the same file as the co-simulation's."""
     def spec():
-        s = load_system("wltc3b-thermal")
-        s.stop_time, s.output_interval = 3.0, 0.01
-        return s
+        return apply_overrides("wltc3b-thermal", controller="sensorless", stop_time=3.0, output_interval=0.01)
 
     r = _same(spec, tmp_path)
     assert r["T_wdg"][-1] > r["T_wdg"][0] and r["Q_heat"][-1] > 0.0 and r["psi_now"][-1] != r["psi_now"][0]
