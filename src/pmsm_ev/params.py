@@ -651,7 +651,7 @@ class PlantParams:
     flux_U: float = 1.0  #: see ``flux_S``
     flux_V: float = 1.0  #: see ``flux_S``
 
-    # -- temperature (the magnet's constant over a run; the winding's too unless thermal_R > 0) --
+    # -- temperature (constant over a run, unless thermal_R > 0 heats the winding or thermal_model 'lptn' both) --
     #: winding temperature [degC] (at the start, with the thermal model); Table I's R_s is taken at
     #: ``TEMPERATURE_REF`` (20 degC). R_s(T) = R_s (1 + alpha_R (T - 20)). Typical: 20 (cold) .. 120
     #: degC (hot, +39 % R_s).

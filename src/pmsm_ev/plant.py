@@ -10,8 +10,9 @@ noise, offset, gain error and ADC quantisation per phase (two phase sensors, a a
 the truth outputs stay clean), and an inverter with a DC-link voltage limit and an
 actuation delay of one switching period. A motor that is not its data sheet: inverter dead
 time (a per-phase voltage error in the sign of the current), magnetic saturation of L_d, L_q
-(flux-form eqs 10-12) and the winding and magnet temperatures (R_s(T), psi(T): the magnet's
-constant over a run, the winding's too unless the thermal model heats it, ``thermal_R``).
+(flux-form eqs 10-12) and the winding and magnet temperatures (R_s(T), psi(T): constants over a
+run, unless the thermal model heats them: the winding alone with ``thermal_R``, both with the lumped-parameter thermal
+network ``thermal_model`` 'lptn', in the kernels' step).
 The inverter's switching period (``PlantParams.switching_period``), not the communication
 step, sets the dead time's voltage error and the delay: a plant stepped at a fraction of the
 control period sees the same inverter. The controllers keep their own nominal parameters, so
