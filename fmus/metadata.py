@@ -208,12 +208,34 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "flux_V": (None, "algebraic flux model: cross-saturation exponent V (of psi_q), >= 0"),
     "T_winding": ("degC", "winding temperature: R_s(T) = R_s (1 + alpha_R (T - 20 degC))"),
     "T_magnet": ("degC", "magnet temperature: psi(T) = psi (1 + alpha_psi (T - 20 degC))"),
-    "thermal_R": ("K/W", "thermal resistance winding -> coolant of the first-order thermal model (0 = off: "
-                         "T_winding constant)"),
+    "thermal_R": ("K/W", "thermal resistance winding -> coolant of the one-node thermal model (0 = off: "
+                         "T_winding constant; thermal_model 'lptn' needs 0)"),
     "thermal_C": ("J/K", "heat capacity of the winding in the thermal model"),
-    "T_ambient": ("degC", "coolant temperature of the thermal model"),
+    "T_ambient": ("degC", "coolant temperature of the thermal model (both boundaries of the 'lptn' network)"),
     "alpha_R": ("1/K", "temperature coefficient of the winding resistance (copper 0.00393)"),
     "alpha_psi": ("1/K", "temperature coefficient of the magnet flux (NdFeB about -0.0012)"),
+    "thermal_model": (None, "the motor's thermal model: 'off' (the temperatures constant, or the one-node winding "
+                            "of thermal_R) or 'lptn' (Wallscheid and Boecker's four-node lumped-parameter thermal "
+                            "network: stator yoke, tooth, winding, magnet; R_s and psi follow it)"),
+    "lptn_C_yoke": ("J/K", "thermal network: heat capacity of the stator yoke's node"),
+    "lptn_C_tooth": ("J/K", "thermal network: heat capacity of the stator tooth's node"),
+    "lptn_C_winding": ("J/K", "thermal network: heat capacity of the winding's node"),
+    "lptn_C_magnet": ("J/K", "thermal network: heat capacity of the magnet's (rotor's) node"),
+    "lptn_R_yoke_coolant": ("K/W", "thermal network: thermal resistance yoke -> coolant (water jacket)"),
+    "lptn_R_yoke_winding": ("K/W", "thermal network: thermal resistance yoke -> winding"),
+    "lptn_R_yoke_tooth": ("K/W", "thermal network: thermal resistance yoke -> tooth"),
+    "lptn_R_tooth_winding": ("K/W", "thermal network: thermal resistance tooth -> winding"),
+    "lptn_R_tooth_magnet": ("K/W", "thermal network: thermal resistance tooth -> magnet (the air gap)"),
+    "lptn_R_winding_magnet": ("K/W", "thermal network: thermal resistance winding -> magnet (end windings' air)"),
+    "lptn_R_magnet_ambient": ("K/W", "thermal network: thermal resistance magnet -> ambient (at T_ambient)"),
+    "lptn_rotor_share": (None, "thermal network: the share of the iron and friction losses that heats the magnet's "
+                               "node, in [0, 1]"),
+    "lptn_yoke_share": (None, "thermal network: the stator's share of the iron and friction losses that heats the "
+                              "yoke (the rest the tooth), in [0, 1]"),
+    "T_winding_max": ("degC", "the winding's temperature limit (insulation class), above T_ambient: the output "
+                              "over_temperature flags it"),
+    "T_magnet_max": ("degC", "the magnet's maximum temperature, above T_ambient: the output over_temperature flags "
+                             "it"),
     "dead_time_comp": ("V", "dead-time compensation: per-phase voltage added in the sign of the measured "
                             "current (0 = off; v_dc t_d / T_s cancels the plant's dead time)"),
     "dead_time_comp_i0": ("A", "current scale of the dead-time compensation's soft sign"),

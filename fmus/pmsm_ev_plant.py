@@ -12,7 +12,7 @@ import math
 from pmsm_ev import __version__
 from pmsm_ev import kernels as _k
 from pmsm_ev.params import BatteryParams, MotorParams, PlantParams, VehicleParams
-from pmsm_ev.plant import BATTERY_SLOTS, ENERGY_SLOTS, Plant
+from pmsm_ev.plant import BATTERY_SLOTS, ENERGY_SLOTS, THERMAL_SLOTS, Plant
 from pmsm_ev_fmus.slave_support import COMPILED_BUFFER, DriveSlave, FmuUsageError, SimulationError
 
 _MOTOR = ("N", "psi", "L_d", "L_q")  # the motor parameters of eq 12
@@ -75,6 +75,19 @@ _BATTERY_OUTPUTS = {
     "W_battery": ("J", "energy in the battery's RC pair's capacitor, C1 v_rc^2 / 2", "Wh"),
 }
 
+#: the thermal network's outputs (thermal_model 'lptn', or the one-node winding of thermal_R; without either the start
+#: temperatures, constant): name -> (unit, description, display unit)
+_THERMAL_OUTPUTS = {
+    "T_yoke": ("degC", "the stator yoke's temperature (the thermal network's node)", None),
+    "T_tooth": ("degC", "the stator tooth's temperature (the thermal network's node)", None),
+    "T_wdg": ("degC", "the winding's temperature: R_s follows it (the parameter T_winding is its start)", None),
+    "T_pm": ("degC", "the magnet's temperature: psi follows it (the parameter T_magnet is its start)", None),
+    "Q_heat": ("J", "the heat the motor's losses put into the thermal network since the start (copper, and with "
+                    "'lptn' iron and friction)", "Wh"),
+    "Q_coolant": ("J", "the heat the thermal network gave to the coolant since the start", "Wh"),
+    "over_temperature": (None, "over-temperature flags now: 1 the winding at or above T_winding_max, 2 the magnet "
+                               "at or above T_magnet_max, 3 both; 0 none (a controller may derate on it)", None),
+}
 
 #: the slave's inputs and outputs in the compiled step's buffer, the plant's ``io``
 #: (``pmsm_ev.kernels.PLANT_IO_LAYOUT``); the outputs are the plant's attributes of the same names there
@@ -163,6 +176,16 @@ class PmsmEvPlant(DriveSlave):
                             start_dependencies=("battery", "bat_soc0", "bat_ocv_soc", "bat_ocv_v"),
                             display_unit=display)
 
+        for name, (unit, text, display) in _THERMAL_OUTPUTS.items():
+            self.add_output(name, unit, text + " (before the first step: the start values)", start=None,
+                            start_dependencies=("T_winding", "T_magnet"), display_unit=display)
+        self.add_output("R_s_now", "Ohm", "the winding's resistance now, R_s (1 + alpha_R (T_wdg - 20 degC))"
+                        + at_start,
+                        start=None, start_dependencies=("R_s", "T_winding", "alpha_R"))
+        self.add_output("psi_now", "Wb", "the magnet's flux linkage now, psi (1 + alpha_psi (T_pm - 20 degC))"
+                        + at_start,
+                        start=None, start_dependencies=("psi", "T_magnet", "alpha_psi"))
+
         self.add_parameters(MotorParams, VehicleParams, PlantParams, BatteryParams)
         self._plant = None
 
@@ -219,6 +242,9 @@ class PmsmEvPlant(DriveSlave):
         slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in ENERGY_SLOTS.items()})
         slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in BATTERY_SLOTS.items()})
         slots["P_dc"] = 2 * COMPILED_BUFFER + _k.E_P_DC
+        slots.update({name: 2 * COMPILED_BUFFER + slot for name, slot in THERMAL_SLOTS.items()})
+        slots["R_s_now"] = COMPILED_BUFFER + _k.P_R_S
+        slots["psi_now"] = COMPILED_BUFFER + _k.P_PSI
         return slots
 
     def compiled_live(self) -> tuple[str, ...]:
@@ -228,9 +254,9 @@ class PmsmEvPlant(DriveSlave):
     def compiled_step(self):
         """(the plant's C step, the plant's buffer ``Plant.io`` with the slave's inputs and outputs written into it,
         the plant's parameter and energy vectors); None where the kernels run as plain Python or the plant has an
-        inverter delay or the thermal model (their state is Python's)."""
+        inverter delay (its state is Python's)."""
         p = self._plant
-        if p is None or not getattr(p._kernels, "JIT", False) or p.delay or p._thermal:
+        if p is None or not getattr(p._kernels, "JIT", False) or p.delay:
             return None
         step = self.__dict__.get("_step_address")
         if step is None:
@@ -276,3 +302,7 @@ PmsmEvPlant.E_kinetic = _Energy(lambda plant: plant.stored[1])
 PmsmEvPlant.P_dc = _Energy(lambda plant: plant.P_dc)
 for _name, _slot in BATTERY_SLOTS.items():
     setattr(PmsmEvPlant, _name, _energy_slot(_slot))
+for _name, _slot in THERMAL_SLOTS.items():
+    setattr(PmsmEvPlant, _name, _energy_slot(_slot))
+PmsmEvPlant.R_s_now = _Energy(lambda plant: float(plant._pp[_k.P_R_S]))
+PmsmEvPlant.psi_now = _Energy(lambda plant: float(plant._pp[_k.P_PSI]))

@@ -51,7 +51,7 @@ from pmsm_ev.params import (
     StartupParams,
     VehicleParams,
 )
-from pmsm_ev.plant import BATTERY_SLOTS, Plant
+from pmsm_ev.plant import BATTERY_SLOTS, THERMAL_SLOTS, Plant
 from pmsm_ev_fmus import build as fmu_build
 from pmsm_ev_fmus.metadata import PARAMETERS, UNITS
 
@@ -61,7 +61,7 @@ PLANT_INPUTS = ("v_alpha", "v_beta", "delta", "T_brake")
 PLANT_OUTPUTS = ("i_alpha", "i_beta", "i_d", "i_q", "omega_m", "theta_e", "T_e", "T_L_mech", "v_vehicle",
                  "x_vehicle", "E_dc", "E_dc_abs", "E_regen", "E_copper", "E_friction", "E_shaft", "E_gear", "E_aero",
                  "E_rolling", "E_grade", "E_brake", "E_inverter", "E_iron", "W_magnetic", "E_kinetic", "P_dc",
-                 *BATTERY_SLOTS)
+                 *BATTERY_SLOTS, *THERMAL_SLOTS, "R_s_now", "psi_now")
 CTRL_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas", "v_dc_meas", "P_charge_max",
                "P_discharge_max")
 CTRL_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d_hat", "i_q_hat", "omega_hat", "theta_hat", "T_L_hat",
@@ -136,7 +136,8 @@ def plant_outputs(p: Plant):
     e = p.energies()
     return [p.i_alpha, p.i_beta, p.i_d, p.i_q, p.omega_m, p.theta_e, p.T_e, p.T_L_mech, p.v_vehicle, p.x_vehicle,
             *(e[name] for name in PLANT_OUTPUTS[10:23]), e["W_magnetic"], e["E_kinetic"], p.P_dc,
-            *(float(p.energy[slot]) for slot in BATTERY_SLOTS.values())]
+            *(float(p.energy[slot]) for slot in BATTERY_SLOTS.values()),
+            *(float(p.energy[slot]) for slot in THERMAL_SLOTS.values()), p.thermal()["R_s"], p.thermal()["psi"]]
 
 
 def unit_outputs(u: ControlUnit, theta_meas: float = 0.0):
@@ -412,7 +413,7 @@ def test_model_description_is_complete(fmus, name):
     assert [v.name for v in md.modelVariables if v.causality == "input"] == list(inputs)
     assert [v.name for v in md.modelVariables if v.causality == "output"] == list(outputs)
     for n in inputs + outputs:  # all with units, but the mode, the fault, the region (codes 0 / 1 / 2 ...), soc
-        unitless = n in ("mode", "fault", "ref_region", "soc")
+        unitless = n in ("mode", "fault", "ref_region", "soc", "over_temperature")
         assert by_name[n].type == "Real" and (by_name[n].unit is None if unitless else by_name[n].unit in units)
     assert by_name["omega_m" if name == "PmsmEvPlant" else "omega_hat"].unit == "rad/s"
     # no direct feedthrough: every output's dependency list is empty

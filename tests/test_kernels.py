@@ -169,8 +169,12 @@ def test_each_slot_is_a_module_constant_and_no_two_overlap(table, size):
 
 def test_the_offsets_are_those_the_kernels_were_written_with():
     assert (kernels.P_SUBSTEPS, kernels.P_DT_V, kernels.P_SAT_AQ, kernels.P_T_BRAKE, kernels.PLANT_PARAMS) == (
-        21, 22, 26, 29, 125)
-    assert (kernels.E_DC, kernels.E_P_DC, kernels.E_IRON, kernels.PLANT_ENERGY) == (0, 12, 13, 24)
+        21, 22, 26, 29, 148)
+    assert (kernels.E_DC, kernels.E_P_DC, kernels.E_IRON, kernels.PLANT_ENERGY) == (0, 12, 13, 31)
+    # the thermal network's slots, after the battery's (``thermal_network_step``)
+    assert (kernels.P_TH, kernels.P_TH_G, kernels.P_ALPHA_PSI, kernels.E_TH_T, kernels.E_TH_OVER) == (
+        120, 121, 142, 24, 30)
+    assert kernels.P_FLUX_MEMO == 143  # the algebraic model's memo, after the thermal network's
     # the battery's slots, after the ideal link's (0 there with the ideal link)
     assert (kernels.P_BAT, kernels.P_BAT_OCV, kernels.P_DT_K, kernels.E_BAT_SOC, kernels.E_BAT_P_DIS) == (
         56, 69, 119, 14, 23)

@@ -65,7 +65,8 @@ def test_the_default_build_puts_the_lean_binding_in_front_of_pythonfmus_library(
 
 
 @pytest.mark.parametrize("scenario, stop", [("wltc3b-if", "12"), ("scenario2", "2"),
-                                            ("hill-start-injection", "3"), ("wltc3b-battery", "8")])
+                                            ("hill-start-injection", "3"), ("wltc3b-battery", "8"),
+                                            ("wltc3b-thermal", "8")])
 def test_a_run_gives_the_same_bytes_with_either_binding(builds, tmp_path, scenario, stop):
     """The whole co-simulation (plant, controller, route FMU; the compiled loop) through each binding:
     ``results.csv`` identical. With the lean binding the FMUs step in compiled code (``pmsm_ev.kernels.fmu``),
@@ -73,7 +74,8 @@ def test_a_run_gives_the_same_bytes_with_either_binding(builds, tmp_path, scenar
     handover to the EKF, with the plant's voltage limit, inverter losses and current noise; scenario2 the paper's
     FocEkf5 with the route FMU's elevation; hill-start-injection the injection's acquisition and polarity test
     (``injection_unit_step``); wltc3b-battery the battery in the plant's step and the controller on the measured DC
-    link (``battery_step``, ``unit_dc_link``)."""
+    link (``battery_step``, ``unit_dc_link``); wltc3b-thermal the thermal network in the plant's step
+    (``thermal_network_step``)."""
     outputs = []
     for binding, folder in builds.items():
         out = tmp_path / binding

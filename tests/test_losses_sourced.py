@@ -206,7 +206,8 @@ def test_the_physical_scenarios_carry_the_sourced_losses_and_the_paper_scenarios
                 assert plant[name] == pytest.approx(value, rel=2e-3, abs=1e-12), (path.name, name)
         if path.stem in ("scenario1", "scenario2"):
             assert not set(sourced) & set(plant) and not plant.get("inverter_losses")
-    assert physical == 19  # 17 (the cycles, their injection and I-f drives, the accelerations, hilly), the 2 batteries
+    assert physical == 21  # 17 (the cycles, their injection and I-f drives, the accelerations, hilly), the 2 batteries,
+    # the 2 thermal runs
 
 
 def test_the_sourced_losses_give_the_same_bits_compiled_or_not():

@@ -341,21 +341,7 @@ def test_psi_adaptation_removes_the_speed_bias_of_a_hot_magnet():
         ControlUnit("ekf5", ekf=EkfParams(psi_adapt=1.0))
 
 
-# -- the winding's first-order thermal model ----------------------------------------------------------
-def test_thermal_model_settles_at_losses_times_thermal_resistance():
-    """C_th dT/dt = P - (T - T_amb) / R_th: the step response reaches 1 - 1/e of P R_th after one time
-    constant and T_amb + P R_th in steady state."""
-    P, R_th, C_th, T_amb = 1500.0, 0.05, 2000.0, 40.0
-    T, t = T_amb, 0.0
-    while t < R_th * C_th - 1e-9:  # one time constant in 1 s steps
-        T = k.thermal_step(T, P, T_amb, R_th, C_th, 1.0)
-        t += 1.0
-    assert T - T_amb == pytest.approx(P * R_th * (1 - math.exp(-1)), rel=1e-9)
-    for _ in range(3000):
-        T = k.thermal_step(T, P, T_amb, R_th, C_th, 1.0)
-    assert T - T_amb == pytest.approx(P * R_th, rel=1e-9)
-
-
+# -- the winding's first-order thermal model (the one-node case of the thermal network, tests/test_thermal.py) --
 def test_plant_winding_heats_to_copper_losses_times_thermal_resistance():
     """The plant at standstill with a constant d-axis voltage (no torque): the copper losses heat the
     winding, R_s rises (+0.393 %/K) and the current falls, until T - T_amb = P_cu(T) R_th."""

@@ -168,8 +168,8 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     now in the system), and still valid SSP 1.0."""
     # the paper's 2, their 4 variants, 4 sensorless (the paper's 2 and the hill start with injection and I-f),
     # 4 acceleration (sensorless with injection and I-f), 15 drive-cycle runs (sensored, injection, I-f; hilly; the
-    # battery's, sensored and with injection)
-    assert len(SCENARIOS) == 29
+    # battery's, sensored and with injection), 2 with the motor's thermal network (wltc3b-thermal, us06x5-thermal)
+    assert len(SCENARIOS) == 31
     # a system that sets the sensorless unit's own parameters (low_speed) keeps that unit (its String travels in
     # a copy of the FMU); the rest swap in FocEkf5
     ctrl = "FocSensorless" if "low_speed" in load_system(scenario).component("ctrl").start else "FocEkf5"
@@ -197,7 +197,7 @@ def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_pat
     # runs' set the reference generator and the plant's gear model (strings), the others only angle_source; the
     # hilly road's RouteProfile in position mode carries its road name
     # hill-start-injection's: the plant's flux model and the unit's low_speed
-    cycle = scenario.split("-")[0] in ("wltc3b", "udds", "hwfet", "us06")
+    cycle = scenario.split("-")[0] in ("wltc3b", "udds", "hwfet", "us06", "us06x5")  # us06x5: US06 five times
     strings = scenario.startswith("acceleration") or cycle or scenario.endswith("-injection")
     assert fmu_names == sorted(["resources/PmsmEvPlant_plant.fmu" if strings else "resources/PmsmEvPlant.fmu",
                                 "resources/RouteProfile.fmu",

@@ -11,6 +11,7 @@ import pytest
 from orchestrator_support import project_fmus
 from pmsm_cosim.app import bench
 from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.overrides import apply_overrides
 from pmsm_cosim.app.whole_loop import run_whole_loop
 from pmsm_cosim.engine.master import Master, SignalClock
 from pmsm_cosim.engine.recording import read_results
@@ -56,6 +57,17 @@ def test_the_cycle_system_of_bench_e_every_step_is_the_cosimulations(tmp_path):
     r = _same(spec, tmp_path)
     assert len(r["time"]) == 4001 and r["E_dc"][-1] != 0.0 and r["W_magnetic"][-1] > 0.0
     assert r["i_dref"][-1] > 0.0  # aligning: the vector's magnitude (the unit's property)
+
+
+def test_the_thermal_network_in_the_whole_loop_is_the_cosimulations(tmp_path):
+    """wltc3b-thermal (the plant's thermal network on: R_s and psi follow its temperatures each step) with the
+    sensorless unit (the whole loop's controllers are FocEkf5 and FocSensorless) for 3 s, a row every 10 ms with the
+    temperatures recorded: the same file as the co-simulation's."""
+    def spec():
+        return apply_overrides("wltc3b-thermal", controller="sensorless", stop_time=3.0, output_interval=0.01)
+
+    r = _same(spec, tmp_path)
+    assert r["T_wdg"][-1] > r["T_wdg"][0] and r["Q_heat"][-1] > 0.0 and r["psi_now"][-1] != r["psi_now"][0]
 
 
 def test_the_bench_a_system_is_the_cosimulations(tmp_path):

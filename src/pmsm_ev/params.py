@@ -49,6 +49,9 @@ SPEED_FEEDFORWARDS = ("none", "inertia", "inertia+road")
 DISCRETISATIONS = ("euler", "bilinear")
 #: the plant's magnetic model (``PlantParams.flux_model``)
 FLUX_MODELS = ("linear", "algebraic")
+#: the plant's thermal models (``PlantParams.thermal_model``): none (or the one-node winding of ``thermal_R``), the
+#: four-node lumped-parameter thermal network
+THERMAL_MODELS = ("off", "lptn")
 
 
 class ParameterError(ValueError):
@@ -648,7 +651,7 @@ class PlantParams:
     flux_U: float = 1.0  #: see ``flux_S``
     flux_V: float = 1.0  #: see ``flux_S``
 
-    # -- temperature (the magnet's constant over a run; the winding's too unless thermal_R > 0) --
+    # -- temperature (constant over a run, unless thermal_R > 0 heats the winding or thermal_model 'lptn' both) --
     #: winding temperature [degC] (at the start, with the thermal model); Table I's R_s is taken at
     #: ``TEMPERATURE_REF`` (20 degC). R_s(T) = R_s (1 + alpha_R (T - 20)). Typical: 20 (cold) .. 120
     #: degC (hot, +39 % R_s).
@@ -673,6 +676,46 @@ class PlantParams:
     #: temperature coefficient of the magnet's remanence, hence of psi [1/K]: -0.0012 (sintered
     #: NdFeB, -0.09 .. -0.12 %/K in makers' data sheets; the upper end for high-coercivity grades)
     alpha_psi: float = -0.0012
+
+    # -- the motor's thermal network (off by default: the temperatures above are constants) ------------------------
+    #: "off" (default: T_winding, T_magnet constant, or the one-node winding of ``thermal_R``) or "lptn": the
+    #: four-node lumped-parameter thermal network of Wallscheid and Boecker, "Global identification of a low-order
+    #: lumped-parameter thermal network for permanent magnet synchronous motors", IEEE Trans. Energy Convers. 31(1),
+    #: 2016, pp. 354-365, identified on a 60 kW automotive interior-PM motor with a water jacket: nodes stator yoke,
+    #: stator tooth, winding (start ``T_winding``, the yoke and tooth too: a soaked motor) and magnet (start
+    #: ``T_magnet``); the copper losses heat the winding, the residual ones (iron and friction) the stator and the
+    #: rotor (``lptn_rotor_share``); R_s follows the winding, psi the magnet (``pmsm_ev.kernels.thermal_network_step``;
+    #: docs/speed-range.md, "A motor that warms"). Figures below: the paper's identified network (its table of
+    #: parameters; as reimplemented in public code, not re-derived here)
+    thermal_model: str = "off"
+    lptn_C_yoke: float = 5590.0  #: heat capacity of the stator yoke's node [J/K] (Wallscheid and Boecker 2016)
+    lptn_C_tooth: float = 2910.0  #: ... of the stator tooth's node [J/K] (idem)
+    lptn_C_winding: float = 2620.0  #: ... of the winding's node [J/K] (idem)
+    lptn_C_magnet: float = 10800.0  #: ... of the magnet's node: the rotor [J/K] (idem)
+    lptn_R_yoke_coolant: float = 0.017  #: thermal resistance yoke -> coolant, the water jacket [K/W] (idem)
+    lptn_R_yoke_winding: float = 0.289  #: ... yoke -> winding [K/W] (idem)
+    lptn_R_yoke_tooth: float = 0.013  #: ... yoke -> tooth [K/W] (idem)
+    lptn_R_tooth_winding: float = 0.019  #: ... tooth -> winding, through the slot liner [K/W] (idem)
+    lptn_R_tooth_magnet: float = 0.599  #: ... tooth -> magnet, across the air gap [K/W] (idem)
+    lptn_R_winding_magnet: float = 1.149  #: ... winding -> magnet, the end windings' air [K/W] (idem)
+    #: ... magnet -> ambient, the shaft and the housing's air [K/W] (idem); its far end taken at the coolant's
+    #: temperature ``T_ambient`` [chosen: one boundary temperature; with 2.451 K/W it carries a few % of the heat]
+    lptn_R_magnet_ambient: float = 2.451
+    #: the residual losses' (iron and friction) share that heats the rotor's node [-]: 1 - k_1 of the paper's loss
+    #: split k_1 = 0.719 - 0.059 i + 0.069 n - 0.619 i n (i, n the current and speed over their maxima) at light load
+    #: (i, n -> 0), the drive cycles' usual point [chosen: the constant share, not the paper's function of i and n]
+    lptn_rotor_share: float = 0.281
+    #: the stator's share of the residual losses that heats the yoke, the rest the tooth [-]: the paper's
+    #: k_2 = 0.742 - 0.213 i - 0.023 n - 0.474 i n at light load [chosen, as ``lptn_rotor_share``]
+    lptn_yoke_share: float = 0.742
+    #: the winding's temperature limit [degC]: thermal class 180 (H) of IEC 60085, the enamelled wire and slot
+    #: insulation of EV traction motors [chosen: class H; the network's winding node is a mean, the hot spot runs
+    #: hotter, so this is the mean's limit only as a first check]
+    T_winding_max: float = 180.0
+    #: the magnet's maximum temperature [degC]: a sintered NdFeB grade's maximum working temperature, 150 degC for
+    #: the "SH" coercivity class in makers' grade tables (N 80, M 100, H 120, SH 150, UH 180, EH 200) [chosen: SH,
+    #: a common traction grade; beyond it the magnet risks irreversible demagnetisation at peak stator current]
+    T_magnet_max: float = 150.0
 
     def validate(self) -> None:
         _require(self.rk4_substeps >= 1 and float(self.rk4_substeps).is_integer(),
@@ -748,6 +791,77 @@ class PlantParams:
                  f"R_s at T_winding = {self.T_winding} degC with alpha_R = {self.alpha_R} 1/K is not > 0")
         _require(1.0 + self.alpha_psi * (self.T_magnet - TEMPERATURE_REF) > 0,
                  f"psi at T_magnet = {self.T_magnet} degC with alpha_psi = {self.alpha_psi} 1/K is not > 0")
+        _require(self.thermal_model in THERMAL_MODELS,
+                 f"thermal_model must be one of {THERMAL_MODELS} (got {self.thermal_model!r})")
+        _require(self.thermal_model == "off" or self.thermal_R == 0,
+                 f"thermal_model {self.thermal_model!r} has its own winding-to-coolant path: set thermal_R = 0 (the "
+                 f"one-node model's)")
+        for name in LPTN_FIELDS:
+            value = getattr(self, name)
+            unit = "J/K" if name.startswith("lptn_C_") else "K/W"
+            _require(math.isfinite(value) and value > 0, f"{name} must be > 0 {unit} (got {value})")
+        for name in ("lptn_rotor_share", "lptn_yoke_share"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and 0.0 <= value <= 1.0, f"{name} must be in [0, 1] (got {value})")
+        for name in ("T_winding_max", "T_magnet_max"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > self.T_ambient,
+                     f"{name} = {value} degC must be above the coolant's T_ambient = {self.T_ambient} degC")
+        if self.thermal:
+            _require(thermal_time_constant_bound(self) >= THERMAL_TAU_MIN,
+                     f"the thermal network's fastest node has C / sum(1/R) = {thermal_time_constant_bound(self):.3g} "
+                     f"s, below {THERMAL_TAU_MIN} s: its Euler step per plant step would not be stable (raise the "
+                     f"heat capacities or the thermal resistances)")
+
+    @property
+    def thermal(self) -> bool:
+        """The motor's temperatures follow its losses: the network ``thermal_model`` 'lptn' or the one-node winding
+        (``thermal_R`` > 0)."""
+        return self.thermal_model != "off" or self.thermal_R > 0
+
+
+#: the thermal network's resistances and capacitances (``PlantParams.thermal_model`` 'lptn'), each > 0
+LPTN_FIELDS = ("lptn_C_yoke", "lptn_C_tooth", "lptn_C_winding", "lptn_C_magnet", "lptn_R_yoke_coolant",
+               "lptn_R_yoke_winding", "lptn_R_yoke_tooth", "lptn_R_tooth_winding", "lptn_R_tooth_magnet",
+               "lptn_R_winding_magnet", "lptn_R_magnet_ambient")
+
+#: the least C_i / sum_j G_ij of the thermal network's nodes [s]: the plant's explicit Euler step of the network
+#: (``pmsm_ev.kernels.thermal_network_step``) is stable for a step below it (Gershgorin: the fastest mode's rate is at
+#: most 2 sum_j G_ij / C_i); 10 ms is over 4 times the plant's longest step with its defaults (2.3 ms,
+#: ``PmsmEvPlant.max_step``). Wallscheid and Boecker's network: 22 s (the tooth)
+THERMAL_TAU_MIN = 0.01
+
+
+def thermal_network(p: PlantParams) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(the conductances [W/K] in the order of ``pmsm_ev.kernels.TH_G_YC`` .. ``TH_G_WC``, the heat capacities [J/K]
+    of the nodes TH_Y .. TH_M, 0 for a node that holds its temperature) of the plant's thermal model: the four-node
+    network (``thermal_model`` 'lptn'), the one-node winding (``thermal_R`` > 0: winding -> coolant, ``thermal_C``)
+    or none (all 0)."""
+    if p.thermal_model == "lptn":
+        r = (p.lptn_R_yoke_coolant, p.lptn_R_yoke_winding, p.lptn_R_yoke_tooth, p.lptn_R_tooth_winding,
+             p.lptn_R_tooth_magnet, p.lptn_R_winding_magnet, p.lptn_R_magnet_ambient)
+        return tuple(1.0 / x for x in r) + (0.0,), (p.lptn_C_yoke, p.lptn_C_tooth, p.lptn_C_winding,
+                                                      p.lptn_C_magnet)
+    if p.thermal_R > 0:
+        return (0.0,) * 7 + (1.0 / p.thermal_R,), (0.0, 0.0, p.thermal_C, 0.0)
+    return (0.0,) * 8, (0.0,) * 4
+
+
+#: the nodes each conductance of ``thermal_network`` joins (-1: the coolant)
+THERMAL_EDGES = ((0, -1), (0, 2), (0, 1), (1, 2), (1, 3), (2, 3), (3, -1), (2, -1))
+
+
+def thermal_time_constant_bound(p: PlantParams) -> float:
+    """min over the network's nodes with a heat capacity of C_i / sum_j G_ij [s] (``THERMAL_TAU_MIN``); inf without
+    the thermal model."""
+    g, c = thermal_network(p)
+    bound = math.inf
+    for node, cap in enumerate(c):
+        if cap > 0:
+            total = sum(gk for gk, edge in zip(g, THERMAL_EDGES) if node in edge)
+            if total > 0:
+                bound = min(bound, cap / total)
+    return bound
 
 
 def _bisect(f, lo: float, hi: float) -> float:

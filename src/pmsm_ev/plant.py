@@ -10,8 +10,9 @@ noise, offset, gain error and ADC quantisation per phase (two phase sensors, a a
 the truth outputs stay clean), and an inverter with a DC-link voltage limit and an
 actuation delay of one switching period. A motor that is not its data sheet: inverter dead
 time (a per-phase voltage error in the sign of the current), magnetic saturation of L_d, L_q
-(flux-form eqs 10-12) and the winding and magnet temperatures (R_s(T), psi(T): the magnet's
-constant over a run, the winding's too unless the thermal model heats it, ``thermal_R``).
+(flux-form eqs 10-12) and the winding and magnet temperatures (R_s(T), psi(T): constants over a
+run, unless the thermal model heats them: the winding alone with ``thermal_R``, both with the lumped-parameter thermal
+network ``thermal_model`` 'lptn', in the kernels' step).
 The inverter's switching period (``PlantParams.switching_period``), not the communication
 step, sets the dead time's voltage error and the delay: a plant stepped at a fraction of the
 control period sees the same inverter. The controllers keep their own nominal parameters, so
@@ -47,6 +48,7 @@ from .params import (
     equivalent_inertia,
     flux_model_coefficients,
     magnet_flux,
+    thermal_network,
     winding_resistance,
 )
 from .transforms import wrap_angle
@@ -63,6 +65,12 @@ ENERGY_SLOTS = {"E_dc": _k.E_DC, "E_dc_abs": _k.E_DC_ABS, "E_regen": _k.E_REGEN,
 BATTERY_SLOTS = {"soc": _k.E_BAT_SOC, "v_bat": _k.E_BAT_V, "i_bat": _k.E_BAT_I, "P_charge_max": _k.E_BAT_P_CHG,
                  "P_discharge_max": _k.E_BAT_P_DIS, "Q_bat": _k.E_BAT_Q, "E_chemical": _k.E_BAT_CHEM,
                  "E_battery": _k.E_BAT_LOSS, "W_battery": _k.E_BAT_W}
+#: the thermal network's outputs by name (``PlantParams.thermal_model``; docs/speed-range.md, "A motor that warms"):
+#: the temperatures of its nodes [degC] (the start values, constant, with it off), the heat put in by the losses and
+#: given to the coolant [J], the over-temperature flags (``pmsm_ev.kernels.TH_OVER_WINDING`` + ``TH_OVER_MAGNET``)
+THERMAL_SLOTS = {"T_yoke": _k.E_TH_T + _k.TH_Y, "T_tooth": _k.E_TH_T + _k.TH_T, "T_wdg": _k.E_TH_T + _k.TH_W,
+                 "T_pm": _k.E_TH_T + _k.TH_M, "Q_heat": _k.E_TH_IN, "Q_coolant": _k.E_TH_OUT,
+                 "over_temperature": _k.E_TH_OVER}
 #: the terms whose sum is E_dc (the energy balance, docs/speed-range.md)
 BALANCE_TERMS = ("E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_aero", "E_rolling", "E_grade",
                  "E_brake", "dE_kinetic", "dW_magnetic")
@@ -196,7 +204,18 @@ class Plant:
                   _k.P_DT_V: p.v_dc * p.dead_time / p.switching_period if p.dead_time else 0.0}
         #: the actuation delay [s]: inverter_delay switching periods
         self.delay = p.inverter_delay * p.switching_period
-        self._thermal = p.thermal_R > 0
+        #: the thermal model on: the losses heat the motor, R_s and psi follow (``kernels.thermal_network_step``)
+        self._thermal = p.thermal
+        if self._thermal:
+            g, c = thermal_network(p)
+            values.update({_k.P_TH: 1.0, _k.P_TH_RES: 1.0 if p.thermal_model == "lptn" else 0.0,
+                           _k.P_TH_ROTOR: p.lptn_rotor_share, _k.P_TH_YOKE: p.lptn_yoke_share,
+                           _k.P_TH_AMB: p.T_ambient, _k.P_TH_LIM_W: p.T_winding_max, _k.P_TH_LIM_M: p.T_magnet_max,
+                           _k.P_R_S20: m.R_s, _k.P_ALPHA_R: p.alpha_R, _k.P_PSI20: m.psi, _k.P_ALPHA_PSI: p.alpha_psi})
+            for j, value in enumerate(g):
+                values[_k.P_TH_G + j] = value
+            for j, value in enumerate(c):
+                values[_k.P_TH_INV_C + j] = 1.0 / value if value > 0 else 0.0
         if p.flux_model == "algebraic":  # the algebraic magnetic model, its coefficients at the magnet's psi
             values[_k.P_FLUX] = 1.0
             for j, value in enumerate(flux_model_coefficients(m, p, self.psi)):
@@ -238,9 +257,6 @@ class Plant:
         self.delta = 0.0
         self.x_vehicle = 0.0  # distance travelled since the start [m] (eqs 1, 6 integrated)
         self.samples = 0  # measurements taken so far (the noise counter)
-        self.T_winding = p.T_winding  # [degC]; changes only with the thermal model
-        if self._thermal:
-            self._pp[_k.P_R_S] = self.R_s
         self.clock = 0.0  # time since the start [s]: the sum of the steps (the inverter delay's clock)
         self._pending = []  # voltages received, (time, v_alpha, v_beta), not yet superseded (inverter delay)
         self.v_alpha_applied = self.v_beta_applied = 0.0
@@ -250,6 +266,12 @@ class Plant:
             self.energy[i] = 0.0
         if self.has_battery:  # at rest at its initial state of charge
             self._kernels.battery_reset(self._pp, self.energy)
+        # the thermal network's nodes at their start temperatures (the stator's at the winding's); constants without it
+        for node, value in ((_k.TH_Y, p.T_winding), (_k.TH_T, p.T_winding), (_k.TH_W, p.T_winding),
+                            (_k.TH_M, p.T_magnet)):
+            self.energy[_k.E_TH_T + node] = value
+        if self._thermal:  # R_s, psi at the start temperatures
+            self._kernels.thermal_apply(self._pp, self.energy)
         self._update_outputs()
         #: the stored energies at the start (W_mag, E_kin) [J]
         self.stored0 = self.stored
@@ -280,12 +302,12 @@ class Plant:
             float(state[name]) for name in ("i_d", "i_q", "omega_m", "theta_e", "delta", "x_vehicle"))
         self.clock = float(state["clock"])
         self._pending = pending
-        self.T_winding = float(state["T_winding"])
         for i, value in enumerate(state["energy"]):
             self.energy[i] = float(value)
+        self.T_winding = float(state["T_winding"])
         self.stored0 = tuple(float(x) for x in state["stored0"])
-        if self._thermal:
-            self._pp[_k.P_R_S] = winding_resistance(self.motor.R_s, self.T_winding, self.params.alpha_R)
+        if self._thermal:  # R_s, psi at the restored temperatures
+            self._kernels.thermal_apply(self._pp, self.energy)
         self.samples = int(state["samples"]) - 1  # _update_outputs takes the present sample again
         self._update_outputs()
 
@@ -324,8 +346,8 @@ class Plant:
         Returns (i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle)
         after the step, also set as attributes (i_alpha, i_beta as measured). The step is the kernel
         ``plant_advance`` on ``io``, which the plant FMU's compiled step (``pmsm_ev.kernels.plant_fmu_step``)
-        calls too; what is here, the inverter's delay and limit and the thermal model, the compiled step does not
-        take (it declines a voltage at or near the limit)."""
+        calls too (the thermal network included: ``plant_step`` heats the motor with the step's losses); what is here,
+        the inverter's delay and limit, the compiled step does not take (it declines a voltage at or near the limit)."""
         if self.delay:
             v_alpha, v_beta = self._delayed(v_alpha, v_beta, dt)
         u_lim = self._u_lim
@@ -338,12 +360,36 @@ class Plant:
                 v_beta *= u_lim / mag
         self._advance(self.io, self._pp, self.energy, v_alpha, v_beta, delta, T_brake, dt, False)
         i_alpha, i_beta, i_d, i_q, omega_m, theta_e, T_e, T_L_mech, v_vehicle = self._io_items[_OUTPUTS]
-        if self._thermal:  # the copper losses heat the winding; R_s follows for the next step
-            p = self.params
-            self.T_winding, self._pp[_k.P_R_S] = self._kernels.winding_thermal_step(
-                self.T_winding, i_d, i_q, self.motor.R_s, p.alpha_R, TEMPERATURE_REF, p.T_ambient,
-                p.thermal_R, p.thermal_C, dt, self.motor.k_dq)
         return i_d, i_q, omega_m, theta_e, i_alpha, i_beta, T_e, T_L_mech, v_vehicle
+
+    # -- temperatures ----------------------------------------------------------------
+    @property
+    def T_winding(self) -> float:
+        """The winding's temperature [degC] (the thermal network's node; ``PlantParams.T_winding`` without it)."""
+        return float(self.energy[_k.E_TH_T + _k.TH_W])
+
+    @T_winding.setter
+    def T_winding(self, value: float) -> None:
+        self.energy[_k.E_TH_T + _k.TH_W] = value
+
+    @property
+    def T_magnet(self) -> float:
+        """The magnet's temperature [degC] (the thermal network's node; ``PlantParams.T_magnet`` without it)."""
+        return float(self.energy[_k.E_TH_T + _k.TH_M])
+
+    def thermal(self) -> dict[str, float]:
+        """The thermal network's outputs by name (``THERMAL_SLOTS``), R_s [Ohm] and psi [Wb] now, and the heat it
+        stores now over the start, sum C_i (T_i - T_i0) [J] (``stored_heat``)."""
+        out = {name: float(self.energy[slot]) for name, slot in THERMAL_SLOTS.items()}
+        out.update(R_s=float(self._pp[_k.P_R_S]), psi=float(self._pp[_k.P_PSI]), Q_stored=self.stored_heat())
+        return out
+
+    def stored_heat(self) -> float:
+        """The heat the thermal network holds over its start [J]: sum over its nodes of C_i (T_i - T_i0)."""
+        p = self.params
+        _, c = thermal_network(p)
+        start = (p.T_winding, p.T_winding, p.T_winding, p.T_magnet)
+        return sum(ci * (float(self.energy[_k.E_TH_T + j]) - start[j]) for j, ci in enumerate(c))
 
     # -- energies ------------------------------------------------------------------
     @property

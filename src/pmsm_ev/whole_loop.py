@@ -35,8 +35,8 @@ class WholeLoop:
         """``unit_dt``: the controller FMU's ``dt`` parameter (0: the first step's size)."""
         if not accel.compiled():
             raise NotCovered("the whole loop needs the compiled kernels (numba)")
-        if plant.delay or plant._thermal:
-            raise NotCovered("the plant's inverter delay and thermal model are not in the FMU's compiled step")
+        if plant.delay:
+            raise NotCovered("the plant's inverter delay is not in the FMU's compiled step")
         self.plant, self.unit = plant, unit
         self._kernels = accel.kernels()
         #: the buffers: the plant's and the unit's own, as the FMUs hand them to the lean binding

@@ -25,7 +25,7 @@ from ..engine.errors import CosimError
 from ..engine.master import Master
 from ..engine.recording import read_results
 from ..engine.system import SystemSpec
-from . import cycles
+from . import cycles, thermal_metrics
 from .drive import draw_figures, drive_metrics, ensure_fmus
 from .overrides import apply_overrides
 
@@ -92,7 +92,8 @@ def simulate(system="scenario1", *, stop_time: float | None = None, step_size: f
     master = Master(spec)
     with tempfile.TemporaryDirectory(prefix="pmsm-cosim-") as tmp:
         out = Path(output_dir) if output_dir is not None else Path(tmp)
-        metrics = master.run(out, metrics_of=cycles.with_trace_figures(drive_metrics, spec))
+        metrics = master.run(out, metrics_of=thermal_metrics.with_thermal_figures(
+            cycles.with_trace_figures(drive_metrics, spec), spec))
         columns = read_results(out) if metrics.get("rows") else {c.name: np.empty(0) for c in spec.columns}
         if figures and output_dir is not None and metrics.get("rows", 0) >= 2:
             draw_figures(out, spec.name, quiet=True)

@@ -25,7 +25,7 @@ from ..engine.master import LOOPS, Master
 from ..engine.progress import ProgressBar
 from ..engine.system import ALGORITHMS
 from ..sweeps import prepare_runs, run_sweep
-from . import bench, compare, cycles, report
+from . import bench, compare, cycles, report, thermal_metrics
 from .drive import (
     PACKAGED_SCENARIOS,
     draw_figures,
@@ -92,7 +92,9 @@ def cmd_run(a) -> int:
         for w in master.warnings:
             _note(w)
     progress = ProgressBar(spec.stop_time) if ProgressBar.wanted(a.quiet) else None
-    m = master.run(out, progress=progress, metrics_of=cycles.with_trace_figures(drive_metrics, spec),
+    m = master.run(out, progress=progress,
+                   metrics_of=thermal_metrics.with_thermal_figures(cycles.with_trace_figures(drive_metrics, spec),
+                                                                   spec),
                    extra_settings={"command_line": {"set": list(a.set or ()), "profile": list(a.profile or ()),
                                                      **({"cycle": a.cycle} if a.cycle else {})}})
     if "metrics_note" in m:
@@ -119,6 +121,8 @@ def cmd_run(a) -> int:
                       f"{bat['charge_Ah']:.3f} Ah drawn, {bat['losses_Wh']:.1f} Wh lost in the battery, terminal "
                       f"voltage {bat['v_bat_min']:.1f} .. {bat['v_bat_max']:.1f} V; {energy['brake_Wh']:.1f} Wh to the "
                       f"friction brake (regeneration refused or beyond the motor)")
+    if isinstance(m.get("thermal"), dict):
+        print(thermal_metrics.summary_line(m["thermal"]))
     figures = None
     if not a.no_figures and m["rows"] >= 2:
         figures = draw_figures(out, spec.name, a.quiet)

@@ -2,7 +2,8 @@
 docs/cycles.md): the application expands them into what the engine knows, an ordinary signal table
 and an ordinary component with its connections. The engine knows FMI and time, never cycles.
 
-* ``[cycle]`` (``name = "wltc3b"`` or ``file = "my.csv"``; ``drives``, default ``ctrl.omega_ref``;
+* ``[cycle]`` (``name = "wltc3b"`` or ``file = "my.csv"``; ``repeat``, default 1: the cycle that many times back to
+  back, ``pmsm_ev.cycles.repeated``; ``drives``, default ``ctrl.omega_ref``;
   ``r_w`` [m] and ``n_g`` [-], default the plant's start values, else ``pmsm_ev.params.VehicleParams``'
   Table II values; ``dt`` [s], default ``pmsm_ev.cycles.REFERENCE_DT``) and ``--cycle NAME|CSV``: the
   signal ``omega_ref`` becomes a linear table of ``pmsm_ev.cycles.speed_reference`` (PCHIP through the
@@ -38,7 +39,7 @@ from .metrics.trace import trace_figures
 #: the signal a cycle drives, and the input by default
 CYCLE_SIGNAL = "omega_ref"
 CYCLE_DRIVES = "ctrl.omega_ref"
-CYCLE_KEYS = ("name", "file", "drives", "r_w", "n_g", "dt", "description")
+CYCLE_KEYS = ("name", "file", "repeat", "drives", "r_w", "n_g", "dt", "description")
 #: the road component's defaults
 ROAD_INSTANCE = "road"
 ROAD_DRIVES = "plant.delta"
@@ -181,6 +182,14 @@ def pop_sections(data: dict, where: str, base_dir: Path, fmu_dir: Path):
         _check_keys(table, CYCLE_KEYS, cw)
         key, text = _one_source(table, cw, "cycle")
         cycle = load_cycle(text, f"{cw}.{key}", base_dir if key == "file" else None)
+        if "repeat" in table:
+            repeat = table["repeat"]
+            if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
+                _fail(cw, f"repeat must be a whole number >= 1 (got {repeat!r})")
+            try:
+                cycle = pcycles.repeated(cycle, repeat)
+            except pcycles.CycleError as exc:
+                _fail(cw, str(exc))
         drives = _drives(table.get("drives"), CYCLE_DRIVES, cw)
         r_w = _positive(table["r_w"], "r_w [m]", cw) if "r_w" in table else None
         n_g = _positive(table["n_g"], "n_g", cw) if "n_g" in table else None

@@ -26,7 +26,7 @@ from pmsm_ev.params import (
     PlantParams,
     VehicleParams,
 )
-from pmsm_ev.plant import ENERGY_SLOTS, Plant
+from pmsm_ev.plant import ENERGY_SLOTS, THERMAL_SLOTS, Plant
 from pmsm_ev.whole_loop import NotCovered, WholeLoop
 
 from ..engine.checks import time_grid
@@ -120,6 +120,10 @@ def _columns(spec: SystemSpec, roles: dict[str, str], signals: list[str]) -> lis
             var = col.variable
             if var in ENERGY_SLOTS or var == "P_dc":
                 cols.append((_k.COL_ENERGY, _k.E_P_DC if var == "P_dc" else ENERGY_SLOTS[var]))
+            elif var in THERMAL_SLOTS:
+                cols.append((_k.COL_ENERGY, THERMAL_SLOTS[var]))
+            elif var in ("R_s_now", "psi_now"):
+                cols.append((_k.COL_PARAM, _k.P_R_S if var == "R_s_now" else _k.P_PSI))
             elif var in ("W_magnetic", "E_kinetic"):
                 cols.append((_k.COL_W_MAGNETIC if var == "W_magnetic" else _k.COL_E_KINETIC, 0))
             elif hasattr(_k, "PIO_" + var.upper()):

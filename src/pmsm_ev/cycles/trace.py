@@ -94,6 +94,7 @@ class Cycle:
     grade: np.ndarray | None = None
     source: str = ""
     phases: tuple[Phase, ...] = field(default=())
+    repeats: int = 1  #: the times a cycle of duration / repeats is driven back to back (``repeated``)
 
     def __post_init__(self):
         time, speed = frozen_array(self.time), frozen_array(self.speed)
@@ -223,6 +224,28 @@ def check_trace(time: np.ndarray, speed: np.ndarray, grade: np.ndarray | None, f
         if steep.size:
             fail(int(steep[0]), f"{show('grade', int(steep[0]))} is steeper than the bound |grade| <= "
                                 f"{GRADE_MAX:g} ({GRADE_MAX * 100:g} %)")
+
+
+def repeated(cycle: Cycle, times: int) -> Cycle:
+    """``cycle`` driven ``times`` times back to back (a heat run: US06 repeated, docs/speed-range.md, "A motor that
+    warms"): each repetition's samples shifted by the duration, the first sample of each after the first dropped
+    (it is the previous one's last time); its phases repeated with the repetition's number. A cycle must end at the
+    speed (and grade) it starts with, else ``CycleError`` names both. ``times`` = 1: the cycle itself."""
+    if isinstance(times, bool) or not isinstance(times, int) or times < 1:
+        raise CycleError(f"{cycle.name}: repeat must be a whole number >= 1 (got {times!r})")
+    if times == 1:
+        return cycle
+    if cycle.speed[-1] != cycle.speed[0] or (cycle.grade is not None and cycle.grade[-1] != cycle.grade[0]):
+        raise CycleError(f"{cycle.name}: cannot repeat it: it ends at {cycle.speed[-1]:g} m/s and starts at "
+                         f"{cycle.speed[0]:g} m/s (a repeated cycle must join)")
+    d = cycle.duration
+    time = np.concatenate([cycle.time] + [cycle.time[1:] + k * d for k in range(1, times)])
+    speed = np.concatenate([cycle.speed] + [cycle.speed[1:]] * (times - 1))
+    grade = None if cycle.grade is None else np.concatenate([cycle.grade] + [cycle.grade[1:]] * (times - 1))
+    phases = tuple(Phase(f"{p.name}_{k + 1}", p.start + k * d, p.end + k * d) for k in range(times)
+                   for p in cycle.phases)
+    return Cycle(f"{cycle.name}x{times}", time, speed, grade, f"{cycle.source}; {times} times back to back", phases,
+                 cycle.repeats * times)
 
 
 def names() -> tuple[str, ...]:

@@ -19,7 +19,7 @@ limit, which are Python's), the controller's periods ``unit_periods`` and its sa
 (``FocSlave.do_step`` calls both), the brake's demand ``unit_t_brake`` (``ControlUnit.T_brake``); what is here is
 what decides whether the compiled step is taken. A step they do not take returns
 ``STEP_DECLINED`` with nothing changed, and the binding runs the slave's Python ``do_step`` instead: a plant
-with the inverter's delay or the thermal model (the slave does not offer those), a plant voltage at or near the
+with the inverter's delay (the slave does not offer it), a plant voltage at or near the
 DC link's limit (the ideal link's v_dc / sqrt 3, or the battery's terminal voltage over sqrt 3, ``dc_link_limit``;
 CPython's ``math.hypot``, which numba does not reproduce to the last bit, decides the limit
 there), a controller's first step that rebuilds its unit, a non-finite plant state (the slave raises), a step
@@ -127,7 +127,7 @@ UNIT_KIND_CONTROL, UNIT_KIND_SENSORLESS, UNIT_KIND_INJECTION = 0.0, 1.0, 2.0
 def plant_fmu_step(io, pp, ee, h):
     """``PmsmEvPlant.do_step`` over ``h`` on the plant's buffer ``io`` (``PLANT_IO_LAYOUT``: ``Plant.io``, the
     slave's inputs written into it), its parameter vector ``pp`` and energy vector ``ee``: ``Plant.step`` with the
-    inputs held (without its inverter delay and thermal model), that is its kernel ``plant_advance`` with the
+    inputs held (without its inverter delay), that is its kernel ``plant_advance`` with the
     voltage inside the DC link's limit. ``STEP_TAKEN``, or ``STEP_DECLINED`` with nothing changed (the module
     doc)."""
     if not h > 0.0:

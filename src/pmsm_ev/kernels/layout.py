@@ -217,10 +217,27 @@ PLANT_PARAMS_LAYOUT = Layout("plant parameter vector", "P_", (
     ("P_INV_KSW", 1, "inverter: the switching losses' loss voltage per volt of the DC link [-] (P_INV_V at the "
                      "battery's voltage)"),
     ("P_DT_K", 1, "inverter dead time: t_d / T_s [-] (P_DT_V at the battery's voltage)"),
+    # the motor's thermal network (``PlantParams.thermal_model`` 'lptn', or the one-node winding of ``thermal_R``;
+    # ``pmsm_ev.kernels.thermal_network_step``): nodes stator yoke, stator tooth, winding, magnet (TH_Y .. TH_M)
+    ("P_TH", 1, "1.0: the thermal network on (the winding's R_s and the magnet's psi follow its temperatures)"),
+    ("P_TH_G", 8, "its thermal conductances [W/K] in the order TH_G_YC .. TH_G_WC (0: no such path)"),
+    ("P_TH_INV_C", 4, "the inverse heat capacities of its nodes [1/(J/K)] in the order TH_Y .. TH_M (0: a node "
+                      "that holds its temperature)"),
+    ("P_TH_RES", 1, "the share of the residual losses (iron and friction) that heats the network [-] (1: all, "
+                    "'lptn'; 0: the copper losses only, the one-node winding)"),
+    ("P_TH_ROTOR", 1, "the residual losses' share that heats the magnet's node (the rotor's) [-]"),
+    ("P_TH_YOKE", 1, "the stator's share of the residual losses that heats the yoke's node, the rest the tooth's [-]"),
+    ("P_TH_AMB", 1, "the coolant's temperature [degC] (``PlantParams.T_ambient``)"),
+    ("P_TH_LIM_W", 1, "the winding's insulation limit [degC] (``PlantParams.T_winding_max``)"),
+    ("P_TH_LIM_M", 1, "the magnet's maximum temperature [degC] (``PlantParams.T_magnet_max``)"),
+    ("P_R_S20", 1, "stator resistance at 20 degC [Ohm] (Table I's R_s)"),
+    ("P_ALPHA_R", 1, "the copper's temperature coefficient [1/K]"),
+    ("P_PSI20", 1, "magnet flux at 20 degC [Wb] (Table I's psi)"),
+    ("P_ALPHA_PSI", 1, "the magnet's temperature coefficient of psi [1/K]"),
     # not a parameter: a memo the algebraic model's kernels keep (``plant_flux_linkages``), 0 in a new vector
     ("P_FLUX_MEMO", 5, "the last psi(i) solved: 1.0 when valid (0 = empty; clear it where P_FLUX_C changes), "
                        "i_d, i_q [A], psi_d, psi_q [Wb]"),
-), size=56 + 64 + 5)
+), size=56 + 64 + 23 + 5)
 
 #: the plant's energy accumulators (``pmsm_ev.plant.Plant.energy``; ``plant_step`` adds each step's
 #: RK4-integrated energies): joules since the start, in the dq convention's power scaling (``P_K_DQ``)
@@ -251,7 +268,15 @@ PLANT_ENERGY_LAYOUT = Layout("plant energy vector", "E_", (
     ("E_BAT_W", 1, "battery: energy stored in the RC pair's capacitor, C1 v_rc^2 / 2 [J]"),
     ("E_BAT_P_CHG", 1, "battery: the charge power it accepts now (charge acceptance) [W]"),
     ("E_BAT_P_DIS", 1, "battery: the discharge power it gives now [W]"),
-), size=24)
+    # the thermal network (``P_TH``; ``thermal_network_step``): its temperatures (the start values with it off) and
+    # its energies
+    ("E_TH_T", 4, "thermal network: the temperatures of its nodes [degC] in the order TH_Y .. TH_M (stator yoke, "
+                  "stator tooth, winding, magnet)"),
+    ("E_TH_IN", 1, "thermal network: the heat the losses put in since the start [J]"),
+    ("E_TH_OUT", 1, "thermal network: the heat given to the coolant since the start [J]"),
+    ("E_TH_OVER", 1, "thermal network: over-temperature flags, TH_OVER_WINDING (1) + TH_OVER_MAGNET (2) of the nodes "
+                     "at or above their limits now (0: none)"),
+), size=24 + 7)
 
 #: the control unit's state vector (controller + observer)
 UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
@@ -519,6 +544,14 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
+#: the thermal network's nodes (``P_TH_INV_C``, ``E_TH_T``): stator yoke, stator tooth, winding, magnet (rotor)
+TH_Y, TH_T, TH_W, TH_M = 0, 1, 2, 3
+#: its conductances (``P_TH_G``): yoke-coolant, yoke-winding, yoke-tooth, tooth-winding, tooth-magnet (the air gap),
+#: winding-magnet (the end windings' air), magnet-ambient (the shaft and the housing's air: to the coolant's
+#: temperature), winding-coolant (the one-node winding's ``thermal_R``)
+TH_G_YC, TH_G_YW, TH_G_YT, TH_G_TW, TH_G_TM, TH_G_WM, TH_G_MA, TH_G_WC = range(8)
+#: its over-temperature flags (``E_TH_OVER``): the winding at or above its insulation's limit, the magnet above its own
+TH_OVER_WINDING, TH_OVER_MAGNET = 1.0, 2.0
 
 PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())

@@ -54,6 +54,8 @@ TARGET_PLANT, TARGET_UNIT = 0, 1
 #: the plant's buffer, its energy vector, the controller's buffer; the plant's stored magnetic and kinetic
 #: energies (``stored_energies``); a column filled afterwards from the unit's state (``states``)
 COL_TIME, COL_SIGNAL, COL_PLANT, COL_ENERGY, COL_UNIT, COL_W_MAGNETIC, COL_E_KINETIC, COL_LATER = range(8)
+#: ... the plant's parameter vector (R_s and psi now, which the thermal network moves: ``R_s_now``, ``psi_now``)
+COL_PARAM = 8
 #: the returns of ``whole_loop`` (with the step reached): done; the controller's or the plant's compiled step
 #: did not take step n (declined or failed: nothing of that component changed; the steps before n are taken)
 LOOP_DONE, LOOP_UNIT_STOPPED, LOOP_PLANT_STOPPED = 0, 1, 2
@@ -78,6 +80,8 @@ def _record(r, n, h, pio, ee, pp, uio, s, value, cols, rows, states):
         elif kind == COL_W_MAGNETIC or kind == COL_E_KINETIC:
             w_mag, e_kin = stored_energies(pio[PIO_I_D], pio[PIO_I_Q], pio[PIO_OMEGA_M], pp)
             x = w_mag if kind == COL_W_MAGNETIC else e_kin
+        elif kind == COL_PARAM:
+            x = pp[slot]
         else:
             x = 0.0
         rows[r, j] = x

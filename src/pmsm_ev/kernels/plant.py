@@ -3,8 +3,9 @@ vehicle's motion (eqs 1, 6, 9 = 28) and the RK4 step over them (``plant_step``),
 departures of a real motor and inverter from eqs 10-12, each off by default: the inverter's
 dead time (``dead_time_error``), magnetic saturation (flux-form eqs 10-12: per axis,
 ``saturated_*``, or the algebraic magnetic model with cross-saturation, ``flux_*``,
-``incremental_inductances``) and the winding's temperature (``winding_resistance``,
-``thermal_step``); the friction brake, the gear model ``power_flow`` (``power_flow_gear``), the
+``incremental_inductances``) and the motor's temperatures (``winding_resistance``,
+``thermal_network_step``: a lumped-parameter thermal network heated by the losses, R_s and psi
+following it); the friction brake, the gear model ``power_flow`` (``power_flow_gear``), the
 inverter's losses (``inverter_loss``) and the energy accounting (``plant_rates``' powers,
 integrated by ``plant_step`` with the RK4 weights of the state; ``stored_energies``),
 docs/speed-range.md; the current sensors (``gaussian_pair``, ``measured_currents``) and
@@ -47,7 +48,13 @@ from .layout import (
     E_REGEN,
     E_ROLL,
     E_SHAFT,
+    E_TH_IN,
+    E_TH_OUT,
+    E_TH_OVER,
+    E_TH_T,
     P_A_F,
+    P_ALPHA_PSI,
+    P_ALPHA_R,
     P_B_M,
     P_BAT,
     P_BAT_C1,
@@ -98,7 +105,9 @@ from .layout import (
     P_OMEGA_EPS,
     P_PAPER,
     P_PSI,
+    P_PSI20,
     P_R_S,
+    P_R_S20,
     P_R_W,
     P_RHO_A,
     P_SAT,
@@ -108,6 +117,15 @@ from .layout import (
     P_SUBSTEPS,
     P_T_BRAKE,
     P_T_M0,
+    P_TH,
+    P_TH_AMB,
+    P_TH_G,
+    P_TH_INV_C,
+    P_TH_LIM_M,
+    P_TH_LIM_W,
+    P_TH_RES,
+    P_TH_ROTOR,
+    P_TH_YOKE,
     P_V_A,
     P_V_EPS,
     PIO_CLOCK,
@@ -133,6 +151,20 @@ from .layout import (
     PIO_V_VEHICLE,
     PIO_X_VEHICLE,
     PLANT_ENERGY,
+    TH_G_MA,
+    TH_G_TM,
+    TH_G_TW,
+    TH_G_WC,
+    TH_G_WM,
+    TH_G_YC,
+    TH_G_YT,
+    TH_G_YW,
+    TH_M,
+    TH_OVER_MAGNET,
+    TH_OVER_WINDING,
+    TH_T,
+    TH_W,
+    TH_Y,
 )
 from .transforms import inverse_park, wrap_angle
 
@@ -241,23 +273,72 @@ def winding_resistance(R_s20, T, alpha_R, T_ref):
     return R_s20 * (1.0 + alpha_R * (T - T_ref))
 
 
+# -- the motor's thermal network ----------------------------------------------------------------
 @kernel()
-def winding_thermal_step(T, i_d, i_q, R_s20, alpha_R, T_ref, T_amb, R_th, C_th, dt, k_dq):
-    """The winding heated over dt by its copper losses k_dq R_s(T) (i_d^2 + i_q^2) (``thermal_step``; in
-    the dq convention's power scaling, the energy accounting's: k_dq = 1 for "paper", 3/2 for
-    "amplitude_invariant"); returns the new temperature [degC] and R_s there."""
-    r_s = winding_resistance(R_s20, T, alpha_R, T_ref)
-    T_new = thermal_step(T, k_dq * r_s * (i_d * i_d + i_q * i_q), T_amb, R_th, C_th, dt)
-    return T_new, winding_resistance(R_s20, T_new, alpha_R, T_ref)
+def thermal_apply(pp, ee):
+    """R_s and psi at the network's temperatures (``E_TH_T``): R_s = R_s20 (1 + alpha_R (T_w - 20)) (copper's
+    linear law, IEC 60028's coefficient) and psi = psi20 (1 + alpha_psi (T_m - 20)) (the remanence's), into the
+    slots eqs 10-12 read; with the algebraic magnetic model (``P_FLUX``) what the magnet sets there: its equivalent
+    current i_f = (a_d0 + a_dd psi_T^S) psi_T, the flux at zero current psi_T and the energy's zero w0, as
+    ``pmsm_ev.params.flux_model_coefficients`` puts them for a magnet at psi_T (the iron's curve, a_d0 .. V, is the
+    20 degC one: a hot magnet has less MMF, not other iron)."""
+    pp[P_R_S] = winding_resistance(pp[P_R_S20], ee[E_TH_T + TH_W], pp[P_ALPHA_R], 20.0)
+    psi_t = pp[P_PSI20] * (1.0 + pp[P_ALPHA_PSI] * (ee[E_TH_T + TH_M] - 20.0))
+    pp[P_PSI] = psi_t
+    if pp[P_FLUX] != 0.0:
+        o = P_FLUX_C
+        pp[o + FX_IF] = (pp[o + FX_AD0] + pp[o + FX_ADD] * psi_t ** pp[o + FX_S]) * psi_t
+        pp[o + FX_PSI0] = psi_t
+        pp[o + FX_W0] = 0.0
+        pp[o + FX_W0] = flux_energy(psi_t, 0.0, pp, o)
+        pp[P_FLUX_MEMO] = 0.0  # psi(i) of the cooler magnet no longer holds (``plant_flux_linkages``)
 
 
 @kernel()
-def thermal_step(T, P, T_amb, R_th, C_th, dt):
-    """Winding temperature after dt [degC] of the first-order model C_th dT/dt = P - (T - T_amb) / R_th
-    with the losses P [W] held over the step (exact solution: T relaxes to T_amb + P R_th with the
-    time constant R_th C_th)."""
-    T_inf = T_amb + P * R_th
-    return T_inf + (T - T_inf) * math.exp(-dt / (R_th * C_th))
+def thermal_network_step(q_cu, q_res, dt, pp, ee):
+    """The motor's lumped-parameter thermal network over a step of ``dt`` [s] that put the copper losses ``q_cu``
+    and the residual losses ``q_res`` (iron and friction) [J] in (the step's RK4 integrals, ``E_COPPER``,
+    ``E_IRON`` + ``E_FRICTION``): Wallscheid and Boecker's four nodes (IEEE Trans. Energy Convers. 31(1), 2016),
+    stator yoke Y, stator tooth T, winding W, magnet M, C_i dT_i/dt = P_i - sum_j G_ij (T_i - T_j) - G_i0 (T_i -
+    T_0), T_0 the coolant's temperature (``P_TH_AMB``), the copper losses into W, the residual ones split: the
+    rotor's share (``P_TH_ROTOR``) into M, the stator's into Y (``P_TH_YOKE``) and T. One explicit Euler step with
+    the temperatures at the step's start: the network's time constants are tens of seconds and more (16 s .. 65 min
+    with Wallscheid's figures), so over 1e-4 s Euler's error is ~ dt / tau ~ 1e-5 of a step's change, and its
+    update conserves heat exactly, the flows between nodes cancelling (heat in = stored + to the coolant, to
+    round-off). Then ``thermal_apply`` (R_s, psi for the next step) and the over-temperature flags ``E_TH_OVER``."""
+    o = E_TH_T
+    t_y = ee[o + TH_Y]
+    t_t = ee[o + TH_T]
+    t_w = ee[o + TH_W]
+    t_m = ee[o + TH_M]
+    t_0 = pp[P_TH_AMB]
+    g = P_TH_G
+    f_yc = pp[g + TH_G_YC] * (t_y - t_0)  # the flows [W], from the first node to the second
+    f_yw = pp[g + TH_G_YW] * (t_y - t_w)
+    f_yt = pp[g + TH_G_YT] * (t_y - t_t)
+    f_tw = pp[g + TH_G_TW] * (t_t - t_w)
+    f_tm = pp[g + TH_G_TM] * (t_t - t_m)
+    f_wm = pp[g + TH_G_WM] * (t_w - t_m)
+    f_ma = pp[g + TH_G_MA] * (t_m - t_0)
+    f_wc = pp[g + TH_G_WC] * (t_w - t_0)
+    q = pp[P_TH_RES] * q_res
+    q_rotor = pp[P_TH_ROTOR] * q
+    q_stator = q - q_rotor
+    q_yoke = pp[P_TH_YOKE] * q_stator
+    c = P_TH_INV_C
+    ee[o + TH_Y] = t_y + pp[c + TH_Y] * (q_yoke - dt * (f_yc + f_yw + f_yt))
+    ee[o + TH_T] = t_t + pp[c + TH_T] * ((q_stator - q_yoke) + dt * (f_yt - f_tw - f_tm))
+    ee[o + TH_W] = t_w + pp[c + TH_W] * (q_cu + dt * (f_yw + f_tw - f_wm - f_wc))
+    ee[o + TH_M] = t_m + pp[c + TH_M] * (q_rotor + dt * (f_tm + f_wm - f_ma))
+    ee[E_TH_IN] += q_cu + q
+    ee[E_TH_OUT] += dt * (f_yc + f_ma + f_wc)
+    thermal_apply(pp, ee)
+    over = 0.0
+    if ee[o + TH_W] >= pp[P_TH_LIM_W]:
+        over += TH_OVER_WINDING
+    if ee[o + TH_M] >= pp[P_TH_LIM_M]:
+        over += TH_OVER_MAGNET
+    ee[E_TH_OVER] = over
 
 
 @kernel()
@@ -983,6 +1064,8 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     ee[E_P_DC] = w * s_dc / dt
     if battery:  # the battery delivers the step's DC power
         battery_step(ee[E_P_DC], dt, pp, ee)
+    if pp[P_TH] != 0.0:  # the step's losses heat the motor; R_s and psi follow for the next step
+        thermal_network_step(w * s_cu, w * (s_fe + s_fr), dt, pp, ee)
     dx = pp[P_R_W] / (pp[P_N_G] * pp[P_N]) * (x3 - theta_e)
     x3 = wrap_angle(x3)
     if flux:  # the currents of the new fluxes
