@@ -156,6 +156,12 @@ def test_r_s_and_psi_follow_the_temperatures():
     got = [float(plant._pp[k.P_FLUX_C + j]) for j in range(12)]
     assert got[:9] == list(ref[:9])  # the iron's curve: the 20 degC one
     assert got[9:] == pytest.approx(ref[9:], rel=1e-13, abs=1e-15)  # i_f, psi0, w0 of the hot magnet
+    # the plant's memo of psi(i) (``plant_flux_linkages``) is the hot magnet's: the flux solved afresh
+    kk = plant._kernels
+    fresh = kk.flux_linkages(plant.i_d, plant.i_q, plant._pp, k.P_FLUX_C)
+    assert kk.plant_flux_linkages(plant.i_d, plant.i_q, plant._pp) == fresh
+    warm = [float(x) for x in plant._pp[k.P_FLUX_MEMO:k.P_FLUX_MEMO + 5]]
+    assert warm == [1.0, plant.i_d, plant.i_q, *fresh]
 
 
 def test_the_compiled_step_is_the_python_step_bit_for_bit():
