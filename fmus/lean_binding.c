@@ -616,6 +616,16 @@ static fmi2Status forward_set_real(fmi2Component c, const fmi2ValueReference vr[
     FORWARD(fmi2SetReal, set_real_t, W->inner, vr, nvr, value);
 }
 
+/* the slave's Real attribute of value reference vr into *value (GIL held): 1, or 0 with a Python error set */
+static int read_attribute(Instance* w, fmi2ValueReference vr, fmi2Real* value)
+{
+    PyObject* v = PyObject_GetAttr(w->slave, w->names[vr]);
+    if (v == NULL) return 0;
+    *value = PyFloat_AsDouble(v);
+    Py_DECREF(v);
+    return !(*value == -1.0 && PyErr_Occurred());
+}
+
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
     Instance* w = W;
@@ -636,18 +646,8 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
             PyGILState_STATE gil = PyGILState_Ensure();
             int ok = 1;
             for (i = 0; ok && i < nvr; i++) {
-                if (w->slots[vr[i]] >= 0) {
-                    value[i] = *slot_of(w, vr[i]);
-                    continue;
-                }
-                PyObject* v = PyObject_GetAttr(w->slave, w->names[vr[i]]);
-                if (v == NULL) {
-                    ok = 0;
-                    break;
-                }
-                value[i] = PyFloat_AsDouble(v);
-                Py_DECREF(v);
-                if (value[i] == -1.0 && PyErr_Occurred()) ok = 0;
+                if (w->slots[vr[i]] >= 0) value[i] = *slot_of(w, vr[i]);
+                else ok = read_attribute(w, vr[i], &value[i]);
             }
             if (!ok) PyErr_Clear();
             else w->fast_calls++;
@@ -661,16 +661,7 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
     int is_stale = stale ? PyObject_IsTrue(stale) : -1;
     Py_XDECREF(stale);
     int ok = is_stale == 0;
-    for (size_t i = 0; ok && i < nvr; i++) {
-        PyObject* v = PyObject_GetAttr(w->slave, w->names[vr[i]]);
-        if (v == NULL) {
-            ok = 0;
-            break;
-        }
-        value[i] = PyFloat_AsDouble(v);
-        Py_DECREF(v);
-        if (value[i] == -1.0 && PyErr_Occurred()) ok = 0;
-    }
+    for (size_t i = 0; ok && i < nvr; i++) ok = read_attribute(w, vr[i], &value[i]);
     if (!ok) PyErr_Clear();
     else w->fast_calls++;
     PyGILState_Release(gil);
