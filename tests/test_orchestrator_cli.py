@@ -83,6 +83,25 @@ def test_run_a_toy_system(tmp_path, capsys):
     assert m["stop_time"] == 0.005
 
 
+def test_figures_of_merit_that_fail_are_said(tmp_path, monkeypatch, capsys):
+    """A run whose figures of merit raise keeps its rows and its bookkeeping, and says so in one line, even with
+    --quiet (metrics.json's ``metrics_error``); the run itself completed: exit 0."""
+    from pmsm_cosim.app import cli
+
+    def broken(*_args, **_kwargs):
+        raise ValueError("no such column")
+
+    monkeypatch.setattr(cli, "drive_metrics", broken)
+    out = tmp_path / "o"
+    assert main(["run", str(toy_system(tmp_path)), "--out", str(out), "--quiet", "--stop-time", "0.005"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["warning: the figures of merit could not be computed (ValueError: no such column); metrics.json "
+                   "holds the run's bookkeeping only"]
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["metrics_error"] == "ValueError: no such column" and m["status"] == "completed"
+    assert (out / "results.csv").is_file()
+
+
 def test_default_out_dir_is_runs_scenario_name(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["run", str(toy_system(tmp_path, name="mytoy")), "--quiet"]) == 0

@@ -99,6 +99,9 @@ def cmd_run(a) -> int:
                                                      **({"cycle": a.cycle} if a.cycle else {})}})
     if "metrics_note" in m:
         _note(m["metrics_note"], a.quiet)
+    if "metrics_error" in m:  # the run's rows are written; its figures of merit are not: said even with --quiet
+        print(f"warning: the figures of merit could not be computed ({m['metrics_error']}); metrics.json holds the "
+              f"run's bookkeeping only", file=sys.stderr)
     trace = m.get("trace")
     if isinstance(trace, dict):
         longest = (f", the longest {trace['longest_excursion_s']:.2f} s at {trace['t_longest_excursion']:.2f} s"
