@@ -309,3 +309,17 @@ def test_the_limits_and_the_network_are_the_runs_own():
     p = thermal_metrics._plant_params(spec)
     assert (p.thermal_model, p.T_ambient, p.T_magnet_max, p.T_winding_max, p.T_winding) == (
         "lptn", 90.0, 120.0, 180.0, 65.0)
+
+
+def test_the_network_on_where_its_columns_are_not_recorded_is_said():
+    """``--set plant.thermal_model=lptn`` on a scenario that records none of the network's columns: the run's figures
+    as they are, and a note (metrics.json's ``metrics_note``, printed by ``pmsm-cosim run``) that no thermal figures
+    were made and why; with the network off, the figures untouched."""
+    def figures(out_dir, columns, rows):
+        return {"rows": rows}
+
+    on = apply_overrides("wltc3b-sensorless", set=["plant.thermal_model=lptn"], cli=True)
+    m = thermal_metrics.with_thermal_figures(figures, on)(None, [], 10)
+    assert m["rows"] == 10 and "thermal" not in m
+    assert m["metrics_note"].startswith("no thermal figures: the thermal network is on, but T_wdg, T_pm")
+    assert thermal_metrics.with_thermal_figures(figures, load_system("wltc3b-sensorless")) is figures

@@ -143,7 +143,20 @@ def with_thermal_figures(metrics_of, spec: SystemSpec):
     (:func:`thermal_figures`)."""
     names = {c.name for c in spec.columns}
     if not set(THERMAL_COLUMNS) <= names:
-        return metrics_of
+        plant = next((c for c in spec.components if c.name == PLANT), None)
+        if plant is None or str(plant.start.get("thermal_model", "off")) == "off":
+            return metrics_of
+        # the network on (e.g. --set plant.thermal_model=lptn) where its columns are not recorded: said, not silent
+        missing = ", ".join(c for c in THERMAL_COLUMNS if c not in names)
+        note = (f"no thermal figures: the thermal network is on, but {missing} are not recorded (a system file "
+                f"records them as wltc3b-thermal.toml does)")
+
+        def noted(out_dir, columns, rows: int) -> dict:
+            m = metrics_of(out_dir, columns, rows)
+            m["metrics_note"] = f"{m['metrics_note']}; {note}" if "metrics_note" in m else note
+            return m
+
+        return noted
     params = _plant_params(spec)
     t_winding_max, t_magnet_max = params.T_winding_max, params.T_magnet_max
     cycle = cycle_of(spec)
