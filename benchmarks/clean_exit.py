@@ -3,6 +3,7 @@ is not Python.
 
     python benchmarks/clean_exit.py [-n 100] [--failing 20] [--stop-time 0.05] [--jobs 1]
     python benchmarks/clean_exit.py --c-host [-n 20] [--jobs 1]
+    python benchmarks/clean_exit.py --foreign [-n 30] [--jobs 1]
 
 Each run is a fresh ``python`` process that imports the package, runs a short ``simulate``
 of scenario 1 and exits normally (no ``os._exit``): ``-n`` runs for every controller FMU
@@ -24,6 +25,12 @@ then starts and finalizes the interpreter); each FMU's library unloaded after it
 none (``keep``); kernels compiled (PMSM_EV_JIT=1) or plain. A run is clean as above and when it printed the
 binding's counters of all seven FMUs; the line of a group ends with the compiled calls of each FMU (0 for plain
 kernels).
+
+``--foreign``: each run is a fresh ``python`` process whose master runs FMUs of another origin, built with
+pythonfmu alone (the tests' toy FMUs, ``tests/toy_fmus``, built by the process as a test session builds them):
+``pmsm-cosim run`` of a system of the two, then ``pmsm-cosim info`` of one. Such an FMU does not reset
+pythonfmu's interpreter guard itself; the master does (``pmsm_cosim.engine.fmu.reset_guard_at_exit``). A run is
+clean as above.
 """
 
 from __future__ import annotations
@@ -159,6 +166,42 @@ def main_c_host(n: int, jobs: int) -> int:
         shutil.rmtree(work, ignore_errors=True)
 
 
+# -- FMUs of another origin, through the master ---------------------------------------------------------------------
+FOREIGN_CHILD = """
+import sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+from orchestrator_support import toy_fmus, toy_system
+from pmsm_cosim.app.cli import main
+work = Path(sys.argv[2])
+code = main(["run", str(toy_system(work)), "--out", str(work / "out"), "--quiet", "--set", "snk.gain=2"])
+sys.exit(code or main(["info", str(toy_fmus()["ToySink"])]))
+"""
+
+
+def one_foreign_run(work: Path) -> tuple[bool, str]:
+    child = Path(tempfile.mkdtemp(prefix="run-", dir=work))
+    proc = subprocess.run([sys.executable, "-c", FOREIGN_CHILD, str(C_HOST.parent), str(child)],
+                          capture_output=True, text=True, timeout=600)
+    if proc.returncode < 0:
+        return False, f"signal {-proc.returncode}: {proc.stderr.strip()[-200:]}"
+    if NATIVE_TROUBLE.search(proc.stderr):
+        return False, f"stderr: {NATIVE_TROUBLE.search(proc.stderr).group(0)}: {proc.stderr.strip()[-200:]}"
+    if proc.returncode != 0:
+        return False, f"exit code {proc.returncode}: {(proc.stdout + proc.stderr).strip()[-200:]}"
+    return True, ""
+
+
+def main_foreign(n: int, jobs: int) -> int:
+    work = Path(tempfile.mkdtemp(prefix="clean-exit-"))
+    try:
+        clean, runs = run_group("pythonfmu FMUs of another origin (the tests' ToySource, ToySink) through the master",
+                                n, jobs, work, run=one_foreign_run)
+        return 0 if clean == runs else 1
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("-n", type=int, default=100, help="runs per controller and kernel kind (default 100)")
@@ -167,11 +210,14 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=1, help="processes at a time (default 1)")
     parser.add_argument("--controllers", nargs="+", default=list(CONTROLLERS), choices=CONTROLLERS)
     parser.add_argument("--c-host", action="store_true", help="runs of the seven FMUs in a C host (Linux)")
+    parser.add_argument("--foreign", action="store_true", help="runs of FMUs of another origin through the master")
     args = parser.parse_args(argv)
     if args.n < 0 or args.failing < 0 or args.jobs < 1 or not args.stop_time > 0:
         parser.error("-n and --failing must be >= 0, --jobs >= 1, --stop-time > 0")
     if args.c_host:
         return main_c_host(args.n, args.jobs)
+    if args.foreign:
+        return main_foreign(args.n, args.jobs)
     # one untimed run first: builds the FMUs if they are out of date and fills numba's cache
     ok, why = one_run(CONTROLLERS[0], True, "completed", args.stop_time)
     print(f"warm-up run: {'clean' if ok else why}", flush=True)

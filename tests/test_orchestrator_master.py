@@ -3,8 +3,14 @@ scenario signals, start values, load-time checks, recording, failure and interru
 
 from __future__ import annotations
 
+import _ctypes
+import ctypes
 import json
 import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -325,3 +331,47 @@ def test_read_results_of_some_columns_parses_only_those(tmp_path):
     for name in some:
         assert some[name].tolist() == whole[name].tolist() and len(some[name]) == 2
     assert read_results(tmp_path, columns=("x",)) == {}
+
+
+# --- leaving the process ------------------------------------------------------------------------
+# pythonfmu's library keeps its interpreter guard in a static shared_ptr (the symbol below) that exit()'s C++
+# destructors free and its ELF destructor then resets once more: a write into freed memory at exit (docs/errors.md,
+# "Crash at exit"). The project's FMUs reset it themselves; for an FMU of another origin (these toys are pythonfmu's
+# alone) the master does, from Python's atexit, while the pointer is alive.
+GUARD_SYMBOL = "_ZN12_GLOBAL__N_17pyStateE"  # (anonymous namespace)::pyState of pythonfmu's PySlaveInstance.cpp
+
+
+def guard_address(library: str) -> int:
+    """Where the loaded ``library`` keeps its guard: its load address (/proc/self/maps, the mapping at offset 0)
+    plus the symbol's (nm; its symbol table is not stripped)."""
+    nm = subprocess.run(["nm", library], capture_output=True, text=True, check=True).stdout
+    offset = next(int(line.split()[0], 16) for line in nm.splitlines() if line.endswith(" " + GUARD_SYMBOL))
+    maps = Path("/proc/self/maps").read_text().splitlines()
+    base = next(int(line.split("-")[0], 16) for line in maps
+                if line.endswith(library) and line.split()[2] == "00000000")
+    return base + offset
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("nm") is None,
+                    reason="the guard is read through Linux's /proc and nm")
+def test_the_interpreter_guard_of_a_foreign_pythonfmu_fmu_is_reset_before_exit():
+    from orchestrator_support import toy_fmus
+    from pmsm_cosim.engine import fmu as engine_fmu
+
+    instance = engine_fmu.FmuInstance("src", toy_fmus()["ToySource"])
+    instance.instantiate(0.0, 1.0, {})
+    library = instance.fmu.dll._name
+    held = ctypes.CDLL(library)  # the library stays loaded after close (the hazard: loaded at exit), as it does
+    try:  # whenever another library has bound to its unique symbols
+        guard = ctypes.c_void_p.from_address(guard_address(library))
+        assert guard.value  # fmi2Instantiate made it
+        instance.close()
+        assert guard.value  # still held by the library's static after the instance is freed: exit's hazard
+        assert library in engine_fmu._GUARDED_LIBRARIES
+        engine_fmu.reset_guards()  # what Python's atexit runs
+        assert guard.value is None
+        engine_fmu.reset_guards()  # a second reset (the project's FMUs do theirs too) finds nothing to do
+        assert guard.value is None
+    finally:
+        instance.close()
+        _ctypes.dlclose(held._handle)  # unloaded now, if nothing else holds it: its destructors run in order

@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import _ctypes
 import ast
+import atexit
 import ctypes
 import math
 import os
 import re
 import shutil
+import sys
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree
@@ -57,6 +59,47 @@ _EXC_TEXT = re.compile(r"(?:^|: )([A-Za-z_][A-Za-z0-9_]*(?:Error|Exception)): (.
 PYTHONFMU_TOOL = "PythonFMU"
 #: exception classes whose text alone says it all
 PLAIN_EXCEPTIONS = ("ValueError", "ParameterError", "ProfileError")
+#: the function by which a pythonfmu-built library resets its interpreter guard (docs/errors.md, "Crash at exit")
+PYTHONFMU_GUARD_RESET = "finalizePythonInterpreter"
+#: the libraries (paths) of the pythonfmu-built FMUs this process loaded, whose guard is reset at its exit
+_GUARDED_LIBRARIES: set[str] = set()
+_GUARD_RESET_PLANNED = False
+
+
+def reset_guard_at_exit(library) -> None:
+    """Have a loaded FMU library (a ctypes library) that pythonfmu built reset its interpreter guard when this
+    Python exits: pythonfmu 0.6.5-0.7.0 writes into freed memory at exit otherwise, whenever its library is still
+    loaded, and the process may abort after its work is done (exit code 134, "corrupted double-linked list";
+    docs/errors.md, "Crash at exit"). The project's FMUs do this themselves (``slave_support.release_at_exit``, so
+    any Python host has it); an FMU of another origin, a user's or the tests' toys, does not, so the master does
+    it for every FMU it loads. Only a library that exports the reset, only on Linux (pythonfmu resets it from
+    DllMain elsewhere, in order) and only in a Python program (``sys.orig_argv`` set): where pythonfmu started
+    the interpreter itself, the reset would finalize it, which is pythonfmu's to do."""
+    global _GUARD_RESET_PLANNED
+    if not sys.platform.startswith("linux") or not getattr(sys, "orig_argv", None):
+        return
+    try:
+        getattr(library, PYTHONFMU_GUARD_RESET)
+    except AttributeError:  # not pythonfmu's library (or one with another lifetime)
+        return
+    _GUARDED_LIBRARIES.add(library._name)
+    if not _GUARD_RESET_PLANNED:
+        atexit.register(reset_guards)  # Python's atexit runs before exit()'s C++ static destructors
+        _GUARD_RESET_PLANNED = True
+
+
+def reset_guards() -> None:
+    """Reset the interpreter guard of every library ``reset_guard_at_exit`` registered that is still loaded (one
+    that dlclose unloaded ran its destructors in order); registered with ``atexit``. Resetting twice (the
+    project's FMUs reset theirs too) does nothing the second time: the guard is null."""
+    for path in sorted(_GUARDED_LIBRARIES):
+        try:
+            library = ctypes.CDLL(path, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+        except OSError:
+            continue
+        reset = getattr(library, PYTHONFMU_GUARD_RESET)
+        reset.restype = None
+        reset()
 
 
 def _exception_text(cls: str, text: str) -> str:
@@ -293,6 +336,7 @@ class FmuInstance:
             raise CosimError(f"{self.name}: cannot load the FMU's binary ({one_line(exc)})") from None
         finally:
             os.chdir(cwd)  # fmpy changes to the binary's directory and stays there if loading fails
+        reset_guard_at_exit(self.fmu.dll)
         try:
             self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
         except Exception as exc:
