@@ -80,6 +80,8 @@ def test_run_a_toy_system(tmp_path, capsys):
     assert summary.startswith("completed: 5 steps") and str(out) in summary
     m = json.loads((out / "metrics.json").read_text())
     assert m["settings"]["command_line"]["set"] == ["snk.gain=2"]
+    snk = next(c for c in m["settings"]["components"] if c["name"] == "snk")
+    assert snk["start"]["gain"] == 2.0 and isinstance(snk["start"]["gain"], float)  # the Real the FMU got, not "2"
     assert m["stop_time"] == 0.005
 
 

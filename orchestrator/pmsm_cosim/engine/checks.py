@@ -14,8 +14,11 @@ from __future__ import annotations
 import math
 
 from .errors import CosimError
-from .fmu import FmuInstance, variable_unit
+from .fmu import FmuInstance, convert_start, variable_unit
 from .system import COLUMN_CONVERSIONS, SystemSpec
+
+#: the variable types whose start values the run's settings keep as numbers (an Enumeration keeps the item's name)
+NUMBER_TYPES = ("Real", "Integer", "Boolean")
 
 
 def _a(word: str) -> str:
@@ -121,8 +124,11 @@ def check_wiring(s: SystemSpec, instances: dict[str, FmuInstance]) -> None:
                                  f"({u or sv.type}) to {col.unit!r}")
     for comp in s.components:
         inst = instances[comp.name]
-        for var in comp.start:
-            inst.check_settable(var, f"start value {comp.name}.{var}")
+        for var, value in comp.start.items():
+            ctx = f"start value {comp.name}.{var}"
+            sv = inst.check_settable(var, ctx)
+            if sv.type in NUMBER_TYPES:  # the value the FMU gets, in its type: a --set's text becomes a number
+                comp.start[var] = convert_start(sv, value, ctx)  # here, in the run's settings (metrics.json) too
 
 def drop_foreign_starts(spec: SystemSpec, instances: dict[str, FmuInstance]) -> list[str]:
     """Take out of each component's start values those written for the FMU it replaced
