@@ -63,11 +63,8 @@ sys.exit(0 if metrics["status"].startswith(expected) else 3)
 """
 
 
-def one_run(controller: str, jit: bool, expected: str, stop_time: float) -> tuple[bool, str]:
-    """(clean, why not) of one fresh process."""
-    env = dict(os.environ, PMSM_EV_JIT="1" if jit else "0")
-    proc = subprocess.run([sys.executable, "-c", CHILD, controller, repr(stop_time), expected],
-                          capture_output=True, text=True, env=env, timeout=600)
+def exit_verdict(proc: subprocess.CompletedProcess) -> tuple[bool, str]:
+    """(clean, why not) of a finished fresh process: not ended by a signal, no native trouble on stderr, exit 0."""
     if proc.returncode < 0:
         return False, f"signal {-proc.returncode}: {proc.stderr.strip()[-200:]}"
     if NATIVE_TROUBLE.search(proc.stderr):
@@ -75,6 +72,14 @@ def one_run(controller: str, jit: bool, expected: str, stop_time: float) -> tupl
     if proc.returncode != 0:
         return False, f"exit code {proc.returncode}: {(proc.stdout + proc.stderr).strip()[-200:]}"
     return True, ""
+
+
+def one_run(controller: str, jit: bool, expected: str, stop_time: float) -> tuple[bool, str]:
+    """(clean, why not) of one fresh process."""
+    env = dict(os.environ, PMSM_EV_JIT="1" if jit else "0")
+    proc = subprocess.run([sys.executable, "-c", CHILD, controller, repr(stop_time), expected],
+                          capture_output=True, text=True, env=env, timeout=600)
+    return exit_verdict(proc)
 
 
 def run_group(label: str, n: int, jobs: int, *args, run=None) -> tuple[int, int]:
@@ -183,13 +188,7 @@ def one_foreign_run(work: Path) -> tuple[bool, str]:
     child = Path(tempfile.mkdtemp(prefix="run-", dir=work))
     proc = subprocess.run([sys.executable, "-c", FOREIGN_CHILD, str(C_HOST.parent), str(child)],
                           capture_output=True, text=True, timeout=600)
-    if proc.returncode < 0:
-        return False, f"signal {-proc.returncode}: {proc.stderr.strip()[-200:]}"
-    if NATIVE_TROUBLE.search(proc.stderr):
-        return False, f"stderr: {NATIVE_TROUBLE.search(proc.stderr).group(0)}: {proc.stderr.strip()[-200:]}"
-    if proc.returncode != 0:
-        return False, f"exit code {proc.returncode}: {(proc.stdout + proc.stderr).strip()[-200:]}"
-    return True, ""
+    return exit_verdict(proc)
 
 
 def main_foreign(n: int, jobs: int) -> int:
