@@ -32,20 +32,20 @@ from distributed import Client
 
 from pmsm_cosim.app.studies import packaged_sweep, parse_sweep
 from pmsm_cosim.engine.system import read_toml
-from pmsm_cosim.sweeps import local_cluster, run_sweep
+from pmsm_cosim.sweeps import local_cluster, redraw, run_sweep
 
 DEFAULT_SWEEP = "cycle_montecarlo_wltc3b_injection"
 
 
 def sweep_of(name: str, samples: int, seed: int):
-    """The shipped sweep ``name`` with ``samples`` random samples drawn with ``seed``."""
+    """The shipped sweep ``name`` drawn again: ``samples`` random samples with ``seed`` (as ``pmsm-cosim sweep NAME
+    --samples N --seed S``), named ``..._throughput``."""
     path = packaged_sweep(name)
     data = read_toml(path, "sweep file")
     if "random" not in data:
         sys.exit(f"error: {name} is not a Monte-Carlo sweep (it has no [random] table)")
+    data = redraw(data, samples, seed, path)
     data["name"] = f"{data['name']}_throughput"
-    data["random"]["samples"] = samples
-    data["random"]["seed"] = seed
     return parse_sweep(data, None, path.parent)
 
 

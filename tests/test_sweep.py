@@ -146,6 +146,36 @@ def test_shipped_sweep_lists_its_runs(capsys):
     assert "ekf5_load_noise: 7 runs" in out and "ctrl.q_TL = 1e-07" in out and "ctrl.q_TL = 0.1" in out
 
 
+MC_BODY = """
+    [random]
+    samples = 4
+    seed = 7
+    "ctrl.q_TL" = { log_uniform = [1e-6, 1e-1] }
+    "plant.R_s" = { uniform = [0.05, 0.07] }
+"""
+
+
+def test_a_monte_carlo_sweep_drawn_again_is_the_file_with_that_seed_and_samples(tmp_path):
+    """--seed, --samples: the same design with another draw, as the file edited to that seed and count would
+    give; a name of its own (the default output directory)."""
+    again = load_sweep(write_sweep(tmp_path, MC_BODY), samples=3, seed=11)
+    edited = load_sweep(write_sweep(tmp_path, MC_BODY.replace("samples = 4", "samples = 3")
+                                    .replace("seed = 7", "seed = 11"), name="edited"))
+    assert again.name == "sw_seed11_n3" and (again.seed, again.samples) == (11, 3)
+    assert [r.params for r in again.runs] == [r.params for r in edited.runs]
+    assert [r.params for r in again.runs] != [r.params for r in load_sweep(write_sweep(tmp_path, MC_BODY)).runs][:3]
+
+
+def test_seed_and_samples_on_a_sweep_without_random_are_one_line(tmp_path, capsys):
+    path = write_sweep(tmp_path, '[grid]\n"ctrl.q_TL" = [1e-3, 1e-2]\n')
+    assert main(["sweep", str(path), "--seed", "3", "--dry-run", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and "this sweep has no [random] table" in err[0], err
+    assert main(["sweep", "cycle_montecarlo_wltc3b", "--samples", "2", "--seed", "5", "--dry-run"]) == 0
+    assert capsys.readouterr().out.startswith("cycle_montecarlo_wltc3b_seed5_n2: 2 runs into "
+                                              "runs/cycle_montecarlo_wltc3b_seed5_n2/runs")
+
+
 def test_parse_needs_a_system():
     with pytest.raises(CosimError, match="needs system ="):
         parse_sweep({"grid": {"ctrl.q_TL": [1]}})

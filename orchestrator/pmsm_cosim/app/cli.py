@@ -73,6 +73,16 @@ def _count(text: str) -> int:
     return value
 
 
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0 (got {text})")
+    return value
+
+
 # --- commands --------------------------------------------------------------------------
 
 def _load_with_overrides(a):
@@ -158,7 +168,7 @@ def cmd_export_ssp(a) -> int:
 def cmd_sweep(a) -> int:
     if a.workers is not None and a.scheduler:
         raise CosimError("--workers sizes the local cluster; with --scheduler the cluster's own workers are used")
-    sweep = load_sweep(a.sweep)
+    sweep = load_sweep(a.sweep, samples=a.samples, seed=a.seed)
     if a.stop_time is not None:
         sweep.stop_time = a.stop_time
     out = Path(a.out) if a.out else Path("runs") / sweep.name
@@ -401,6 +411,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes of the local cluster (default: one per core, at most one per run)")
     w.add_argument("--out", metavar="DIR", help="output directory (default: runs/<sweep name>)")
     w.add_argument("--stop-time", type=_positive, metavar="S", help="stop time of every run [s] (overrides the file)")
+    w.add_argument("--samples", type=_count, metavar="N",
+                   help="a Monte-Carlo sweep: draw N samples instead of the file's (its name, and so the default "
+                        "output directory, get _nN)")
+    w.add_argument("--seed", type=_seed, metavar="N",
+                   help="a Monte-Carlo sweep: draw with the seed N instead of the file's, new samples of the same "
+                        "design (its name, and so the default output directory, get _seedN)")
     w.add_argument("--dry-run", action="store_true", help="check the sweep against the FMUs and list its runs")
     w.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no per-run lines")
     _fmu_dir_option(w)

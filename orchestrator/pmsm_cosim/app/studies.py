@@ -43,8 +43,9 @@ def packaged_sweep(name: str) -> Path:
     return Path(str(resources.files("pmsm_cosim.app") / "sweeps" / f"{name}.toml"))
 
 
-def load_sweep(path) -> sweeps.SweepSpec:
-    """A sweep file, or the name of a shipped sweep, with this drive's hooks."""
+def load_sweep(path, *, samples: int | None = None, seed: int | None = None) -> sweeps.SweepSpec:
+    """A sweep file, or the name of a shipped sweep, with this drive's hooks; ``samples``, ``seed``: a Monte-Carlo
+    sweep drawn again (``pmsm_cosim.sweeps.redraw``)."""
     path = Path(path)
     if path.suffix == "" and not path.exists():
         if str(path) in PACKAGED_SWEEPS:
@@ -52,7 +53,7 @@ def load_sweep(path) -> sweeps.SweepSpec:
         else:
             raise CosimError(f"no sweep file {str(path)!r}{close_matches(str(path), PACKAGED_SWEEPS)}; "
                              f"shipped sweeps: {', '.join(PACKAGED_SWEEPS)}")
-    return sweeps.load_sweep(path, drive_hooks())
+    return sweeps.load_sweep(path, drive_hooks(), samples=samples, seed=seed)
 
 
 def parse_sweep(data: dict, path: Path | None = None, base_dir: Path | None = None) -> sweeps.SweepSpec:

@@ -17,9 +17,9 @@ from .execute import (
     run_signature,
     run_sweep,
 )
-from .spec import Param, RunPlan, SweepHooks, SweepSpec, load_sweep, parse_param, parse_sweep, run_id
+from .spec import Param, RunPlan, SweepHooks, SweepSpec, load_sweep, parse_param, parse_sweep, redraw, run_id
 from .summary import plot_summary, read_summary, write_summary
 
 __all__ = ["Param", "RunPlan", "SweepHooks", "SweepOutcome", "SweepSpec", "cpu_count", "dask_client", "execute_run",
            "is_done", "load_sweep", "local_cluster", "parse_param", "parse_sweep", "plot_summary", "prepare_runs",
-           "read_summary", "run_id", "run_signature", "run_sweep", "write_summary"]
+           "read_summary", "redraw", "run_id", "run_signature", "run_sweep", "write_summary"]

@@ -318,7 +318,7 @@ def parse_sweep(data: dict, path: Path | None = None, base_dir: Path | None = No
     system = data.get("system")
     if not isinstance(system, str) or not system:
         raise CosimError(f"{where}: needs system = \"scenario1\", \"scenario2\" or the path of a system file")
-    sweep = SweepSpec(name=str(data.get("name") or (path.stem if path else "sweep")), path=path,
+    sweep = SweepSpec(name=sweep_name(data, path), path=path,
                       base_dir=base_dir, system=system, description=str(data.get("description", "")), hooks=hooks)
     for key in ("stop_time", "output_interval"):
         if key in data:
@@ -402,7 +402,35 @@ def parse_sweep(data: dict, path: Path | None = None, base_dir: Path | None = No
     return sweep
 
 
-def load_sweep(path, hooks: SweepHooks | None = None) -> SweepSpec:
-    """Read and check a sweep file."""
+def sweep_name(data: dict, path: Path | None) -> str:
+    """A sweep's name: its ``name``, else its file's stem."""
+    return str(data.get("name") or (path.stem if path else "sweep"))
+
+
+def load_sweep(path, hooks: SweepHooks | None = None, *, samples: int | None = None,
+               seed: int | None = None) -> SweepSpec:
+    """Read and check a sweep file; ``samples``, ``seed``: a Monte-Carlo sweep drawn again (``redraw``)."""
     path = Path(path)
-    return parse_sweep(read_toml(path, "sweep file"), path, hooks=hooks)
+    data = read_toml(path, "sweep file")
+    if samples is not None or seed is not None:
+        data = redraw(data, samples, seed, path)
+    return parse_sweep(data, path, hooks=hooks)
+
+
+def redraw(data: dict, samples: int | None, seed: int | None, path: Path | None = None) -> dict:
+    """A Monte-Carlo sweep's document with its draw replaced: ``samples`` samples and/or the seed ``seed`` in
+    its [random] table, and a name of its own (``<name>_seed<seed>``, ``_n<samples>``), so that its runs and
+    summary go to a folder of their own by default. CosimError (one line) for a sweep without [random]."""
+    rnd = data.get("random")
+    if not isinstance(rnd, dict):
+        raise CosimError(f"{path or 'sweep'}: --samples and --seed draw a Monte-Carlo sweep again, and this sweep "
+                         f"has no [random] table")
+    rnd = dict(rnd)
+    name = sweep_name(data, path)
+    if seed is not None:
+        rnd["seed"] = seed
+        name += f"_seed{seed}"
+    if samples is not None:
+        rnd["samples"] = samples
+        name += f"_n{samples}"
+    return {**data, "name": name, "random": rnd}
