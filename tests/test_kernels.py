@@ -82,7 +82,10 @@ def test_kernels_are_cached_by_content(tmp_path):
     numba's cache instead of compiling."""
     pytest.importorskip("numba")
     cache = tmp_path / "cache"
+    # every kernel made ready: a top-level kernel is compiled (or loaded) when a process first needs it
     probe = ("from pmsm_ev import accel; import json; k = accel.kernels(); "
+             "import sys; [f.ready() for m in list(sys.modules) if m.startswith(k.__name__ + '.') "
+             "for f in vars(sys.modules[m]).values() if not isinstance(f, type) and hasattr(f, 'ready')]; "
              "print(json.dumps([accel.describe(), k.__file__]))")
 
     def load() -> list:
@@ -106,6 +109,19 @@ def test_kernels_are_cached_by_content(tmp_path):
     assert {n.split(".")[0] for n in compiled if n.endswith(".nbi")} >= {"plant", "control", "observers", "startup"}
     assert load()[1] == path
     assert {p.name: p.stat().st_mtime_ns for p in (copy / "__pycache__").iterdir()} == compiled  # no recompiling
+
+
+def test_a_kernel_is_compiled_for_its_one_signature_when_first_needed():
+    """A top-level kernel (``kernel(signature)``) is compiled, or loaded from numba's cache, when a process first
+    calls it: then for its signature alone, as ``njit(signature)`` would have at once (an int argument is
+    converted to the float64 it declares, not compiled for anew)."""
+    k = accel.kernels()
+    if not accel.compiled():
+        pytest.skip("the kernels run as plain Python")
+    fn = k.sample_instant
+    assert fn(3, 0, 1, 0) == fn(3.0, 0.0, 1.0, 0.0)
+    assert len(fn.overloads) == 1 and fn.ready() is fn
+    assert [str(t) for t in next(iter(fn.overloads))] == ["float64"] * 4
 
 
 def test_a_change_in_any_kernel_file_gives_another_cache(tmp_path):

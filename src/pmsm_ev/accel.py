@@ -180,6 +180,9 @@ def direct(fn):
     explicit signature as its compiled entry point, which skips numba's per-call type dispatch
     (~0.15 us a call; the same machine code, so the same numbers; arguments of another type are a
     TypeError); any other ``fn`` as it is."""
+    ready = getattr(fn, "ready", None)
+    if ready is not None:  # a top-level kernel: its signature compiled (or loaded) first
+        ready()
     overloads = getattr(fn, "overloads", None)
     if not overloads or len(overloads) != 1:
         return fn
