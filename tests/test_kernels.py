@@ -23,24 +23,36 @@ from regression_runs import CASES
 RUN_SCRIPT = """
 import json, sys
 from pmsm_ev import accel
-from pmsm_cosim.app.reference import run_reference
 sys.path.insert(0, sys.argv[3])
-from regression_runs import PARAMS, ELEVATION
+from test_kernels import run_here
 observer, angle_source, out = sys.argv[1], sys.argv[2], sys.argv[4]
-if len(sys.argv) > 5:  # the plant's effects on: dead time and its compensation, saturation, temperature (heating)
-    from dataclasses import replace
-    from pmsm_ev.params import ControllerParams, PlantParams
-    PARAMS = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, sat_i_q=900.0, sat_i_d=2000.0,
-                                               T_winding=90.0, T_magnet=70.0, thermal_R=0.05,
-                                               thermal_C=2.0),
-                     controller=ControllerParams(dead_time_comp=7.2))
-run_reference(out, stop_time=2.0, observer=observer, angle_source=angle_source, params=PARAMS,
-              output_interval=0.001, elevation=ELEVATION)
-print(json.dumps({"mode": accel.describe(), "compiled": accel.compiled()}))
+print(json.dumps(run_here(observer, angle_source, out, *sys.argv[5:])))
 """
 
 
+def run_here(observer: str, angle_source: str, out, *extra) -> dict:
+    """The reference run of ``observer``/``angle_source`` over 2 s into ``out``, in this process; "effects" in
+    ``extra``: the plant's effects on (dead time and its compensation, saturation, temperature and heating).
+    How the kernels ran: {"mode": accel.describe(), "compiled": accel.compiled()}."""
+    from dataclasses import replace
+
+    from pmsm_cosim.app.reference import run_reference
+    from pmsm_ev.params import ControllerParams, PlantParams
+    from regression_runs import ELEVATION, PARAMS
+
+    params = PARAMS
+    if "effects" in extra:
+        params = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, sat_i_q=900.0, sat_i_d=2000.0,
+                                                   T_winding=90.0, T_magnet=70.0, thermal_R=0.05,
+                                                   thermal_C=2.0),
+                         controller=ControllerParams(dead_time_comp=7.2))
+    run_reference(out, stop_time=2.0, observer=observer, angle_source=angle_source, params=params,
+                  output_interval=0.001, elevation=ELEVATION)
+    return {"mode": accel.describe(), "compiled": accel.compiled()}
+
+
 def _run(tmp_path: Path, observer: str, angle_source: str, name: str, *extra, **env) -> tuple[dict, dict]:
+    """The run in a process of its own (with ``env``: PMSM_EV_JIT=0, plain Python)."""
     script = tmp_path / "run.py"
     script.write_text(RUN_SCRIPT)
     out = tmp_path / name
@@ -51,11 +63,19 @@ def _run(tmp_path: Path, observer: str, angle_source: str, name: str, *extra, **
     return json.loads(r.stdout.strip().splitlines()[-1]), read_results(out)
 
 
+def _run_compiled(tmp_path: Path, observer: str, angle_source: str, name: str, *extra) -> tuple[dict, dict]:
+    """The run in this process, whose kernels are compiled (numba is there: the tests that call this import it)."""
+    out = tmp_path / name
+    info = run_here(observer, angle_source, out, *extra)
+    return info, read_results(out)
+
+
 @pytest.mark.parametrize("observer,angle_source", CASES + (("ekf5", "estimated"),))
 def test_plain_python_and_numba_give_the_same_bits(tmp_path, observer, angle_source):
+    """A process with PMSM_EV_JIT=0 runs the kernels as plain Python; this one, compiled: the same bits."""
     pytest.importorskip("numba")
     info_plain, plain = _run(tmp_path, observer, angle_source, "plain", PMSM_EV_JIT="0")
-    info_jit, jit = _run(tmp_path, observer, angle_source, "jit")
+    info_jit, jit = _run_compiled(tmp_path, observer, angle_source, "jit")
     assert not info_plain["compiled"] and info_plain["mode"].startswith("plain Python")
     assert info_jit["compiled"], info_jit["mode"]
     for col in ALL_COLUMNS:
@@ -68,11 +88,11 @@ def test_plant_effects_give_the_same_bits_compiled_or_not(tmp_path, observer):
     """Dead time (and its compensation), saturation and temperature on: the same bits."""
     pytest.importorskip("numba")
     _, plain = _run(tmp_path, observer, "measured", "plain", "effects", PMSM_EV_JIT="0")
-    info_jit, jit = _run(tmp_path, observer, "measured", "jit", "effects")
+    info_jit, jit = _run_compiled(tmp_path, observer, "measured", "jit", "effects")
     assert info_jit["compiled"], info_jit["mode"]
     for col in ALL_COLUMNS:
         assert np.array_equal(plain[col], jit[col]), col
-    _, off = _run(tmp_path, observer, "measured", "off")
+    _, off = _run_compiled(tmp_path, observer, "measured", "off")
     assert not np.array_equal(off["i_q"], jit["i_q"])  # the effects changed the run
 
 
