@@ -8,25 +8,29 @@ import os
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import accel, kernels
 from pmsm_ev.kernels import layout
+from pmsm_ev.params import ControllerParams, PlantParams
 from pmsm_ev.plant import Plant
 from pmsm_ev.results import ALL_COLUMNS
-from regression_runs import CASES
+from regression_runs import CASES, ELEVATION, PARAMS
 
-RUN_SCRIPT = """
+#: the runs the comparisons below make as plain Python: (observer, angle source, *extra), as ``run_here`` takes them
+PLAIN_RUNS = [(observer, angle_source) for observer, angle_source in CASES + (("ekf5", "estimated"),)] + [
+    (observer, "measured", "effects") for observer in ("sensored", "ekf5ab")]
+PLAIN_SCRIPT = """
 import json, sys
-from pmsm_ev import accel
-sys.path.insert(0, sys.argv[3])
+sys.path.insert(0, sys.argv[1])
 from test_kernels import run_here
-observer, angle_source, out = sys.argv[1], sys.argv[2], sys.argv[4]
-print(json.dumps(run_here(observer, angle_source, out, *sys.argv[5:])))
+print(json.dumps([run_here(*run) for run in json.loads(sys.argv[2])]))
 """
 
 
@@ -34,12 +38,6 @@ def run_here(observer: str, angle_source: str, out, *extra) -> dict:
     """The reference run of ``observer``/``angle_source`` over 2 s into ``out``, in this process; "effects" in
     ``extra``: the plant's effects on (dead time and its compensation, saturation, temperature and heating).
     How the kernels ran: {"mode": accel.describe(), "compiled": accel.compiled()}."""
-    from dataclasses import replace
-
-    from pmsm_cosim.app.reference import run_reference
-    from pmsm_ev.params import ControllerParams, PlantParams
-    from regression_runs import ELEVATION, PARAMS
-
     params = PARAMS
     if "effects" in extra:
         params = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, sat_i_q=900.0, sat_i_d=2000.0,
@@ -51,16 +49,18 @@ def run_here(observer: str, angle_source: str, out, *extra) -> dict:
     return {"mode": accel.describe(), "compiled": accel.compiled()}
 
 
-def _run(tmp_path: Path, observer: str, angle_source: str, name: str, *extra, **env) -> tuple[dict, dict]:
-    """The run in a process of its own (with ``env``: PMSM_EV_JIT=0, plain Python)."""
-    script = tmp_path / "run.py"
-    script.write_text(RUN_SCRIPT)
-    out = tmp_path / name
-    r = subprocess.run([sys.executable, str(script), observer, angle_source, str(Path(__file__).parent), str(out),
-                        *extra],
-                       capture_output=True, text=True, timeout=300, env={**os.environ, **env})
+@pytest.fixture(scope="module")
+def plain_runs(tmp_path_factory) -> dict[tuple, tuple[dict, dict]]:
+    """{run of PLAIN_RUNS: (how the kernels ran, its rows)}: the runs made one after the other by a process of
+    their own with PMSM_EV_JIT=0 (plain Python)."""
+    pytest.importorskip("numba")
+    root = tmp_path_factory.mktemp("plain")
+    runs = [[*run[:2], str(root / "-".join(run)), *run[2:]] for run in PLAIN_RUNS]
+    r = subprocess.run([sys.executable, "-c", PLAIN_SCRIPT, str(Path(__file__).parent), json.dumps(runs)],
+                       capture_output=True, text=True, timeout=600, env={**os.environ, "PMSM_EV_JIT": "0"})
     assert r.returncode == 0, r.stderr[-3000:]
-    return json.loads(r.stdout.strip().splitlines()[-1]), read_results(out)
+    infos = json.loads(r.stdout.strip().splitlines()[-1])
+    return {run: (info, read_results(root / "-".join(run))) for run, info in zip(PLAIN_RUNS, infos)}
 
 
 def _run_compiled(tmp_path: Path, observer: str, angle_source: str, name: str, *extra) -> tuple[dict, dict]:
@@ -71,10 +71,9 @@ def _run_compiled(tmp_path: Path, observer: str, angle_source: str, name: str, *
 
 
 @pytest.mark.parametrize("observer,angle_source", CASES + (("ekf5", "estimated"),))
-def test_plain_python_and_numba_give_the_same_bits(tmp_path, observer, angle_source):
+def test_plain_python_and_numba_give_the_same_bits(plain_runs, tmp_path, observer, angle_source):
     """A process with PMSM_EV_JIT=0 runs the kernels as plain Python; this one, compiled: the same bits."""
-    pytest.importorskip("numba")
-    info_plain, plain = _run(tmp_path, observer, angle_source, "plain", PMSM_EV_JIT="0")
+    info_plain, plain = plain_runs[(observer, angle_source)]
     info_jit, jit = _run_compiled(tmp_path, observer, angle_source, "jit")
     assert not info_plain["compiled"] and info_plain["mode"].startswith("plain Python")
     assert info_jit["compiled"], info_jit["mode"]
@@ -84,10 +83,10 @@ def test_plain_python_and_numba_give_the_same_bits(tmp_path, observer, angle_sou
 
 
 @pytest.mark.parametrize("observer", ["sensored", "ekf5ab"])
-def test_plant_effects_give_the_same_bits_compiled_or_not(tmp_path, observer):
+def test_plant_effects_give_the_same_bits_compiled_or_not(plain_runs, tmp_path, observer):
     """Dead time (and its compensation), saturation and temperature on: the same bits."""
-    pytest.importorskip("numba")
-    _, plain = _run(tmp_path, observer, "measured", "plain", "effects", PMSM_EV_JIT="0")
+    info_plain, plain = plain_runs[(observer, "measured", "effects")]
+    assert not info_plain["compiled"] and info_plain["mode"].startswith("plain Python")
     info_jit, jit = _run_compiled(tmp_path, observer, "measured", "jit", "effects")
     assert info_jit["compiled"], info_jit["mode"]
     for col in ALL_COLUMNS:
