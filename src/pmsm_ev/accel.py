@@ -158,7 +158,8 @@ def _load():
 
 
 def kernels():
-    """The kernels module to call (loaded, and compiled, once per process)."""
+    """The kernels module to call (loaded once per process; compiled, each kernel with a signature compiled or
+    loaded from numba's cache when the process first needs it: ``pmsm_ev.kernels.jit``)."""
     global _loaded
     if _loaded is None:
         _loaded = _load()
