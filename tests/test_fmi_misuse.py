@@ -23,106 +23,134 @@ pytestmark = pytest.mark.skipif(fmu_build.binding_requested() != "lean",
 
 H = 1e-4
 
-# one call sequence: the statuses of the calls (0 for one that returned fmi2OK), the FMU's log lines, values read
+# call sequences on one FMU, each on an instance of its own (instantiated, then terminated and freed): per
+# sequence, the statuses of the calls (0 for one that returned fmi2OK), the FMU's log lines, values read
 _SCRIPT = r"""
 import json, math, sys
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
-path, case = sys.argv[1], sys.argv[2]
+path = sys.argv[1]
 md = read_model_description(path)
 vr = {v.name: v.valueReference for v in md.modelVariables}
-fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
-                instanceName="m")
-fmu.instantiate(loggingOn=True)  # fmpy's default logger prints "[ERROR] message": read back from stdout
-out = {"calls": [], "values": {}}
-def call(name, *args):
-    try:
-        getattr(fmu, name)(*args)
-        out["calls"].append([name, 0])
-        return 0
-    except FMICallException as exc:
-        out["calls"].append([name, exc.status])
-        return exc.status
-def init():
-    call("setupExperiment", None, 0.0)
-    call("enterInitializationMode")
-    call("exitInitializationMode")
-def read(label, names):
-    out["values"][label] = [v if math.isfinite(v) else repr(v) for v in fmu.getReal([vr[n] for n in names])]
-if case == "step-before-init":
-    call("setupExperiment", None, 0.0)
-    call("doStep", 0.0, 1e-4)
-    call("enterInitializationMode")
-    call("doStep", 0.0, 1e-4)
-    call("exitInitializationMode")
-    call("doStep", 0.0, 1e-4)
-elif case == "step-after-terminate":
-    init()
-    call("doStep", 0.0, 1e-4)
-    call("terminate")
-    call("doStep", 1e-4, 1e-4)
-elif case == "enter-twice":
-    call("setupExperiment", None, 0.0)
-    call("enterInitializationMode")
-    call("enterInitializationMode")
-    call("exitInitializationMode")
-    call("exitInitializationMode")
-    call("setupExperiment", None, 0.0)
-    call("doStep", 0.0, 1e-4)
-elif case == "non-finite":
-    init()
-    inputs = [v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
-    call("setReal", [vr[inputs[0]]], [float("inf")])
-    call("setReal", [vr[n] for n in inputs], [1.0] * (len(inputs) - 1) + [float("nan")])
-    call("doStep", 0.0, 1e-4)
-    read("after", [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"])
-elif case == "time":
-    init()
-    call("doStep", 0.0, 1e-4)
-    call("doStep", 1e-4, 1e-4)
-    call("doStep", 0.0, 1e-4)       # back in time
-    call("doStep", 5e-4, 1e-4)      # a gap
-    state = fmu.getFMUstate()       # at 2e-4
-    call("doStep", 2e-4, 1e-4)
-    fmu.setFMUstate(state)
-    call("doStep", 2e-4, 1e-4)      # from the restored state: the same point again
-    call("doStep", 3e-4 + 1e-19, 1e-4)  # a master's rounding: continues
-elif case == "long-step":
-    init()
-    call("setReal", [vr["v_alpha"], vr["v_beta"]], [20.0, 5.0])
-    call("doStep", 0.0, 1e-4)
-    call("doStep", 1e-4, 5.0)
-    read("after", ["omega_m", "i_d", "i_q"])
-    out["values"]["last"] = fmu.getRealStatus(2)
-    out["values"]["terminated"] = fmu.getBooleanStatus(3)
-    call("doStep", 1e-4, 1e-4)
-    read("then", ["omega_m", "i_d", "i_q"])
-fmu.terminate()
-fmu.freeInstance()
-print(json.dumps(out))
+def sequence(case):
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="m")
+    fmu.instantiate(loggingOn=True)  # fmpy's default logger prints "[ERROR] message": read back from stdout
+    out = {"calls": [], "values": {}}
+    def call(name, *args):
+        try:
+            getattr(fmu, name)(*args)
+            out["calls"].append([name, 0])
+            return 0
+        except FMICallException as exc:
+            out["calls"].append([name, exc.status])
+            return exc.status
+    def init():
+        call("setupExperiment", None, 0.0)
+        call("enterInitializationMode")
+        call("exitInitializationMode")
+    def read(label, names):
+        out["values"][label] = [v if math.isfinite(v) else repr(v) for v in fmu.getReal([vr[n] for n in names])]
+    if case == "step-before-init":
+        call("setupExperiment", None, 0.0)
+        call("doStep", 0.0, 1e-4)
+        call("enterInitializationMode")
+        call("doStep", 0.0, 1e-4)
+        call("exitInitializationMode")
+        call("doStep", 0.0, 1e-4)
+    elif case == "step-after-terminate":
+        init()
+        call("doStep", 0.0, 1e-4)
+        call("terminate")
+        call("doStep", 1e-4, 1e-4)
+    elif case == "enter-twice":
+        call("setupExperiment", None, 0.0)
+        call("enterInitializationMode")
+        call("enterInitializationMode")
+        call("exitInitializationMode")
+        call("exitInitializationMode")
+        call("setupExperiment", None, 0.0)
+        call("doStep", 0.0, 1e-4)
+    elif case == "non-finite":
+        init()
+        inputs = [v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
+        call("setReal", [vr[inputs[0]]], [float("inf")])
+        call("setReal", [vr[n] for n in inputs], [1.0] * (len(inputs) - 1) + [float("nan")])
+        call("doStep", 0.0, 1e-4)
+        read("after", [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"])
+    elif case == "time":
+        init()
+        call("doStep", 0.0, 1e-4)
+        call("doStep", 1e-4, 1e-4)
+        call("doStep", 0.0, 1e-4)       # back in time
+        call("doStep", 5e-4, 1e-4)      # a gap
+        state = fmu.getFMUstate()       # at 2e-4
+        call("doStep", 2e-4, 1e-4)
+        fmu.setFMUstate(state)
+        call("doStep", 2e-4, 1e-4)      # from the restored state: the same point again
+        call("doStep", 3e-4 + 1e-19, 1e-4)  # a master's rounding: continues
+    elif case == "long-step":
+        init()
+        call("setReal", [vr["v_alpha"], vr["v_beta"]], [20.0, 5.0])
+        call("doStep", 0.0, 1e-4)
+        call("doStep", 1e-4, 5.0)
+        read("after", ["omega_m", "i_d", "i_q"])
+        out["values"]["last"] = fmu.getRealStatus(2)
+        out["values"]["terminated"] = fmu.getBooleanStatus(3)
+        call("doStep", 1e-4, 1e-4)
+        read("then", ["omega_m", "i_d", "i_q"])
+    fmu.terminate()
+    fmu.freeInstance()
+    print(END + json.dumps(out), flush=True)  # the end of the sequence's log lines
+END = sys.argv[2]
+for case in sys.argv[3:]:
+    sequence(case)
 """
+#: the mark of the line that ends a sequence (its JSON after it)
+_END = "@@sequence@@ "
 
 
 @pytest.fixture(scope="module")
 def fmus() -> dict[str, Path]:
-    return project_fmus()  # the user's cache: each call sequence runs in a process of its own
+    return project_fmus()  # the user's cache: the call sequences on each FMU run in a process of their own
+
+
+#: the call sequences the tests below make on each FMU, run one after the other in one process per FMU
+SEQUENCES = {"PmsmEvPlant": ("step-before-init", "step-after-terminate", "non-finite", "time", "long-step"),
+             "FocSensorless": ("step-before-init", "step-after-terminate", "enter-twice", "time"),
+             "RouteProfile": ("step-before-init",), "FocEkf5": ("non-finite",)}
+_RUNS: dict = {}  # {(FMU, case): its result}, of the sequences run so far
+
+
+def run_all(fmu: Path, cases) -> dict[str, tuple[list, list[str], dict]]:
+    """{case: (the calls with their statuses, the FMU's log lines, the values read)} of the call sequences
+    ``cases`` on ``fmu``, one after the other in a process of their own, each on an instance of its own."""
+    done = subprocess.run([sys.executable, "-c", _SCRIPT, str(fmu), _END, *cases], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    results, log = {}, []
+    for line in done.stdout.strip().splitlines():
+        if line.startswith(_END):
+            out = json.loads(line[len(_END):])
+            results[cases[len(results)]] = (out["calls"], log, out["values"])
+            log = []
+        elif line.startswith("[") or not log:  # a message of several lines (pythonfmu's, with the exception's
+            log.append(line)                     # repr): one entry
+        else:
+            log[-1] += "\n" + line
+    assert list(results) == list(cases) and not log
+    return results
 
 
 def run(fmu: Path, case: str) -> tuple[list, list[str], dict]:
-    """(the calls with their statuses, the FMU's log lines, the values read) of ``case`` in a process of its own."""
-    done = subprocess.run([sys.executable, "-c", _SCRIPT, str(fmu), case], capture_output=True, text=True,
-                          timeout=300)
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
-    lines = done.stdout.strip().splitlines()
-    out = json.loads(lines[-1])
-    log = []
-    for line in lines[:-1]:  # a message of several lines (pythonfmu's, with the exception's repr): one entry
-        if line.startswith("[") or not log:
-            log.append(line)
-        else:
-            log[-1] += "\n" + line
-    return out["calls"], log, out["values"]
+    """(the calls with their statuses, the FMU's log lines, the values read) of ``case`` on ``fmu``, one of the FMUs
+    of ``SEQUENCES`` (its sequences run in a process of their own the first time one of them is asked for)."""
+    if (fmu, case) not in _RUNS:
+        cases = SEQUENCES[fmu.stem]
+        assert case in cases, (fmu.stem, case)
+        _RUNS.update({(fmu, c): result for c, result in run_all(fmu, cases).items()})
+    return _RUNS[(fmu, case)]
 
 
 ERROR, DISCARD = 3, 2
@@ -206,9 +234,10 @@ def test_through_pythonfmus_library_alone_the_same_calls_are_refused_as_fatal(tm
     subprocess.run([sys.executable, "-m", "pmsm_ev_fmus", "--out", str(tmp_path), "PmsmEvPlant"], env=env,
                    check=True, capture_output=True, text=True, timeout=600)
     plant = tmp_path / "PmsmEvPlant.fmu"
-    calls, log, _ = run(plant, "step-after-terminate")
+    runs = run_all(plant, ("step-after-terminate", "long-step"))
+    calls, log, _ = runs["step-after-terminate"]
     assert calls[-1] == ["doStep", 4]
     assert len(log) == 1 and log[0].startswith("[FATAL] ") and "fmi2DoStep after fmi2Terminate" in log[0]
-    calls, log, values = run(plant, "long-step")
+    calls, log, values = runs["long-step"]
     assert calls[5] == ["doStep", DISCARD] and values["terminated"] is True
     assert any("longer than the plant integrates to its accuracy" in line for line in log)

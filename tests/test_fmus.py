@@ -33,7 +33,7 @@ from fmpy.fmi2 import (
 from fmpy.validation import validate_fmu
 
 import pmsm_ev_fmus
-from fmpy_process import simulate_fmu
+from fmpy_process import simulate_fmu, simulate_fmus
 from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import __version__, accel
@@ -506,15 +506,28 @@ def test_plant_fmu_dead_time_and_delay_follow_the_switching_period(fmus, step):
     assert r["time"][first] == pytest.approx(DT + step, rel=1e-9)  # applied from t = 1e-4 s on
 
 
-@pytest.mark.parametrize("name", CONTROLLERS)
-@pytest.mark.parametrize("angle_source", ["measured", "estimated"])
-def test_controller_with_constant_inputs_gives_bounded_voltages(fmus, name, angle_source):
-    u_max = ControllerParams().u_max
+ANGLE_SOURCES = ("measured", "estimated")
+
+
+@pytest.fixture(scope="module")
+def constant_input_runs(fmus) -> dict[tuple[str, str], np.ndarray]:
+    """{(controller, angle source): fmpy.simulate_fmu's rows} of every controller FMU with constant inputs over
+    0.2 s, run one after the other by one fmpy process of their own."""
     signals = np.array([(0.0, 20.0, -5.0, 100.0, 0.4, 10.0, 0.0, 0.0, 0.0),
                         (1.0, 20.0, -5.0, 100.0, 0.4, 10.0, 0.0, 0.0, 0.0)],
                        dtype=[("time", float)] + [(n, float) for n in CTRL_INPUTS])
-    r = simulate_fmu(str(fmus[name]), stop_time=0.2, step_size=DT, output_interval=DT, input=signals,
-                          start_values={"angle_source": angle_source})
+    keys = [(name, angle_source) for name in CONTROLLERS for angle_source in ANGLE_SOURCES]
+    rows = simulate_fmus([(fmus[name], dict(stop_time=0.2, step_size=DT, output_interval=DT, input=signals,
+                                            start_values={"angle_source": angle_source}))
+                          for name, angle_source in keys])
+    return dict(zip(keys, rows))
+
+
+@pytest.mark.parametrize("name", CONTROLLERS)
+@pytest.mark.parametrize("angle_source", ANGLE_SOURCES)
+def test_controller_with_constant_inputs_gives_bounded_voltages(constant_input_runs, name, angle_source):
+    u_max = ControllerParams().u_max
+    r = constant_input_runs[(name, angle_source)]
     for n in CTRL_OUTPUTS:
         assert np.all(np.isfinite(r[n])), n
     assert np.max(np.hypot(r["v_alpha"], r["v_beta"])) <= u_max * (1 + 1e-12)

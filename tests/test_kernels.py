@@ -8,54 +8,73 @@ import os
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from pmsm_cosim.app.reference import run_reference
 from pmsm_cosim.engine.recording import read_results
 from pmsm_ev import accel, kernels
 from pmsm_ev.kernels import layout
+from pmsm_ev.params import ControllerParams, PlantParams
 from pmsm_ev.plant import Plant
 from pmsm_ev.results import ALL_COLUMNS
-from regression_runs import CASES
+from regression_runs import CASES, ELEVATION, PARAMS
 
-RUN_SCRIPT = """
+#: the runs the comparisons below make as plain Python: (observer, angle source, *extra), as ``run_here`` takes them
+PLAIN_RUNS = [(observer, angle_source) for observer, angle_source in CASES + (("ekf5", "estimated"),)] + [
+    (observer, "measured", "effects") for observer in ("sensored", "ekf5ab")]
+PLAIN_SCRIPT = """
 import json, sys
-from pmsm_ev import accel
-from pmsm_cosim.app.reference import run_reference
-sys.path.insert(0, sys.argv[3])
-from regression_runs import PARAMS, ELEVATION
-observer, angle_source, out = sys.argv[1], sys.argv[2], sys.argv[4]
-if len(sys.argv) > 5:  # the plant's effects on: dead time and its compensation, saturation, temperature (heating)
-    from dataclasses import replace
-    from pmsm_ev.params import ControllerParams, PlantParams
-    PARAMS = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, sat_i_q=900.0, sat_i_d=2000.0,
-                                               T_winding=90.0, T_magnet=70.0, thermal_R=0.05,
-                                               thermal_C=2.0),
-                     controller=ControllerParams(dead_time_comp=7.2))
-run_reference(out, stop_time=2.0, observer=observer, angle_source=angle_source, params=PARAMS,
-              output_interval=0.001, elevation=ELEVATION)
-print(json.dumps({"mode": accel.describe(), "compiled": accel.compiled()}))
+sys.path.insert(0, sys.argv[1])
+from test_kernels import run_here
+print(json.dumps([run_here(*run) for run in json.loads(sys.argv[2])]))
 """
 
 
-def _run(tmp_path: Path, observer: str, angle_source: str, name: str, *extra, **env) -> tuple[dict, dict]:
-    script = tmp_path / "run.py"
-    script.write_text(RUN_SCRIPT)
-    out = tmp_path / name
-    r = subprocess.run([sys.executable, str(script), observer, angle_source, str(Path(__file__).parent), str(out),
-                        *extra],
-                       capture_output=True, text=True, timeout=300, env={**os.environ, **env})
+def run_here(observer: str, angle_source: str, out, *extra) -> dict:
+    """The reference run of ``observer``/``angle_source`` over 2 s into ``out``, in this process; "effects" in
+    ``extra``: the plant's effects on (dead time and its compensation, saturation, temperature and heating).
+    How the kernels ran: {"mode": accel.describe(), "compiled": accel.compiled()}."""
+    params = PARAMS
+    if "effects" in extra:
+        params = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, sat_i_q=900.0, sat_i_d=2000.0,
+                                                   T_winding=90.0, T_magnet=70.0, thermal_R=0.05,
+                                                   thermal_C=2.0),
+                         controller=ControllerParams(dead_time_comp=7.2))
+    run_reference(out, stop_time=2.0, observer=observer, angle_source=angle_source, params=params,
+                  output_interval=0.001, elevation=ELEVATION)
+    return {"mode": accel.describe(), "compiled": accel.compiled()}
+
+
+@pytest.fixture(scope="module")
+def plain_runs(tmp_path_factory) -> dict[tuple, tuple[dict, dict]]:
+    """{run of PLAIN_RUNS: (how the kernels ran, its rows)}: the runs made one after the other by a process of
+    their own with PMSM_EV_JIT=0 (plain Python)."""
+    pytest.importorskip("numba")
+    root = tmp_path_factory.mktemp("plain")
+    runs = [[*run[:2], str(root / "-".join(run)), *run[2:]] for run in PLAIN_RUNS]
+    r = subprocess.run([sys.executable, "-c", PLAIN_SCRIPT, str(Path(__file__).parent), json.dumps(runs)],
+                       capture_output=True, text=True, timeout=600, env={**os.environ, "PMSM_EV_JIT": "0"})
     assert r.returncode == 0, r.stderr[-3000:]
-    return json.loads(r.stdout.strip().splitlines()[-1]), read_results(out)
+    infos = json.loads(r.stdout.strip().splitlines()[-1])
+    return {run: (info, read_results(root / "-".join(run))) for run, info in zip(PLAIN_RUNS, infos)}
+
+
+def _run_compiled(tmp_path: Path, observer: str, angle_source: str, name: str, *extra) -> tuple[dict, dict]:
+    """The run in this process, whose kernels are compiled (numba is there: the tests that call this import it)."""
+    out = tmp_path / name
+    info = run_here(observer, angle_source, out, *extra)
+    return info, read_results(out)
 
 
 @pytest.mark.parametrize("observer,angle_source", CASES + (("ekf5", "estimated"),))
-def test_plain_python_and_numba_give_the_same_bits(tmp_path, observer, angle_source):
-    pytest.importorskip("numba")
-    info_plain, plain = _run(tmp_path, observer, angle_source, "plain", PMSM_EV_JIT="0")
-    info_jit, jit = _run(tmp_path, observer, angle_source, "jit")
+def test_plain_python_and_numba_give_the_same_bits(plain_runs, tmp_path, observer, angle_source):
+    """A process with PMSM_EV_JIT=0 runs the kernels as plain Python; this one, compiled: the same bits."""
+    info_plain, plain = plain_runs[(observer, angle_source)]
+    info_jit, jit = _run_compiled(tmp_path, observer, angle_source, "jit")
     assert not info_plain["compiled"] and info_plain["mode"].startswith("plain Python")
     assert info_jit["compiled"], info_jit["mode"]
     for col in ALL_COLUMNS:
@@ -64,15 +83,15 @@ def test_plain_python_and_numba_give_the_same_bits(tmp_path, observer, angle_sou
 
 
 @pytest.mark.parametrize("observer", ["sensored", "ekf5ab"])
-def test_plant_effects_give_the_same_bits_compiled_or_not(tmp_path, observer):
+def test_plant_effects_give_the_same_bits_compiled_or_not(plain_runs, tmp_path, observer):
     """Dead time (and its compensation), saturation and temperature on: the same bits."""
-    pytest.importorskip("numba")
-    _, plain = _run(tmp_path, observer, "measured", "plain", "effects", PMSM_EV_JIT="0")
-    info_jit, jit = _run(tmp_path, observer, "measured", "jit", "effects")
+    info_plain, plain = plain_runs[(observer, "measured", "effects")]
+    assert not info_plain["compiled"] and info_plain["mode"].startswith("plain Python")
+    info_jit, jit = _run_compiled(tmp_path, observer, "measured", "jit", "effects")
     assert info_jit["compiled"], info_jit["mode"]
     for col in ALL_COLUMNS:
         assert np.array_equal(plain[col], jit[col]), col
-    _, off = _run(tmp_path, observer, "measured", "off")
+    _, off = _run_compiled(tmp_path, observer, "measured", "off")
     assert not np.array_equal(off["i_q"], jit["i_q"])  # the effects changed the run
 
 
@@ -82,7 +101,10 @@ def test_kernels_are_cached_by_content(tmp_path):
     numba's cache instead of compiling."""
     pytest.importorskip("numba")
     cache = tmp_path / "cache"
+    # every kernel made ready: a top-level kernel is compiled (or loaded) when a process first needs it
     probe = ("from pmsm_ev import accel; import json; k = accel.kernels(); "
+             "import sys; [f.ready() for m in list(sys.modules) if m.startswith(k.__name__ + '.') "
+             "for f in vars(sys.modules[m]).values() if not isinstance(f, type) and hasattr(f, 'ready')]; "
              "print(json.dumps([accel.describe(), k.__file__]))")
 
     def load() -> list:
@@ -106,6 +128,19 @@ def test_kernels_are_cached_by_content(tmp_path):
     assert {n.split(".")[0] for n in compiled if n.endswith(".nbi")} >= {"plant", "control", "observers", "startup"}
     assert load()[1] == path
     assert {p.name: p.stat().st_mtime_ns for p in (copy / "__pycache__").iterdir()} == compiled  # no recompiling
+
+
+def test_a_kernel_is_compiled_for_its_one_signature_when_first_needed():
+    """A top-level kernel (``kernel(signature)``) is compiled, or loaded from numba's cache, when a process first
+    calls it: then for its signature alone, as ``njit(signature)`` would have at once (an int argument is
+    converted to the float64 it declares, not compiled for anew)."""
+    k = accel.kernels()
+    if not accel.compiled():
+        pytest.skip("the kernels run as plain Python")
+    fn = k.sample_instant
+    assert fn(3, 0, 1, 0) == fn(3.0, 0.0, 1.0, 0.0)
+    assert len(fn.overloads) == 1 and fn.ready() is fn
+    assert [str(t) for t in next(iter(fn.overloads))] == ["float64"] * 4
 
 
 def test_a_change_in_any_kernel_file_gives_another_cache(tmp_path):

@@ -158,7 +158,8 @@ def _load():
 
 
 def kernels():
-    """The kernels module to call (loaded, and compiled, once per process)."""
+    """The kernels module to call (loaded once per process; compiled, each kernel with a signature compiled or
+    loaded from numba's cache when the process first needs it: ``pmsm_ev.kernels.jit``)."""
     global _loaded
     if _loaded is None:
         _loaded = _load()
@@ -180,6 +181,9 @@ def direct(fn):
     explicit signature as its compiled entry point, which skips numba's per-call type dispatch
     (~0.15 us a call; the same machine code, so the same numbers; arguments of another type are a
     TypeError); any other ``fn`` as it is."""
+    ready = getattr(fn, "ready", None)
+    if ready is not None:  # a top-level kernel: its signature compiled (or loaded) first
+        ready()
     overloads = getattr(fn, "overloads", None)
     if not overloads or len(overloads) != 1:
         return fn

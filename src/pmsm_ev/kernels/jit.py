@@ -17,13 +17,46 @@ CACHE = bool(getattr(_package, "CACHE", False))
 
 if JIT:
     from numba import njit
+    from numba.core import typeinfer
+    from numba.core.registry import CPUDispatcher
+
+    class _Kernel(CPUDispatcher):
+        """A top-level kernel: numba's dispatcher of its one ``signature``, compiled (or loaded from numba's
+        cache) when first needed (called from Python, typed by a compiled caller, or ``ready``), then closed
+        to any other signature, as ``njit(signature)`` makes it at once. A process loads only the kernels it
+        runs: the same machine code, the same numbers."""
+
+        _pending = None  #: the signature not compiled yet
+
+        def ready(self):
+            """Compile (or load) the kernel's signature now, if not done yet."""
+            signature = self._pending
+            if signature is not None:
+                with typeinfer.register_dispatcher(self):
+                    self.compile(signature)
+                self.disable_compile()
+                self._pending = None
+            return self
+
+        def get_call_template(self, args, kws):
+            self.ready()
+            return super().get_call_template(args, kws)
+
+        def _compile_for_args(self, *args, **kws):
+            # numba's dispatch calls this on a call no compiled signature takes while it may compile (before the
+            # kernel is ready, or in another thread meanwhile), and calls what it returns: the call dispatched
+            # again, to the one signature now compiled (converted to it, or a TypeError, as with njit(signature))
+            return self.ready().__call__
 
     def kernel(signature=None):
-        """Compile with numba: eagerly for ``signature`` (a top-level kernel), else lazily
-        when a compiled caller first needs it."""
+        """Compile with numba: for ``signature`` (a top-level kernel) when it is first needed (``_Kernel``),
+        else lazily when a compiled caller first needs it."""
         def wrap(fn):
-            options = {"cache": CACHE}
-            return njit(signature, **options)(fn) if signature else njit(**options)(fn)
+            dispatcher = njit(cache=CACHE)(fn)
+            if signature:
+                dispatcher.__class__ = _Kernel
+                dispatcher._pending = signature
+            return dispatcher
         return wrap
 else:
     def kernel(signature=None):
