@@ -30,8 +30,12 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     signals and rows as the master's, its results.csv the same as (e)'s, byte for byte: the limit that the
     co-simulation is measured against (its time includes making the rows; not the set-up);
 (i) the same for the system of (a);
+(j) a plain fmpy master stepping the FMUs of (a): fmpy's ``FMU2Slave`` and its own methods (``getReal``,
+    ``setReal``, ``doStep``), a Python loop in the order of the system file (Gauss-Seidel, as the master), the
+    connections of each destination read from each source in one ``getReal`` and set in one ``setReal``, the
+    signals set when their value changes; nothing recorded (``fmpy_loop``: what a user writes with fmpy alone);
 
-and prints one table with the ratios a/b, d/a, e/f, e/h and a/i, in wall time (what a user waits) and in
+and prints one table with the ratios a/b, d/a, j/a, e/f, e/h and a/i, in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
 includes its worker threads). (a)-(c) include the recording of a row every 10 ms, (e), (f) every
 50 ms, as in a normal run of their scenario. With ``memory`` it also runs ``pmsm-cosim run scenario1``
@@ -194,6 +198,94 @@ def libcosim_us_per_step(stop_time: float, plant: Path, ctrl: Path) -> tuple[flo
     return 1e6 * wall / n_steps, 1e6 * cpu / n_steps
 
 
+def fmpy_loop(spec, n_steps: int, clock=None) -> dict[str, dict[str, float]]:
+    """Step ``spec``'s system ``n_steps`` steps with a plain fmpy master (case (j)): each FMU an ``FMU2Slave``,
+    its start values and the signals' values at t = 0 set before initialization, then per step, component by
+    component in the system file's order, its connected inputs read from their sources (one ``getReal`` per
+    source) and set (one ``setReal``), the signals that drive it set when their value changed, ``doStep``.
+    ``clock`` ``(start, stop)``: called around the stepping loop alone. Returns every component's Real outputs
+    after the last step ({instance: {name: value}}): the same as the master's, which steps the same way."""
+    from fmpy import extract, read_model_description  # noqa: PLC0415 - fmpy: the master's own dependency
+    from fmpy.fmi2 import FMU2Slave  # noqa: PLC0415
+
+    h = spec.step_size
+    slaves, variables, folders = {}, {}, []
+    try:
+        for comp in spec.components:
+            md = read_model_description(str(comp.fmu))
+            folders.append(extract(str(comp.fmu)))
+            slave = FMU2Slave(guid=md.guid, unzipDirectory=folders[-1], instanceName=comp.name,
+                              modelIdentifier=md.coSimulation.modelIdentifier)
+            slave.instantiate()
+            slave.setupExperiment(startTime=0.0, stopTime=n_steps * h)
+            variables[comp.name] = {v.name: v for v in md.modelVariables}
+            for var, value in comp.start.items():
+                sv = variables[comp.name][var]
+                if sv.type == "Real":
+                    slave.setReal([sv.valueReference], [float(value)])
+                elif sv.type == "Boolean":
+                    slave.setBoolean([sv.valueReference], [bool(value)])
+                elif sv.type == "String":
+                    slave.setString([sv.valueReference], [str(value)])
+                else:
+                    slave.setInteger([sv.valueReference], [int(value)])
+            slaves[comp.name] = slave
+        vr = {name: {var: sv.valueReference for var, sv in vs.items()} for name, vs in variables.items()}
+        signals = [(sig.profile, inst, vr[inst][var]) for sig in spec.signals.values() for inst, var in sig.drives]
+        last = [profile(0.0) for profile, _inst, _ref in signals]
+        for (_profile, inst, ref), value in zip(signals, last):
+            slaves[inst].setReal([ref], [value])
+        for slave in slaves.values():
+            slave.enterInitializationMode()
+            slave.exitInitializationMode()
+        plan = []  # per component in order: its slave, [(source slave, source refs, its refs)], its signals
+        for comp in spec.components:
+            sources: dict[str, tuple[list, list]] = {}
+            for c in spec.connections:
+                if c.dst == comp.name:
+                    if variables[c.src][c.src_var].type != "Real":
+                        raise CosimError(f"the plain fmpy master of case (j) connects Reals only, not {c}")
+                    src_refs, dst_refs = sources.setdefault(c.src, ([], []))
+                    src_refs.append(vr[c.src][c.src_var])
+                    dst_refs.append(vr[comp.name][c.dst_var])
+            plan.append((slaves[comp.name], [(slaves[src], a, b) for src, (a, b) in sources.items()],
+                         [k for k, (_p, inst, _r) in enumerate(signals) if inst == comp.name]))
+        if clock is not None:
+            clock[0]()
+        for n in range(n_steps):
+            t = n * h
+            for slave, transfers, mine in plan:
+                for source, src_refs, dst_refs in transfers:
+                    slave.setReal(dst_refs, source.getReal(src_refs))
+                for k in mine:
+                    profile, _inst, ref = signals[k]
+                    v = profile(t)
+                    if v != last[k]:
+                        last[k] = v
+                        slave.setReal([ref], [v])
+                slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        if clock is not None:
+            clock[1]()
+        return {name: {var: slaves[name].getReal([sv.valueReference])[0] for var, sv in variables[name].items()
+                       if sv.causality == "output" and sv.type == "Real"} for name in slaves}
+    finally:
+        for slave in slaves.values():
+            slave.terminate()
+            slave.freeInstance()
+        for folder in folders:
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def fmpy_us_per_step(stop_time: float, plant: Path, ctrl: Path) -> tuple[float, float]:
+    """(j): the plain fmpy master (``fmpy_loop``) on the system of (a), (wall, CPU) time per step [us]."""
+    n_steps = round(stop_time / 1e-4)
+    marks = []
+    fmpy_loop(_spec(stop_time, plant, ctrl), n_steps,
+              clock=(lambda: marks.append((time.perf_counter(), time.process_time())),) * 2)
+    (w0, c0), (w1, c1) = marks
+    return 1e6 * (w1 - w0) / n_steps, 1e6 * (c1 - c0) / n_steps
+
+
 def passthrough_fmus(out_dir: Path) -> dict[str, Path]:
     return {name: build_fmu(name, out_dir)[0] for name in BENCH_FMUS}
 
@@ -248,7 +340,8 @@ def memory_runs(say, stop_times, work: Path, system: str = SCENARIO, options=(),
 
 # -- the report ------------------------------------------------------------------------------
 def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: bool = True,
-              out=sys.stdout, cycle_slice: float = DEFAULT_CYCLE_SLICE, cycle_memory: bool = False) -> dict:
+              out=sys.stdout, cycle_slice: float = DEFAULT_CYCLE_SLICE, cycle_memory: bool = False,
+              fmpy_case: bool = True) -> dict:
     def say(text: str = "") -> None:
         print(text, file=out, flush=True)
 
@@ -275,6 +368,7 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
             cycle_slice, plant, real["FocSensorless"], INJECTION_SYSTEM))
         results["h"] = whole_loop_us_per_step(cycle_spec(cycle_slice, plant, real["FocSensorless"]))
         results["i"] = whole_loop_us_per_step(_spec(slice_s, plant, ctrl))
+        results["j"] = fmpy_us_per_step(slice_s, plant, ctrl) if fmpy_case else None
         rows = [
             ("(a) orchestrator + PmsmEvPlant/FocEkf5 FMUs", results["a"]),
             ("(b) orchestrator + pass-through FMUs", results["b"]),
@@ -285,11 +379,13 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
             ("(g) (e) with injection (wltc3b-sensorless)", results["g"]),
             ("(h) whole compiled loop (no FMI), system of (e)", results["h"]),
             ("(i) whole compiled loop (no FMI), system of (a)", results["i"]),
+            ("(j) a plain fmpy master + the FMUs of (a)", results["j"]),
         ]
         say(f"{'case':<50}{'us/step wall':>14}{'us/step CPU':>13}")
         for label, value in rows:
             if value is None:
-                say(f"{label:<50}{'n/a':>14}  (" + ("libcosimpy not installed)" if libcosim else "skipped)"))
+                missing = label.startswith("(d)") and libcosim
+                say(f"{label:<50}{'n/a':>14}  (" + ("libcosimpy not installed)" if missing else "skipped)"))
             else:
                 say(f"{label:<50}{value[0]:>14.2f}{value[1]:>13.2f}")
 
@@ -299,6 +395,8 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         ratio("a/b", results["a"], results["b"])
         if results["d"] is not None:
             ratio("d/a", results["d"], results["a"])
+        if results["j"] is not None:
+            ratio("j/a", results["j"], results["a"])
         ratio("e/f", results["e"], results["f"])
         ratio("e/h", results["e"], results["h"])
         ratio("a/i", results["a"], results["i"])
@@ -330,6 +428,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--no-memory", action="store_true",
                     help="skip the 100 s and 350 s runs that measure peak memory (about 2 min)")
     ap.add_argument("--no-libcosim", action="store_true", help="skip case (d)")
+    ap.add_argument("--no-fmpy", action="store_true", help="skip case (j), the plain fmpy master")
     ap.add_argument("--cycle-slice", type=float, default=DEFAULT_CYCLE_SLICE, metavar="S",
                     help=f"simulated seconds of {CYCLE} in cases (e), (f), from t = 0 (default "
                          f"{DEFAULT_CYCLE_SLICE:g}; at least 10)")
@@ -349,7 +448,8 @@ def run_from_args(a) -> int:
     if a.cycle_slice > pcycles.load(CYCLE).duration:
         raise CosimError(f"--cycle-slice must be at most {CYCLE}'s {pcycles.load(CYCLE).duration:g} s "
                          f"(got {a.cycle_slice:g})")
-    run_bench(a.slice, memory=not a.no_memory, libcosim=not a.no_libcosim, cycle_slice=a.cycle_slice,
+    run_bench(a.slice, memory=not a.no_memory, libcosim=not a.no_libcosim, fmpy_case=not a.no_fmpy,
+              cycle_slice=a.cycle_slice,
               cycle_memory=a.cycle_memory)
     return 0
 
