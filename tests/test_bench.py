@@ -96,3 +96,15 @@ def test_the_plain_fmpy_master_steps_the_system_as_the_master_does(tmp_path):
                                 "v_alpha": ("ctrl", "v_alpha"), "T_L_hat": ("ctrl", "T_L_hat")}.items():
         assert outputs[inst][var] == r[column][-1], column
     assert r["omega_m"][-1] > 0.0  # the ramp started: not a pair of idle FMUs
+
+
+def test_a_memory_run_reports_its_own_peak_not_the_bench_s(tmp_path):
+    """The memory runs' peak is the child's own high-water mark: wait4's figure would include the memory of the
+    process that spawned it (Linux keeps it across the exec), here 600 MB held by the test's process."""
+    project_fmus()  # built: the child only runs
+    held = bytearray(600 * 1024 * 1024)
+    held[::4096] = b"\x01" * len(held[::4096])  # resident
+    wall, peak, tail = bench.run_child(0.01, tmp_path / "out")
+    assert tail.startswith("completed: 100 steps") and wall > 0
+    assert 50.0 < peak < 450.0, (peak, tail)  # a short scenario1 run: ~230 MB of Python, numba and the FMUs
+    del held
