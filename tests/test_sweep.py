@@ -164,6 +164,16 @@ def test_a_monte_carlo_sweep_drawn_again_is_the_file_with_that_seed_and_samples(
     assert again.name == "sw_seed11_n3" and (again.seed, again.samples) == (11, 3)
     assert [r.params for r in again.runs] == [r.params for r in edited.runs]
     assert [r.params for r in again.runs] != [r.params for r in load_sweep(write_sweep(tmp_path, MC_BODY)).runs][:3]
+    # the copy beside the results is the sweep that was run: the file's text with its name, samples and seed
+    from pmsm_cosim.sweeps.spec import redrawn_text
+
+    copy = tmp_path / "copy" / "sweep.toml"
+    copy.parent.mkdir()
+    copy.write_text(redrawn_text((tmp_path / "sw.toml").read_text(), again))
+    rerun = load_sweep(copy)
+    assert (rerun.name, rerun.seed, rerun.samples) == ("sw_seed11_n3", 11, 3)
+    assert [r.params for r in rerun.runs] == [r.params for r in again.runs]
+    assert "# drawn again" in copy.read_text() and 'log_uniform = [1e-6, 1e-1]' in copy.read_text()
 
 
 def test_seed_and_samples_on_a_sweep_without_random_are_one_line(tmp_path, capsys):

@@ -46,7 +46,7 @@ from ..engine.master import Master
 from ..engine.progress import CountBar
 from ..engine.recording import write_metrics
 from ..engine.system import SIGNAL_CONVERSIONS, SystemSpec, resolve_fmu_path
-from .spec import RUNS_DIR, Param, RunPlan, SweepHooks, SweepSpec, parse_param
+from .spec import RUNS_DIR, Param, RunPlan, SweepHooks, SweepSpec, parse_param, redrawn_text
 from .summary import _row, plot_summary, write_summary
 
 # --- the runs, prepared on the client -------------------------------------------------
@@ -464,7 +464,11 @@ def run_sweep(sweep: SweepSpec, out, *, scheduler: str | None = None, workers: i
     prepared = prepare_runs(sweep, quiet)
     out.mkdir(parents=True, exist_ok=True)
     if sweep.path is not None and sweep.path.resolve() != (out / "sweep.toml").resolve():
-        shutil.copyfile(sweep.path, out / "sweep.toml")  # what was run, beside its results
+        if sweep.redrawn:  # what was run: the file with the name, samples and seed it was drawn with
+            (out / "sweep.toml").write_text(redrawn_text(sweep.path.read_text(encoding="utf-8"), sweep),
+                                            encoding="utf-8")
+        else:
+            shutil.copyfile(sweep.path, out / "sweep.toml")  # what was run, beside its results
     runs_dir = out / RUNS_DIR
     rows: dict[int, dict] = {}
     todo: list[PreparedRun] = []

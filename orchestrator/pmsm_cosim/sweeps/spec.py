@@ -120,6 +120,7 @@ class SweepSpec:
     units: dict[str, str] = field(default_factory=dict)  #: of the swept variables (from the FMUs)
     runs: list[RunPlan] = field(default_factory=list)
     hooks: SweepHooks = field(default_factory=SweepHooks)  #: what the application adds
+    redrawn: bool = False  #: drawn again (``load_sweep``'s samples, seed): its file's name, samples, seed replaced
 
     @property
     def swept(self) -> list[str]:
@@ -402,6 +403,35 @@ def parse_sweep(data: dict, path: Path | None = None, base_dir: Path | None = No
     return sweep
 
 
+def redrawn_text(text: str, sweep: SweepSpec) -> str:
+    """A sweep file's text with the name, samples and seed of ``sweep`` (drawn again) in place of its own, so that
+    the copy beside the results is the sweep that was run (and runs again as it): the top-level ``name`` line
+    and the [random] table's ``samples`` and ``seed`` lines rewritten, or added where the file had none."""
+    lines = text.splitlines()
+    table = None
+    found = {"name": False, "samples": False, "seed": False}
+    values = {"name": f'"{sweep.name}"', "samples": str(sweep.samples), "seed": str(sweep.seed)}
+    random_at = None
+    for k, line in enumerate(lines):
+        header = re.match(r"\s*\[+\s*([^\]]+?)\s*\]+", line)
+        if header:
+            table = header.group(1)
+            if table == "random":
+                random_at = k
+            continue
+        key = re.match(r"\s*(name|samples|seed)\s*=", line)
+        if key and ((table is None and key.group(1) == "name") or (table == "random" and key.group(1) != "name")):
+            lines[k] = f"{key.group(1)} = {values[key.group(1)]}  # drawn again (pmsm-cosim sweep --samples/--seed)"
+            found[key.group(1)] = True
+    extra = [f"{key} = {values[key]}  # drawn again (pmsm-cosim sweep --samples/--seed)"
+             for key in ("samples", "seed") if not found[key]]
+    if random_at is not None:
+        lines[random_at + 1:random_at + 1] = extra
+    if not found["name"]:
+        lines.insert(0, f"name = {values['name']}  # drawn again (pmsm-cosim sweep --samples/--seed)")
+    return "\n".join(lines) + "\n"
+
+
 def sweep_name(data: dict, path: Path | None) -> str:
     """A sweep's name: its ``name``, else its file's stem."""
     return str(data.get("name") or (path.stem if path else "sweep"))
@@ -412,9 +442,11 @@ def load_sweep(path, hooks: SweepHooks | None = None, *, samples: int | None = N
     """Read and check a sweep file; ``samples``, ``seed``: a Monte-Carlo sweep drawn again (``redraw``)."""
     path = Path(path)
     data = read_toml(path, "sweep file")
-    if samples is not None or seed is not None:
-        data = redraw(data, samples, seed, path)
-    return parse_sweep(data, path, hooks=hooks)
+    if samples is None and seed is None:
+        return parse_sweep(data, path, hooks=hooks)
+    sweep = parse_sweep(redraw(data, samples, seed, path), path, hooks=hooks)
+    sweep.redrawn = True
+    return sweep
 
 
 def redraw(data: dict, samples: int | None, seed: int | None, path: Path | None = None) -> dict:
