@@ -66,6 +66,7 @@ from pmsm_ev import cycles as pcycles
 from pmsm_ev_fmus.build import BENCH_FMUS, ENV_BINDING, build_all, build_fmu, read_build_info
 
 from ..engine.errors import CosimError
+from ..engine.fmu import convert_start
 from ..engine.master import Master
 from .drive import load_system, project_fmu_dir
 from .overrides import apply_overrides
@@ -221,14 +222,9 @@ def fmpy_loop(spec, n_steps: int, clock=None) -> dict[str, dict[str, float]]:
             variables[comp.name] = {v.name: v for v in md.modelVariables}
             for var, value in comp.start.items():
                 sv = variables[comp.name][var]
-                if sv.type == "Real":
-                    slave.setReal([sv.valueReference], [float(value)])
-                elif sv.type == "Boolean":
-                    slave.setBoolean([sv.valueReference], [bool(value)])
-                elif sv.type == "String":
-                    slave.setString([sv.valueReference], [str(value)])
-                else:
-                    slave.setInteger([sv.valueReference], [int(value)])
+                value = convert_start(sv, value, f"start value {comp.name}.{var}")  # the master's conversion
+                setter = {"Real": slave.setReal, "Boolean": slave.setBoolean, "String": slave.setString}
+                setter.get(sv.type, slave.setInteger)([sv.valueReference], [value])
             slaves[comp.name] = slave
         vr = {name: {var: sv.valueReference for var, sv in vs.items()} for name, vs in variables.items()}
         signals = [(sig.profile, inst, vr[inst][var]) for sig in spec.signals.values() for inst, var in sig.drives]

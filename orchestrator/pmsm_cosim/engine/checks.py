@@ -79,7 +79,8 @@ def connection_types_problem(src, dst) -> str:
 
 def check_wiring(s: SystemSpec, instances: dict[str, FmuInstance]) -> None:
     """Connections, signals, recorded columns and start values against the FMUs' variables:
-    names (with close matches), causality, type, units."""
+    names (with close matches), causality, type, units. A start value of a number type is converted to
+    that type in ``s`` (``convert_start``: the value the FMU gets, also in the run's settings)."""
     where = f"{s.path}: " if s.path else ""
     for conn in s.connections:
         ctx = f"{where}connection {conn}"
@@ -129,6 +130,7 @@ def check_wiring(s: SystemSpec, instances: dict[str, FmuInstance]) -> None:
             sv = inst.check_settable(var, ctx)
             if sv.type in NUMBER_TYPES:  # the value the FMU gets, in its type: a --set's text becomes a number
                 comp.start[var] = convert_start(sv, value, ctx)  # here, in the run's settings (metrics.json) too
+
 
 def drop_foreign_starts(spec: SystemSpec, instances: dict[str, FmuInstance]) -> list[str]:
     """Take out of each component's start values those written for the FMU it replaced
