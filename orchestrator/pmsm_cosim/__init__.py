@@ -13,7 +13,12 @@ Three wings, each importing only the ones before it (``docs/architecture.md``):
 sweeps can be imported without it).
 """
 
-__version__ = "0.1.0"
+from importlib import metadata as _metadata
+
+try:  # the version's one home is pmsm_ev.__version__ (pyproject.toml's dynamic version): the installed distribution's
+    __version__ = _metadata.version("pmsm-ev-cosim")
+except _metadata.PackageNotFoundError:  # imported from a source tree that was never installed
+    __version__ = "0+unknown"
 
 __all__ = ["simulate", "__version__"]
 

@@ -19,6 +19,7 @@ from pmsm_ev.scenarios import ProfileError
 from pmsm_ev_fmus import build as fmu_build
 from pmsm_ev_fmus.build import OBSERVER_FMUS
 
+from .. import __version__
 from ..engine.errors import CosimError, one_line
 from ..engine.fmu import read_description, variable_unit
 from ..engine.master import LOOPS, Master
@@ -362,6 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pmsm-cosim",
         description="Co-simulate the PMSM EV drive FMUs (FMI 2.0) with a fixed-step master.",
         epilog="Run 'pmsm-cosim COMMAND --help' for the options of a command.")
+    ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
 
     r = sub.add_parser("run", help="co-simulate a scenario, a system file or an SSP package",
