@@ -30,6 +30,7 @@ from pmsm_ev import kernels as _k
 from pmsm_ev.control_unit import ControlUnit
 from pmsm_ev.params import SENSORLESS_EKF, DriveParams, MotorParams, PlantParams, StartupParams
 from pmsm_ev.plant import Plant
+from pmsm_ev.pmsm import electromagnetic_torque
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase, hill_start_route
 
 DT = 1e-4
@@ -195,17 +196,40 @@ def test_fault_output_of_the_other_controllers_is_zero():
 
 
 # -- the torque the vector gives ---------------------------------------------------------------------------
+@pytest.mark.parametrize("convention", ["paper", "amplitude_invariant"])
 @pytest.mark.parametrize("e_deg", [30.0, 60.0, 89.0, 100.0])
 @pytest.mark.parametrize("i", [10.0, 60.0, 400.0])
-def test_vector_current_inverts_vector_torque_and_agrees_with_eq_12(i, e_deg):
+def test_vector_current_inverts_vector_torque_and_agrees_with_eq_12(i, e_deg, convention):
+    """The I-f vector's torque is the plant's eq 12 in either dq convention (times k_dq: 3/2 amplitude-invariant)."""
     k = accel.kernels()
-    unit = ControlUnit("sensorless", dt=DT)
-    c, m = unit._c, MotorParams()
+    m = MotorParams(dq_convention=convention)
+    c = ControlUnit("sensorless", dt=DT, motor=m)._c
     e = math.radians(e_deg)
     torque = k.vector_torque(c, i, math.sin(e), math.cos(e))
     i_d, i_q = i * math.cos(e), i * math.sin(e)  # the vector e ahead of the rotor's d axis
-    assert torque == pytest.approx(m.N * (m.psi * i_q + (m.L_d - m.L_q) * i_d * i_q), rel=1e-12)
+    assert torque == pytest.approx(m.k_dq * electromagnetic_torque(i_d, i_q, m), rel=1e-12)
     assert k.vector_current(c, torque, math.sin(e), math.cos(e)) == pytest.approx(i, rel=1e-9)
+
+
+@pytest.mark.parametrize("convention", ["paper", "amplitude_invariant"])
+def test_the_i_f_vector_is_sized_for_the_load_in_either_dq_convention(convention):
+    """The I-f target current for a load is the load's current with the margin, T_L margin / (k_dq N psi): the same
+    torque needs 2/3 of the current where eq 12 carries 3/2 (amplitude-invariant)."""
+    k = accel.kernels()
+    m = MotorParams(dq_convention=convention)
+    u = ControlUnit("sensorless", dt=DT, motor=m)
+    s, c = u._s.copy(), u._c
+    t_l = 60.0
+    s[k.S_I_TGT] = 0.0
+    k.if_vector_step(s, c, 0.0, t_l)
+    sin_e, cos_e = math.sin(c[k.C_E_MAX]), math.cos(c[k.C_E_MAX])
+    load_current = c[k.C_IF_MARGIN] * t_l / (m.k_dq * m.N * m.psi)
+    assert load_current < c[k.C_I_Q_MAX]  # (not the limit's answer)
+    assert s[k.S_I_TGT] == pytest.approx(max(load_current, k.vector_current(c, t_l, sin_e, cos_e)), rel=1e-12)
+    # the vector so sized carries the load at the design load angle, in the plant's eq 12 with k_dq
+    e = c[k.C_E_MAX]
+    i_d, i_q = s[k.S_I_TGT] * math.cos(e), s[k.S_I_TGT] * math.sin(e)
+    assert m.k_dq * electromagnetic_torque(i_d, i_q, m) >= t_l * (1.0 - 1e-12)
 
 
 def test_no_current_gives_a_torque_beyond_the_reluctance_limit():

@@ -233,7 +233,7 @@ def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
     reference (eq 12: the I-f vector's d current adds a reluctance torque N (L_d - L_q) i_d i_q that
     FOC's i_d = 0 takes away; with the reference generator, ``C_REF_MODE`` != 0: the present torque
     over k_t, the generator's references for it), or with ``on_load`` the current of the load the EKF sees,
-    T_L_hat / (N psi), after a loss of synchronism, when the present current says nothing of the
+    T_L_hat / k_t (k_t = k_dq N psi), after a loss of synchronism, when the present current says nothing of the
     load; the current PIs on the voltage held, turned by one period of the I-f vector's rotation
     (``seat_current_pis``)."""
     theta = s[S_X + 3]
@@ -246,7 +246,7 @@ def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
         i_dref, i_seat = generate_references(s, c, t_seat, omega_hat)
     elif on_load:
         i_dref = c[C_I_D_REF]
-        i_seat = s[S_X + 4] / (c[C_N] * c[C_PSI])
+        i_seat = s[S_X + 4] / c[C_K_T]
         s[S_W_INT] = i_seat - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_seat now
     else:  # N i_q (psi + (L_d - L_q) i_d) = N i_seat (psi + (L_d - L_q) i_dref)
         i_dref = c[C_I_D_REF]
@@ -260,17 +260,18 @@ def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
 @kernel()
 def vector_torque(c, i, sin_e, cos_e):
     """Eq 12 for a current vector of magnitude ``i`` leading the rotor's d axis by e:
-    T_e = N (psi i sin e + (L_d - L_q) i^2 sin e cos e) [N m] (the controller's motor model); with
-    L_q > L_d the reluctance term takes torque below e = 90 deg and adds it above."""
-    return c[C_N] * i * sin_e * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i * cos_e)
+    T_e = k_dq N (psi i sin e + (L_d - L_q) i^2 sin e cos e) [N m] (the controller's motor model, k_dq the
+    dq convention's factor, ``MotorParams.k_dq``); with L_q > L_d the reluctance term takes torque below
+    e = 90 deg and adds it above."""
+    return c[C_K_DQN] * i * sin_e * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i * cos_e)
 
 
 @kernel()
 def vector_current(c, torque, sin_e, cos_e):
     """The least magnitude whose vector at the load angle e gives ``torque`` [A] (``vector_torque``
     solved for i, the smaller root); inf if no current does."""
-    a = (c[C_L_Q] - c[C_L_D]) * cos_e  # N sin e (psi i - a i^2) = torque
-    t = abs(torque) / (c[C_N] * sin_e)
+    a = (c[C_L_Q] - c[C_L_D]) * cos_e  # k_dq N sin e (psi i - a i^2) = torque
+    t = abs(torque) / (c[C_K_DQN] * sin_e)
     if abs(a) < 1e-12:
         return t / c[C_PSI]
     disc = c[C_PSI] * c[C_PSI] - 4.0 * a * t
@@ -299,7 +300,7 @@ def if_vector_step(s, c, omega_ref, t_l):
     if s[S_I_MAG] < c[C_I_Q_MAX]:
         t_cap = vector_torque(c, s[S_I_MAG], sin_e, cos_e)
     else:  # at the current limit the reserve is spent: the torque at 90 deg (up to the soft guard)
-        t_cap = c[C_N] * c[C_PSI] * s[S_I_MAG]
+        t_cap = c[C_K_T] * s[S_I_MAG]
     step = c[C_IF_ACCEL] * dt
     hi = min(step, max((t_cap - t_l) / j * dt, 0.0))
     lo = max(-step, min((-t_cap - t_l) / j * dt, 0.0))
@@ -308,7 +309,7 @@ def if_vector_step(s, c, omega_ref, t_l):
     s[S_OMEGA_IF] = w_if + min(max(want, lo), hi)
     s[S_PHI] = wrap_angle(s[S_PHI] + c[C_N] * s[S_OMEGA_IF] * dt)  # (13)
     need = vector_current(c, t_l + j * want / dt, sin_e, cos_e)
-    load_current = c[C_IF_MARGIN] * abs(t_l) / (c[C_N] * c[C_PSI])  # eq 12 with i_d = 0, times the margin
+    load_current = c[C_IF_MARGIN] * abs(t_l) / c[C_K_T]  # eq 12 with i_d = 0, times the margin
     s[S_I_TGT] = min(max(s[S_I_TGT], need, load_current), c[C_I_Q_MAX])
     rate = (c[C_I_RATE_LOAD] if s[S_GUARD] != 0.0 else c[C_I_RATE]) * dt
     s[S_I_MAG] += min(max(s[S_I_TGT] - s[S_I_MAG], -rate), rate)
