@@ -26,7 +26,7 @@ from pmsm_cosim.engine.errors import CosimError
 from pmsm_cosim.engine.system import read_toml
 from pmsm_cosim.sweeps import prepare_runs, read_summary, run_sweep
 from pmsm_ev import cycles as pcycles
-from pmsm_ev.params import VehicleParams
+from pmsm_ev.params import MotorParams, PlantParams, VehicleParams
 
 NAME = rr.CYCLE_MONTE_CARLO
 
@@ -97,14 +97,42 @@ def test_integers_law_draws_whole_numbers_low_to_high_included():
 
 
 def test_summary_metrics_of_a_cycle_run():
-    m = {"trace": {"inside_share": 0.9925}, "synchronism": {"slipped_turns": 2, "fault_latched": True},
+    m = {"trace": {"inside_share": 0.9925}, "synchronism": {"slipped_turns": 2, "fault_latched": True, "episodes": 3,
+                                                            "roll_back_m": 0.004},
          "energy": {"dc_Wh_per_km": 131.5}}
     s = summary_metrics(m)
     assert tuple(s) == SUMMARY_METRICS
-    assert (s["inside_share"], s["slipped_turns"], s["fault_latched"], s["dc_Wh_per_km"]) == (0.9925, 2.0, 1.0, 131.5)
+    assert (s["inside_share"], s["slipped_turns"], s["episodes"], s["roll_back_m"], s["fault_latched"],
+            s["dc_Wh_per_km"]) == (0.9925, 2.0, 3.0, 0.004, 1.0, 131.5)
     s = summary_metrics({"synchronism": {"fault_latched": False}, "energy": {"dc_Wh_per_km": None}})
     assert s["fault_latched"] == 0.0
-    assert all(math.isnan(s[k]) for k in ("inside_share", "slipped_turns", "dc_Wh_per_km"))
+    assert all(math.isnan(s[k]) for k in ("inside_share", "slipped_turns", "episodes", "roll_back_m", "dc_Wh_per_km"))
+
+
+def test_the_wide_injection_sweep_draws_the_stated_design():
+    """cycle_montecarlo_injection_wide: each sample on WLTC 3b and UDDS, the spread its file states (L_d, L_q
+    +-15 % each, knees +-25 %, R_s 0..+60 %, psi -15..0 %, grade +-4 %, offsets +-1.5 A, gains +-2 %, the
+    dead-time compensation +-30 % of the 7.2 V the 2 us dead time gives, sigma = 1.5 A)."""
+    sweep = load_sweep("cycle_montecarlo_injection_wide")
+    assert sweep.grid["system"] == ["wltc3b-sensorless", "udds-sensorless"]
+    assert len(sweep.runs) == 2 * sweep.samples >= 200
+    assert sweep.fixed == {"plant.sensor_noise": 1.5, "plant.dead_time": 2e-6}
+    m, fm = MotorParams(), PlantParams()
+
+    def spread(key, nominal):
+        law, (lo, hi) = sweep.random[key]
+        assert law == "uniform"
+        return round(lo / nominal - 1.0, 4), round(hi / nominal - 1.0, 4)
+
+    assert spread("plant.L_d", m.L_d) == spread("plant.L_q", m.L_q) == (-0.15, 0.15)
+    assert spread("plant.flux_q_current", fm.flux_q_current) == spread("plant.flux_d_current", fm.flux_d_current) \
+        == (-0.25, 0.25)
+    assert spread("plant.R_s", m.R_s) == (0.0, 0.6) and spread("plant.psi", m.psi) == (-0.15, 0.0)
+    assert spread("ctrl.dead_time_comp", 2e-6 * 360.0 / 1e-4) == (-0.3, 0.3)
+    law, (lo, hi) = sweep.random["offset.delta"]
+    assert rc.grade_pct(lo) == pytest.approx(-4.0, abs=1e-3) and rc.grade_pct(hi) == pytest.approx(4.0, abs=1e-3)
+    assert sweep.random["plant.sensor_offset_a"] == ("uniform", (-1.5, 1.5))
+    assert sweep.random["plant.sensor_gain_b"] == ("uniform", (0.98, 1.02))
 
 
 # --- the shipped sweep --------------------------------------------------------------------------------

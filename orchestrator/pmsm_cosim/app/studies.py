@@ -16,14 +16,9 @@ from . import cycles
 from .drive import PACKAGED_SCENARIOS, draw_figures, drive_metrics, ensure_fmus, load_system, project_fmu_dir
 from .metrics.summary import SUMMARY_METRICS, SUMMARY_UNITS, summary_metrics
 
-#: the sweeps shipped with the package (``pmsm_cosim/app/sweeps/<name>.toml``)
-PACKAGED_SWEEPS = ("ekf5_load_noise",
-                   "robust_rs_psi_sensorless", "robust_rs_psi_ekf5ab", "robust_rs_psi_ekf5paper",
-                   "robust_lq_load_sensorless", "robust_lq_load_ekf5ab", "robust_lq_load_ekf5paper",
-                   "robust_rs_psi_sensorless_adapt", "robust_lq_load_sensorless_adapt",
-                   "robust_montecarlo_sensorless", "robust_montecarlo_sensorless_adapt", "robust_deadtime_hill",
-                   "cycle_montecarlo_wltc3b", "cycle_montecarlo_wltc3b_injection",
-                   "cycle_montecarlo_wltc3b_injection_if")
+#: the sweeps shipped with the package (``pmsm_cosim/app/sweeps/<name>.toml``), found, in name order
+PACKAGED_SWEEPS = tuple(sorted(p.name[:-len(".toml")] for p in (resources.files("pmsm_cosim.app") / "sweeps").iterdir()
+                               if p.name.endswith(".toml")))
 #: the metric a sweep file without ``metric`` plots
 DEFAULT_METRIC = "speed_rms_error"
 

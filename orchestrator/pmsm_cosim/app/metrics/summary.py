@@ -9,14 +9,15 @@ import math
 SUMMARY_METRICS = (
     "speed_rms_error", "omega_hat_rms_error", "theta_error_rms", "theta_error_max",
     "max_speed_deviation", "max_settling_time", "T_L_hat_error_max",
-    "inside_share", "slipped_turns", "fault_latched", "dc_Wh_per_km",
+    "inside_share", "slipped_turns", "episodes", "roll_back_m", "fault_latched", "dc_Wh_per_km",
 )
 
 #: their units
 SUMMARY_UNITS = {
     "speed_rms_error": "rad/s", "omega_hat_rms_error": "rad/s", "theta_error_rms": "rad", "theta_error_max": "rad",
     "max_speed_deviation": "rad/s", "max_settling_time": "s", "T_L_hat_error_max": "N m",
-    "inside_share": "-", "slipped_turns": "-", "fault_latched": "-", "dc_Wh_per_km": "Wh/km",
+    "inside_share": "-", "slipped_turns": "-", "episodes": "-", "roll_back_m": "m", "fault_latched": "-",
+    "dc_Wh_per_km": "Wh/km",
 }
 
 
@@ -30,8 +31,10 @@ def summary_metrics(m: dict) -> dict[str, float]:
     * ``T_L_hat_error_max`` [N m]: the largest |mean T_L_hat - mean T_L_mech| over the
       plateaus' end windows (how well the observer's load estimate tracks eq 31);
     * of a drive cycle (``docs/cycles.md``): ``inside_share`` [-], the share of the cycle inside the
-      tolerance band (``trace``); ``slipped_turns`` [-] and ``fault_latched`` [-] (1 if the safe state
-      latched, else 0) of the sensorless unit (``synchronism``); ``dc_Wh_per_km`` [Wh/km], the DC link's
+      tolerance band (``trace``); ``slipped_turns`` [-], ``episodes`` [-] (the loss-of-synchronism episodes the
+      unit itself reported: a slip with none went unseen), ``roll_back_m`` [m] (the largest travel against the
+      driver's direction) and ``fault_latched`` [-] (1 if the safe state latched, else 0) of the sensorless unit
+      (``synchronism``); ``dc_Wh_per_km`` [Wh/km], the DC link's
       energy per distance (``energy``).
 
     NaN where the run has no such figure (no steps, no plateau long enough, no metrics).
@@ -52,6 +55,8 @@ def summary_metrics(m: dict) -> dict[str, float]:
     trace, sync, energy = (m.get(k) if isinstance(m.get(k), dict) else {} for k in ("trace", "synchronism", "energy"))
     out["inside_share"] = num(trace.get("inside_share"))
     out["slipped_turns"] = num(sync.get("slipped_turns"))
+    out["episodes"] = num(sync.get("episodes"))
+    out["roll_back_m"] = num(sync.get("roll_back_m"))
     latched = sync.get("fault_latched")
     out["fault_latched"] = float(latched) if isinstance(latched, bool) else nan
     out["dc_Wh_per_km"] = num(energy.get("dc_Wh_per_km"))
