@@ -63,7 +63,7 @@ from pythonfmu import FmuBuilder
 from pmsm_ev.cycles import load_road
 from pmsm_ev.scenarios import route_from_json, route_to_json, scenario_route
 
-from .slave_support import START_VALUES_FILE, WRAPPER_CHECKED, version_tuple
+from .slave_support import BINDING_CONSTANTS, START_VALUES_FILE, WRAPPER_CHECKED, version_tuple
 
 HERE = Path(__file__).resolve().parent
 BUILD_INFO = "build_info.json"
@@ -128,13 +128,16 @@ def binding_requested() -> str:
     return choice
 
 
-def _compiled(source_path: Path, prefix: str, python_headers: bool) -> tuple[Path | None, str]:
-    """``source_path`` compiled into a shared library (``cc``, or ``$CC``; no libpython linked), kept in the
-    user's cache (``user_cache_dir()/binding/``) under the hash of its source and of ``C_HEADER`` (and of the Python
-    headers, if it uses them): (path, "") or (None, why it cannot be built)."""
+def _compiled(source_path: Path, prefix: str, python_headers: bool, defines: dict[str, str] | None = None
+              ) -> tuple[Path | None, str]:
+    """``source_path`` compiled into a shared library (``cc``, or ``$CC``; no libpython linked), with ``defines``
+    as ``-D`` definitions, kept in the user's cache (``user_cache_dir()/binding/``) under the hash of its source,
+    of ``C_HEADER``, of the definitions (and of the Python headers, if it uses them): (path, "") or (None, why it
+    cannot be built)."""
+    flags = [f"-D{name}={value}" for name, value in (defines or {}).items()]
     source = source_path.read_bytes() + C_HEADER.read_bytes()  # the header it includes changes it too
     include = sysconfig.get_paths()["include"] if python_headers else ""
-    key = hashlib.sha256(source + include.encode()).hexdigest()[:16]
+    key = hashlib.sha256(source + include.encode() + " ".join(flags).encode()).hexdigest()[:16]
     folder = user_cache_dir() / "binding"
     target = folder / f"{prefix}-{key}.so"
     if target.is_file():
@@ -145,7 +148,7 @@ def _compiled(source_path: Path, prefix: str, python_headers: bool) -> tuple[Pat
         os.close(fd)
     except OSError as exc:
         return None, f"cannot write {folder} ({exc.strerror or exc})"
-    command = [os.environ.get("CC", "cc"), "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall",
+    command = [os.environ.get("CC", "cc"), "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall", *flags,
                *([f"-I{include}"] if include else []), str(source_path), "-o", tmp, "-ldl", "-lpthread"]
     try:
         done = subprocess.run(command, capture_output=True, text=True, timeout=120)
@@ -164,7 +167,7 @@ def _compiled(source_path: Path, prefix: str, python_headers: bool) -> tuple[Pat
 def lean_library() -> tuple[Path | None, str]:
     """The lean binding compiled for this Python (the limited API, no libpython linked), kept in the user's
     cache under the hash of its source and of the Python headers: (path, "") or (None, why it cannot be built)."""
-    return _compiled(LEAN_SOURCE, "lean", True)
+    return _compiled(LEAN_SOURCE, "lean", True, BINDING_CONSTANTS)
 
 
 def loader_library() -> tuple[Path | None, str]:

@@ -100,10 +100,17 @@ static void* inner(const char* name)
 /* the compiled step: int step(double* io, double* a, double* b, double t, double h), pmsm_ev.kernels.fmu:
  * 1 taken, 0 declined (nothing changed), -1 a kernel raised (nothing changed) */
 typedef int (*c_step_t)(double*, double*, double*, double, double);
-#define COMPILED_BUFFER (1L << 20)
-/* a slot of a value read through the slave's Python while the buffers hold its values (compiled_live): its getter
- * reads the physics object's buffers, not the slave's attributes, so no compiled_pull is needed first */
-#define LIVE_SLOT (-2L)
+/* The constants shared with the slaves, defined once in pmsm_ev_fmus.slave_support.BINDING_CONSTANTS and given
+ * by the build as -D definitions:
+ *   COMPILED_BUFFER       a slot's buffer stride (buffer b's element i is COMPILED_BUFFER * b + i);
+ *   LIVE_SLOT             a slot of a value read through the slave's Python while the buffers hold its values
+ *                         (compiled_live): its getter reads the physics object's buffers, not the slave's
+ *                         attributes, so no compiled_pull is needed first;
+ *   CONTINUITY_TOLERANCE  a communication point continues the last step within this share of its size ...
+ *   TIME_ULPS             ... plus this many ulps of the time. */
+#if !defined(COMPILED_BUFFER) || !defined(LIVE_SLOT) || !defined(CONTINUITY_TOLERANCE) || !defined(TIME_ULPS)
+#error "compile with the -D definitions of pmsm_ev_fmus.slave_support.BINDING_CONSTANTS (pmsm_ev_fmus.build does)"
+#endif
 
 typedef struct {
     fmi2Component inner;        /* pythonfmu's instance */
@@ -815,7 +822,8 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         return status >= 0 ? refuse_step(w, t, status) : forward_do_step(w, t, h, flag);
     }
     if (!(h <= w->max_step) || !isfinite(t)
-        || (!isnan(w->next_time) && fabs(t - w->next_time) > 1e-3 * w->last_step + 16 * 2.220446049250313e-16 * fabs(t))) {
+        || (!isnan(w->next_time) && fabs(t - w->next_time) > CONTINUITY_TOLERANCE * w->last_step
+                                     + TIME_ULPS * 2.220446049250313e-16 * fabs(t))) {
         int status = refused_step(w, t, h);
         if (status >= 0) return refuse_step(w, t, status);
     }

@@ -194,7 +194,13 @@ FMI2_DISCARD, FMI2_ERROR = 2, 3
 #: a communication point continues the last step when within this share of the last step size of where it ended
 #: (plus a few ulps of the time): a master's own rounding of t + h, never a step back or forward
 CONTINUITY_TOLERANCE = 1e-3
-_TIME_ULPS = 16 * sys.float_info.epsilon
+#: ... in ulps of the time
+TIME_ULPS = 16
+_TIME_ULPS = TIME_ULPS * sys.float_info.epsilon
+#: the constants the lean binding (``fmus/lean_binding.c``) shares with the slaves, their one home: the build
+#: compiles the binding with each as a ``-D`` definition (``pmsm_ev_fmus.build``), the C source defines none
+BINDING_CONSTANTS = {"COMPILED_BUFFER": f"{COMPILED_BUFFER}L", "LIVE_SLOT": f"({LIVE_SLOT}L)",
+                     "CONTINUITY_TOLERANCE": repr(CONTINUITY_TOLERANCE), "TIME_ULPS": str(TIME_ULPS)}
 
 
 class FmuStateError(ValueError):

@@ -11,9 +11,11 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
+import sysconfig
 import zipfile
 from pathlib import Path
 
@@ -465,3 +467,21 @@ def test_another_pythonfmu_is_refused_by_the_build(tmp_path, monkeypatch, capsys
     assert not list(tmp_path.iterdir())
     with pytest.raises(build.BuildError, match=r"^pythonfmu 0\.6\.4 is not a version"):
         build.check_pythonfmu("0.6.4")
+
+
+def test_the_constants_the_binding_shares_with_the_slaves_have_one_home(tmp_path):
+    """COMPILED_BUFFER, LIVE_SLOT and the time tolerance are slave_support's (BINDING_CONSTANTS): the C source
+    defines none of them and does not compile without the build's -D definitions of them."""
+    from pmsm_ev_fmus import build
+    from pmsm_ev_fmus.slave_support import BINDING_CONSTANTS, COMPILED_BUFFER, LIVE_SLOT
+
+    source = build.LEAN_SOURCE.read_text()
+    for name in BINDING_CONSTANTS:
+        assert not re.search(rf"^\s*#\s*define\s+{name}\b", source, flags=re.M), name
+    assert BINDING_CONSTANTS["COMPILED_BUFFER"] == f"{COMPILED_BUFFER}L" and BINDING_CONSTANTS["LIVE_SLOT"] == \
+        f"({LIVE_SLOT}L)"
+    bare = subprocess.run([os.environ.get("CC", "cc"), "-fsyntax-only", f"-I{sysconfig.get_paths()['include']}",
+                           str(build.LEAN_SOURCE)], capture_output=True, text=True)
+    assert bare.returncode != 0 and "BINDING_CONSTANTS" in bare.stderr
+    library, why = build.lean_library()
+    assert library is not None and library.is_file(), why
