@@ -46,6 +46,7 @@ import json
 import os
 import platform
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -128,13 +129,23 @@ def binding_requested() -> str:
     return choice
 
 
+#: extra compiler flags for the FMUs' C libraries (the lean binding and the loader), e.g. the sanitizers'
+#: ``-fsanitize=address,undefined`` (tests/test_sanitizers.py); part of their cache key
+ENV_CFLAGS = "PMSM_EV_BINDING_CFLAGS"
+
+
+def extra_cflags() -> list[str]:
+    """The flags of ``$PMSM_EV_BINDING_CFLAGS`` (shell words)."""
+    return shlex.split(os.environ.get(ENV_CFLAGS, ""))
+
+
 def _compiled(source_path: Path, prefix: str, python_headers: bool, defines: dict[str, str] | None = None
               ) -> tuple[Path | None, str]:
     """``source_path`` compiled into a shared library (``cc``, or ``$CC``; no libpython linked), with ``defines``
     as ``-D`` definitions, kept in the user's cache (``user_cache_dir()/binding/``) under the hash of its source,
     of ``C_HEADER``, of the definitions (and of the Python headers, if it uses them): (path, "") or (None, why it
     cannot be built)."""
-    flags = [f"-D{name}={value}" for name, value in (defines or {}).items()]
+    flags = [f"-D{name}={value}" for name, value in (defines or {}).items()] + extra_cflags()
     source = source_path.read_bytes() + C_HEADER.read_bytes()  # the header it includes changes it too
     include = sysconfig.get_paths()["include"] if python_headers else ""
     key = hashlib.sha256(source + include.encode() + " ".join(flags).encode()).hexdigest()[:16]
@@ -381,6 +392,7 @@ def source_hash(name: str) -> str:
         add("lean_binding.c", LEAN_SOURCE.read_bytes())
         add("fmu_loader.c", LOADER_SOURCE.read_bytes())
         add("fmi2_binding.h", C_HEADER.read_bytes())
+        add("cflags", " ".join(extra_cflags()).encode())
     for module in sorted(_fmus_modules(script)):
         add(f"fmus/{module}", (HERE / module).read_bytes())
     root = physics_dir()
@@ -408,7 +420,7 @@ def _source_signature() -> tuple:
     for source in (LEAN_SOURCE, LOADER_SOURCE, C_HEADER):
         st = source.stat()
         files.append((str(source), st.st_size, st.st_mtime_ns))
-    return (_pythonfmu_version(), os.environ.get(ENV_BINDING, ""), tuple(files))
+    return (_pythonfmu_version(), os.environ.get(ENV_BINDING, ""), os.environ.get(ENV_CFLAGS, ""), tuple(files))
 
 
 def content_key() -> str:

@@ -30,7 +30,7 @@ from pmsm_ev.params import (
     DT_DEFAULT,
     ParameterError,
 )
-from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, check_fields
+from pmsm_ev_fmus.slave_support import DriveSlave, FmuUsageError, check_fields, compiled_offer
 
 DESCRIPTION = (
     "Speed and current control of a sensorless EV drive (Wicaksono, Harini, Yusivar, "
@@ -228,7 +228,7 @@ class FocSlave(DriveSlave):
 
     def compiled_step(self):
         """(the controllers' C step, the unit's buffer ``ControlUnit.io`` filled from the slave, the unit's state and
-        parameter vectors); None where the kernels run as plain Python."""
+        parameter vectors: ``compiled_offer``); None where the kernels run as plain Python."""
         u = self._unit
         if u is None or not getattr(u._kernels, "JIT", False):
             return None
@@ -236,7 +236,7 @@ class FocSlave(DriveSlave):
         if step is None:
             step = self._step_address = u._kernels.fmu_step_address("unit")
         u.load_io({name: getattr(self, name) for name in IO_SLOTS}, self._dt, self._t0, self._k_next)
-        return step, u.io.ctypes.data, u._s.ctypes.data, u._c.ctypes.data
+        return compiled_offer(step, u.io, u._s, u._c)
 
     def compiled_pull(self) -> None:
         values = self._unit.io.tolist()

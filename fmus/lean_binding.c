@@ -45,7 +45,17 @@
  * pmsm_fmu_fast_calls(instance) is the number of calls this instance served on the direct path (fmi2GetReal,
  * fmi2SetReal and fmi2DoStep completed here, not forwarded): a test of the binding's contract reads it
  * (tests/test_lean_binding.py), so that a binding that falls back to pythonfmu's path fails it rather than only
- * losing its speed. Counted with the GIL held, per instance: exact in a host of several instances and threads.
+ * losing its speed. Counted per instance, without the GIL on the compiled path: FMI calls on one instance are serial
+ * (the standard's rule for a master), so each count is exact in a host of several instances and threads.
+ *
+ * An instance the binding did not make, or has freed (NULL, a stale pointer): every function returns fmi2Error
+ * (fmi2FreeInstance and the counters do nothing) without touching it: the binding keeps the instances it made in
+ * a table (enlist, delist) and looks each call's up there first (live), with no lock on the look-up. There is no
+ * logger to tell: the host's callbacks belong to the instance.
+ *
+ * The compiled step's buffers: the slave offers their addresses with their lengths (compiled_step); a slot that
+ * falls outside its buffer keeps the compiled path off for that slave (its Python step runs), never a write out
+ * of bounds.
  *
  * Checked against pythonfmu 0.6.5 to 0.7.0 (pmsm_ev_fmus.slave_support.WRAPPER_CHECKED): the log queue it
  * drains after every call, its fmi2DoStep's handling of a slave's do_step; the build refuses another version.
@@ -58,6 +68,8 @@
 
 #include <dlfcn.h>
 #include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -86,10 +98,12 @@ static void* inner(const char* name)
     return dlsym(inner_library, name);
 }
 
-/* forward(name, type, args...): pythonfmu's function `name` of type `type`, or fmi2Error if missing */
+/* forward(name, type, args...): pythonfmu's function `name` of type `type`, or fmi2Error if missing (or if `c` is
+ * not an instance of this binding's) */
 #define FORWARD(name, type, ...)                                                                             \
     do {                                                                                                     \
         static type fn = NULL;                                                                               \
+        if (!live(c)) return fmi2Error;                                                                      \
         to_python_gil((Instance*)c);                                                                         \
         if (fn == NULL) fn = (type)inner(#name);                                                             \
         if (fn == NULL) return fmi2Error;                                                                    \
@@ -136,17 +150,71 @@ typedef struct {
     fmi2CallbackFunctions callbacks; /* the host's (a copy), for the refusals' log lines */
     char* name;                 /* the instance name */
     /* the compiled step (the slave's compiled_step, compiled_pull, compiled_slots) */
-    PyObject* compiled;         /* compiled_step(): None, or (step, io, a, b) addresses, the buffers filled */
+    PyObject* compiled;         /* compiled_step(): None, or (step, io, a, b) addresses and (io, a, b) lengths */
     PyObject* pull;             /* compiled_pull(): the slave's attributes from the buffers */
     long* slots;                /* by value reference: COMPILED_BUFFER * buffer + index, LIVE_SLOT, or -1 (read in
                                  * Python after compiled_pull) */
     c_step_t c_step;            /* the C function */
     double* buffers[3];         /* io, a, b */
+    Py_ssize_t lengths[3];      /* their lengths (doubles) */
     int c_owned;                /* the buffers hold the slave's inputs, outputs and state; its attributes are behind */
     int c_off;                  /* compiled_step said None: not asked again until re-armed (direct_path) */
     unsigned long long compiled_calls; /* calls served with no Python (pmsm_fmu_compiled_calls) */
     unsigned long long pulls;   /* the buffers handed back to the slave's Python (pmsm_fmu_pulls) */
 } Instance;
+
+/* -- the instances this binding made ---------------------------------------------------------------------- */
+/* at most this many at once (a host asking for more gets NULL from fmi2Instantiate, with a log line) */
+#define LIVE_INSTANCES 4096
+static _Atomic(Instance*) live_table[LIVE_INSTANCES];
+static atomic_size_t live_top; /* entries in use are below it */
+static pthread_mutex_t live_lock = PTHREAD_MUTEX_INITIALIZER;
+
+/* whether c is an instance this binding made and has not freed (no lock: a host that frees an instance while
+ * another thread still calls it breaks FMI's rules; this catches a freed or foreign pointer, not that race) */
+static int live(const void* c)
+{
+    if (c == NULL) return 0;
+    size_t n = atomic_load_explicit(&live_top, memory_order_acquire);
+    for (size_t i = 0; i < n; i++)
+        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == c) return 1;
+    return 0;
+}
+
+/* put w in the table: 1, or 0 where it is full */
+static int enlist(Instance* w)
+{
+    int done = 0;
+    pthread_mutex_lock(&live_lock);
+    size_t n = atomic_load_explicit(&live_top, memory_order_relaxed);
+    for (size_t i = 0; i < n && !done; i++)
+        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == NULL) {
+            atomic_store_explicit(&live_table[i], w, memory_order_release);
+            done = 1;
+        }
+    if (!done && n < LIVE_INSTANCES) {
+        atomic_store_explicit(&live_table[n], w, memory_order_release);
+        atomic_store_explicit(&live_top, n + 1, memory_order_release);
+        done = 1;
+    }
+    pthread_mutex_unlock(&live_lock);
+    return done;
+}
+
+/* take w out of the table: 1, or 0 where it was not in it */
+static int delist(const void* w)
+{
+    int found = 0;
+    pthread_mutex_lock(&live_lock);
+    size_t n = atomic_load_explicit(&live_top, memory_order_relaxed);
+    for (size_t i = 0; i < n && !found; i++)
+        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == w) {
+            atomic_store_explicit(&live_table[i], NULL, memory_order_release);
+            found = 1;
+        }
+    pthread_mutex_unlock(&live_lock);
+    return found;
+}
 
 /* the offer made on this thread during the forwarded fmi2EnterInitializationMode */
 static __thread PyObject* pending_offer = NULL;
@@ -260,7 +328,7 @@ static void take_offer(Instance* w)
             PyObject* item = PySequence_GetItem(slots, i);
             long slot = item ? PyLong_AsLong(item) : -1;
             Py_XDECREF(item);
-            if (PyErr_Occurred()) goto bad;
+            if (PyErr_Occurred() || (slot < 0 && slot != -1 && slot != LIVE_SLOT)) goto bad;
             w->slots[i] = w->names[i] != NULL ? slot : -1;
         }
         w->compiled = PyTuple_GetItem(offer, 8);
@@ -291,17 +359,17 @@ bad:
 }
 
 /* pmsm_fmu_fast_calls(instance): the fmi2GetReal, fmi2SetReal and fmi2DoStep calls of this instance served on the
- * direct path since it was instantiated (0 for NULL) */
+ * direct path since it was instantiated (0 for NULL or an instance not this binding's) */
 EXPORT unsigned long long pmsm_fmu_fast_calls(fmi2Component c)
 {
-    return c == NULL ? 0 : ((Instance*)c)->fast_calls;
+    return live(c) ? ((Instance*)c)->fast_calls : 0;
 }
 
 /* pmsm_fmu_compiled_calls(instance): the fmi2GetReal, fmi2SetReal and fmi2DoStep calls of this instance served
  * with no Python at all (the compiled step on the slave's buffers), a part of pmsm_fmu_fast_calls (0 for NULL) */
 EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi2Component c)
 {
-    return c == NULL ? 0 : ((Instance*)c)->compiled_calls;
+    return live(c) ? ((Instance*)c)->compiled_calls : 0;
 }
 
 /* pmsm_fmu_pulls(instance): how many times the binding handed the compiled step's buffers back to the slave's Python
@@ -309,7 +377,7 @@ EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi2Component c)
  * the C function declines), after which the next compiled call refills them (compiled_step) (0 for NULL) */
 EXPORT unsigned long long pmsm_fmu_pulls(fmi2Component c)
 {
-    return c == NULL ? 0 : ((Instance*)c)->pulls;
+    return live(c) ? ((Instance*)c)->pulls : 0;
 }
 
 /* -- the compiled step: who holds the slave's values ------------------------------------------------------ */
@@ -343,10 +411,18 @@ static int to_compiled(Instance* w)
     PyGILState_STATE gil = PyGILState_Ensure();
     PyObject* answer = PyObject_CallObject(w->compiled, NULL);
     int ok = 0;
-    if (answer != NULL && PyTuple_Check(answer) && PyTuple_Size(answer) == 4) {
+    if (answer != NULL && PyTuple_Check(answer) && PyTuple_Size(answer) == 7) {
         void* step = PyLong_AsVoidPtr(PyTuple_GetItem(answer, 0));
-        for (int i = 0; i < 3; i++) w->buffers[i] = (double*)PyLong_AsVoidPtr(PyTuple_GetItem(answer, i + 1));
+        for (int i = 0; i < 3; i++) {
+            w->buffers[i] = (double*)PyLong_AsVoidPtr(PyTuple_GetItem(answer, i + 1));
+            w->lengths[i] = PyLong_AsSsize_t(PyTuple_GetItem(answer, i + 4));
+        }
         ok = !PyErr_Occurred() && step != NULL && w->buffers[0] && w->buffers[1] && w->buffers[2];
+        for (Py_ssize_t i = 0; ok && i < w->n; i++) { /* every slot inside its buffer */
+            long slot = w->slots[i];
+            long b = slot / COMPILED_BUFFER;
+            ok = slot < 0 || (b < 3 && slot % COMPILED_BUFFER < w->lengths[b]);
+        }
         if (ok) w->c_step = (c_step_t)step;
     }
     Py_XDECREF(answer);
@@ -494,6 +570,16 @@ static void direct_path(Instance* w)
 }
 
 /* -- the FMI functions ---------------------------------------------------------------------------------- */
+/* free an instance that is out of the table (delist) */
+static void fmi2FreeInstance_unlisted(Instance* w)
+{
+    drop_offer_gil(w);
+    free_t fn = (free_t)inner("fmi2FreeInstance");
+    if (fn != NULL) fn(w->inner);
+    free(w->name);
+    free(w);
+}
+
 EXPORT const char* fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char* fmi2GetVersion(void) { return "2.0"; }
 
@@ -533,6 +619,13 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     w->max_step = INFINITY;
     if (functions != NULL) w->callbacks = *functions;
     w->name = strdup(instanceName ? instanceName : "");
+    if (!enlist(w)) {
+        if (functions && functions->logger)
+            functions->logger(functions->componentEnvironment, instanceName, fmi2Error, "logStatusError",
+                              "more than %d instances at once", LIVE_INSTANCES);
+        fmi2FreeInstance_unlisted(w);
+        return NULL;
+    }
     return w;
 }
 
@@ -540,12 +633,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
 
 EXPORT void fmi2FreeInstance(fmi2Component c)
 {
-    if (c == NULL) return;
-    drop_offer_gil(W);
-    free_t fn = (free_t)inner("fmi2FreeInstance");
-    if (fn != NULL) fn(W->inner);
-    free(W->name);
-    free(W);
+    if (delist(c)) fmi2FreeInstance_unlisted(W); /* (not this binding's instance, or freed already: nothing) */
 }
 
 EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[])
@@ -556,6 +644,7 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol, fmi2Real start,
                                       fmi2Boolean stopDefined, fmi2Real stop)
 {
+    if (!live(c)) return fmi2Error;
     int status = refused_plain(W, "fmi2SetupExperiment");
     if (status >= 0) return (fmi2Status)status;
     FORWARD(fmi2SetupExperiment, setup_t, W->inner, tolDefined, tol, start, stopDefined, stop);
@@ -563,6 +652,7 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, f
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
+    if (!live(c)) return fmi2Error;
     static plain_t fn = NULL;
     if (fn == NULL) fn = (plain_t)inner("fmi2EnterInitializationMode");
     if (fn == NULL) return fmi2Error;
@@ -574,6 +664,7 @@ EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
+    if (!live(c)) return fmi2Error;
     static plain_t fn = NULL;
     if (fn == NULL) fn = (plain_t)inner("fmi2ExitInitializationMode");
     if (fn == NULL) return fmi2Error;
@@ -587,6 +678,7 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
+    if (!live(c)) return fmi2Error;
     to_python_gil(W);
     if (W->ready) { /* the direct path stops: the slave learns where the last step ended */
         PyGILState_STATE gil = PyGILState_Ensure();
@@ -599,6 +691,7 @@ EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
+    if (!live(c)) return fmi2Error;
     static plain_t fn = NULL;
     if (fn == NULL) fn = (plain_t)inner("fmi2Reset");
     if (fn == NULL) return fmi2Error;
@@ -635,6 +728,7 @@ static int read_attribute(Instance* w, fmi2ValueReference vr, fmi2Real* value)
 
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
+    if (!live(c)) return fmi2Error;
     Instance* w = W;
     if (!w->ready || nvr == 0) return forward_get_real(c, vr, nvr, value);
     for (size_t i = 0; i < nvr; i++)
@@ -684,6 +778,7 @@ static fmi2Status checked_set_real(fmi2Component c, const fmi2ValueReference vr[
 
 EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
 {
+    if (!live(c)) return fmi2Error;
     Instance* w = W;
     if (!w->ready || nvr == 0) return checked_set_real(c, vr, nvr, value);
     for (size_t i = 0; i < nvr; i++)
@@ -750,6 +845,7 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state)
 }
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
+    if (!live(c)) return fmi2Error;
     static set_state_t fn = NULL;
     if (fn == NULL) fn = (set_state_t)inner("fmi2SetFMUstate");
     if (fn == NULL) return fmi2Error;
@@ -816,6 +912,7 @@ static fmi2Status refuse_step(Instance* w, double t, int status)
 
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean flag)
 {
+    if (!live(c)) return fmi2Error;
     Instance* w = W;
     if (!w->ready) {
         int status = refused_step(w, t, h);
@@ -894,6 +991,7 @@ EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Sta
 }
 EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value)
 {
+    if (!live(c)) return fmi2Error;
     if (s == fmi2LastSuccessfulTime) {
         *value = W->last_successful_time;
         return fmi2OK;
@@ -906,6 +1004,7 @@ EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, 
 }
 EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value)
 {
+    if (!live(c)) return fmi2Error;
     if (s == fmi2Terminated) {
         *value = W->terminated ? 1 : 0;
         return fmi2OK;

@@ -13,7 +13,13 @@ from pmsm_ev import __version__
 from pmsm_ev import kernels as _k
 from pmsm_ev.params import BatteryParams, MotorParams, PlantParams, VehicleParams
 from pmsm_ev.plant import BATTERY_SLOTS, ENERGY_SLOTS, THERMAL_SLOTS, Plant
-from pmsm_ev_fmus.slave_support import COMPILED_BUFFER, DriveSlave, FmuUsageError, SimulationError
+from pmsm_ev_fmus.slave_support import (
+    COMPILED_BUFFER,
+    DriveSlave,
+    FmuUsageError,
+    SimulationError,
+    compiled_offer,
+)
 
 _MOTOR = ("N", "psi", "L_d", "L_q")  # the motor parameters of eq 12
 #: the algebraic flux model's parameters (``PlantParams.flux_model``): T_e and W_magnetic depend on them
@@ -253,8 +259,8 @@ class PmsmEvPlant(DriveSlave):
 
     def compiled_step(self):
         """(the plant's C step, the plant's buffer ``Plant.io`` with the slave's inputs and outputs written into it,
-        the plant's parameter and energy vectors); None where the kernels run as plain Python or the plant has an
-        inverter delay (its state is Python's)."""
+        the plant's parameter and energy vectors: ``compiled_offer``); None where the kernels run as plain Python or
+        the plant has an inverter delay (its state is Python's)."""
         p = self._plant
         if p is None or not getattr(p._kernels, "JIT", False) or p.delay:
             return None
@@ -264,7 +270,7 @@ class PmsmEvPlant(DriveSlave):
         io = p.io
         for name, slot in _IO_SLOTS.items():
             io[slot] = getattr(self, name)
-        return step, io.ctypes.data, p._pp.ctypes.data, p.energy.ctypes.data
+        return compiled_offer(step, io, p._pp, p.energy)
 
     def compiled_pull(self) -> None:
         values = self._plant.io.tolist()

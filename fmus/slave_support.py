@@ -152,6 +152,17 @@ LEAN_OFFER = "pmsm_fmu_offer"
 COMPILED_BUFFER = 1 << 20
 #: the slot of a ``DriveSlave.compiled_live`` output in the lean binding's table (``fmus/lean_binding.c``)
 LIVE_SLOT = -2
+
+
+def compiled_offer(step: int, *buffers) -> tuple:
+    """What ``DriveSlave.compiled_step`` returns to the lean binding: the C function's address, then the addresses of
+    its three buffers (C-contiguous float64 arrays), then their lengths, by which the binding checks every slot
+    (``compiled_slots``) before it reads or writes one."""
+    if len(buffers) != 3 or any(getattr(b, "dtype", None) != "float64" or not b.flags.c_contiguous for b in buffers):
+        raise ValueError("compiled_offer takes three C-contiguous float64 arrays")
+    return (step, *(b.ctypes.data for b in buffers), *(b.size for b in buffers))
+
+
 #: the lean binding's offer function of each FMU library folder of this process (None: pythonfmu's own binary)
 _LEAN_OFFERS: dict[str, object] = {}
 
@@ -564,8 +575,9 @@ class DriveSlave(Fmi2Slave):
     def compiled_step(self):
         """Called by the lean binding (the GIL held) before it steps in compiled code: None where this slave has
         no compiled step now (the binding runs its Python ``do_step``), else (the C function's address, the
-        addresses of its three buffers), the buffers filled from the slave's attributes: from then on they hold
-        the slave's inputs, outputs and state until ``compiled_pull``. None by default."""
+        addresses of its three buffers, their lengths: ``compiled_offer``), the buffers filled from the slave's
+        attributes: from then on they hold the slave's inputs, outputs and state until ``compiled_pull``. None by
+        default."""
         return None
 
     def compiled_pull(self) -> None:

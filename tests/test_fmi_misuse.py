@@ -3,14 +3,22 @@ gives them non-finite inputs, steps from a communication point that does not con
 plant further than it integrates to its accuracy, is refused with the standard's status (fmi2Error; fmi2Discard
 for the step too long) and one log line, and the FMU stays usable. Each call sequence runs in a Python process
 of its own (fmpy's low-level FMU2Slave, as another master would call it; a crash is one failed test), on the
-default build (the lean binding: ``DriveSlave.refusal`` asked by ``fmus/lean_binding.c``)."""
+default build (the lean binding: ``DriveSlave.refusal`` asked by ``fmus/lean_binding.c``).
+
+The same sequences under AddressSanitizer and UndefinedBehaviorSanitizer: the FMUs' C code (the lean binding and
+the loader, fmus/fmu_loader.c) compiled with ``-fsanitize=address,undefined`` (``PMSM_EV_BINDING_CFLAGS``), run by
+fmpy in a process with the sanitizers' runtime preloaded: no report, and the same statuses, log lines and numbers as
+the plain build."""
 
 from __future__ import annotations
 
 import json
 import math
+import os
+import shutil
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -100,6 +108,57 @@ def sequence(case):
         out["values"]["terminated"] = fmu.getBooleanStatus(3)
         call("doStep", 1e-4, 1e-4)
         read("then", ["omega_m", "i_d", "i_q"])
+    elif case == "foreign-instance":  # a freed instance, then NULL: fmi2Error each, nothing touched
+        import ctypes
+        init()
+        call("doStep", 0.0, 1e-4)
+        dll, freed = fmu.dll, fmu.component
+        fmu.terminate()
+        fmu.freeInstance()
+        refs, values = (ctypes.c_uint * 1)(vr[md.modelVariables[0].name]), (ctypes.c_double * 1)(0.0)
+        for label, c in (("freed", freed), ("null", None)):
+            out["values"][label] = [dll.fmi2DoStep(c, 1e-4, 1e-4, 1), dll.fmi2GetReal(c, refs, 1, values),
+                                    dll.fmi2SetReal(c, refs, 1, values),
+                                    dll.fmi2SetupExperiment(c, 0, 0.0, 0.0, 0, 0.0),
+                                    dll.fmi2EnterInitializationMode(c), dll.fmi2ExitInitializationMode(c),
+                                    dll.fmi2Terminate(c), dll.fmi2Reset(c)]
+        dll.fmi2FreeInstance(freed)  # again: nothing
+        dll.fmi2FreeInstance(None)
+        print(END + json.dumps(out), flush=True)
+        return
+    elif case == "threads":  # instances side by side, then two threads each stepping its own: the same numbers
+        import threading
+        inputs = [vr[v.name] for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
+        outputs = [vr[v.name] for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+        def make(name):
+            f = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                          instanceName=name)
+            f.instantiate()
+            f.setupExperiment(None, 0.0)
+            f.enterInitializationMode()
+            f.exitInitializationMode()
+            return f
+        def drive(f, n, into):
+            for k in range(n):
+                f.setReal(inputs, [0.5 + 0.001 * j for j in range(len(inputs))])
+                f.doStep(k * 1e-4, 1e-4)
+            into.append(f.getReal(outputs))
+        serial = []
+        drive(fmu, 0, [])
+        fmu.setupExperiment(None, 0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        drive(fmu, 500, serial)
+        pair, found = [make("a"), make("b")], [[], []]
+        threads = [threading.Thread(target=drive, args=(f, 500, into)) for f, into in zip(pair, found)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        out["values"]["same"] = [found[0] == serial, found[1] == serial]
+        for f in pair:
+            f.terminate()
+            f.freeInstance()
     fmu.terminate()
     fmu.freeInstance()
     print(END + json.dumps(out), flush=True)  # the end of the sequence's log lines
@@ -117,17 +176,22 @@ def fmus() -> dict[str, Path]:
 
 
 #: the call sequences the tests below make on each FMU, run one after the other in one process per FMU
-SEQUENCES = {"PmsmEvPlant": ("step-before-init", "step-after-terminate", "non-finite", "time", "long-step"),
-             "FocSensorless": ("step-before-init", "step-after-terminate", "enter-twice", "time"),
+SEQUENCES = {"PmsmEvPlant": ("step-before-init", "step-after-terminate", "non-finite", "time", "long-step",
+                             "foreign-instance", "threads"),
+             "FocSensorless": ("step-before-init", "step-after-terminate", "enter-twice", "time", "foreign-instance",
+                               "threads"),
              "RouteProfile": ("step-before-init",), "FocEkf5": ("non-finite",)}
 _RUNS: dict = {}  # {(FMU, case): its result}, of the sequences run so far
 
 
-def run_all(fmu: Path, cases) -> dict[str, tuple[list, list[str], dict]]:
+def run_all(fmu: Path, cases, env: dict | None = None, check=None) -> dict[str, tuple[list, list[str], dict]]:
     """{case: (the calls with their statuses, the FMU's log lines, the values read)} of the call sequences
-    ``cases`` on ``fmu``, one after the other in a process of their own, each on an instance of its own."""
+    ``cases`` on ``fmu``, one after the other in a process of their own (with ``env``), each on an instance of its
+    own; ``check(completed process)`` first, if given."""
     done = subprocess.run([sys.executable, "-c", _SCRIPT, str(fmu), _END, *cases], capture_output=True, text=True,
-                          timeout=300)
+                          timeout=600, env=env)
+    if check is not None:
+        check(done)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     results, log = {}, []
     for line in done.stdout.strip().splitlines():
@@ -228,8 +292,6 @@ def test_through_pythonfmus_library_alone_the_same_calls_are_refused_as_fatal(tm
     """An FMU built with pythonfmu's library alone (``PMSM_EV_FMU_BINDING=pythonfmu``: no C compiler, another
     platform) refuses the same calls, as fmi2Fatal (pythonfmu gives a slave no other status), the reason in
     pythonfmu's log line; a step too long is discarded there too (with the terminated status, pythonfmu's)."""
-    import os
-
     env = dict(os.environ, PMSM_EV_FMU_BINDING="pythonfmu", PMSM_COSIM_FMU_DIR=str(tmp_path))
     subprocess.run([sys.executable, "-m", "pmsm_ev_fmus", "--out", str(tmp_path), "PmsmEvPlant"], env=env,
                    check=True, capture_output=True, text=True, timeout=600)
@@ -241,3 +303,64 @@ def test_through_pythonfmus_library_alone_the_same_calls_are_refused_as_fatal(tm
     calls, log, values = runs["long-step"]
     assert calls[5] == ["doStep", DISCARD] and values["terminated"] is True
     assert any("longer than the plant integrates to its accuracy" in line for line in log)
+
+
+@pytest.mark.parametrize("name", ["PmsmEvPlant", "FocSensorless"])
+def test_a_freed_or_null_instance_is_an_error_and_touched_nowhere(fmus, name):
+    """Every call on an instance already freed, or on NULL, returns fmi2Error (there is no logger to tell: the
+    host's callbacks belong to the instance); freeing it again does nothing."""
+    _, _, values = run(fmus[name], "foreign-instance")
+    assert values["freed"] == values["null"] == [ERROR] * 8
+
+
+@pytest.mark.parametrize("name", ["PmsmEvPlant", "FocSensorless"])
+def test_instances_side_by_side_and_in_two_threads_give_the_serial_numbers(fmus, name):
+    _, log, values = run(fmus[name], "threads")
+    assert values["same"] == [True, True] and log == []
+
+
+# -- under the sanitizers ----------------------------------------------------------------------------------------
+CC = os.environ.get("CC", "cc")
+#: the runtime ASan needs first in the process (the host, python, is not built with it)
+ASAN_RUNTIME = subprocess.run([CC, "-print-file-name=libasan.so"], capture_output=True, text=True).stdout.strip() \
+    if shutil.which(CC) else ""
+SANITIZE = "-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer -g"
+#: what a sanitizer prints when it finds something
+REPORTS = ("ERROR: AddressSanitizer", "runtime error:", "ERROR: LeakSanitizer", "SUMMARY: UndefinedBehaviorSanitizer")
+SANITIZED = ("PmsmEvPlant", "FocSensorless")  # every sequence of the suite is run on one of them
+needs_asan = pytest.mark.skipif(not os.path.isabs(ASAN_RUNTIME), reason=f"{CC} has no AddressSanitizer runtime")
+
+
+@pytest.fixture(scope="module")
+def sanitized(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("fmus-sanitized")
+    env = dict(os.environ, PMSM_EV_BINDING_CFLAGS=SANITIZE, PMSM_COSIM_FMU_DIR=str(folder))
+    subprocess.run([sys.executable, "-m", "pmsm_ev_fmus", "--out", str(folder), *SANITIZED], env=env, check=True,
+                   capture_output=True, text=True, timeout=600)
+    return {name: folder / f"{name}.fmu" for name in SANITIZED}
+
+
+def _no_report(done: subprocess.CompletedProcess) -> None:
+    found = [line for line in done.stderr.splitlines() if any(mark in line for mark in REPORTS)]
+    assert not found, done.stderr[-6000:]
+
+
+@needs_asan
+def test_the_sanitized_build_is_sanitized(sanitized):
+    """The binding and the loader inside the FMU link the sanitizers' runtimes (so that the test below checks what
+    it says)."""
+    for name, fmu in sanitized.items():
+        with zipfile.ZipFile(fmu) as z:
+            for library in ("pmsm-binding.so", f"{name}.so"):
+                data = z.read(f"binaries/linux64/{library}")
+                assert b"__asan_init" in data and b"__ubsan_handle" in data, library
+
+
+@needs_asan
+@pytest.mark.parametrize("name", SANITIZED)
+def test_the_misuse_suite_under_the_sanitizers_reports_nothing_and_answers_as_the_plain_build(fmus, sanitized, name):
+    env = dict(os.environ, LD_PRELOAD=ASAN_RUNTIME,
+               ASAN_OPTIONS="detect_leaks=0:halt_on_error=1:alloc_dealloc_mismatch=0",
+               UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1")
+    found = run_all(sanitized[name], SEQUENCES[name], env=env, check=_no_report)
+    assert found == {case: run(fmus[name], case) for case in SEQUENCES[name]}
