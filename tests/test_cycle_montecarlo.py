@@ -222,6 +222,23 @@ def test_failure_reasons():
     assert f("not run", math.nan, math.nan, math.nan) == ["did not complete"]
 
 
+def test_an_unseen_slip_and_the_verdict_on_a_cycle_sweeps_rows():
+    from pmsm_cosim.app.metrics.verdicts import cycle_verdict, unseen_slip, verdict_line
+
+    assert unseen_slip(1.0, 0.0) and unseen_slip(302.0, 0.0)
+    assert not unseen_slip(1.0, 1.0) and not unseen_slip(0.0, 0.0) and not unseen_slip(math.nan, math.nan)
+    rows = [{"status": "completed", "inside_share": 1.0, "slipped_turns": 0.0, "fault_latched": 0.0, "episodes": 0.0},
+            {"status": "completed", "inside_share": "0.9965", "slipped_turns": "302", "fault_latched": "0",
+             "episodes": "0"},
+            {"status": "completed", "inside_share": 0.98, "slipped_turns": 2.0, "fault_latched": 1.0, "episodes": 3.0},
+            {"status": "failed: x", "inside_share": "", "slipped_turns": "", "fault_latched": "", "episodes": ""}]
+    v = cycle_verdict(rows)
+    assert v == {"samples": 4, "failed": 3, "unseen_slips": 1,
+                 "by_reason": {"did not complete": 1, "left the band": 1, "slipped a turn": 2, "fault latched": 1}}
+    assert verdict_line(v).startswith("cycle verdict: 3 of 4 samples failed (did not complete 1, left the band 1, ")
+    assert cycle_verdict([{"status": "completed", "speed_rms_error": 1.0}]) is None  # not a cycle sweep
+
+
 def _row(k, status="completed", inside=1.0, slips=0.0, fault=0.0, wh=150.0):
     reasons = rc.failure_reasons(status, inside, slips, fault)
     return {"run": f"{k:04d}", "status": status, "error": "", "inside_share": inside, "slipped_turns": slips,

@@ -36,6 +36,7 @@ from .drive import (
     fmu_dir_override,
     project_fmu_dir,
 )
+from .metrics.verdicts import cycle_verdict, verdict_line
 from .overrides import CONTROLLER_INSTANCE, PLANT_INSTANCE, apply_overrides, fmu_choices, resolve_fmu
 from .studies import load_sweep
 
@@ -182,6 +183,9 @@ def cmd_sweep(a) -> int:
     completed = sum(r["status"] == "completed" for r in outcome.rows)
     print(f"{'interrupted' if outcome.interrupted else 'done'}: {completed} of {len(outcome.rows)} runs completed "
           f"({outcome.ran} run now, {outcome.skipped} already done), {outcome.failed} not completed; {where}")
+    verdict = cycle_verdict(outcome.rows)
+    if verdict is not None:  # a cycle sweep: the failure rule on its samples
+        print(verdict_line(verdict))
     if outcome.interrupted:
         return EXIT_INTERRUPTED
     return EXIT_FAILED if outcome.failed else 0

@@ -16,5 +16,6 @@ per subject, each with its own bands, thresholds and windows beside the figures 
 * ``windows``: figures of a window of rows (after a time, under a mask, per plateau) for compare, the
   reports and the robustness maps, and a run's timing from its metrics.json;
 * ``summary``: one number per figure of merit, for sweeps' tables (``SUMMARY_METRICS``);
+* ``verdicts``: the failure rule of a drive-cycle sample (``INSIDE_MIN``, ``REASONS``) and the unseen slip;
 * ``rows``: the helpers they share (RMS, runs of True, the driver's direction, roll-back, km/h).
 """

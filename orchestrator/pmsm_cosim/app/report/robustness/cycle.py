@@ -2,11 +2,8 @@
 figures from its summary row and metrics.json, the failure rule, the counts with their interval, the Wh/km
 distribution, what a sample costs, and its section of the page (its figure: ``figures.cycle_figure``).
 
-**The failure rule** (defined here once; the page quotes it): a sample fails if it did not complete, or its
-speed was inside the tolerance band (``pmsm_cosim.app.metrics.trace.trace_figures``: +-2 km/h around the trace, taken
-over +-1 s) for less than ``INSIDE_MIN`` of the cycle (metrics.json ``trace`` ``inside_share``; a completed
-run without it fails too), or its angle slipped an electrical turn (``synchronism`` ``slipped_turns``), or
-the controller's safe state latched (``synchronism`` ``fault_latched``).
+**The failure rule** is ``pmsm_cosim.app.metrics.verdicts``' (``failure_reasons``, ``INSIDE_MIN``, ``REASONS``);
+the page quotes it.
 """
 
 from __future__ import annotations
@@ -22,14 +19,11 @@ from pmsm_ev.params import MotorParams, VehicleParams
 
 from ....sweeps import read_summary
 from ...metrics.trace import TRACE_BAND_KMH, TRACE_WINDOW_S
+from ...metrics.verdicts import INSIDE_MIN, REASONS, failure_reasons
 from .interval import wilson
 
-#: a sample follows the cycle if its speed is inside the tolerance band for at least this share of it
-INSIDE_MIN = 0.99
 #: one occupant (driver or passenger) [kg] [chosen: the 75 kg of a person in EU 1230/2012's mass in running order]
 OCCUPANT_KG = 75.0
-#: the failure reasons, in the page's order
-REASONS = ("did not complete", "left the band", "slipped a turn", "fault latched")
 #: the worker counts the page prices a thousand samples on
 THOUSAND_ON = (2, 16, 64)
 #: the sweep parameters of the design: vehicle mass, grade offset
@@ -51,21 +45,6 @@ def _num(x) -> float:
         return float(x)
     except (TypeError, ValueError):
         return math.nan
-
-
-def failure_reasons(status: str, inside_share: float, slipped_turns: float, fault_latched: float) -> list[str]:
-    """Why a sample failed (``REASONS``; empty: it passed). NaN slipped_turns or fault_latched (a controller
-    without the sensorless unit's columns) count as none; a NaN inside_share of a completed run fails."""
-    if status != "completed":
-        return [REASONS[0]]
-    out = []
-    if not inside_share >= INSIDE_MIN:
-        out.append(REASONS[1])
-    if slipped_turns > 0:
-        out.append(REASONS[2])
-    if fault_latched > 0:
-        out.append(REASONS[3])
-    return out
 
 
 def occupants(m_v: float, base: float | None = None) -> float:
