@@ -1,5 +1,5 @@
 """The plant's integrators against the converged solution of the same equations (docs/performance.md, "The plant's
-integrator"): the stationary-frame RK4 (``PlantParams.integrator`` 'rk4_stationary') and the rotor-frame one, each
+integrator"): the stationary-frame RK4 (``PlantParams.integrator`` 'rk6_stationary') and the rotor-frame one, each
 with the voltage held over each step in the stationary frame as the co-simulation holds it, at 0, 50, 100 and
 131 km/h, with the linear and the algebraic flux models; the flux linkages carried from step to step (no Newton
 solve per step); the whole-number powers; the refused setting; and a slice of a shipped sensorless scenario against
@@ -73,7 +73,7 @@ def test_the_stationary_frame_holds_its_accuracy_at_every_speed(kmh, flux_model)
     the electrical angle within 2e-5 rad (1860 rad turned at 131 km/h), the energy balance within 3e-6 of the
     throughput, with one to four sub-steps a step (``STATIONARY_SUBSTEP_ANGLE``)."""
     ref, turned = held_run(kmh, flux_model, **CONVERGED)
-    run, _ = held_run(kmh, flux_model, integrator="rk4_stationary")
+    run, _ = held_run(kmh, flux_model, integrator="rk6_stationary")
     rotor, _ = held_run(kmh, flux_model)
     err, err_rotor = _errors(run, ref), _errors(rotor, ref)
     print(f"\n{flux_model} {kmh:g} km/h ({turned:.0f} rad turned): stationary {err}; rotor frame {err_rotor}")
@@ -85,7 +85,7 @@ def test_the_stationary_frame_holds_its_accuracy_at_every_speed(kmh, flux_model)
         assert err["i"] < 0.1 * err_rotor["i"]
 
 
-@pytest.mark.parametrize("integrator", ["rk4_rotor", "rk4_stationary"])
+@pytest.mark.parametrize("integrator", ["rk4_rotor", "rk6_stationary"])
 def test_the_step_carries_the_flux_linkages(integrator):
     """With the algebraic model the fluxes a step ends with are the memo of psi(i) for the currents it returns: the
     next step starts from them (no Newton solve), and the currents are their explicit function."""

@@ -77,11 +77,10 @@ BALANCE_TERMS = ("E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_
 
 
 def substep_angle_slot(p: PlantParams) -> float:
-    """The plant vector's ``P_SUBSTEP_ANGLE``: ``substep_angle`` in the rotor's frame, the stationary frame's bound
-    ``STATIONARY_SUBSTEP_ANGLE`` negated with ``integrator`` 'rk4_stationary' (``pmsm_ev.kernels.stationary_frame``:
-    the sign tells the frame)."""
-    if p.integrator == "rk4_stationary":
-        return -_k.STATIONARY_SUBSTEP_ANGLE
+    """The plant vector's ``P_SUBSTEP_ANGLE``: ``substep_angle`` in the rotor's frame, ``stationary_substep_angle``
+    negated with ``integrator`` 'rk6_stationary' (``pmsm_ev.kernels.stationary_frame``: the sign tells the frame)."""
+    if p.integrator == "rk6_stationary":
+        return -p.stationary_substep_angle
     return p.substep_angle
 
 

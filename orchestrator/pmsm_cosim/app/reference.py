@@ -33,12 +33,11 @@ from pmsm_ev.results import ALL_COLUMNS, SENSORLESS_COLUMNS
 from pmsm_ev.scenarios import SCENARIO_STOP_TIME, Profile, elevation_profile, speed_reference
 
 from ..engine.errors import CosimError
-from ..engine.master import Master
 from ..engine.recording import ResultWriter, read_results, write_metrics
+from .api import simulate
 from .metrics.cycle_energy import balance_check
 from .metrics.energy import energy_metrics
 from .metrics.run import compute_metrics
-from .overrides import apply_overrides
 
 #: the converged reference's sub-steps per communication step at least [-]: RK4's error falls as the sub-step's
 #: fourth power, so 16 sub-steps put it 16^4 = 65536 times below the one-sub-step step's at standstill
@@ -60,15 +59,14 @@ def converged_settings() -> dict[str, object]:
 
 def run_system(system, out_dir, *, stop_time: float | None = None, set: dict | None = None,
                converged: bool = False) -> dict:
-    """Run the shipped scenario or system file ``system`` (what ``apply_overrides`` takes; the first ``stop_time`` s
-    of it if given, ``set`` its start values as ``--set``) with the master, as ``pmsm-cosim run`` does without
-    figures, into ``out_dir``; with ``converged`` the converged reference of it (``converged_settings`` over
-    ``set``). Returns its metrics (``Master.run``)."""
+    """Run the shipped scenario or system file ``system`` (the first ``stop_time`` s of it if given, ``set`` its
+    start values as ``--set``) as ``pmsm-cosim run`` does without figures (``pmsm_cosim.app.api.simulate``), into
+    ``out_dir``; with ``converged`` the converged reference of it (``converged_settings`` over ``set``). Returns its
+    metrics."""
     values = dict(set or {})
     if converged:
         values.update(converged_settings())
-    spec = apply_overrides(system, stop_time=stop_time, set=values or None)
-    m = Master(spec).run(Path(out_dir), catch_sigint=False)
+    _, m = simulate(system, stop_time=stop_time, set=values or None, output_dir=out_dir)
     if m["status"] != "completed":
         raise CosimError(f"{system}: the run did not complete: {m['status']}")
     return m
