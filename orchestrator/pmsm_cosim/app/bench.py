@@ -36,9 +36,10 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     signals set when their value changes; nothing recorded (``fmpy_loop``: what a user writes with fmpy alone);
 
 (k) the cost a step at 0, 50, 100 and 131 km/h held (``SPEEDS_KMH``) for the shipped sensored drive (``wltc3b``:
-    ``FocSensored``, the linear flux model) and the shipped sensorless drive (``wltc3b-sensorless``: injection, the
-    algebraic flux model): the master on ``speed_slice`` s of the system with its plant started at that speed
-    and ``omega_ref`` held there (``held_speed_spec``), each case's errors against the converged reference of the
+    ``FocSensored``, the linear flux model) and the shipped sensorless drive (``wltc3b-sensorless``: injection at
+    standstill, the algebraic flux model; at speed its stationary-frame EKF5, ``FocEkf5AB`` from a flying start,
+    as the unit starts from standstill only): the master on ``speed_slice`` s of the system with its plant started
+    at that speed and ``omega_ref`` held there (``held_speed_spec``), each case's errors against the converged reference of the
     same slice (``pmsm_cosim.app.reference.converged_errors``: the largest differences of the vehicle's speed and
     of the electrical angle over the rows) and the ratio of the cost at 131 km/h to the cost at standstill;
 
@@ -93,8 +94,10 @@ DEFAULT_CYCLE_SLICE = 60.0  #: [s] of the cycle in cases (e), (f)
 CYCLE_MEMORY_STOP_TIMES = (900.0, 1800.0)  #: half the WLTC, the whole
 #: the whole WLTC's wall time and memory: the shipped sensorless drive (injection), the scenario users run
 CYCLE_MEMORY_SYSTEM = INJECTION_SYSTEM
-#: case (k): the drives whose cost a step it measures at held speeds, sensored and sensorless
-SPEED_SYSTEMS = ("wltc3b", "wltc3b-sensorless")
+#: case (k): the drives whose cost a step it measures at held speeds, sensored and sensorless, each with the controller
+#: it runs at speed (None: the system's own): the sensorless unit starts from standstill only (its alignment and
+#: polarity check), at speed it runs its stationary-frame EKF5, which FocEkf5AB runs from a flying start
+SPEED_SYSTEMS = (("wltc3b", None), ("wltc3b-sensorless", "ekf5ab"))
 SPEEDS_KMH = (0.0, 50.0, 100.0, 131.0)  #: case (k): the held speeds [km/h] (131: WLTC 3b's top speed, 131.3)
 DEFAULT_SPEED_SLICE = 2.0  #: [s] of each held speed in case (k)
 #: the master's stepping loop of each case run (metrics.json's "loop"; $PMSM_COSIM_LOOP chooses it)
@@ -157,18 +160,22 @@ def reference_us_per_step(stop_time: float, work: Path) -> tuple[float, float]:
     return m["us_per_step"], 1e6 * m["cpu_time_s"] / m["macro_steps"]
 
 
-def held_speed_spec(system: str, kmh: float, stop_time: float, converged: bool = False):
+def held_speed_spec(system: str, kmh: float, stop_time: float, converged: bool = False, at_speed: str | None = None):
     """Case (k): ``system`` for ``stop_time`` s with the plant started at ``kmh`` [km/h] (``omega_m0``) and the speed
-    reference held there (the cycle's ``omega_ref`` replaced by a constant); with ``converged`` its converged
-    reference (``converged_settings``)."""
-    values = {"plant.omega_m0": 0.0}
+    reference held there (the cycle's ``omega_ref`` replaced by a constant); above 0 km/h with the controller
+    ``at_speed`` if given, from a flying start (``x0_omega``); with ``converged`` its converged reference
+    (``converged_settings``)."""
+    table_ii = VehicleParams()
+    spec = apply_overrides(system, stop_time=stop_time)
+    plant = spec.component("plant", "case (k)")
+    omega = kmh / KMH_PER_MS / float(plant.start.get("r_w", table_ii.r_w)) * float(plant.start.get("n_g", table_ii.n_g))
+    values = {"plant.omega_m0": omega}
+    controller = at_speed if kmh > 0.0 else None
+    if controller is not None:
+        values["ctrl.x0_omega"] = omega
     if converged:
         values.update(converged_settings())
-    spec = apply_overrides(system, stop_time=stop_time, set=values)
-    plant = spec.component("plant", "case (k)")
-    table_ii = VehicleParams()
-    omega = kmh / KMH_PER_MS / float(plant.start.get("r_w", table_ii.r_w)) * float(plant.start.get("n_g", table_ii.n_g))
-    plant.start["omega_m0"] = omega
+    spec = apply_overrides(system, stop_time=stop_time, set=values, controller=controller)
     old = spec.signals["omega_ref"]
     spec.signals["omega_ref"] = SignalSpec("omega_ref", Table((0.0,), (omega,), "previous", "omega_ref", "rad/s"),
                                            "rad/s", list(old.drives), "rad/s")
@@ -180,17 +187,19 @@ def speed_cases(say, work: Path, stop_time: float) -> dict:
     out = {}
     say(f"{'(k) drive at a held speed':<34}{'km/h':>6}{'us/step wall':>14}{'us/step CPU':>13}"
         f"{'speed err km/h':>16}{'angle err rad':>15}")
-    for system in SPEED_SYSTEMS:
+    for system, at_speed in SPEED_SYSTEMS:
         for kmh in SPEEDS_KMH:
             run_dir = Path(tempfile.mkdtemp(prefix="speed-", dir=work))
             ref_dir = Path(tempfile.mkdtemp(prefix="speed-ref-", dir=work))
-            master = Master(held_speed_spec(system, kmh, stop_time))
+            master = Master(held_speed_spec(system, kmh, stop_time, at_speed=at_speed))
             m = master.run(run_dir, catch_sigint=False)
-            Master(held_speed_spec(system, kmh, stop_time, converged=True)).run(ref_dir, catch_sigint=False)
+            Master(held_speed_spec(system, kmh, stop_time, converged=True, at_speed=at_speed)).run(
+                ref_dir, catch_sigint=False)
             err = converged_errors(run_dir, ref_dir)
             cpu = 1e6 * master.loop_cpu_time / m["macro_steps"]
             out[(system, kmh)] = (m["us_per_step"], cpu, err)
-            say(f"{system:<34}{kmh:>6g}{m['us_per_step']:>14.2f}{cpu:>13.2f}{err['speed_kmh']:>16.2e}"
+            label = system if at_speed is None or kmh == 0.0 else f"{system} ({at_speed})"
+            say(f"{label:<34}{kmh:>6g}{m['us_per_step']:>14.2f}{cpu:>13.2f}{err['speed_kmh']:>16.2e}"
                 f"{err['angle_rad']:>15.2e}")
             shutil.rmtree(run_dir, ignore_errors=True)
             shutil.rmtree(ref_dir, ignore_errors=True)
