@@ -102,7 +102,12 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     # PlantParams: numerics and initial state
     "rk4_substeps": (None, "RK4 sub-steps per communication step (at least; see substep_angle)"),
     "substep_angle": ("rad", "largest electrical angle per RK4 sub-step: a step takes max(rk4_substeps, "
-                             "ceil(N |omega_m| h / substep_angle)) sub-steps; 0 = off"),
+                             "ceil(N |omega_m| h / substep_angle)) sub-steps; 0 = off (integrator 'rk4_rotor')"),
+    "integrator": (None, "the frame the plant's RK4 integrates in: 'rk4_rotor' (the rotor's dq frame, sub-steps by "
+                         "substep_angle) or 'rk6_stationary' (the flux linkages in the stationary frame, where the "
+                         "held voltage is constant; docs/performance.md)"),
+    "stationary_substep_angle": ("rad", "largest electrical angle per sub-step of the stationary-frame RK4 "
+                                        "(integrator 'rk6_stationary')"),
     "i_d0": ("A", "initial d-axis current"),
     "i_q0": ("A", "initial q-axis current"),
     "omega_m0": ("rad/s", "initial mechanical rotor speed"),

@@ -8,6 +8,7 @@ import pytest
 from orchestrator_support import project_fmus
 from pmsm_cosim.app import bench
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.reference import CONVERGED_SUBSTEPS
 from pmsm_cosim.engine.master import Master
 from pmsm_cosim.engine.recording import read_results
 
@@ -108,3 +109,16 @@ def test_a_memory_run_reports_its_own_peak_not_the_bench_s(tmp_path):
     assert tail.startswith("completed: 100 steps") and wall > 0
     assert 50.0 < peak < 450.0, (peak, tail)  # a short scenario1 run: ~230 MB of Python, numba and the FMUs
     del held
+
+
+def test_the_held_speed_case_starts_at_the_speed_and_holds_it():
+    """Case (k): the plant started at the speed, the speed reference held there; its converged reference the
+    rotor frame's RK4 with the converged sub-steps."""
+    spec = bench.held_speed_spec("wltc3b-sensorless", 131.0, 1.0)
+    omega = 131.0 / 3.6 / 0.2933 * 12.5
+    plant = spec.component("plant", "test")
+    assert abs(plant.start["omega_m0"] - omega) < 1e-9 and plant.start["integrator"] == "rk6_stationary"
+    ref = spec.signals["omega_ref"].profile
+    assert ref(0.0) == ref(0.5) == ref(1.0) == omega and spec.stop_time == 1.0
+    converged = bench.held_speed_spec("wltc3b-sensorless", 131.0, 1.0, converged=True).component("plant", "test").start
+    assert converged["integrator"] == "rk4_rotor" and converged["rk4_substeps"] == CONVERGED_SUBSTEPS

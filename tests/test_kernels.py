@@ -25,7 +25,7 @@ from regression_runs import CASES, ELEVATION, PARAMS
 
 #: the runs the comparisons below make as plain Python: (observer, angle source, *extra), as ``run_here`` takes them
 PLAIN_RUNS = [(observer, angle_source) for observer, angle_source in CASES + (("ekf5", "estimated"),)] + [
-    (observer, "measured", "effects") for observer in ("sensored", "ekf5ab")]
+    (observer, "measured", "effects") for observer in ("sensored", "ekf5ab")] + [("sensored", "measured", "stationary")]
 PLAIN_SCRIPT = """
 import json, sys
 sys.path.insert(0, sys.argv[1])
@@ -44,6 +44,10 @@ def run_here(observer: str, angle_source: str, out, *extra) -> dict:
                                                    T_winding=90.0, T_magnet=70.0, thermal_R=0.05,
                                                    thermal_C=2.0),
                          controller=ControllerParams(dead_time_comp=7.2))
+    if "stationary" in extra:  # the drive cycles' plant: the stationary frame's RK6 on the algebraic flux model
+        params = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, flux_model="algebraic",
+                                                   integrator="rk6_stationary", inverter_losses=True,
+                                                   iron_c_h=27.98, iron_c_e=9.191e-3))
     run_reference(out, stop_time=2.0, observer=observer, angle_source=angle_source, params=params,
                   output_interval=0.001, elevation=ELEVATION)
     return {"mode": accel.describe(), "compiled": accel.compiled()}
@@ -80,6 +84,19 @@ def test_plain_python_and_numba_give_the_same_bits(plain_runs, tmp_path, observe
     for col in ALL_COLUMNS:
         assert np.array_equal(plain[col], jit[col]), col
     assert np.max(np.abs(jit["omega_m"])) > 50.0  # the drive moved
+
+
+def test_the_stationary_frame_gives_the_same_bits_compiled_or_not(plain_runs, tmp_path):
+    """The stationary frame's RK6 on the algebraic flux model (with dead time, inverter and iron losses): the same
+    bits (and another run than the default plant's)."""
+    info_plain, plain = plain_runs[("sensored", "measured", "stationary")]
+    assert not info_plain["compiled"]
+    info_jit, jit = _run_compiled(tmp_path, "sensored", "measured", "jit", "stationary")
+    assert info_jit["compiled"], info_jit["mode"]
+    for col in ALL_COLUMNS:
+        assert np.array_equal(plain[col], jit[col]), col
+    _, default = _run_compiled(tmp_path, "sensored", "measured", "default")
+    assert not np.array_equal(default["i_q"], jit["i_q"])
 
 
 @pytest.mark.parametrize("observer", ["sensored", "ekf5ab"])

@@ -22,6 +22,7 @@ from .kernels import (
     FX_PSI0,
     FX_W0,
     REFERENCE_CODES,
+    STATIONARY_SUBSTEP_ANGLE,
     flux_currents,
     flux_energy,
     flux_jacobian,
@@ -47,6 +48,8 @@ CURRENT_CONTROLS = ("paper", "high_speed")
 #: the speed loop's feedforward (``ControllerParams.speed_feedforward``; docs/cycles.md)
 SPEED_FEEDFORWARDS = ("none", "inertia", "inertia+road")
 DISCRETISATIONS = ("euler", "bilinear")
+#: the frames the plant's RK4 integrates in (``PlantParams.integrator``)
+INTEGRATORS = ("rk4_rotor", "rk6_stationary")
 #: the plant's magnetic model (``PlantParams.flux_model``)
 FLUX_MODELS = ("linear", "algebraic")
 #: the plant's thermal models (``PlantParams.thermal_model``): none (or the one-node winding of ``thermal_R``), the
@@ -497,6 +500,18 @@ class PlantParams:
     #: the rotation is ~(0.1)^5 / 120 = 8e-8 of a sub-step's). 0.1 rad keeps one sub-step up to
     #: 250 rad/s at 10 kHz (the paper's scenarios run as before); 0 = off (always rk4_substeps).
     substep_angle: float = 0.1
+    #: how the plant integrates its winding over a step (docs/performance.md, "The plant's integrator").
+    #: "rk4_rotor" (default; the paper's scenarios): RK4 in the rotor's dq frame, the currents (or, with the
+    #: algebraic flux model, the flux linkages) as the state, sub-steps bounded by ``substep_angle``: the held
+    #: stationary-frame voltage turns in that frame, so the sub-steps, and the cost, grow with the speed.
+    #: "rk6_stationary" (the drive-cycle scenarios): Butcher's RK6 on the flux linkages (psi_alpha, psi_beta) in
+    #: the stationary frame, where the held voltage is constant, the currents explicit functions of them at the
+    #: integrated angle: order 6, seven stages, one sub-step (``rk4_substeps`` at least) up to
+    #: ``stationary_substep_angle`` of electrical angle a sub-step (148 km/h at 1e-4 s); ``substep_angle`` unused
+    integrator: str = "rk4_rotor"
+    #: the largest electrical angle one sub-step of the stationary-frame RK6 may turn [rad] [chosen]
+    #: (``integrator`` 'rk6_stationary'; default ``pmsm_ev.kernels.STATIONARY_SUBSTEP_ANGLE``, its reasons there)
+    stationary_substep_angle: float = STATIONARY_SUBSTEP_ANGLE
     i_d0: float = 0.0  #: initial d current [A]
     i_q0: float = 0.0  #: initial q current [A]
     omega_m0: float = 0.0  #: initial mechanical speed [rad/s] (start-up from standstill)
@@ -722,6 +737,10 @@ class PlantParams:
                  f"rk4_substeps must be a whole number >= 1 (got {self.rk4_substeps})")
         _require(math.isfinite(self.substep_angle) and self.substep_angle >= 0,
                  f"substep_angle must be >= 0 rad, 0 = off (got {self.substep_angle})")
+        _require(self.integrator in INTEGRATORS,
+                 f"integrator must be one of {INTEGRATORS} (got {self.integrator!r})")
+        _require(math.isfinite(self.stationary_substep_angle) and self.stationary_substep_angle > 0,
+                 f"stationary_substep_angle must be > 0 rad (got {self.stationary_substep_angle})")
         for name in ("i_d0", "i_q0", "omega_m0", "theta_e0", "sensor_offset_a", "sensor_offset_b"):
             _require(math.isfinite(getattr(self, name)), f"{name} must be finite")
         _require(math.isfinite(self.sensor_noise) and self.sensor_noise >= 0,

@@ -35,6 +35,14 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     connections of each destination read from each source in one ``getReal`` and set in one ``setReal``, the
     signals set when their value changes; nothing recorded (``fmpy_loop``: what a user writes with fmpy alone);
 
+(k) the cost a step at 0, 50, 100 and 131 km/h held (``SPEEDS_KMH``) for the shipped sensored drive (``wltc3b``:
+    ``FocSensored``, the linear flux model) and the shipped sensorless drive (``wltc3b-sensorless``: injection at
+    standstill, the algebraic flux model; at speed its stationary-frame EKF5, ``FocEkf5AB`` from a flying start,
+    as the unit starts from standstill only): the master on ``speed_slice`` s of the system with its plant started
+    at that speed and ``omega_ref`` held there (``held_speed_spec``), each case's errors against the converged reference of the
+    same slice (``pmsm_cosim.app.reference.converged_errors``: the largest differences of the vehicle's speed and
+    of the electrical angle over the rows) and the ratio of the cost at 131 km/h to the cost at standstill;
+
 and prints one table with the ratios a/b, d/a, j/a, e/f, e/h and a/i, in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
 includes its worker threads). (a)-(c) include the recording of a row every 10 ms, (e), (f) every
@@ -63,14 +71,17 @@ from pathlib import Path
 
 from pmsm_ev import accel
 from pmsm_ev import cycles as pcycles
+from pmsm_ev.params import VehicleParams
 from pmsm_ev_fmus.build import BENCH_FMUS, ENV_BINDING, build_all, build_fmu, read_build_info
 
 from ..engine.errors import CosimError
 from ..engine.fmu import convert_start
 from ..engine.master import Master
+from ..engine.signals import Table
+from ..engine.system import SignalSpec
 from .drive import load_system, project_fmu_dir
 from .overrides import apply_overrides
-from .reference import run_reference
+from .reference import KMH_PER_MS, converged_errors, converged_settings, run_reference
 from .whole_loop import run_whole_loop
 
 SCENARIO = "scenario1"
@@ -83,6 +94,12 @@ DEFAULT_CYCLE_SLICE = 60.0  #: [s] of the cycle in cases (e), (f)
 CYCLE_MEMORY_STOP_TIMES = (900.0, 1800.0)  #: half the WLTC, the whole
 #: the whole WLTC's wall time and memory: the shipped sensorless drive (injection), the scenario users run
 CYCLE_MEMORY_SYSTEM = INJECTION_SYSTEM
+#: case (k): the drives whose cost a step it measures at held speeds, sensored and sensorless, each with the controller
+#: it runs at speed (None: the system's own): the sensorless unit starts from standstill only (its alignment and
+#: polarity check), at speed it runs its stationary-frame EKF5, which FocEkf5AB runs from a flying start
+SPEED_SYSTEMS = (("wltc3b", None), ("wltc3b-sensorless", "ekf5ab"))
+SPEEDS_KMH = (0.0, 50.0, 100.0, 131.0)  #: case (k): the held speeds [km/h] (131: WLTC 3b's top speed, 131.3)
+DEFAULT_SPEED_SLICE = 2.0  #: [s] of each held speed in case (k)
 #: the master's stepping loop of each case run (metrics.json's "loop"; $PMSM_COSIM_LOOP chooses it)
 LOOPS_SEEN: list[str] = []
 
@@ -141,6 +158,55 @@ def reference_us_per_step(stop_time: float, work: Path) -> tuple[float, float]:
     if m["status"] != "completed":
         raise CosimError(f"reference run did not complete: {m['status']}")
     return m["us_per_step"], 1e6 * m["cpu_time_s"] / m["macro_steps"]
+
+
+def held_speed_spec(system: str, kmh: float, stop_time: float, converged: bool = False, at_speed: str | None = None):
+    """Case (k): ``system`` for ``stop_time`` s with the plant started at ``kmh`` [km/h] (``omega_m0``) and the speed
+    reference held there (the cycle's ``omega_ref`` replaced by a constant); above 0 km/h with the controller
+    ``at_speed`` if given, from a flying start (``x0_omega``); with ``converged`` its converged reference
+    (``converged_settings``)."""
+    table_ii = VehicleParams()
+    spec = apply_overrides(system, stop_time=stop_time)
+    plant = spec.component("plant", "case (k)")
+    omega = kmh / KMH_PER_MS / float(plant.start.get("r_w", table_ii.r_w)) * float(plant.start.get("n_g", table_ii.n_g))
+    values = {"plant.omega_m0": omega}
+    controller = at_speed if kmh > 0.0 else None
+    if controller is not None:
+        values["ctrl.x0_omega"] = omega
+    if converged:
+        values.update(converged_settings())
+    spec = apply_overrides(system, stop_time=stop_time, set=values, controller=controller)
+    old = spec.signals["omega_ref"]
+    spec.signals["omega_ref"] = SignalSpec("omega_ref", Table((0.0,), (omega,), "previous", "omega_ref", "rad/s"),
+                                           "rad/s", list(old.drives), "rad/s")
+    return spec
+
+
+def speed_cases(say, work: Path, stop_time: float) -> dict:
+    """Case (k), printed: {(system, km/h): (us/step wall, us/step CPU, errors)}."""
+    out = {}
+    say(f"{'(k) drive at a held speed':<34}{'km/h':>6}{'us/step wall':>14}{'us/step CPU':>13}"
+        f"{'speed err km/h':>16}{'angle err rad':>15}")
+    for system, at_speed in SPEED_SYSTEMS:
+        for kmh in SPEEDS_KMH:
+            run_dir = Path(tempfile.mkdtemp(prefix="speed-", dir=work))
+            ref_dir = Path(tempfile.mkdtemp(prefix="speed-ref-", dir=work))
+            master = Master(held_speed_spec(system, kmh, stop_time, at_speed=at_speed))
+            m = master.run(run_dir, catch_sigint=False)
+            Master(held_speed_spec(system, kmh, stop_time, converged=True, at_speed=at_speed)).run(
+                ref_dir, catch_sigint=False)
+            err = converged_errors(run_dir, ref_dir)
+            cpu = 1e6 * master.loop_cpu_time / m["macro_steps"]
+            out[(system, kmh)] = (m["us_per_step"], cpu, err)
+            label = system if at_speed is None or kmh == 0.0 else f"{system} ({at_speed})"
+            say(f"{label:<34}{kmh:>6g}{m['us_per_step']:>14.2f}{cpu:>13.2f}{err['speed_kmh']:>16.2e}"
+                f"{err['angle_rad']:>15.2e}")
+            shutil.rmtree(run_dir, ignore_errors=True)
+            shutil.rmtree(ref_dir, ignore_errors=True)
+        top, still = out[(system, SPEEDS_KMH[-1])], out[(system, SPEEDS_KMH[0])]
+        say(f"{system + ': cost at ' + f'{SPEEDS_KMH[-1]:g}' + ' / at 0 km/h':<40}{top[0] / still[0]:>14.2f}"
+            f"{top[1] / still[1]:>13.2f}")
+    return out
 
 
 def whole_loop_us_per_step(spec) -> tuple[float, float]:
@@ -361,7 +427,7 @@ def memory_runs(say, stop_times, work: Path, system: str = SCENARIO, options=(),
 # -- the report ------------------------------------------------------------------------------
 def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: bool = True,
               out=sys.stdout, cycle_slice: float = DEFAULT_CYCLE_SLICE, cycle_memory: bool = False,
-              fmpy_case: bool = True) -> dict:
+              fmpy_case: bool = True, speed_slice: float = DEFAULT_SPEED_SLICE) -> dict:
     def say(text: str = "") -> None:
         print(text, file=out, flush=True)
 
@@ -424,6 +490,9 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         for case in ("e", "g"):
             say(f"{f'({case}) x the whole ' + CYCLE + f' ({whole} steps) [s]':<50}"
                 f"{results[case][0] * whole * 1e-6:>14.1f}{results[case][1] * whole * 1e-6:>13.1f}")
+        if speed_slice:
+            say()
+            results["k"] = speed_cases(say, work, speed_slice)
         say(f"master's stepping loop: {', '.join(sorted(set(LOOPS_SEEN)))} (PMSM_COSIM_LOOP chooses)")
         say(f"the FMUs' binding: {bindings()} ({ENV_BINDING} chooses)")
         say(f"load average at end: {load_average()}")
@@ -452,6 +521,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--cycle-slice", type=float, default=DEFAULT_CYCLE_SLICE, metavar="S",
                     help=f"simulated seconds of {CYCLE} in cases (e), (f), from t = 0 (default "
                          f"{DEFAULT_CYCLE_SLICE:g}; at least 10)")
+    ap.add_argument("--speed-slice", type=float, default=DEFAULT_SPEED_SLICE, metavar="S",
+                    help=f"simulated seconds of each held speed in case (k) (default {DEFAULT_SPEED_SLICE:g}; "
+                         f"0 skips it)")
     ap.add_argument("--cycle-memory", action="store_true",
                     help=f"also run the whole {CYCLE} sensorless ('pmsm-cosim run {CYCLE_MEMORY_SYSTEM} --cycle "
                          f"{CYCLE}', 18 million steps) and half of it, wall time and peak memory (about 1-2 min)")
@@ -469,7 +541,7 @@ def run_from_args(a) -> int:
         raise CosimError(f"--cycle-slice must be at most {CYCLE}'s {pcycles.load(CYCLE).duration:g} s "
                          f"(got {a.cycle_slice:g})")
     run_bench(a.slice, memory=not a.no_memory, libcosim=not a.no_libcosim, fmpy_case=not a.no_fmpy,
-              cycle_slice=a.cycle_slice,
+              cycle_slice=a.cycle_slice, speed_slice=a.speed_slice,
               cycle_memory=a.cycle_memory)
     return 0
 
