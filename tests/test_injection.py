@@ -3,7 +3,7 @@ docs/sensorless.md, "Closed loop at zero speed"): the unit (compiled kernels) on
 saturation injection needs (the algebraic flux model), 1 A of current-sensor noise, in one process.
 
 What must hold, as physics and outcomes: the demodulated error is sin 2e of the rotor's angle; from any
-start angle the magnet's polarity is found and torque is available within 0.3 s while the car moves less
+start angle the magnet's polarity is found and torque is available within 0.4 s while the car moves less
 than 1 mm; on 22 deg the car stands on the current the slope needs and restarts without rolling back; the
 polarity test refuses to guess on a motor without the magnet's asymmetry."""
 
@@ -80,14 +80,15 @@ START_ANGLES = ([2 * math.pi * j / 16 for j in range(16)]
 
 
 @pytest.mark.parametrize("index", range(len(START_ANGLES)))
-def test_polarity_right_torque_within_0_3_s_car_still(index):
+def test_polarity_right_torque_within_0_4_s_car_still(index):
     """From 24 start angles (16 over a turn, +-pi/2, pi, within 0.05 rad of them) with 1 A of noise (a seed
     each) and 2 us of dead time, compensated: the magnet's polarity right, FOC on the injection before
-    0.3 s, the car moved < 1 mm at the wheel before the reference rises (0.5 s)."""
+    0.4 s (the acquisition, the identification and the polarity test: 0.33 s), the car moved < 1 mm at the
+    wheel before the reference rises (0.5 s)."""
     p, u = _drive(START_ANGLES[index], seed=400 + index, dead_time=True)
     rows = _run(p, u, 0.5)
     foc = rows[rows[:, 1] == k.MODE_INJECTION]
-    assert len(foc) and foc[0, 0] < 0.3
+    assert len(foc) and foc[0, 0] < 0.4
     assert np.all(rows[rows[:, 0] >= foc[0, 0], 1] == k.MODE_INJECTION)
     assert abs(rows[-1, 8]) < 0.3  # the right polarity: the angle within 0.3 rad, not pi off
     assert np.abs(rows[:, 3]).max() < 1e-3
@@ -97,12 +98,12 @@ def test_polarity_right_torque_within_0_3_s_car_still(index):
 @pytest.mark.parametrize("hold", [1.0, 0.0])
 def test_a_car_parked_on_a_slope_is_held_until_the_unit_gives_torque(hold):
     """Parked on 16 deg with no brake of its own, enabled at rest: with the hill hold (``hold_brake``) the car
-    creeps less than 5 mm before the unit gives torque; without it, it rolls free for the 0.23 s the angle and
-    the polarity take, about 1/2 g sin(delta) t^2 (8 cm; the rotating inertia and rolling resistance make it
-    less)."""
+    creeps less than 5 mm before the unit gives torque; without it, it rolls free for the 0.33 s the angle, the
+    identification and the polarity take, about 1/2 g sin(delta) t^2 (17 cm; the rotating inertia and rolling
+    resistance make it less)."""
     p, u = _drive(1.9, seed=5, hold_brake=hold)
     slope = math.radians(16.0)
-    rows = _run(p, u, 0.35, delta=lambda t: slope)
+    rows = _run(p, u, 0.45, delta=lambda t: slope)
     first = np.nonzero(rows[:, 1] == k.MODE_INJECTION)[0][0]
     travel = abs(rows[first, 3])
     if hold:
