@@ -1713,7 +1713,8 @@ class InjectionParams:
                  f"inj_voltage_max must be >= inj_voltage (got {self.inj_voltage_max} < {self.inj_voltage} V)")
         if u_max is not None:
             _require(self.inj_voltage_max < 0.5 * u_max,
-                     f"inj_voltage_max must be < half the voltage limit {0.5 * u_max:.4g} V (got {self.inj_voltage_max})")
+                     f"inj_voltage_max must be < half the voltage limit {0.5 * u_max:.4g} V "
+                     f"(got {self.inj_voltage_max})")
             _require(self.inj_voltage < 0.5 * u_max,
                      f"inj_voltage must be < half the voltage limit {0.5 * u_max:.4g} V (got {self.inj_voltage})")
         if dt is not None and self.inj_frequency != 0:

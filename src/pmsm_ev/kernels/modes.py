@@ -69,8 +69,8 @@ from .layout import (
     C_EKF_LOS_TIME,
     C_FF,
     C_I_D_REF,
-    C_ID_TIME,
     C_I_Q_MAX,
+    C_ID_TIME,
     C_INJ_I_MAX,
     C_INJ_LOS_ANGLE,
     C_INJ_LOS_TIME,
@@ -113,11 +113,11 @@ from .layout import (
     S_FAULT,
     S_HOLD,
     S_I_DL,
+    S_I_QL,
     S_ID_BLIND,
     S_ID_SUM,
     S_ID_Y,
     S_ID_YE,
-    S_I_QL,
     S_INJ_ADM,
     S_INJ_AXIS,
     S_INJ_ERR,
@@ -171,7 +171,6 @@ from .machine import (
 from .observers import ekf5ab_period
 from .startup import age_episode
 from .transforms import park, wrap_angle
-
 
 # -- the schedules of the acquisition and the polarity test ----------------------------------------
 #: the acquisition's phases (``acquisition_phase``): on the first axis, on the axis 45 deg ahead, the tracking
