@@ -202,6 +202,8 @@ def test_a_stop_on_the_slope_without_roll_back_on_the_ev_drives_reference(feedfo
     ("ctrl.inj_voltage=0", "inj_voltage must be > 0"),
     ("ctrl.inj_voltage=150", "inj_voltage must be < half the voltage limit"),
     ("ctrl.low_speed=hfi", "low_speed must be one of"),
+    ("ctrl.id_time=0.001", "id_time must be 0 (not measured) or >= 0.005 s"),
+    ("ctrl.inj_voltage_max=110", "inj_voltage_max must be < half the voltage limit"),
 ])
 def test_bad_injection_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, setting, names):
     from orchestrator_support import project_fmus

@@ -481,6 +481,12 @@ def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
     ({"low_speed": "injection", "inj_voltage": 150.0}, "inj_voltage"),
     ({"low_speed": "injection", "inj_blend_low": 40.0}, "inj_blend_low"),
     ({"low_speed": "injection", "hold_brake": -1.0}, "hold_brake"),
+    ({"low_speed": "injection", "id_time": 0.001}, "id_time"),
+    ({"low_speed": "injection", "id_time": -0.05}, "id_time"),
+    ({"low_speed": "injection", "saliency_min": 0.9}, "saliency_min"),
+    ({"low_speed": "injection", "inj_axis_cos": 1.0}, "inj_axis_cos"),
+    ({"low_speed": "injection", "inj_voltage_max": 20.0}, "inj_voltage_max"),
+    ({"low_speed": "injection", "inj_voltage_max": 120.0}, "inj_voltage_max"),
 ])
 def test_bad_injection_parameters_are_refused_by_name(kw, names):
     with pytest.raises(ParameterError, match=names) as err:
@@ -491,3 +497,16 @@ def test_bad_injection_parameters_are_refused_by_name(kw, names):
 def test_lower_frequencies_are_whole_half_waves():
     u, _, c = _unit(inj_frequency=2500.0)
     assert c[k.C_INJ_M] == 2.0
+
+
+def test_an_identification_that_sees_no_current_gives_no_torque_and_latches_the_safe_state():
+    """No current answers the square wave (an open phase, a DC link at 0): nothing is identified (the model's gain
+    and amplitude stay), the polarity test cannot decide, and after the second try the fault latches (output
+    fault 2) in the acquisition, with no current asked for: never torque on a guess."""
+    u, _, _ = _unit()
+    for _ in range(round(1.2 / u.dt)):
+        out = u.step(0.0, 0.0, 50.0)
+    s = u._s
+    assert u.L_d_id == 0.0 and u.L_q_id == 0.0 and s[k.S_INJ_VA] == 0.0
+    assert out[13] == k.FAULT_LATCHED and out[12] == k.MODE_ACQUIRE
+    assert out[6] == 0.0 and u.T_brake > 0.0  # no q current asked for; the hill hold keeps the car

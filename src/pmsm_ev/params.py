@@ -1709,14 +1709,15 @@ class InjectionParams:
                  f"inj_blend_low must be < inj_blend_high (got {self.inj_blend_low} >= {self.inj_blend_high} rad/s)")
         _require(self.inj_hysteresis < self.inj_blend_high - self.inj_blend_low,
                  f"inj_hysteresis must be < inj_blend_high - inj_blend_low (got {self.inj_hysteresis} rad/s)")
+        if u_max is not None:
+            _require(self.inj_voltage < 0.5 * u_max,
+                     f"inj_voltage must be < half the voltage limit {0.5 * u_max:.4g} V (got {self.inj_voltage})")
         _require(self.inj_voltage_max >= self.inj_voltage,
                  f"inj_voltage_max must be >= inj_voltage (got {self.inj_voltage_max} < {self.inj_voltage} V)")
         if u_max is not None:
             _require(self.inj_voltage_max < 0.5 * u_max,
                      f"inj_voltage_max must be < half the voltage limit {0.5 * u_max:.4g} V "
                      f"(got {self.inj_voltage_max})")
-            _require(self.inj_voltage < 0.5 * u_max,
-                     f"inj_voltage must be < half the voltage limit {0.5 * u_max:.4g} V (got {self.inj_voltage})")
         if dt is not None and self.inj_frequency != 0:
             m = 1.0 / (2.0 * self.inj_frequency * dt)
             allowed = ", ".join(f"{1.0 / (2.0 * k * dt):.6g}" for k in range(1, 9))
