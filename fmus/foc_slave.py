@@ -151,6 +151,9 @@ class FocSlave(DriveSlave):
         self.add_output("L_q_id", "H", "the identified incremental q inductance at zero current: 1 / the d admittance "
                                        "of the injection's answers on the q axis" + ident, discrete=True)
         self.add_output("saliency_id", None, "the identified saliency L_q_id / L_d_id" + ident, discrete=True)
+        self.add_output("R_s_id", "Ohm", "the identified stator resistance: the d PI's voltage difference over the "
+                                         "current difference of two d current levels at standstill" + ident,
+                        discrete=True)
         self.add_output("blind", None, "1: the identified saliency is below saliency_min, the injection cannot see "
                                        "the rotor's axis well enough; 0 otherwise", discrete=True)
         self.add_output("axis_cos", None, "cos 2e of the tracking observer's axis error from the d admittance and "
@@ -185,6 +188,7 @@ class FocSlave(DriveSlave):
     L_d_id = _unit_output("L_d_id", "``ControlUnit.L_d_id``")
     L_q_id = _unit_output("L_q_id", "``ControlUnit.L_q_id``")
     saliency_id = _unit_output("saliency_id", "``ControlUnit.saliency_id``")
+    R_s_id = _unit_output("R_s_id", "``ControlUnit.R_s_id``")
     blind = _unit_output("blind", "``ControlUnit.blind``")
     axis_cos = _unit_output("axis_cos", "``ControlUnit.axis_cos``")
     del _unit_output

@@ -342,6 +342,9 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                            "below it)"),
     "inj_voltage_max": ("V", "the square wave's largest amplitude: after the identification it is the one whose "
                              "error signal has the data sheet motor's current per unit of sin 2e at inj_voltage"),
+    "rs_current": ("A", "the R_s test at enable: the upper d current level (the lower: half of it), on the found d "
+                        "axis at standstill"),
+    "rs_time": ("s", "the R_s test: the time at each level (the second half measured); 0: no test"),
     "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "
                            "identified admittances), filtered, stays below this for inj_los_time"),
     # ControlUnit

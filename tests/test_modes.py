@@ -193,14 +193,14 @@ def test_a_lost_ekf_searches_again_from_an_unknown_start_as_an_episode():
 @pytest.mark.parametrize("identified", [False, True])
 def test_acquired_only_at_the_end_of_the_acquisition(identified):
     """The acquisition ends after its two axes and the settling, plus the identification on the d and the q
-    axis at the first acquisition after enable (none once the motor is identified)."""
+    axis and the R_s test's two levels at the first acquisition after enable (none after)."""
     _, s, c = _unit()
     if identified:
-        s[k.S_ID_Y:k.S_ID_Y + 2] = [4500.0, 3900.0]
-    end = 2 * c[k.C_ACQ_TIME] + c[k.C_ACQ_SETTLE] + (0.0 if identified else 2 * c[k.C_ID_TIME])
+        s[k.S_ID_DONE] = 1.0
+    end = 2 * c[k.C_ACQ_TIME] + c[k.C_ACQ_SETTLE] + (0.0 if identified else 2 * c[k.C_ID_TIME] + 2 * c[k.C_RS_TIME])
     s[k.S_MODE_TIME] = end - 1e-9
     assert k.detect_acquired(s, c) == k.EV_NONE
-    s[k.S_MODE_TIME] = end
+    s[k.S_MODE_TIME] = end + 1e-12  # (the sum's rounding)
     assert k.detect_acquired(s, c) == k.EV_ACQUIRED
 
 
@@ -209,9 +209,13 @@ def test_the_identification_measures_on_the_found_d_axis_then_on_q():
     settled = 2 * c[k.C_ACQ_TIME] + c[k.C_ACQ_SETTLE]
     t_id = c[k.C_ID_TIME]
     assert t_id > 0.0
+    t_rs = c[k.C_RS_TIME]
     phases = [k.acquisition_phase(s, c, t) for t in (0.0, c[k.C_ACQ_TIME], settled - 1e-9, settled,
-                                                     settled + t_id, settled + 2 * t_id)]
-    assert phases == [k.PHASE_AXIS0, k.PHASE_AXIS45, k.PHASE_SETTLE, k.PHASE_ID_D, k.PHASE_ID_Q, k.PHASE_OVER]
+                                                     settled + 0.5 * t_id, settled + t_id, settled + 1.5 * t_id,
+                                                     settled + 2 * t_id, settled + 2 * t_id + t_rs,
+                                                     settled + 2 * t_id + 2 * t_rs)]
+    assert phases == [k.PHASE_AXIS0, k.PHASE_AXIS45, k.PHASE_SETTLE, k.PHASE_ID_D, k.PHASE_ID_D2, k.PHASE_ID_Q,
+                      k.PHASE_ID_Q2, k.PHASE_RS1, k.PHASE_RS2, k.PHASE_OVER]
 
 
 @pytest.mark.parametrize(("y_pos", "y_neg", "event"), [
@@ -409,6 +413,21 @@ def test_identify_says_blind_below_the_least_saliency_and_bounds_the_amplitude()
     assert s[k.S_ID_BLIND] == 0.0 and s[k.S_INJ_VA] == c[k.C_INJ_V]
 
 
+@pytest.mark.parametrize("v_dt", [0.0, 0.3])
+def test_identify_rs_cancels_the_dead_times_voltage_by_two_levels(v_dt):
+    """(ID2): the d PI's steady voltage R i + v_dt at the two levels gives R whatever the dead time's v_dt; a
+    current that did not rise gives nothing."""
+    _, s, c = _unit()
+    r, i2, n = 0.0123, c[k.C_RS_I], 200
+    s[k.S_RS_SUM:k.S_RS_SUM + 6] = [n * (r * 0.5 * i2 + v_dt), n * 0.5 * i2, n * (r * i2 + v_dt), n * i2, n, n]
+    k.identify_rs(s, c)
+    assert s[k.S_ID_RS] == pytest.approx(r, rel=1e-12)
+    _, s, c = _unit()
+    s[k.S_RS_SUM:k.S_RS_SUM + 6] = [n * v_dt, 0.0, n * v_dt, n * 0.1, n, n]  # an open phase: no current
+    k.identify_rs(s, c)
+    assert s[k.S_ID_RS] == 0.0
+
+
 def test_identify_leaves_the_model_where_no_voltage_reached_the_motor():
     _, s, c = _unit()
     _sums(s, 0.0, 0.0, 0.0, c[k.C_INJ_V])
@@ -487,6 +506,8 @@ def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
     ({"low_speed": "injection", "inj_axis_cos": 1.0}, "inj_axis_cos"),
     ({"low_speed": "injection", "inj_voltage_max": 20.0}, "inj_voltage_max"),
     ({"low_speed": "injection", "inj_voltage_max": 120.0}, "inj_voltage_max"),
+    ({"low_speed": "injection", "rs_time": 0.001}, "rs_time"),
+    ({"low_speed": "injection", "rs_current": 0.0}, "rs_current"),
 ])
 def test_bad_injection_parameters_are_refused_by_name(kw, names):
     with pytest.raises(ParameterError, match=names) as err:
@@ -507,6 +528,6 @@ def test_an_identification_that_sees_no_current_gives_no_torque_and_latches_the_
     for _ in range(round(1.2 / u.dt)):
         out = u.step(0.0, 0.0, 50.0)
     s = u._s
-    assert u.L_d_id == 0.0 and u.L_q_id == 0.0 and s[k.S_INJ_VA] == 0.0
+    assert u.L_d_id == 0.0 and u.L_q_id == 0.0 and u.R_s_id == 0.0 and s[k.S_INJ_VA] == 0.0
     assert out[13] == k.FAULT_LATCHED and out[12] == k.MODE_ACQUIRE
     assert out[6] == 0.0 and u.T_brake > 0.0  # no q current asked for; the hill hold keeps the car

@@ -85,7 +85,8 @@ _INJECTION_SLOTS = (
     ("inj_los_angle", _k.C_INJ_LOS_ANGLE), ("inj_los_time", _k.C_INJ_LOS_TIME),
     ("ekf_los_current", _k.C_EKF_LOS_I), ("ekf_los_time", _k.C_EKF_LOS_TIME),
     ("inj_current_limit", _k.C_INJ_I_MAX), ("pol_frame_band", _k.C_POL_BAND), ("id_time", _k.C_ID_TIME),
-    ("saliency_min", _k.C_SALIENCY_MIN), ("inj_axis_cos", _k.C_AXIS_COS), ("inj_voltage_max", _k.C_INJ_V_MAX))
+    ("saliency_min", _k.C_SALIENCY_MIN), ("inj_axis_cos", _k.C_AXIS_COS), ("inj_voltage_max", _k.C_INJ_V_MAX),
+    ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME))
 #: state slots of the sensorless start-up, zeroed by ``reset``
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
@@ -391,6 +392,12 @@ class ControlUnit:
     def saliency_id(self) -> float:
         """The identified saliency L_q / L_d [-]; 0 until identified."""
         return self.L_q_id / self.L_d_id if self.L_d_id > 0.0 else 0.0
+
+    @property
+    def R_s_id(self) -> float:
+        """The identified stator resistance [Ohm] (the R_s test at enable, ``pmsm_ev.kernels.identify_rs``); 0 until
+        identified, and for a unit without injection."""
+        return float(self._s[_k.S_ID_RS]) if self.injecting else 0.0
 
     @property
     def blind(self) -> float:

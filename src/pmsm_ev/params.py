@@ -1680,6 +1680,17 @@ class InjectionParams:
     #: take no larger a share of the angle than on the data sheet's motor. The d current's ripple grows with it
     #: (+-dt V / (2 L_d): +-20 A at 90 V on Table I's L_d)
     inj_voltage_max: float = 90.0
+    #: the R_s test at enable, its upper d current [A] [chosen: 200 A, the polarity test's: the winding heats no
+    #: more than there]; the lower level is half of it. After the identification, on the found d axis at
+    #: standstill, the d current is held at each level (``rs_time``) and R_s = (v_2 - v_1) / (i_2 - i_1) from
+    #: the d PI's integral (``pmsm_ev.kernels.identify_rs``, eq ID2): the difference cancels the inverter's
+    #: dead-time voltage, which is the same at both levels where the phases' currents keep their signs. 100 A
+    #: apart give 0.87 V on Table I's 8.7 mOhm
+    rs_current: float = 200.0
+    #: ... the time at each level [s] [chosen: 40 ms, the second half measured: the current loop settles in a
+    #: few ms]; 0: no test (a drive already commissioned). Enable to torque with it: 0.41 s, within the 0.5 s a
+    #: driver waits for a car that has said it is ready
+    rs_time: float = 0.04
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
@@ -1703,6 +1714,10 @@ class InjectionParams:
                  f"inj_axis_cos must be within (-1, 1): a cosine of 2e (got {self.inj_axis_cos})")
         _require(self.saliency_min >= 1.0,
                  f"saliency_min must be >= 1: a saliency L_q / L_d (got {self.saliency_min})")
+        _require(self.rs_time == 0.0 or self.rs_time >= 0.002,
+                 f"rs_time must be 0 (no test) or >= 0.002 s, ten current-loop time constants (got {self.rs_time})")
+        _require(self.rs_time == 0.0 or self.rs_current > 0.0,
+                 f"rs_current must be > 0 A (got {self.rs_current})")
         _require(self.id_time == 0.0 or self.id_time >= 0.005,
                  f"id_time must be 0 (not measured) or >= 0.005 s, 50 answers an axis (got {self.id_time})")
         _require(self.inj_blend_low < self.inj_blend_high,

@@ -92,6 +92,8 @@ from .layout import (
     C_POL_RAMP,
     C_PSI,
     C_REF_MODE,
+    C_RS_I,
+    C_RS_TIME,
     C_SALIENCY_MIN,
     C_T_MAX,
     FAULT_LATCHED,
@@ -115,6 +117,8 @@ from .layout import (
     S_I_DL,
     S_I_QL,
     S_ID_BLIND,
+    S_ID_DONE,
+    S_ID_RS,
     S_ID_SUM,
     S_ID_Y,
     S_ID_YE,
@@ -138,6 +142,7 @@ from .layout import (
     S_POL_AXIS,
     S_POL_TRIES,
     S_RESID_F,
+    S_RS_SUM,
     S_THETA_CTRL,
     S_TRK,
     S_W_INT,
@@ -175,8 +180,9 @@ from .transforms import park, wrap_angle
 # -- the schedules of the acquisition and the polarity test ----------------------------------------
 #: the acquisition's phases (``acquisition_phase``): on the first axis, on the axis 45 deg ahead, the tracking
 #: observer settling, the identification on the found d axis at the square wave's amplitude and at twice it, on
-#: the q axis at both, over
-PHASE_AXIS0, PHASE_AXIS45, PHASE_SETTLE, PHASE_ID_D, PHASE_ID_D2, PHASE_ID_Q, PHASE_ID_Q2, PHASE_OVER = range(8)
+#: the q axis at both, the R_s test's d current at its lower and its upper level, over
+(PHASE_AXIS0, PHASE_AXIS45, PHASE_SETTLE, PHASE_ID_D, PHASE_ID_D2, PHASE_ID_Q, PHASE_ID_Q2, PHASE_RS1, PHASE_RS2,
+ PHASE_OVER) = range(10)
 #: the injection's angle and the EKF's are of opposite polarities where they differ by more than this [rad]:
 #: half a turn of the electrical angle's two candidates 0 and pi (the tracking observer sees the axis, not its
 #: direction; the EKF's back-EMF sees the direction)
@@ -185,9 +191,15 @@ FLIP_ANGLE = 0.5 * math.pi
 
 @kernel()
 def identification_time(s, c):
-    """The identification's time on each axis [s]: ``C_ID_TIME`` until the unit has identified its motor, 0
-    after (a reacquisition, which may find the car rolling, does not measure again)."""
-    return c[C_ID_TIME] if s[S_ID_Y] == 0.0 else 0.0
+    """The identification's time on each axis [s]: ``C_ID_TIME`` in the first acquisition after enable, 0 after
+    (a reacquisition, which may find the car rolling, does not measure again)."""
+    return c[C_ID_TIME] if s[S_ID_DONE] == 0.0 else 0.0
+
+
+@kernel()
+def rs_test_time(s, c):
+    """The R_s test's time at each level [s]: ``C_RS_TIME`` in the first acquisition after enable, 0 after."""
+    return c[C_RS_TIME] if s[S_ID_DONE] == 0.0 else 0.0
 
 
 @kernel()
@@ -207,7 +219,43 @@ def acquisition_phase(s, c, t):
     for j in range(4):
         if t < t_settled + (j + 1) * half:
             return PHASE_ID_D + j
+    t_rs = rs_test_time(s, c)
+    if t < t_settled + 4.0 * half + t_rs:
+        return PHASE_RS1
+    if t < t_settled + 4.0 * half + 2.0 * t_rs:
+        return PHASE_RS2
     return PHASE_OVER
+
+
+@kernel()
+def rs_level_time(s, c, t):
+    """The time [s] since the R_s test's present level began (``t`` the time in the acquisition, in
+    ``PHASE_RS1`` or ``PHASE_RS2``)."""
+    t_rs1 = 2.0 * c[C_ACQ_TIME] + c[C_ACQ_SETTLE] + 2.0 * identification_time(s, c)
+    return t - t_rs1 - (rs_test_time(s, c) if acquisition_phase(s, c, t) == PHASE_RS2 else 0.0)
+
+
+@kernel()
+def identify_rs(s, c):
+    """R_s from the R_s test: the d current held at two levels on the found d axis at standstill (no back-EMF, no
+    change of flux: the d voltage is R_s i_d plus the inverter's dead-time voltage, about the same at both levels
+    where the current keeps its sign), the d PI's integral (its steady voltage, without the proportional part's
+    noise) over the current:
+
+        R_s = (v_2 - v_1) / (i_2 - i_1)                                                         (ID2)
+
+    the difference cancelling the dead-time voltage. Nothing where a level brought no sample or the current did
+    not rise by half the levels' difference (``S_ID_RS`` stays 0)."""
+    n1 = s[S_RS_SUM + 4]
+    n2 = s[S_RS_SUM + 5]
+    if n1 < 1.0 or n2 < 1.0:
+        return
+    di = s[S_RS_SUM + 3] / n2 - s[S_RS_SUM + 1] / n1
+    if not di > 0.25 * c[C_RS_I]:
+        return
+    r = (s[S_RS_SUM + 2] / n2 - s[S_RS_SUM] / n1) / di  # (ID2)
+    if r > 0.0:
+        s[S_ID_RS] = r
 
 
 @kernel()
@@ -443,6 +491,8 @@ def enter_acquire(s, c, i_alpha, i_beta):
         s[S_ACQ + k] = 0.0
     for k in range(8):
         s[S_ID_SUM + k] = 0.0
+    for k in range(6):
+        s[S_RS_SUM + k] = 0.0
     s[S_INT_D] = 0.0
     s[S_INT_Q] = 0.0
     s[S_I_DL] = 0.0
@@ -600,7 +650,7 @@ def transition(s, c, mode, event, i_alpha, i_beta):
 
 # -- the step ------------------------------------------------------------------------------------
 @kernel()
-def collect(s, c, mode, t, phase, answer):
+def collect(s, c, mode, t, phase, answer, i_d):
     """The measurements of the acquisition and of the polarity test: the answers' sin 2e summed on each of
     the acquisition's axes (and, as it ends, the tracking observer put on the axis they give: 2e =
     atan2(sin 2e, -(-cos 2e)), and the polarity test's frame with it), the d admittances summed on the found d
@@ -612,13 +662,22 @@ def collect(s, c, mode, t, phase, answer):
             s[S_ACQ + phase] += s[S_INJ_ERR]
             s[S_ACQ + 2 + phase] += 1.0
         starts = phase_starts(s, c, t, phase)
+        if (phase == PHASE_RS1 or phase == PHASE_RS2) and rs_level_time(s, c, t) >= 0.5 * c[C_RS_TIME]:
+            j = phase - PHASE_RS1  # the level's second half: the current settled
+            s[S_RS_SUM + 2 * j] += s[S_INT_D]
+            s[S_RS_SUM + 2 * j + 1] += i_d
+            s[S_RS_SUM + 4 + j] += 1.0
         if answer and PHASE_ID_D <= phase <= PHASE_ID_Q2 and not starts:
             s[S_ID_SUM + phase - PHASE_ID_D] += s[S_INJ_ADM]
             s[S_ID_SUM + 4 + phase - PHASE_ID_D] += 1.0
-        if starts and PHASE_ID_D2 <= phase <= PHASE_OVER and identification_time(s, c) > 0.0:
-            s[S_INJ_SKIP] = 2.0  # the amplitude steps, the axis jumps by 90 deg (to q, back to d for the polarity)
-            if phase == PHASE_OVER:
+        if starts and PHASE_ID_D2 <= phase <= PHASE_RS1 and identification_time(s, c) > 0.0:
+            s[S_INJ_SKIP] = 2.0  # the amplitude steps, the axis jumps by 90 deg (to q, back to d)
+        if starts and phase == PHASE_OVER and s[S_ID_DONE] == 0.0:
+            if identification_time(s, c) > 0.0:
+                s[S_INJ_SKIP] = 2.0
                 identify(s, c)
+            identify_rs(s, c)
+            s[S_ID_DONE] = 1.0
         if phase == 1 and t - dt < c[C_ACQ_TIME]:  # the axis jumps by 45 deg: two answers straddle it
             s[S_INJ_SKIP] = 2.0
         elif phase == 2 and t - dt < 2.0 * c[C_ACQ_TIME]:  # the axis found: sin 2e and -cos 2e
@@ -697,7 +756,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         if mode == MODE_INJECTION and share == 1.0:  # (at the full amplitude, not in the polarity test: its d
             # current saturates the d axis)
             s[S_AXIS_F] += gain * (axis_cosine(s, s[S_INJ_ADM]) - s[S_AXIS_F])
-    collect(s, c, mode, t, phase, answer)
+    collect(s, c, mode, t, phase, answer, f_d)
     # the event and the transition
     event = detect(s, c, mode)
     s[S_EVENT] = event
@@ -723,6 +782,12 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             j = acquisition_phase(s, c, t) - PHASE_ID_D  # (ID1): V, 2 V on d, then on q
             offset = 0.5 * math.pi if j >= 2 else 0.0
             amplitude = c[C_INJ_V] * (2.0 if j % 2 == 1 else 1.0)
+        elif mode == MODE_ACQUIRE and PHASE_RS1 <= acquisition_phase(s, c, t) <= PHASE_RS2:
+            # (ID2): the two levels on the polarity test's frame (held where the acquisition put it: the
+            # observer's noise leaks no torque)
+            i_dref = c[C_RS_I] * (0.5 if acquisition_phase(s, c, t) == PHASE_RS1 else 1.0)
+            theta = polarity_frame(s, c)
+            offset = wrap_angle(s[S_TRK] - theta)
         elif mode == MODE_POLARITY:
             i_dref, _, _ = polarity_schedule(c, t)
             theta = polarity_frame(s, c)
