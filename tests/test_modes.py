@@ -18,7 +18,8 @@ from pmsm_ev.params import ControllerParams, InjectionParams, ParameterError
 
 INJECTION_MODES = (k.MODE_ACQUIRE, k.MODE_POLARITY, k.MODE_INJECTION, k.MODE_EKF)
 EVENTS = (k.EV_ACQUIRED, k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED, k.EV_POLARITY_UNRESOLVED, k.EV_FAST,
-          k.EV_SLOW, k.EV_INJECTION_LOST, k.EV_DISAGREE, k.EV_EKF_LOST, k.EV_FLIPPED)
+          k.EV_SLOW, k.EV_INJECTION_LOST, k.EV_DISAGREE, k.EV_EKF_LOST, k.EV_FLIPPED, k.EV_BLIND_STOP,
+          k.EV_STILL_PARKED)
 
 
 def _unit(**kw):
@@ -39,7 +40,7 @@ ROWS = tuple(row for row in k.TRANSITIONS if row[1] in EVENTS)
 def test_table_has_one_row_per_pair_and_known_modes_and_actions():
     pairs = [(row[0], row[1]) for row in k.TRANSITIONS]
     assert len(pairs) == len(set(pairs))
-    assert len(ROWS) == 11
+    assert len(ROWS) == 13
     actions = {getattr(k, n) for n in dir(k) if n.startswith("A_")}
     for mode, event, new, action in ROWS:
         assert mode in INJECTION_MODES and new in INJECTION_MODES
@@ -164,6 +165,49 @@ def test_a_flipped_tracking_observer_is_turned_onto_the_ekfs_polarity_as_an_epis
     assert s[k.S_TRK] == pytest.approx(0.3 - math.pi) and s[k.S_INT_Q] == -4.0
     assert s[k.S_X + 3] == pytest.approx(0.3 - math.pi + 0.1)
     assert s[k.S_EPISODE] > 0.0 and s[k.S_DISAGREE_V:k.S_DISAGREE_V + 2] == [1.0, 0.0]
+
+
+def test_a_blind_unit_at_a_stop_parks_the_car_on_the_brake_and_finds_the_angle_afresh():
+    """EV_BLIND_STOP: the friction brake asked for (the hill hold's), the acquisition from the start (its sums
+    cleared, no current), no episode: the unit said it is blind, nothing was lost."""
+    u, s, c = _unit()
+    s[k.S_ACQ:k.S_ACQ + 4] = [1.0, 2.0, 3.0, 4.0]
+    s[k.S_W_INT] = 9.0
+    assert _go(s, c, k.MODE_INJECTION, k.EV_BLIND_STOP) == k.MODE_ACQUIRE
+    assert s[k.S_PARKED] == 1.0 and s[k.S_HOLD] == c[k.C_HOLD_BRAKE] > 0.0
+    assert s[k.S_ACQ:k.S_ACQ + 4] == [0.0] * 4 and s[k.S_W_INT] == 0.0 and s[k.S_EPISODE] == 0.0
+
+
+def test_still_parked_acquires_again_and_the_first_torque_lets_go():
+    _, s, c = _unit()
+    s[k.S_PARKED], s[k.S_HOLD] = 1.0, c[k.C_HOLD_BRAKE]
+    s[k.S_ACQ] = 5.0
+    assert _go(s, c, k.MODE_ACQUIRE, k.EV_STILL_PARKED) == k.MODE_ACQUIRE
+    assert s[k.S_ACQ] == 0.0 and s[k.S_PARKED] == 1.0 and s[k.S_HOLD] == c[k.C_HOLD_BRAKE]
+    assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_RIGHT) == k.MODE_INJECTION
+    assert s[k.S_PARKED] == 0.0 and s[k.S_HOLD] == 0.0
+
+
+@pytest.mark.parametrize(("blind", "omega_ref", "omega", "t", "event"), [
+    (1.0, 0.0, 2.0, 0.1, k.EV_BLIND_STOP),
+    (0.0, 0.0, 2.0, 0.1, k.EV_NONE),  # it sees: the tracking observer holds the angle
+    (1.0, 5.0, 2.0, 0.1, k.EV_NONE),  # the driver asks to move
+    (1.0, 0.0, 20.0, 0.1, k.EV_NONE),  # still in the blend: the EKF sees
+    (1.0, 0.0, 2.0, 0.01, k.EV_NONE),  # just back in injection
+])
+def test_blind_stop_only_for_a_blind_unit_asked_to_stand_below_the_blend(blind, omega_ref, omega, t, event):
+    _, s, c = _unit()
+    s[k.S_ID_BLIND], s[k.S_OMEGA_CTRL], s[k.S_MODE_TIME] = blind, omega, t
+    assert k.detect_blind_stop(s, c, omega_ref) == event
+
+
+@pytest.mark.parametrize(("parked", "omega_ref", "event"), [
+    (1.0, 0.0, k.EV_STILL_PARKED), (1.0, 3.0, k.EV_ACQUIRED), (0.0, 0.0, k.EV_ACQUIRED)])
+def test_a_parked_acquisition_starts_again_until_the_driver_asks_to_move(parked, omega_ref, event):
+    _, s, c = _unit()
+    s[k.S_ID_DONE], s[k.S_PARKED] = 1.0, parked
+    s[k.S_MODE_TIME] = 2 * c[k.C_ACQ_TIME] + c[k.C_ACQ_SETTLE] + 1e-9
+    assert k.detect(s, c, k.MODE_ACQUIRE, omega_ref) == event
 
 
 def test_fast_hands_over_to_the_ekf_alone():

@@ -401,12 +401,14 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_RS_SUM", 6, "the R_s test: sums of the d PI's integral [V] and of the d current [A] at the lower level, the "
                     "same at the upper, how many samples each [-]"),
     ("S_ID_RS", 1, "the identified stator resistance [Ohm] (0: not identified)"),
+    ("S_PARKED", 1, "1.0 while a blind unit (S_ID_BLIND) holds the car at a stop on the friction brake and finds the "
+                    "angle afresh for the restart"),
     ("S_ID_BLIND", 1, "1.0 where the identified saliency L_q / L_d is below C_SALIENCY_MIN: the injection cannot "
                       "see the axis well enough"),
     ("S_AXIS_F", 1, "cos 2e from the d admittance and the identified admittances, low-pass filtered [-]"),
     ("S_DISAGREE_V", 2, "cos and sin of the injection's angle less the EKF's, low-pass filtered (S_DISAGREE_F is "
                         "their angle: no wrap at +-pi) [-]"),
-), size=225)
+), size=226)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (

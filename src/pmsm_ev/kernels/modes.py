@@ -63,11 +63,13 @@ from .layout import (
     C_AXIS_COS,
     C_BLEND_HI,
     C_BLEND_HYST,
+    C_BLEND_LO,
     C_DT,
     C_EKF_LOS_EMF,
     C_EKF_LOS_I,
     C_EKF_LOS_TIME,
     C_FF,
+    C_HOLD_BRAKE,
     C_I_D_REF,
     C_I_Q_MAX,
     C_ID_TIME,
@@ -138,6 +140,7 @@ from .layout import (
     S_MODE_TIME,
     S_OMEGA_CTRL,
     S_P,
+    S_PARKED,
     S_POL,
     S_POL_AXIS,
     S_POL_TRIES,
@@ -153,6 +156,7 @@ from .machine import (
     A_EKF_ALONE,
     A_FLIP_TORQUE,
     A_INJECTION_ON,
+    A_PARK,
     A_POLARITY,
     A_REACQUIRE,
     A_REPOLARIZE,
@@ -161,6 +165,7 @@ from .machine import (
     A_RETRY,
     A_TORQUE,
     EV_ACQUIRED,
+    EV_BLIND_STOP,
     EV_DISAGREE,
     EV_EKF_LOST,
     EV_FAST,
@@ -171,6 +176,7 @@ from .machine import (
     EV_POLARITY_RIGHT,
     EV_POLARITY_UNRESOLVED,
     EV_SLOW,
+    EV_STILL_PARKED,
     next_mode,
 )
 from .observers import ekf5ab_period
@@ -440,6 +446,18 @@ def detect_ekf_lost(s, c):
 
 
 @kernel()
+def detect_blind_stop(s, c, omega_ref):
+    """EV_BLIND_STOP in FOC on the injection when the unit is blind (``S_ID_BLIND``: the identified saliency below
+    ``C_SALIENCY_MIN``), the driver asks for a stop (the reference 0) and the car is below the blend
+    (``C_BLEND_LO``: the injection alone carries the angle), ``C_INJ_LOS_TIME`` after the mode's start: a
+    tracking observer on so weak an error signal drifts while the car stands, so the car is held on the friction
+    brake and the angle found afresh for the restart (``park_car``)."""
+    if s[S_ID_BLIND] == 0.0 or omega_ref != 0.0 or s[S_MODE_TIME] < c[C_INJ_LOS_TIME]:
+        return EV_NONE
+    return EV_BLIND_STOP if abs(s[S_OMEGA_CTRL]) < c[C_BLEND_LO] else EV_NONE
+
+
+@kernel()
 def detect_speed(s, c, mode, omega):
     """EV_FAST in injection at |omega| >= ``C_BLEND_HI``; EV_SLOW on the EKF below ``C_BLEND_HI`` less
     ``C_BLEND_HYST``; neither within ``C_INJ_LOS_TIME`` of the mode's start (a speed that jumps, as an
@@ -454,15 +472,20 @@ def detect_speed(s, c, mode, omega):
 
 
 @kernel()
-def detect(s, c, mode):
-    """This period's event, by priority: a loss of synchronism first, then the mode's own."""
+def detect(s, c, mode, omega_ref):
+    """This period's event, by priority: a loss of synchronism first, then the mode's own (``omega_ref`` [rad/s]:
+    the speed reference of the period). A parked acquisition (``S_PARKED``) that is over with the reference still
+    0 gives EV_STILL_PARKED: the angle is found again, not held by the tracking observer."""
     if mode == MODE_ACQUIRE:
-        return detect_acquired(s, c)
+        ev = detect_acquired(s, c)
+        return EV_STILL_PARKED if ev == EV_ACQUIRED and s[S_PARKED] != 0.0 and omega_ref == 0.0 else ev
     if mode == MODE_POLARITY:
         ev = detect_injection_lost(s, c)
         return ev if ev == EV_INJECTION_LOST else detect_polarity(s, c)
     if mode == MODE_INJECTION:
         ev = detect_injection_lost(s, c)
+        if ev == EV_NONE:
+            ev = detect_blind_stop(s, c, omega_ref)
         return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_OMEGA_CTRL])
     ev = detect_ekf_lost(s, c)
     return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_X + 2])
@@ -527,9 +550,10 @@ def polarity_frame(s, c):
 @kernel()
 def enter_torque(s, c):
     """FOC on the injection: the speed loop's integral from 0 (the car is at rest, no torque yet), the EKF
-    put on the tracking observer; the hill hold of enable released (``S_HOLD``)."""
+    put on the tracking observer; the hill hold of enable (or a blind unit's park) released (``S_HOLD``)."""
     s[S_W_INT] = 0.0
     s[S_HOLD] = 0.0
+    s[S_PARKED] = 0.0
     trust_injection(s, c)
     clear_detectors(s)
 
@@ -595,6 +619,15 @@ def begin_episode_now(s, c):
 
 
 @kernel()
+def park_car(s, c, i_alpha, i_beta):
+    """A blind unit at a stop: the friction brake asked for (``S_HOLD`` = ``C_HOLD_BRAKE``, as the hill hold at
+    enable), the acquisition afresh (no identification: it ran at enable); the first torque releases both."""
+    s[S_PARKED] = 1.0
+    s[S_HOLD] = c[C_HOLD_BRAKE]
+    enter_acquire(s, c, i_alpha, i_beta)
+
+
+@kernel()
 def enter(s, c, action, i_alpha, i_beta):
     """Run an entry action (``A_*``)."""
     if action == A_ACQUIRE:
@@ -630,6 +663,8 @@ def enter(s, c, action, i_alpha, i_beta):
         begin_episode_now(s, c)
         restart_ekf_search(s, c)
         clear_detectors(s)
+    elif action == A_PARK:
+        park_car(s, c, i_alpha, i_beta)
     elif action == A_REPOLARIZE:
         begin_episode_now(s, c)
         flip_frame(s)
@@ -758,7 +793,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             s[S_AXIS_F] += gain * (axis_cosine(s, s[S_INJ_ADM]) - s[S_AXIS_F])
     collect(s, c, mode, t, phase, answer, f_d)
     # the event and the transition
-    event = detect(s, c, mode)
+    event = detect(s, c, mode, omega_ref)
     s[S_EVENT] = event
     if event != EV_NONE:
         mode = transition(s, c, mode, event, i_alpha, i_beta)
