@@ -143,6 +143,22 @@ class FocSlave(DriveSlave):
                                             "3 the current and voltage limits met, 4 the torque or current limit on "
                                             "MTPA, 5 no torque within the limits (0 with reference 'paper')" + hold,
                         discrete=True)
+        # the injection strategy's identification at enable (``pmsm_ev.kernels.identify``): properties reading the
+        # unit, no work per step
+        ident = " (low_speed = 'injection'; 0 until identified and for the other units)"
+        self.add_output("L_d_id", "H", "the identified incremental d inductance at zero current: 1 / the d admittance "
+                                       "of the injection's answers on the found d axis" + ident, discrete=True)
+        self.add_output("L_q_id", "H", "the identified incremental q inductance at zero current: 1 / the d admittance "
+                                       "of the injection's answers on the q axis" + ident, discrete=True)
+        self.add_output("saliency_id", None, "the identified saliency L_q_id / L_d_id" + ident, discrete=True)
+        self.add_output("R_s_id", "Ohm", "the identified stator resistance: the d PI's voltage difference over the "
+                                         "current difference of two d current levels at standstill" + ident,
+                        discrete=True)
+        self.add_output("blind", None, "1: the identified saliency is below saliency_min, the injection cannot see "
+                                       "the rotor's axis well enough; 0 otherwise", discrete=True)
+        self.add_output("axis_cos", None, "cos 2e of the tracking observer's axis error from the d admittance and "
+                                          "the identified admittances, filtered, in FOC on the injection (0 in the "
+                                          "other modes)" + hold, discrete=True)
         self._sensorless = observer == "sensorless"
         if self._sensorless:  # it never reads the measured angle and speed: any value there, NaN included
             self.unread_inputs = frozenset(("theta_meas", "omega_meas"))
@@ -169,6 +185,12 @@ class FocSlave(DriveSlave):
     T_ref = _unit_output("T_ref", "``ControlUnit.T_ref``")
     T_brake = _unit_output("T_brake", "``ControlUnit.T_brake``")
     ref_region = _unit_output("ref_region", "``ControlUnit.ref_region``")
+    L_d_id = _unit_output("L_d_id", "``ControlUnit.L_d_id``")
+    L_q_id = _unit_output("L_q_id", "``ControlUnit.L_q_id``")
+    saliency_id = _unit_output("saliency_id", "``ControlUnit.saliency_id``")
+    R_s_id = _unit_output("R_s_id", "``ControlUnit.R_s_id``")
+    blind = _unit_output("blind", "``ControlUnit.blind``")
+    axis_cos = _unit_output("axis_cos", "``ControlUnit.axis_cos``")
     del _unit_output
 
     # -- physics hooks ---------------------------------------------------------------

@@ -340,6 +340,18 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "inj_los_time": ("s", "... for this long"),
     "ekf_los_current": ("A", "loss of synchronism on the EKF: its current innovation (filtered) beyond this ..."),
     "ekf_los_time": ("s", "... for this long"),
+    "id_time": ("s", "the identification at enable: the d admittance of the injection's answers on the found d axis, "
+                     "then on the q axis, this long each (1/L_d, 1/L_q and the error signal's gain measured); 0: "
+                     "not measured, the motor model's L_d, L_q"),
+    "saliency_min": (None, "the least identified saliency L_q / L_d the injection is trusted at (output blind: 1 "
+                           "below it)"),
+    "inj_voltage_max": ("V", "the square wave's largest amplitude: after the identification it is the one whose "
+                             "error signal has the data sheet motor's current per unit of sin 2e at inj_voltage"),
+    "rs_current": ("A", "the R_s test at enable: the upper d current level (the lower: half of it), on the found d "
+                        "axis at standstill"),
+    "rs_time": ("s", "the R_s test: the time at each level (the second half measured); 0: no test"),
+    "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "
+                           "identified admittances), filtered, stays below this for inj_los_time"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),

@@ -84,7 +84,9 @@ _INJECTION_SLOTS = (
     ("pol_ramp", _k.C_POL_RAMP), ("pol_hold", _k.C_POL_HOLD), ("pol_contrast", _k.C_POL_CONTRAST),
     ("inj_los_angle", _k.C_INJ_LOS_ANGLE), ("inj_los_time", _k.C_INJ_LOS_TIME),
     ("ekf_los_current", _k.C_EKF_LOS_I), ("ekf_los_time", _k.C_EKF_LOS_TIME),
-    ("inj_current_limit", _k.C_INJ_I_MAX), ("pol_frame_band", _k.C_POL_BAND))
+    ("inj_current_limit", _k.C_INJ_I_MAX), ("pol_frame_band", _k.C_POL_BAND), ("id_time", _k.C_ID_TIME),
+    ("saliency_min", _k.C_SALIENCY_MIN), ("inj_axis_cos", _k.C_AXIS_COS), ("inj_voltage_max", _k.C_INJ_V_MAX),
+    ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME))
 #: state slots of the sensorless start-up, zeroed by ``reset``
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
@@ -371,6 +373,43 @@ class ControlUnit:
         s = self._s
         return float(s[_k.S_FAULT]) if s[_k.S_FAULT] == _k.FAULT_LATCHED else (
             _k.FAULT_RECOVERING if s[_k.S_EPISODE] > 0.0 else _k.FAULT_NONE)
+
+    # the injection strategy's identification at enable (``pmsm_ev.kernels.identify``)
+    @property
+    def L_d_id(self) -> float:
+        """The identified incremental d inductance at zero current [H] (1 / the d admittance the injection measured
+        on the found d axis); 0 until identified, and for a unit without injection."""
+        y = float(self._s[_k.S_ID_Y]) if self.injecting else 0.0
+        return 1.0 / y if y > 0.0 else 0.0
+
+    @property
+    def L_q_id(self) -> float:
+        """The identified incremental q inductance at zero current [H]; 0 until identified."""
+        y = float(self._s[_k.S_ID_Y + 1]) if self.injecting else 0.0
+        return 1.0 / y if y > 0.0 else 0.0
+
+    @property
+    def saliency_id(self) -> float:
+        """The identified saliency L_q / L_d [-]; 0 until identified."""
+        return self.L_q_id / self.L_d_id if self.L_d_id > 0.0 else 0.0
+
+    @property
+    def R_s_id(self) -> float:
+        """The identified stator resistance [Ohm] (the R_s test at enable, ``pmsm_ev.kernels.identify_rs``); 0 until
+        identified, and for a unit without injection."""
+        return float(self._s[_k.S_ID_RS]) if self.injecting else 0.0
+
+    @property
+    def blind(self) -> float:
+        """1.0 where the identified saliency is below ``InjectionParams.saliency_min``: the injection cannot see the
+        rotor's axis well enough; else 0."""
+        return float(self._s[_k.S_ID_BLIND]) if self.injecting else 0.0
+
+    @property
+    def axis_cos(self) -> float:
+        """cos 2e of the tracking observer's axis error from the d admittance, filtered (``S_AXIS_F``) in
+        FOC on the injection; 0 there and for a unit without injection)."""
+        return float(self._s[_k.S_AXIS_F]) if self.injecting and self.mode == _k.MODE_INJECTION else 0.0
 
     @property
     def theta_ctrl(self) -> float:

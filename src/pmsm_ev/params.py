@@ -1663,6 +1663,53 @@ class InjectionParams:
     #: tanh(v / v_eps) (``VehicleParams.v_eps``), so a held car creeps at v_eps atanh(load / brake): 4 mm/s on
     #: 16 deg with 900 kg. 0: no hold
     hold_brake: float = 1.0
+    #: the identification at enable, on each axis [s] [chosen: 50 ms, 500 answers a side]: after the axis is
+    #: found, the d admittance of the square wave's answers on the found d axis and then on the q axis is the
+    #: motor's incremental 1/L_d and 1/L_q at zero current ((I1) at e = 0 and 90 deg,
+    #: ``pmsm_ev.kernels.identify``), and Y_x = (1/L_d - 1/L_q) / 2 the error signal's gain: the tracking
+    #: observer then keeps the bandwidth its poles say on a motor that is not its data sheet (a saliency a third
+    #: of the model's leaves it a third of the gain, and an error signal that never reaches the loss detector's
+    #: angle). The second difference's noise at the square wave's frequency is 4 sigma an answer, over 500
+    #: answers 4 sigma / sqrt(500) / (2 dt V) = 30 1/H a sigma of 1 A (0.7 % of 1/L_d with Table I; Y_x to 21
+    #: 1/H, 3 % of Table I's 751). The acquisition then takes 2 x 40 + 30 + 2 x 50 ms and the polarity test
+    #: 120 ms: 0.33 s from enable to torque, the car held (``hold_brake``). Only at the first acquisition after
+    #: enable (a reacquisition may find the car rolling). 0: not measured, the model's L_d, L_q (a drive whose
+    #: data sheet is its motor's)
+    id_time: float = 0.05
+    #: the least identified saliency L_q / L_d at which the injection is trusted [-] [chosen: 1.10]: the error
+    #: signal's amplitude is Y_x = (1/L_d - 1/L_q) / 2, (L_q/L_d - 1) / (2 L_q) of it; at 1.10 that is 11 % of
+    #: 1/L_d (Table I's 1.44: 31 %), 1.0 A an answer at 30 V against the second difference's 2.8 A of noise
+    #: with sigma = 1 A, the angle's noise at a stop four times Table I's (0.05 rad rms there): 0.2 rad, where
+    #: the load's tilt of the axes (cross-saturation) is of the same size. Below it the unit says so (output
+    #: ``blind``)
+    saliency_min: float = 1.10
+    #: the tracking observer has lost the axis where cos 2e from the d admittance (``pmsm_ev.kernels.axis_cosine``:
+    #: (I1), adm = Y_s + Y_x cos 2e with the identified Y_s, Y_x), filtered as the angle error is, stays below
+    #: this for ``inj_los_time`` [-] [chosen: -0.5, 60 deg]: at 45 deg (cos 2e = 0) the error signal sin 2e no
+    #: longer pulls the observer back harder the farther it is, and beyond it pulls it to the axis 90 deg on (the
+    #: q axis, then the d axis pi from the right one); the margin to 0 is for the load: the d admittance under
+    #: load (a negative d current relieves the d axis, the q current saturates the iron) is not the zero-current
+    #: one the identification measured
+    inj_axis_cos: float = -0.5
+    #: the square wave's largest amplitude [V] [chosen: 90 V, below half the 208 V voltage limit, the rest for the
+    #: current loops at a stop]: after the identification the amplitude is the one whose error signal has the
+    #: current per unit of sin 2e the data sheet's motor gives at ``inj_voltage`` (``pmsm_ev.kernels.identify``):
+    #: a motor with a third of the saliency gets three times the voltage, so that the sensors' noise and the
+    #: inverter's dead time (a voltage of a few V per half-wave, not compensated where the ripple crosses zero)
+    #: take no larger a share of the angle than on the data sheet's motor. The d current's ripple grows with it
+    #: (+-dt V / (2 L_d): +-20 A at 90 V on Table I's L_d)
+    inj_voltage_max: float = 90.0
+    #: the R_s test at enable, its upper d current [A] [chosen: 200 A, the polarity test's: the winding heats no
+    #: more than there]; the lower level is half of it. After the identification, on the found d axis at
+    #: standstill, the d current is held at each level (``rs_time``) and R_s = (v_2 - v_1) / (i_2 - i_1) from
+    #: the d PI's integral (``pmsm_ev.kernels.identify_rs``, eq ID2): the difference cancels the inverter's
+    #: dead-time voltage, which is the same at both levels where the phases' currents keep their signs. 100 A
+    #: apart give 0.87 V on Table I's 8.7 mOhm
+    rs_current: float = 200.0
+    #: ... the time at each level [s] [chosen: 40 ms, the second half measured: the current loop settles in a
+    #: few ms]; 0: no test (a drive already commissioned). Enable to torque with it: 0.41 s, within the 0.5 s a
+    #: driver waits for a car that has said it is ready
+    rs_time: float = 0.04
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
@@ -1674,7 +1721,7 @@ class InjectionParams:
         _require(self.low_speed in LOW_SPEED_STRATEGIES,
                  f"low_speed must be one of {LOW_SPEED_STRATEGIES} (got {self.low_speed!r})")
         for f in fields(self):
-            if f.name in ("low_speed", "inj_cross_comp"):
+            if f.name in ("low_speed", "inj_cross_comp", "inj_axis_cos"):
                 continue
             value = getattr(self, f.name)
             _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")
@@ -1682,6 +1729,16 @@ class InjectionParams:
                      "pol_hold", "pol_contrast", "inj_los_angle", "inj_los_time", "ekf_los_current",
                      "ekf_los_time", "inj_current_limit", "pol_frame_band"):
             _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
+        _require(-1.0 < self.inj_axis_cos < 1.0,
+                 f"inj_axis_cos must be within (-1, 1): a cosine of 2e (got {self.inj_axis_cos})")
+        _require(self.saliency_min >= 1.0,
+                 f"saliency_min must be >= 1: a saliency L_q / L_d (got {self.saliency_min})")
+        _require(self.rs_time == 0.0 or self.rs_time >= 0.002,
+                 f"rs_time must be 0 (no test) or >= 0.002 s, ten current-loop time constants (got {self.rs_time})")
+        _require(self.rs_time == 0.0 or self.rs_current > 0.0,
+                 f"rs_current must be > 0 A (got {self.rs_current})")
+        _require(self.id_time == 0.0 or self.id_time >= 0.005,
+                 f"id_time must be 0 (not measured) or >= 0.005 s, 50 answers an axis (got {self.id_time})")
         _require(self.inj_blend_low < self.inj_blend_high,
                  f"inj_blend_low must be < inj_blend_high (got {self.inj_blend_low} >= {self.inj_blend_high} rad/s)")
         _require(self.inj_hysteresis < self.inj_blend_high - self.inj_blend_low,
@@ -1689,6 +1746,12 @@ class InjectionParams:
         if u_max is not None:
             _require(self.inj_voltage < 0.5 * u_max,
                      f"inj_voltage must be < half the voltage limit {0.5 * u_max:.4g} V (got {self.inj_voltage})")
+        _require(self.inj_voltage_max >= self.inj_voltage,
+                 f"inj_voltage_max must be >= inj_voltage (got {self.inj_voltage_max} < {self.inj_voltage} V)")
+        if u_max is not None:
+            _require(self.inj_voltage_max < 0.5 * u_max,
+                     f"inj_voltage_max must be < half the voltage limit {0.5 * u_max:.4g} V "
+                     f"(got {self.inj_voltage_max})")
         if dt is not None and self.inj_frequency != 0:
             m = 1.0 / (2.0 * self.inj_frequency * dt)
             allowed = ", ".join(f"{1.0 / (2.0 * k * dt):.6g}" for k in range(1, 9))

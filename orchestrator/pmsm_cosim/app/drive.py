@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import sys
 from collections.abc import Iterator
@@ -30,6 +31,8 @@ from ..engine.loading import load_system as load_system_file
 from ..engine.recording import read_results
 from ..engine.system import SystemSpec, parse_system, read_toml
 from . import cycles
+from .metrics.cycle_energy import plant_params
+from .metrics.identification import identification_truth
 from .metrics.run import compute_metrics
 
 #: where the shipped scenarios are (package data)
@@ -126,7 +129,14 @@ def drive_metrics(out_dir, columns, rows: int) -> dict:
                                 + " (pmsm_ev.results.CONTRACT_COLUMNS)"}
     if not rows:
         return {}
-    return compute_metrics(read_results(out_dir))
+    m = compute_metrics(read_results(out_dir))
+    if "identification" in m:  # the plant's truth beside it, from the run's settings (metrics.json, written first)
+        try:
+            settings = json.loads((Path(out_dir) / "metrics.json").read_text())
+            m["identification"].update(identification_truth(plant_params(settings)[0], m["identification"]))
+        except (OSError, ValueError):
+            pass
+    return m
 
 
 # --- the project's FMUs ------------------------------------------------------------------

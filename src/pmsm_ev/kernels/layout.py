@@ -387,7 +387,28 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_RUNAWAY_T", 1, "alignment: how long |omega_hat| has been above C_ALIGN_SLIP [s]"),
     ("S_ALIGN_SPEED", 1, "alignment: the rotor's speed the back-EMF shows on the vector's q axis less the sweep's, "
                          "low-pass filtered (the alignment damping's input) [rad/s]"),
-), size=199)
+    # the injection strategy's identification at enable and its axis and polarity detectors
+    # (``kernels.modes``: ``identify``, ``detect_injection_lost``)
+    ("S_INJ_YX", 1, "the error signal's gain, Y_x = (1/L_d - 1/L_q) / 2 [1/H]: C_INJ_Y until the identification "
+                    "measures it (``demodulate``)"),
+    ("S_ID_SUM", 8, "the identification: sums of the d admittance on the found d axis at the square wave's amplitude "
+                    "and at twice it, on the q axis at both [1/H], how many answers each [-]"),
+    ("S_ID_Y", 2, "the identified incremental admittances 1/L_d, 1/L_q at zero current [1/H] (0: not identified)"),
+    ("S_ID_YE", 2, "... as the square wave at the amplitude S_INJ_VA sees them, the inverter's dead time included "
+                   "[1/H]"),
+    ("S_INJ_VA", 1, "the square wave's amplitude after the identification [V] (0: C_INJ_V)"),
+    ("S_ID_DONE", 1, "1.0 once the first acquisition after enable has run its identification"),
+    ("S_RS_SUM", 6, "the R_s test: sums of the d PI's integral [V] and of the d current [A] at the lower level, the "
+                    "same at the upper, how many samples each [-]"),
+    ("S_ID_RS", 1, "the identified stator resistance [Ohm] (0: not identified)"),
+    ("S_PARKED", 1, "1.0 while a blind unit (S_ID_BLIND) holds the car at a stop on the friction brake and finds the "
+                    "angle afresh for the restart"),
+    ("S_ID_BLIND", 1, "1.0 where the identified saliency L_q / L_d is below C_SALIENCY_MIN: the injection cannot "
+                      "see the axis well enough"),
+    ("S_AXIS_F", 1, "cos 2e from the d admittance and the identified admittances, low-pass filtered [-]"),
+    ("S_DISAGREE_V", 2, "cos and sin of the injection's angle less the EKF's, low-pass filtered (S_DISAGREE_F is "
+                        "their angle: no wrap at +-pi) [-]"),
+), size=226)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -540,7 +561,15 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                    "at most this"),
     ("C_P_DIS", 1, "the battery's discharge power [W] (input P_discharge_max): a motoring torque's power at the shaft "
                    "at most this"),
-), size=148)
+    # the injection strategy's identification and detectors (``pmsm_ev.params.InjectionParams``)
+    ("C_ID_TIME", 1, "the identification's time on each axis, d then q [s] (0: none, the model's admittances)"),
+    ("C_INJ_V_MAX", 1, "the square wave's largest amplitude, that the identified motor's answer may ask for [V]"),
+    ("C_RS_I", 1, "the R_s test's upper d current [A] (the lower: half of it)"),
+    ("C_RS_TIME", 1, "the R_s test's time at each level [s] (0: no test)"),
+    ("C_SALIENCY_MIN", 1, "the least identified saliency L_q / L_d the injection is trusted at [-]"),
+    ("C_AXIS_COS", 1, "the tracking observer has lost the axis where cos 2e from the d admittance stays below this "
+                      "[-]"),
+), size=154)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
