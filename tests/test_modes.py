@@ -422,7 +422,7 @@ def test_the_axis_detector_waits_for_the_identification_and_foc_on_the_injection
 
 def _sums(s, y_d, y_q, v_e, v, n=250):
     """The identification's sums of a motor with admittances y_d, y_q and a dead time that takes v_e [V] from each
-    half-wave: a(V) = y (1 - v_e / V) at V and 2 V."""
+    half-wave: a(V) = y (1 - v_e / V) at V and 2 V (the identification's: half ``C_INJ_V_MAX`` and all of it)."""
     for j, (y, amp) in enumerate(((y_d, v), (y_d, 2 * v), (y_q, v), (y_q, 2 * v))):
         s[k.S_ID_SUM + j] = n * y * (1.0 - v_e / amp)
         s[k.S_ID_SUM + 4 + j] = n
@@ -436,13 +436,13 @@ def test_identify_cancels_the_dead_times_voltage_by_two_amplitudes(v_e):
     _, s, c = _unit()
     y_d, y_q = 1 / 2.2425e-4, 1 / 2.5689e-4
     v = c[k.C_INJ_V]
-    _sums(s, y_d, y_q, v_e, v)
+    _sums(s, y_d, y_q, v_e, 0.5 * c[k.C_INJ_V_MAX])
     k.identify(s, c)
     assert s[k.S_ID_Y:k.S_ID_Y + 2] == pytest.approx([y_d, y_q], rel=1e-12)
     v_a = v * c[k.C_INJ_Y] / (0.5 * (y_d - y_q))
     assert v_a == pytest.approx(2.66 * v, rel=0.01) and s[k.S_INJ_VA] == pytest.approx(v_a)
-    assert s[k.S_ID_YE] == pytest.approx(y_d * (1 - v_e / v_a))
-    assert s[k.S_INJ_YX] == pytest.approx(0.5 * (y_d - y_q) * (1 - v_e / v_a))
+    assert s[k.S_ID_YE] == pytest.approx(y_d * (1 - v_e / v_a), rel=1e-12)
+    assert s[k.S_INJ_YX] == pytest.approx(0.5 * (y_d - y_q) * (1 - v_e / v_a), rel=1e-12)
     assert s[k.S_ID_BLIND] == 0.0  # 1.146 >= 1.10
 
 
@@ -459,8 +459,8 @@ def test_identify_says_blind_below_the_least_saliency_and_bounds_the_amplitude()
 
 @pytest.mark.parametrize("v_dt", [0.0, 0.3])
 def test_identify_rs_cancels_the_dead_times_voltage_by_two_levels(v_dt):
-    """(ID2): the d PI's steady voltage R i + v_dt at the two levels gives R whatever the dead time's v_dt; a
-    current that did not rise gives nothing."""
+    """(ID2): the d command's mean R i + v_dt at the two levels gives R whatever the dead time's v_dt; a current
+    that did not rise gives nothing."""
     _, s, c = _unit()
     r, i2, n = 0.0123, c[k.C_RS_I], 200
     s[k.S_RS_SUM:k.S_RS_SUM + 6] = [n * (r * 0.5 * i2 + v_dt), n * 0.5 * i2, n * (r * i2 + v_dt), n * i2, n, n]

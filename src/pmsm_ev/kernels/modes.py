@@ -116,6 +116,7 @@ from .layout import (
     S_EVENT,
     S_FAULT,
     S_HOLD,
+    S_I_D,
     S_I_DL,
     S_I_QL,
     S_ID_BLIND,
@@ -148,6 +149,7 @@ from .layout import (
     S_RS_SUM,
     S_THETA_CTRL,
     S_TRK,
+    S_V_D,
     S_W_INT,
     S_X,
 )
@@ -292,7 +294,7 @@ def identify(s, c):
     for j in range(4):
         if s[S_ID_SUM + 4 + j] < 1.0:
             return
-    v = c[C_INJ_V]
+    v = 0.5 * c[C_INJ_V_MAX]  # the lower amplitude (``identification_amplitude``)
     a_d = s[S_ID_SUM] / s[S_ID_SUM + 4]
     a_q = s[S_ID_SUM + 2] / s[S_ID_SUM + 6]
     y_d = 2.0 * s[S_ID_SUM + 1] / s[S_ID_SUM + 5] - a_d  # (ID1)
@@ -303,7 +305,7 @@ def identify(s, c):
     s[S_ID_Y + 1] = y_q
     s[S_ID_BLIND] = 1.0 if y_d < c[C_SALIENCY_MIN] * y_q else 0.0
     if y_d > y_q:
-        v_a = min(max(v * c[C_INJ_Y] / (0.5 * (y_d - y_q)), v), c[C_INJ_V_MAX])
+        v_a = min(max(c[C_INJ_V] * c[C_INJ_Y] / (0.5 * (y_d - y_q)), c[C_INJ_V]), c[C_INJ_V_MAX])
         s[S_INJ_VA] = v_a
         e_d = y_d - v * (y_d - a_d) / v_a  # a(V_a) of (ID1)
         e_q = y_q - v * (y_q - a_q) / v_a
@@ -699,8 +701,8 @@ def collect(s, c, mode, t, phase, answer, i_d):
         starts = phase_starts(s, c, t, phase)
         if (phase == PHASE_RS1 or phase == PHASE_RS2) and rs_level_time(s, c, t) >= 0.5 * c[C_RS_TIME]:
             j = phase - PHASE_RS1  # the level's second half: the current settled
-            s[S_RS_SUM + 2 * j] += s[S_INT_D]
-            s[S_RS_SUM + 2 * j + 1] += i_d
+            s[S_RS_SUM + 2 * j] += s[S_V_D]  # the last period's d command and the d current it was computed on
+            s[S_RS_SUM + 2 * j + 1] += s[S_I_D]
             s[S_RS_SUM + 4 + j] += 1.0
         if answer and PHASE_ID_D <= phase <= PHASE_ID_Q2 and not starts:
             s[S_ID_SUM + phase - PHASE_ID_D] += s[S_INJ_ADM]
@@ -778,9 +780,16 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     answer = injecting and s[S_INJ_NEW] != 0.0
     share = injection_share(s[S_BLEND]) if mode == MODE_INJECTION else 1.0
     e_ekf = wrap_angle(s[S_X + 3] + s[S_CROSS] - s[S_TRK]) if share < 1.0 else 0.0
-    # the answers on the found axis correct the tracking observer (not those on the q axis in the identification)
-    on_axis = answer and phase >= PHASE_SETTLE and phase != PHASE_ID_Q and phase != PHASE_ID_Q2
-    track(s, c, model_torque(c, f_d, f_q), share, on_axis, e_ekf)
+    # the answers on the found axis correct the tracking observer; through the identification and the R_s test it is
+    # held where the settling left it, at rest (no torque is given, the car is held: ``hold_brake``), so that the
+    # axes measured are the found ones (an observer left to run on a speed the settling had not yet taken out, or
+    # corrected by the weak error signal of a motor with little saliency, drifted 0.5 rad on motor A of issue 47)
+    held = mode == MODE_ACQUIRE and PHASE_ID_D <= phase <= PHASE_RS2
+    on_axis = answer and phase >= PHASE_SETTLE and not held
+    if held:
+        seat_tracker(s, s[S_TRK], 0.0, 0.0)
+    else:
+        track(s, c, model_torque(c, f_d, f_q), share, on_axis, e_ekf)
     if on_axis and share > 0.0:
         e_inj = angle_error(s[S_INJ_ERR])
         gain = c[C_LOS_FILTER] * c[C_INJ_M]
@@ -816,7 +825,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         elif mode == MODE_ACQUIRE and PHASE_ID_D <= acquisition_phase(s, c, t) <= PHASE_ID_Q2:
             j = acquisition_phase(s, c, t) - PHASE_ID_D  # (ID1): V, 2 V on d, then on q
             offset = 0.5 * math.pi if j >= 2 else 0.0
-            amplitude = c[C_INJ_V] * (2.0 if j % 2 == 1 else 1.0)
+            amplitude = c[C_INJ_V_MAX] * (1.0 if j % 2 == 1 else 0.5)
         elif mode == MODE_ACQUIRE and PHASE_RS1 <= acquisition_phase(s, c, t) <= PHASE_RS2:
             # (ID2): the two levels on the polarity test's frame (held where the acquisition put it: the
             # observer's noise leaks no torque)
