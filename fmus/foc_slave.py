@@ -154,8 +154,17 @@ class FocSlave(DriveSlave):
         self.add_output("R_s_id", "Ohm", "the identified stator resistance: the d PI's voltage difference over the "
                                          "current difference of two d current levels at standstill" + ident,
                         discrete=True)
-        self.add_output("blind", None, "1: the identified saliency is below saliency_min, the injection cannot see "
-                                       "the rotor's axis well enough; 0 otherwise", discrete=True)
+        self.add_output("noise_id", "A", "the current measurement's noise floor from the identification's answers: "
+                                         "a phase sensor's sigma" + ident, discrete=True)
+        self.add_output("offset_a_id", "A", "current sensor a's offset, measured at enable with no voltage and "
+                                            "subtracted from then on" + ident, discrete=True)
+        self.add_output("offset_b_id", "A", "current sensor b's offset, measured at enable with no voltage and "
+                                            "subtracted from then on" + ident, discrete=True)
+        self.add_output("angle_accuracy", "rad", "the rms angle error injection gives at a stop from the measured "
+                                                 "saliency and noise floor (eq ID3)" + ident, discrete=True)
+        self.add_output("blind", None, "1: the identified saliency is below saliency_min or the angle accuracy beyond "
+                                       "inj_angle_max, the injection cannot see the rotor's axis well enough; 0 "
+                                       "otherwise", discrete=True)
         self.add_output("axis_cos", None, "cos 2e of the tracking observer's axis error from the d admittance and "
                                           "the identified admittances, filtered, in FOC on the injection (0 in the "
                                           "other modes)" + hold, discrete=True)
@@ -189,6 +198,10 @@ class FocSlave(DriveSlave):
     L_q_id = _unit_output("L_q_id", "``ControlUnit.L_q_id``")
     saliency_id = _unit_output("saliency_id", "``ControlUnit.saliency_id``")
     R_s_id = _unit_output("R_s_id", "``ControlUnit.R_s_id``")
+    noise_id = _unit_output("noise_id", "``ControlUnit.noise_id``")
+    offset_a_id = _unit_output("offset_a_id", "``ControlUnit.offset_a_id``")
+    offset_b_id = _unit_output("offset_b_id", "``ControlUnit.offset_b_id``")
+    angle_accuracy = _unit_output("angle_accuracy", "``ControlUnit.angle_accuracy``")
     blind = _unit_output("blind", "``ControlUnit.blind``")
     axis_cos = _unit_output("axis_cos", "``ControlUnit.axis_cos``")
     del _unit_output

@@ -345,6 +345,10 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "rs_current": ("A", "the R_s test at enable: the upper d current level (the lower: half of it), on the found d "
                         "axis at standstill"),
     "rs_time": ("s", "the R_s test: the time at each level (the second half measured); 0: no test"),
+    "ofs_time": ("s", "the offset window at enable: no voltage, each current sensor's mean is its offset, subtracted "
+                      "from then on; 0: not measured"),
+    "inj_angle_max": ("rad", "the largest angle accuracy at a stop (eq ID3, from the measured saliency and noise "
+                             "floor) at which the injection is trusted; beyond it the unit is blind"),
     "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "
                            "identified admittances), filtered, stays below this for inj_los_time"),
     # ControlUnit

@@ -86,7 +86,8 @@ _INJECTION_SLOTS = (
     ("ekf_los_current", _k.C_EKF_LOS_I), ("ekf_los_time", _k.C_EKF_LOS_TIME),
     ("inj_current_limit", _k.C_INJ_I_MAX), ("pol_frame_band", _k.C_POL_BAND), ("id_time", _k.C_ID_TIME),
     ("saliency_min", _k.C_SALIENCY_MIN), ("inj_axis_cos", _k.C_AXIS_COS), ("inj_voltage_max", _k.C_INJ_V_MAX),
-    ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME))
+    ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME), ("ofs_time", _k.C_OFS_TIME),
+    ("inj_angle_max", _k.C_ANGLE_MAX))
 #: state slots of the sensorless start-up, zeroed by ``reset``
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
@@ -400,9 +401,35 @@ class ControlUnit:
         return float(self._s[_k.S_ID_RS]) if self.injecting else 0.0
 
     @property
+    def noise_id(self) -> float:
+        """The current measurement's noise floor from the identification's answers: a phase sensor's sigma [A]
+        (``pmsm_ev.kernels.identify_noise``); 0 until identified, and for a unit without injection."""
+        return float(self._s[_k.S_ID_NOISE_F]) if self.injecting else 0.0
+
+    @property
+    def offset_a_id(self) -> float:
+        """Current sensor a's offset measured at enable with no voltage [A] (``InjectionParams.ofs_time``), subtracted
+        from the measurements from then on; 0 until measured, and for a unit without injection."""
+        return float(self._s[_k.S_ID_OFS]) if self.injecting else 0.0
+
+    @property
+    def offset_b_id(self) -> float:
+        """Current sensor b's offset measured at enable [A]: i_alpha = i_a, i_beta = (i_a + 2 i_b) / sqrt 3."""
+        if not self.injecting:
+            return 0.0
+        return 0.5 * (math.sqrt(3.0) * float(self._s[_k.S_ID_OFS + 1]) - float(self._s[_k.S_ID_OFS]))
+
+    @property
+    def angle_accuracy(self) -> float:
+        """The rms angle error injection gives at a stop from the measured saliency and noise floor [rad]
+        (``pmsm_ev.kernels.angle_accuracy``, eq ID3); 0 until identified."""
+        return float(self._s[_k.S_ID_ACC]) if self.injecting else 0.0
+
+    @property
     def blind(self) -> float:
-        """1.0 where the identified saliency is below ``InjectionParams.saliency_min``: the injection cannot see the
-        rotor's axis well enough; else 0."""
+        """1.0 where the identified saliency is below ``InjectionParams.saliency_min`` or the angle accuracy
+        (``angle_accuracy``) beyond ``InjectionParams.inj_angle_max``: the injection cannot see the rotor's axis well
+        enough; else 0."""
         return float(self._s[_k.S_ID_BLIND]) if self.injecting else 0.0
 
     @property

@@ -1656,7 +1656,7 @@ class InjectionParams:
     #: 120 ms: 0.33 s from enable to torque, the car held (``hold_brake``). Only at the first acquisition after
     #: enable (a reacquisition may find the car rolling). 0: not measured, the model's L_d, L_q (a drive whose
     #: data sheet is its motor's)
-    id_time: float = 0.05
+    id_time: float = 0.06
     #: the least identified saliency L_q / L_d at which the injection is trusted [-] [chosen: 1.10]: the error
     #: signal's amplitude is Y_x = (1/L_d - 1/L_q) / 2, (L_q/L_d - 1) / (2 L_q) of it; at 1.10 that is 11 % of
     #: 1/L_d (Table I's 1.44: 31 %), 1.0 A an answer at 30 V against the second difference's 2.8 A of noise
@@ -1691,6 +1691,23 @@ class InjectionParams:
     #: few ms]; 0: no test (a drive already commissioned). Enable to torque with it: 0.41 s, within the 0.5 s a
     #: driver waits for a car that has said it is ready
     rs_time: float = 0.04
+    #: the offset window at enable [s] [chosen: 20 ms, 200 samples: a sensor's offset to sigma / sqrt(200), 0.07 A
+    #: at sigma = 1 A]: before the square wave starts the unit sends no voltage (the inverter's gates off, as a
+    #: drive calibrates its current sensors), the motor at rest carries no current, and the mean of each sensor is
+    #: its offset, subtracted from the measurements from then on (``pmsm_ev.kernels.modes``, outputs
+    #: ``offset_a_id``, ``offset_b_id``). With the current loops closed the measured mean is held at 0 whatever the
+    #: offset (the motor then carries minus the offset), so the offset shows only with no voltage. Only at the
+    #: first acquisition after enable; 0: not measured
+    ofs_time: float = 0.02
+    #: the largest angle accuracy at a stop (eq ID3: the tracking observer's rms angle error from the measured
+    #: saliency, noise floor and amplitude) at which the injection is trusted [rad] [chosen: 0.15 rad, the polarity
+    #: test's frame band ``pol_frame_band`` and a third of the loss detector's ``inj_los_angle``]: a noisier angle
+    #: moves the polarity test's frame with its noise (the torque it leaks moves the car) and meets the loss
+    #: detector's angle at three of its rms. Beyond it the unit is blind as below ``saliency_min``. Table I's motor
+    #: at sigma = 1 A and 30 V: 0.05 rad (as measured from 24 start angles); at the saliency limit 1.10 with the
+    #: amplitude at ``inj_voltage_max``: 0.06 rad at 1 A, 0.15 rad at 2.6 A: below 2.6 A of noise the saliency
+    #: limit is the stricter, beyond it this one
+    inj_angle_max: float = 0.15
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
@@ -1718,6 +1735,11 @@ class InjectionParams:
                  f"rs_time must be 0 (no test) or >= 0.002 s, ten current-loop time constants (got {self.rs_time})")
         _require(self.rs_time == 0.0 or self.rs_current > 0.0,
                  f"rs_current must be > 0 A (got {self.rs_current})")
+        _require(self.ofs_time == 0.0 or self.ofs_time >= 0.001,
+                 f"ofs_time must be 0 (not measured) or >= 0.001 s, ten samples (got {self.ofs_time})")
+        _require(0.0 < self.inj_angle_max < 0.25 * math.pi,
+                 f"inj_angle_max must be within (0, pi/4) rad: beyond pi/4 the error signal sin 2e no longer points "
+                 f"back to the axis (got {self.inj_angle_max})")
         _require(self.id_time == 0.0 or self.id_time >= 0.005,
                  f"id_time must be 0 (not measured) or >= 0.005 s, 50 answers an axis (got {self.id_time})")
         _require(self.inj_blend_low < self.inj_blend_high,

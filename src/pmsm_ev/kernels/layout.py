@@ -398,7 +398,7 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
                    "[1/H]"),
     ("S_INJ_VA", 1, "the square wave's amplitude after the identification [V] (0: C_INJ_V)"),
     ("S_ID_DONE", 1, "1.0 once the first acquisition after enable has run its identification"),
-    ("S_RS_SUM", 6, "the R_s test: sums of the d PI's integral [V] and of the d current [A] at the lower level, the "
+    ("S_RS_SUM", 6, "the R_s test: sums of the d command [V] and of the d current [A] at the lower level, the "
                     "same at the upper, how many samples each [-]"),
     ("S_ID_RS", 1, "the identified stator resistance [Ohm] (0: not identified)"),
     ("S_PARKED", 1, "1.0 while a blind unit (S_ID_BLIND) holds the car at a stop on the friction brake and finds the "
@@ -408,7 +408,16 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_AXIS_F", 1, "cos 2e from the d admittance and the identified admittances, low-pass filtered [-]"),
     ("S_DISAGREE_V", 2, "cos and sin of the injection's angle less the EKF's, low-pass filtered (S_DISAGREE_F is "
                         "their angle: no wrap at +-pi) [-]"),
-), size=226)
+    ("S_ID_NOISE", 8, "the identification: sums of the answers' q second difference, its sign the half-wave's [A], "
+                      "on each of its four phases, then of its square [A^2]"),
+    ("S_OFS_SUM", 3, "the offset window at enable (no voltage, no current): sums of the measured i_alpha, i_beta "
+                     "[A], how many samples [-]"),
+    ("S_ID_OFS", 2, "the current sensors' offset measured at enable, alpha and beta [A] (subtracted from the "
+                    "measurements from then on)"),
+    ("S_ID_NOISE_F", 1, "the current measurement's noise floor from the identification's answers: a phase sensor's "
+                        "sigma [A] (0: not identified)"),
+    ("S_ID_ACC", 1, "the angle accuracy injection gives at a stop, rms [rad] (eq ID3; 0: not identified)"),
+), size=241)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -569,7 +578,9 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_SALIENCY_MIN", 1, "the least identified saliency L_q / L_d the injection is trusted at [-]"),
     ("C_AXIS_COS", 1, "the tracking observer has lost the axis where cos 2e from the d admittance stays below this "
                       "[-]"),
-), size=154)
+    ("C_OFS_TIME", 1, "the offset window at enable: no voltage, the sensors' mean is their offset [s] (0: none)"),
+    ("C_ANGLE_MAX", 1, "the largest angle accuracy (eq ID3) at which the injection is trusted [rad]"),
+), size=156)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
