@@ -146,12 +146,14 @@ def adapt_apply(s, c):
 
 
 @kernel()
-def adapt_period(s, c, i_alpha, i_beta, theta, omega_m):
+def adapt_period(s, c, i_alpha, i_beta, theta, omega_m, on_rotor):
     """The end of a control period: (AD1-AD5) the estimator over the period just gone, on the measured currents
     ``i_alpha``, ``i_beta`` at its end in the control frame at ``theta`` [rad] turning at ``omega_m`` [rad/s,
     mechanical], and the vector the unit held over it; then the vector just commanded (``S_V_ALPHA``, ``S_V_BETA``)
-    kept for the next period, and with ``ADAPT_USE`` the estimates into the model (AD6). Returns nothing: the
-    estimates and the observability flags are in ``S_AD_PSI``, ``S_AD_RS``, ``S_AD_SEEN``."""
+    kept for the next period, and with ``ADAPT_USE`` the estimates into the model (AD6). ``on_rotor`` 0.0: the
+    frame is not the rotor's estimated one (the I-f strategy's alignment and I-f: the current vector's), neither
+    fit updates. Returns nothing: the estimates and the observability flags are in ``S_AD_PSI``, ``S_AD_RS``,
+    ``S_AD_SEEN``."""
     dt = c[C_DT]
     i_d, i_q = park(i_alpha, i_beta, theta)
     if s[S_AD_PRIMED + 1] == 0.0 and s[S_ID_RS] > 0.0:  # the R_s test at enable measured it: R_s_hat starts there
@@ -160,7 +162,7 @@ def adapt_period(s, c, i_alpha, i_beta, theta, omega_m):
         s[S_AD_PRIMED + 1] = 1.0
     seen_psi = 0.0
     seen_rs = 0.0
-    if s[S_AD_PRIMED] != 0.0:
+    if s[S_AD_PRIMED] != 0.0 and on_rotor != 0.0:
         w_e = c[C_N] * omega_m
         a = 0.5 * w_e * dt
         u_d, u_q = park(s[S_AD_V], s[S_AD_V + 1], s[S_AD_PREV] + a)  # (AD1)

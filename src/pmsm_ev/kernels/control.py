@@ -446,6 +446,6 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     v_alpha, v_beta = modulate(c, v_d, v_q, theta_ctrl, omega_hat, True)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6)
-        adapt_period(s, c, i_alpha, i_beta, theta_ctrl, omega_hat)
+        adapt_period(s, c, i_alpha, i_beta, theta_ctrl, omega_hat, 1.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4])

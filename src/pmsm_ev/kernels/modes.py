@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 
+from .adaptation import adapt_period
 from .control import (
     current_step,
     modulate,
@@ -59,6 +60,7 @@ from .jit import sig as _sig
 from .layout import (
     C_ACQ_SETTLE,
     C_ACQ_TIME,
+    C_ADAPT,
     C_ADVANCE,
     C_AXIS_COS,
     C_BLEND_HI,
@@ -868,5 +870,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_OMEGA_CTRL] = omega_ctrl
     fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
+    if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6), on the found axis in every mode
+        adapt_period(s, c, i_alpha, i_beta, theta, omega_ctrl, 1.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta, omega_ctrl)
