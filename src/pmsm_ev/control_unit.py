@@ -252,6 +252,7 @@ class ControlUnit:
         c[_k.C_FF_T0] = float(pr.ff_T0) if road else 0.0
         c[_k.C_FF_T1] = float(pr.ff_T1) if road else 0.0
         c[_k.C_FF_T2] = float(pr.ff_T2) if road else 0.0
+        self._set_adaptation()
         self._set_injection()
         #: the controller FMU's buffer of its step (``pmsm_ev.kernels.UNIT_IO_LAYOUT``): its inputs, outputs and
         #: sample clock (``load_io``), which ``pmsm_ev.kernels.unit_fmu_step`` and ``unit_periods`` step on
@@ -330,6 +331,22 @@ class ControlUnit:
             c[_k.C_CROSS + j] = phi
         c[_k.C_HOLD_BRAKE] = float(p.hold_brake) * c[_k.C_T_MAX] * c[_k.C_BRAKE_GAIN]
 
+    def _set_adaptation(self) -> None:
+        """Adaptation while driving (``ControllerParams.adaptation``, ``pmsm_ev.kernels.adaptation``) into the
+        parameter vector: its mode, thresholds (speeds as electrical rad/s) and where its estimates start, the
+        model's psi and R_s, with the EKF's psi-proportional constants at that psi."""
+        c, p, m = self._c, self.params, self.motor
+        c[_k.C_ADAPT] = _k.ADAPT_CODES[p.adaptation]
+        c[_k.C_AD_GAIN] = min(self.dt / p.adapt_time, 1.0)
+        c[_k.C_AD_PSI_W] = m.N * p.adapt_psi_speed
+        c[_k.C_AD_RS_W] = m.N * p.adapt_rs_speed
+        c[_k.C_AD_RS_I] = float(p.adapt_rs_current)
+        c[_k.C_AD_RATE] = float(p.adapt_current_rate)
+        c[_k.C_AD_PSI0] = m.psi
+        c[_k.C_AD_RS0] = m.R_s
+        c[_k.C_AD_NOM] = c[_k.C_C_WPSI]
+        c[_k.C_AD_NOM + 1] = c[_k.C_C_TPSI]
+
     def reset(self) -> None:
         self.observer.reset()
         self.speed.reset()
@@ -347,6 +364,7 @@ class ControlUnit:
                 for i in _k.UNIT_STATE_LAYOUT.span(name):
                     self._s[i] = 0.0
         self._s[_k.S_PSI_RATIO] = 1.0
+        self._kernels.adapt_reset(self._s, self._c)  # psi_hat, R_s_hat on the model's (and with "use", the model)
         if self.injecting:  # enabled: the acquisition first
             self._s[_k.S_MODE] = _k.MODE_ACQUIRE
             self._s[_k.S_HOLD] = self._c[_k.C_HOLD_BRAKE]  # the hill hold until the first torque
@@ -364,6 +382,29 @@ class ControlUnit:
     def psi_ratio(self) -> float:
         """The EKF's magnet flux over the nominal psi (1 without ``EkfParams.psi_adapt``)."""
         return float(self._s[_k.S_PSI_RATIO])
+
+    # adaptation while driving (``pmsm_ev.kernels.adaptation``)
+    @property
+    def psi_est(self) -> float:
+        """The estimated magnet flux [Wb] (eq AD3): the model's psi until psi is observable, and with adaptation
+        "off"."""
+        return float(self._s[_k.S_AD_PSI]) if self.params.adaptation != "off" else self.motor.psi
+
+    @property
+    def R_s_est(self) -> float:
+        """The estimated stator resistance [Ohm] (eq AD4): the identification's R_s_id or the model's R_s until R_s
+        is observable, and the model's with adaptation "off"."""
+        return float(self._s[_k.S_AD_RS]) if self.params.adaptation != "off" else self.motor.R_s
+
+    @property
+    def psi_observable(self) -> float:
+        """1.0 where the last period let psi_hat move (AD5: fast enough, the currents quasi-steady), else 0."""
+        return float(self._s[_k.S_AD_SEEN])
+
+    @property
+    def R_s_observable(self) -> float:
+        """1.0 where the last period let R_s_hat move (AD5: slow enough, current enough, quasi-steady), else 0."""
+        return float(self._s[_k.S_AD_SEEN + 1])
 
     @property
     def fault(self) -> float:
@@ -529,3 +570,5 @@ class ControlUnit:
         """Restore a ``get_state`` dict; ``LayoutError`` (naming the field) if its fields or their
         lengths are not this version's."""
         _k.UNIT_STATE_LAYOUT.restore(self._s, state)
+        if self._c[_k.C_ADAPT] == _k.ADAPT_USE:  # the model follows the restored estimates
+            self._kernels.adapt_apply(self._s, self._c)

@@ -46,6 +46,8 @@ DQ_CONVENTIONS = ("paper", "amplitude_invariant")
 CURRENT_CONTROLS = ("paper", "high_speed")
 #: the speed loop's feedforward (``ControllerParams.speed_feedforward``; docs/cycles.md)
 SPEED_FEEDFORWARDS = ("none", "inertia", "inertia+road")
+#: adaptation while driving (``ControllerParams.adaptation``)
+ADAPTATIONS = ("off", "observe", "use")
 DISCRETISATIONS = ("euler", "bilinear")
 #: the plant's magnetic model (``PlantParams.flux_model``)
 FLUX_MODELS = ("linear", "algebraic")
@@ -1155,6 +1157,35 @@ class ControllerParams:
     ff_T1: float = _ROAD_LOAD[1]
     ff_T2: float = _ROAD_LOAD[2]
 
+    # -- adaptation while driving (docs/sensorless.md, "Adaptation while driving"; ``pmsm_ev.kernels.adaptation``) ----
+    #: the magnet flux and the stator resistance tracked as the motor warms, by a model-reference estimator on the
+    #: unit's own voltage and measured currents (eqs AD1-AD6) [chosen: "off", today's drive]. "observe": the
+    #: estimates computed and put out (psi_est, R_s_est), the controller unchanged, bit for bit; "use": the
+    #: controller's model takes them (psi in the feed-forward, the reference generator and the EKF's A3-A4, R_s in
+    #: the EKF's A8, A14)
+    adaptation: str = "off"
+    #: the estimators' memory [s] [chosen]: the least-squares sums forget with this time constant over the periods
+    #: where their parameter is observable. Far below the motor's thermal time constants (the winding's fastest
+    #: 15.9 s, the magnet's 65 min: docs/speed-range.md, "A motor that warms"), so the estimate lags the warming by
+    #: a small share; far above the period (2 s at speed is 20 000 periods: the 4 V rms that the sensors' 1 A puts
+    #: on L_q di/dt a period averages to 0.03 V, 0.1 % of the back-EMF at adapt_psi_speed)
+    adapt_time: float = 2.0
+    #: psi is observable at this |omega_m| or faster [rad/s] [chosen]: back-EMF N omega psi = 54 V at 150 rad/s
+    #: (12.7 km/h), so that a resistance 5 % off at 300 A (0.13 V) or an inverter's residual voltage of 0.5 V moves
+    #: psi_hat by 0.3 % or 1 %; below, the back-EMF is of the order of those errors
+    adapt_psi_speed: float = 150.0
+    #: R_s is observable at this |omega_m| or slower [rad/s] [chosen]: at 15 rad/s (1.3 km/h) a psi_hat 0.5 % off
+    #: moves R_s_hat by N omega Delta psi / |i| = 3 % of R_s at adapt_rs_current; faster, the back-EMF's error
+    #: swamps R_s |i|^2
+    adapt_rs_speed: float = 15.0
+    #: ... and at this current magnitude or more [A] [chosen]: R_s |i| = 0.87 V at 100 A, large against the current
+    #: PI's own noise (K_p sigma = 0.6 V a period, averaged out) and the 0.1 V a 1 % dead-time residual leaves
+    adapt_rs_current: float = 100.0
+    #: the currents are quasi-steady, and both fits update, while |di/dt| (filtered over 50 ms) is at most this
+    #: [A/s] [chosen]: the L di/dt terms are in the fits, but with the model's inductances: 10 % of L_q x 2000 A/s is
+    #: 0.06 V, 0.1 % of the back-EMF at adapt_psi_speed
+    adapt_current_rate: float = 2000.0
+
     @property
     def u_limit(self) -> float:
         """The voltage limit of the current PIs and of field weakening [V]: v_dc / sqrt(3) if ``v_dc`` is
@@ -1225,6 +1256,18 @@ class ControllerParams:
         _require(self.v_dc == 0 or self.u_max == _U_MAX_DEFAULT,
                  f"u_max = {self.u_max:g} V and v_dc = {self.v_dc:g} V are both given: set one of the two "
                  f"(v_dc > 0 sets the voltage limit v_dc/sqrt(3))")
+        self.validate_adaptation()
+
+    def validate_adaptation(self) -> None:
+        """The adaptation's settings (``adaptation``, ``adapt_*``)."""
+        _require(self.adaptation in ADAPTATIONS,
+                 f"adaptation must be one of {ADAPTATIONS} (got {self.adaptation!r})")
+        for name in ("adapt_time", "adapt_psi_speed", "adapt_rs_current", "adapt_current_rate"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, f"{name} must be finite and > 0 (got {value})")
+        _require(math.isfinite(self.adapt_rs_speed) and 0 <= self.adapt_rs_speed < self.adapt_psi_speed,
+                 f"adapt_rs_speed must be >= 0 rad/s and below adapt_psi_speed = {self.adapt_psi_speed:g} rad/s "
+                 f"(got {self.adapt_rs_speed})")
 
 
 @dataclass(frozen=True)

@@ -315,6 +315,19 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_V_OUT_ALPHA", 1, "with dead-time compensation: the vector sent to the inverter, alpha [V]"),
     ("S_V_OUT_BETA", 1, "... beta [V]"),
     ("S_PSI_RATIO", 1, "with psi adaptation: the EKF's magnet flux over the nominal psi [-]"),
+    # adaptation while driving (``C_ADAPT``; ``pmsm_ev.kernels.adaptation``): the model-reference estimates of psi
+    # and R_s, their least-squares sums and the last period's frame, currents and held vector
+    ("S_AD_PSI", 1, "the estimated magnet flux psi_hat [Wb] (eq AD3)"),
+    ("S_AD_RS", 1, "the estimated stator resistance R_s_hat [Ohm] (eq AD4)"),
+    ("S_AD_SUM", 4, "the exponentially weighted sums of the two least-squares fits: omega_e^2, omega_e y_psi "
+                    "[V^2, V^2/Wb ...], |i|^4, |i|^2 y_R (AD3, AD4)"),
+    ("S_AD_PREV", 3, "the last period's frame angle [rad] and currents i_d, i_q in it [A]"),
+    ("S_AD_V", 2, "the vector held over the present period (alpha, beta) [V]: the command kept at the end of the "
+                  "last period"),
+    ("S_AD_RATE", 2, "d and q current rates, low-pass filtered (AD_RATE_FILTER) [A/s]: the quasi-steady test"),
+    ("S_AD_SEEN", 2, "1.0 in a period where psi (first) and R_s (second) were observable and their fits updated"),
+    ("S_AD_PRIMED", 2, "1.0 once a period has left S_AD_PREV, S_AD_V (first); 1.0 once R_s_hat was seeded on the "
+                       "identification's R_s_id (second)"),
     # the sensorless unit's synchronism (``sync_guard``, ``slip_detector``)
     ("S_GUARD", 1, "the load-angle guard holding the I-f vector back (GUARD_SOFT, GUARD_HARD; 0 = not)"),
     ("S_LOS", 1, "I-f: how long the unit has been in trouble (the slip beyond its bound, or the limit reached) [s]"),
@@ -417,7 +430,7 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_ID_NOISE_F", 1, "the current measurement's noise floor from the identification's answers: a phase sensor's "
                         "sigma [A] (0: not identified)"),
     ("S_ID_ACC", 1, "the angle accuracy injection gives at a stop, rms [rad] (eq ID3; 0: not identified)"),
-), size=241)
+), size=258)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -483,6 +496,17 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_DTC_I0", 1, "... its soft sign's current scale [A] (``ControllerParams.dead_time_comp_i0``)"),
     ("C_PSI_ADAPT", 1, "psi adaptation of the stationary-frame EKF5: gain [1/s] (0 = off; ``EkfParams.psi_adapt``)"),
     ("C_PSI_ADAPT_W", 1, "... the least |omega_hat| it adapts at [rad/s]"),
+    # adaptation while driving (``ControllerParams.adaptation``; ``pmsm_ev.kernels.adaptation``)
+    ("C_ADAPT", 1, "ADAPT_OFF, ADAPT_OBSERVE (the estimates computed, not used), ADAPT_USE (the controller's model "
+                   "takes them)"),
+    ("C_AD_GAIN", 1, "dt / ControllerParams.adapt_time: the least-squares sums' forgetting per period [-]"),
+    ("C_AD_PSI_W", 1, "the least |omega_e| at which psi is observable [rad/s, electrical]"),
+    ("C_AD_RS_W", 1, "the largest |omega_e| at which R_s is observable [rad/s, electrical]"),
+    ("C_AD_RS_I", 1, "the least |i| at which R_s is observable [A]"),
+    ("C_AD_RATE", 1, "the largest filtered |di/dt| of a quasi-steady period [A/s]"),
+    ("C_AD_PSI0", 1, "the model's psi: where psi_hat starts [Wb]"),
+    ("C_AD_RS0", 1, "the model's R_s: where R_s_hat starts (until the identification's R_s_id) [Ohm]"),
+    ("C_AD_NOM", 2, "the EKF model's psi-proportional constants at C_AD_PSI0: C_C_WPSI, C_C_TPSI"),
     # the sensorless unit's I-f sizing and synchronism (``pmsm_ev.params.StartupParams``)
     ("C_J_IF", 1, "the EKF model's inertia [kg m^2]"),
     ("C_E_MAX", 1, "the design load angle [rad]"),
@@ -580,7 +604,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                       "[-]"),
     ("C_OFS_TIME", 1, "the offset window at enable: no voltage, the sensors' mean is their offset [s] (0: none)"),
     ("C_ANGLE_MAX", 1, "the largest angle accuracy (eq ID3) at which the injection is trusted [rad]"),
-), size=156)
+), size=166)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
@@ -703,6 +727,10 @@ FAULT_NONE, FAULT_RECOVERING, FAULT_LATCHED = 0.0, 1.0, 2.0
 #: observers (``C_OBSERVER``)
 OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
 OBSERVER_CODES = {"ekf5": OBS_EKF5, "ekf4": OBS_EKF4, "ekf5ab": OBS_EKF5AB, "sensored": OBS_SENSORED}
+
+#: adaptation while driving (``C_ADAPT``, ``ControllerParams.adaptation``)
+ADAPT_OFF, ADAPT_OBSERVE, ADAPT_USE = 0.0, 1.0, 2.0
+ADAPT_CODES = {"off": ADAPT_OFF, "observe": ADAPT_OBSERVE, "use": ADAPT_USE}
 
 #: the reference generator's modes (``C_REF_MODE``, ``ControllerParams.reference``)
 REF_PAPER, REF_MTPA, REF_FW = 0.0, 1.0, 2.0

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 
+from .adaptation import adapt_period
 from .control import (
     current_step,
     modulate,
@@ -60,6 +61,7 @@ from .jit import sig as _sig
 from .layout import (
     C_ACQ_SETTLE,
     C_ACQ_TIME,
+    C_ADAPT,
     C_ADVANCE,
     C_ANGLE_MAX,
     C_AXIS_COS,
@@ -986,5 +988,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         v_alpha = v_beta = 0.0
         s[S_V_OUT_ALPHA] = 0.0
         s[S_V_OUT_BETA] = 0.0
+    if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6), on the found axis in every mode
+        adapt_period(s, c, i_alpha, i_beta, theta, omega_ctrl, 1.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta, omega_ctrl)
