@@ -249,6 +249,15 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "x0_theta": ("rad", "EKF initial electrical-angle estimate, the observer's guess of theta(0)"),
     "J_model": ("kg.m2", "inertia of the EKF's mechanical model (0 = the motor's J_m, the paper's eq 22; "
                          "the drive's J_eq of eq 9 is 0.526 kg m^2)"),
+    "adaptation": (None, "adaptation while driving: 'off', 'observe' (psi_est, R_s_est computed, the controller "
+                         "unchanged) or 'use' (the controller's model and its EKF take them)"),
+    "adapt_time": ("s", "the adaptation's memory: its least-squares sums forget with this time constant over the "
+                        "periods where their parameter is observable"),
+    "adapt_psi_speed": ("rad/s", "psi is observable (psi_est moves) at this |omega| or faster"),
+    "adapt_rs_speed": ("rad/s", "R_s is observable (R_s_est moves) at this |omega| or slower ..."),
+    "adapt_rs_current": ("A", "... and at this current magnitude or more"),
+    "adapt_current_rate": ("A/s", "the adaptation's fits update only while the currents' |di/dt|, filtered over "
+                                  "50 ms, is at most this (quasi-steady)"),
     "psi_adapt": ("1/s", "magnet-flux adaptation gain of the stationary-frame EKF5 (ekf5ab, sensorless); 0 = off"),
     "psi_adapt_speed": ("rad/s", "the magnet-flux adaptation runs while |omega_hat| exceeds this"),
     "discretisation": (None, "the EKFs' current model A2-A3: 'euler' (the paper's forward Euler) or 'bilinear' "
@@ -350,6 +359,10 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "rs_current": ("A", "the R_s test at enable: the upper d current level (the lower: half of it), on the found d "
                         "axis at standstill"),
     "rs_time": ("s", "the R_s test: the time at each level (the second half measured); 0: no test"),
+    "ofs_time": ("s", "the offset window at enable: no voltage, each current sensor's mean is its offset, subtracted "
+                      "from then on; 0: not measured"),
+    "inj_angle_max": ("rad", "the largest angle accuracy at a stop (eq ID3, from the measured saliency and noise "
+                             "floor) at which the injection is trusted; beyond it the unit is blind"),
     "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "
                            "identified admittances), filtered, stays below this for inj_los_time"),
     # ControlUnit

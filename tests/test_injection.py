@@ -3,7 +3,7 @@ docs/sensorless.md, "Closed loop at zero speed"): the unit (compiled kernels) on
 saturation injection needs (the algebraic flux model), 1 A of current-sensor noise, in one process.
 
 What must hold, as physics and outcomes: the demodulated error is sin 2e of the rotor's angle; from any
-start angle the magnet's polarity is found and torque is available within 0.45 s while the car moves less
+start angle the magnet's polarity is found and torque is available within 0.5 s while the car moves less
 than 1 mm; on 22 deg the car stands on the current the slope needs and restarts without rolling back; the
 polarity test refuses to guess on a motor without the magnet's asymmetry."""
 
@@ -83,12 +83,13 @@ START_ANGLES = ([2 * math.pi * j / 16 for j in range(16)]
 def test_polarity_right_torque_within_0_45_s_car_still(index):
     """From 24 start angles (16 over a turn, +-pi/2, pi, within 0.05 rad of them) with 1 A of noise (a seed
     each) and 2 us of dead time, compensated: the magnet's polarity right, FOC on the injection before
-    0.45 s (the acquisition, the identification, the R_s test and the polarity test: 0.42 s), the car moved
+    0.5 s (the offset window, the acquisition, the identification, the R_s test and the polarity test: 0.46 s), the
+    car moved
     < 1 mm at the wheel before the reference rises (0.5 s)."""
     p, u = _drive(START_ANGLES[index], seed=400 + index, dead_time=True)
     rows = _run(p, u, 0.5)
     foc = rows[rows[:, 1] == k.MODE_INJECTION]
-    assert len(foc) and foc[0, 0] < 0.45
+    assert len(foc) and foc[0, 0] < 0.5
     assert np.all(rows[rows[:, 0] >= foc[0, 0], 1] == k.MODE_INJECTION)
     assert abs(rows[-1, 8]) < 0.3  # the right polarity: the angle within 0.3 rad, not pi off
     assert np.abs(rows[:, 3]).max() < 1e-3
@@ -130,8 +131,9 @@ def test_a_motor_without_the_magnets_asymmetry_gets_no_torque():
     rows = _run(p, u, 0.8)
     assert rows[-1, 2] == k.FAULT_LATCHED
     assert not np.any(rows[:, 1] == k.MODE_INJECTION)
-    assert np.abs(rows[:, 5]).max() < 20.0  # only the square wave's ripple on q (+-10 A at 2 x 30 V in the
-    # identification on the q axis, +-5 A at 30 V)
+    assert np.abs(rows[:, 5]).max() < 30.0  # only the square wave's ripple on q (+-dt V / (2 L_q) = +-16 A at 90 V
+    # in the identification on the q axis, its first half-wave twice that from a standing current: +-31 A's half; +-5 A
+    # at 30 V)
 
 
 def _slope_current(p: Plant, torque: float) -> float:
@@ -244,11 +246,12 @@ ID_ANGLES = [0.3 + 2 * math.pi * j / 8 for j in range(8)]
 @pytest.mark.parametrize("r_s", [1.0, 1.5])
 def test_the_unit_identifies_its_motor_at_enable(r_s):
     """From 8 rotor angles with 1 A of noise and 2 us of dead time, compensated, on motor A of issue 47 (L_d +11 %,
-    L_q -11 %: a third of the data sheet's 1/L_d - 1/L_q), cold and hot (R_s +50 %): the identified L_d, L_q are
-    the plant's incremental inductances at zero current (``flux_model_coefficients``, ``incremental_inductances``)
-    within 12 % each and 5 % on average over the angles (the dead time's voltage cancelled by the two amplitudes,
-    eq ID1; without that they were 40 % high), R_s (eq ID2) within 8 % each and 5 % on average, the square wave's
-    amplitude raised by about the saliency's shortfall, torque before 0.45 s, the car moved < 1 mm."""
+    L_q -11 %: a third of the data sheet's 1/L_d - 1/L_q), cold and hot (R_s +50 %): the identified L_d, L_q and
+    their saliency are the plant's incremental values at zero current (``flux_model_coefficients``,
+    ``incremental_inductances``) within 5 % each (the dead time's voltage cancelled by two amplitudes, eq ID1, at
+    half ``inj_voltage_max`` and all of it), R_s (eq ID2, the d command's mean) within 5 % each and 2 % on average
+    (the PI's integral alone, which still settles, gave -1.7 % on average, -5.2 % at worst), the square wave's
+    amplitude raised by about the saliency's shortfall, torque before 0.5 s, the car moved < 1 mm."""
     motor = MotorParams(L_d=2.2425e-4, L_q=2.5689e-4, R_s=0.010650 * r_s, psi=0.078370)
     errors = []
     for j, theta in enumerate(ID_ANGLES):
@@ -258,10 +261,28 @@ def test_the_unit_identifies_its_motor_at_enable(r_s):
         p, u = _drive(theta, plant=plant, motor=motor, dead_time=True)
         rows = _run(p, u, 0.5)
         foc = rows[rows[:, 1] == k.MODE_INJECTION]
-        assert len(foc) and foc[0, 0] < 0.45
+        assert len(foc) and foc[0, 0] < 0.5
         assert np.abs(rows[:, 3]).max() < 1e-3
-        errors.append((u.L_d_id / l_dd - 1.0, u.L_q_id / l_qq - 1.0, u.R_s_id / motor.R_s - 1.0))
+        errors.append((u.L_d_id / l_dd - 1.0, u.L_q_id / l_qq - 1.0, u.saliency_id / (l_qq / l_dd) - 1.0,
+                       u.R_s_id / motor.R_s - 1.0))
         assert u._s[k.S_INJ_VA] > 1.8 * u.injection.inj_voltage
     errors = np.array(errors)
-    assert np.abs(errors[:, :2]).max() < 0.12 and np.abs(errors[:, 2]).max() < 0.08
-    assert np.abs(errors.mean(axis=0)).max() < 0.05
+    assert np.abs(errors).max() < 0.05
+    assert abs(errors[:, 3].mean()) < 0.02
+
+
+@pytest.mark.parametrize("r_s", [1.0, 1.5])
+def test_the_identification_has_no_bias_of_its_own(r_s):
+    """Without noise and dead time (Table I's motor, cold and hot, the d axis found either way round: theta = 0.2
+    and pi + 0.2 give the R_s test's current of either sign against the magnet): L_d, L_q within 0.5 % of the
+    plant's incremental values, R_s within 0.2 %. The d PI's integral in the second half of 40 ms levels gave R_s
+    -0.8 ... -2.5 % here (cold; -2.3 ... -3.4 % hot): the integral still settles where the PI's zero is not the
+    plant's R_s / L; the d command's mean is the plant's R_s i whether or not the loop has settled."""
+    motor = MotorParams(R_s=MotorParams().R_s * r_s)
+    for theta in (0.2, math.pi + 0.2):
+        plant = PlantParams(flux_model="algebraic")
+        l_dd, _, l_qq = k.incremental_inductances(0.0, 0.0, list(flux_model_coefficients(motor, plant)), 0)
+        p, u = _drive(theta, plant=plant, motor=motor)
+        _run(p, u, 0.5)
+        assert u.L_d_id == pytest.approx(l_dd, rel=5e-3) and u.L_q_id == pytest.approx(l_qq, rel=5e-3)
+        assert u.R_s_id == pytest.approx(motor.R_s, rel=2e-3)

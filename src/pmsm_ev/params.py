@@ -47,6 +47,8 @@ DQ_CONVENTIONS = ("paper", "amplitude_invariant")
 CURRENT_CONTROLS = ("paper", "high_speed")
 #: the speed loop's feedforward (``ControllerParams.speed_feedforward``; docs/cycles.md)
 SPEED_FEEDFORWARDS = ("none", "inertia", "inertia+road")
+#: adaptation while driving (``ControllerParams.adaptation``)
+ADAPTATIONS = ("off", "observe", "use")
 DISCRETISATIONS = ("euler", "bilinear")
 #: the frames the plant's RK4 integrates in (``PlantParams.integrator``)
 INTEGRATORS = ("rk4_rotor", "rk6_stationary")
@@ -1174,6 +1176,35 @@ class ControllerParams:
     ff_T1: float = _ROAD_LOAD[1]
     ff_T2: float = _ROAD_LOAD[2]
 
+    # -- adaptation while driving (docs/sensorless.md, "Adaptation while driving"; ``pmsm_ev.kernels.adaptation``) ----
+    #: the magnet flux and the stator resistance tracked as the motor warms, by a model-reference estimator on the
+    #: unit's own voltage and measured currents (eqs AD1-AD6) [chosen: "off", today's drive]. "observe": the
+    #: estimates computed and put out (psi_est, R_s_est), the controller unchanged, bit for bit; "use": the
+    #: controller's model takes them (psi in the feed-forward, the reference generator and the EKF's A3-A4, R_s in
+    #: the EKF's A8, A14)
+    adaptation: str = "off"
+    #: the estimators' memory [s] [chosen]: the least-squares sums forget with this time constant over the periods
+    #: where their parameter is observable. Far below the motor's thermal time constants (the winding's fastest
+    #: 15.9 s, the magnet's 65 min: docs/speed-range.md, "A motor that warms"), so the estimate lags the warming by
+    #: a small share; far above the period (2 s at speed is 20 000 periods: the 4 V rms that the sensors' 1 A puts
+    #: on L_q di/dt a period averages to 0.03 V, 0.1 % of the back-EMF at adapt_psi_speed)
+    adapt_time: float = 2.0
+    #: psi is observable at this |omega_m| or faster [rad/s] [chosen]: back-EMF N omega psi = 54 V at 150 rad/s
+    #: (12.7 km/h), so that a resistance 5 % off at 300 A (0.13 V) or an inverter's residual voltage of 0.5 V moves
+    #: psi_hat by 0.3 % or 1 %; below, the back-EMF is of the order of those errors
+    adapt_psi_speed: float = 150.0
+    #: R_s is observable at this |omega_m| or slower [rad/s] [chosen]: at 15 rad/s (1.3 km/h) a psi_hat 0.5 % off
+    #: moves R_s_hat by N omega Delta psi / |i| = 3 % of R_s at adapt_rs_current; faster, the back-EMF's error
+    #: swamps R_s |i|^2
+    adapt_rs_speed: float = 15.0
+    #: ... and at this current magnitude or more [A] [chosen]: R_s |i| = 0.87 V at 100 A, large against the current
+    #: PI's own noise (K_p sigma = 0.6 V a period, averaged out) and the 0.1 V a 1 % dead-time residual leaves
+    adapt_rs_current: float = 100.0
+    #: the currents are quasi-steady, and both fits update, while |di/dt| (filtered over 50 ms) is at most this
+    #: [A/s] [chosen]: the L di/dt terms are in the fits, but with the model's inductances: 10 % of L_q x 2000 A/s is
+    #: 0.06 V, 0.1 % of the back-EMF at adapt_psi_speed
+    adapt_current_rate: float = 2000.0
+
     @property
     def u_limit(self) -> float:
         """The voltage limit of the current PIs and of field weakening [V]: v_dc / sqrt(3) if ``v_dc`` is
@@ -1244,6 +1275,18 @@ class ControllerParams:
         _require(self.v_dc == 0 or self.u_max == _U_MAX_DEFAULT,
                  f"u_max = {self.u_max:g} V and v_dc = {self.v_dc:g} V are both given: set one of the two "
                  f"(v_dc > 0 sets the voltage limit v_dc/sqrt(3))")
+        self.validate_adaptation()
+
+    def validate_adaptation(self) -> None:
+        """The adaptation's settings (``adaptation``, ``adapt_*``)."""
+        _require(self.adaptation in ADAPTATIONS,
+                 f"adaptation must be one of {ADAPTATIONS} (got {self.adaptation!r})")
+        for name in ("adapt_time", "adapt_psi_speed", "adapt_rs_current", "adapt_current_rate"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, f"{name} must be finite and > 0 (got {value})")
+        _require(math.isfinite(self.adapt_rs_speed) and 0 <= self.adapt_rs_speed < self.adapt_psi_speed,
+                 f"adapt_rs_speed must be >= 0 rad/s and below adapt_psi_speed = {self.adapt_psi_speed:g} rad/s "
+                 f"(got {self.adapt_rs_speed})")
 
 
 @dataclass(frozen=True)
@@ -1675,7 +1718,7 @@ class InjectionParams:
     #: 120 ms: 0.33 s from enable to torque, the car held (``hold_brake``). Only at the first acquisition after
     #: enable (a reacquisition may find the car rolling). 0: not measured, the model's L_d, L_q (a drive whose
     #: data sheet is its motor's)
-    id_time: float = 0.05
+    id_time: float = 0.06
     #: the least identified saliency L_q / L_d at which the injection is trusted [-] [chosen: 1.10]: the error
     #: signal's amplitude is Y_x = (1/L_d - 1/L_q) / 2, (L_q/L_d - 1) / (2 L_q) of it; at 1.10 that is 11 % of
     #: 1/L_d (Table I's 1.44: 31 %), 1.0 A an answer at 30 V against the second difference's 2.8 A of noise
@@ -1710,6 +1753,23 @@ class InjectionParams:
     #: few ms]; 0: no test (a drive already commissioned). Enable to torque with it: 0.41 s, within the 0.5 s a
     #: driver waits for a car that has said it is ready
     rs_time: float = 0.04
+    #: the offset window at enable [s] [chosen: 20 ms, 200 samples: a sensor's offset to sigma / sqrt(200), 0.07 A
+    #: at sigma = 1 A]: before the square wave starts the unit sends no voltage (the inverter's gates off, as a
+    #: drive calibrates its current sensors), the motor at rest carries no current, and the mean of each sensor is
+    #: its offset, subtracted from the measurements from then on (``pmsm_ev.kernels.modes``, outputs
+    #: ``offset_a_id``, ``offset_b_id``). With the current loops closed the measured mean is held at 0 whatever the
+    #: offset (the motor then carries minus the offset), so the offset shows only with no voltage. Only at the
+    #: first acquisition after enable; 0: not measured
+    ofs_time: float = 0.02
+    #: the largest angle accuracy at a stop (eq ID3: the tracking observer's rms angle error from the measured
+    #: saliency, noise floor and amplitude) at which the injection is trusted [rad] [chosen: 0.15 rad, the polarity
+    #: test's frame band ``pol_frame_band`` and a third of the loss detector's ``inj_los_angle``]: a noisier angle
+    #: moves the polarity test's frame with its noise (the torque it leaks moves the car) and meets the loss
+    #: detector's angle at three of its rms. Beyond it the unit is blind as below ``saliency_min``. Table I's motor
+    #: at sigma = 1 A and 30 V: 0.05 rad (as measured from 24 start angles); at the saliency limit 1.10 with the
+    #: amplitude at ``inj_voltage_max``: 0.06 rad at 1 A, 0.15 rad at 2.6 A: below 2.6 A of noise the saliency
+    #: limit is the stricter, beyond it this one
+    inj_angle_max: float = 0.15
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
@@ -1737,6 +1797,11 @@ class InjectionParams:
                  f"rs_time must be 0 (no test) or >= 0.002 s, ten current-loop time constants (got {self.rs_time})")
         _require(self.rs_time == 0.0 or self.rs_current > 0.0,
                  f"rs_current must be > 0 A (got {self.rs_current})")
+        _require(self.ofs_time == 0.0 or self.ofs_time >= 0.001,
+                 f"ofs_time must be 0 (not measured) or >= 0.001 s, ten samples (got {self.ofs_time})")
+        _require(0.0 < self.inj_angle_max < 0.25 * math.pi,
+                 f"inj_angle_max must be within (0, pi/4) rad: beyond pi/4 the error signal sin 2e no longer points "
+                 f"back to the axis (got {self.inj_angle_max})")
         _require(self.id_time == 0.0 or self.id_time >= 0.005,
                  f"id_time must be 0 (not measured) or >= 0.005 s, 50 answers an axis (got {self.id_time})")
         _require(self.inj_blend_low < self.inj_blend_high,

@@ -37,7 +37,8 @@ ALL_COLUMNS = CONTRACT_COLUMNS + EXTRA_COLUMNS
 SENSORLESS_COLUMNS = ("x_vehicle", "mode", "fault", "theta_ctrl", "omega_ctrl")
 #: the injection strategy's identification at enable (the sensorless controller's outputs of the same names): a run
 #: that records them gets the identification block of its metrics, the identified values beside the plant's
-IDENTIFICATION_COLUMNS = ("L_d_id", "L_q_id", "saliency_id", "R_s_id", "blind")
+IDENTIFICATION_COLUMNS = ("L_d_id", "L_q_id", "saliency_id", "R_s_id", "noise_id", "offset_a_id", "offset_b_id",
+                          "angle_accuracy", "blind")
 #: the plant's energy outputs [J] (``pmsm_ev.plant.Plant.energies``, the plant FMU's outputs of the same
 #: names) and the position [m]: a run that records them all gets the energy block of its metrics
 #: (``energy_balance``); the acceleration and drive-cycle scenarios record them

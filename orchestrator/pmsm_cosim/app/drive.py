@@ -32,7 +32,7 @@ from ..engine.recording import read_results
 from ..engine.system import SystemSpec, parse_system, read_toml
 from . import cycles
 from .metrics.cycle_energy import plant_params
-from .metrics.identification import identification_truth
+from .metrics.identification import identification_truth, plant_settings
 from .metrics.run import compute_metrics
 
 #: where the shipped scenarios are (package data)
@@ -133,7 +133,8 @@ def drive_metrics(out_dir, columns, rows: int) -> dict:
     if "identification" in m:  # the plant's truth beside it, from the run's settings (metrics.json, written first)
         try:
             settings = json.loads((Path(out_dir) / "metrics.json").read_text())
-            m["identification"].update(identification_truth(plant_params(settings)[0], m["identification"]))
+            m["identification"].update(identification_truth(plant_params(settings)[0], m["identification"],
+                                                            plant_settings(settings)))
         except (OSError, ValueError):
             pass
     return m

@@ -315,6 +315,19 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_V_OUT_ALPHA", 1, "with dead-time compensation: the vector sent to the inverter, alpha [V]"),
     ("S_V_OUT_BETA", 1, "... beta [V]"),
     ("S_PSI_RATIO", 1, "with psi adaptation: the EKF's magnet flux over the nominal psi [-]"),
+    # adaptation while driving (``C_ADAPT``; ``pmsm_ev.kernels.adaptation``): the model-reference estimates of psi
+    # and R_s, their least-squares sums and the last period's frame, currents and held vector
+    ("S_AD_PSI", 1, "the estimated magnet flux psi_hat [Wb] (eq AD3)"),
+    ("S_AD_RS", 1, "the estimated stator resistance R_s_hat [Ohm] (eq AD4)"),
+    ("S_AD_SUM", 4, "the exponentially weighted sums of the two least-squares fits: omega_e^2, omega_e y_psi "
+                    "[V^2, V^2/Wb ...], |i|^4, |i|^2 y_R (AD3, AD4)"),
+    ("S_AD_PREV", 3, "the last period's frame angle [rad] and currents i_d, i_q in it [A]"),
+    ("S_AD_V", 2, "the vector held over the present period (alpha, beta) [V]: the command kept at the end of the "
+                  "last period"),
+    ("S_AD_RATE", 2, "d and q current rates, low-pass filtered (AD_RATE_FILTER) [A/s]: the quasi-steady test"),
+    ("S_AD_SEEN", 2, "1.0 in a period where psi (first) and R_s (second) were observable and their fits updated"),
+    ("S_AD_PRIMED", 2, "1.0 once a period has left S_AD_PREV, S_AD_V (first); 1.0 once R_s_hat was seeded on the "
+                       "identification's R_s_id (second)"),
     # the sensorless unit's synchronism (``sync_guard``, ``slip_detector``)
     ("S_GUARD", 1, "the load-angle guard holding the I-f vector back (GUARD_SOFT, GUARD_HARD; 0 = not)"),
     ("S_LOS", 1, "I-f: how long the unit has been in trouble (the slip beyond its bound, or the limit reached) [s]"),
@@ -398,7 +411,7 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
                    "[1/H]"),
     ("S_INJ_VA", 1, "the square wave's amplitude after the identification [V] (0: C_INJ_V)"),
     ("S_ID_DONE", 1, "1.0 once the first acquisition after enable has run its identification"),
-    ("S_RS_SUM", 6, "the R_s test: sums of the d PI's integral [V] and of the d current [A] at the lower level, the "
+    ("S_RS_SUM", 6, "the R_s test: sums of the d command [V] and of the d current [A] at the lower level, the "
                     "same at the upper, how many samples each [-]"),
     ("S_ID_RS", 1, "the identified stator resistance [Ohm] (0: not identified)"),
     ("S_PARKED", 1, "1.0 while a blind unit (S_ID_BLIND) holds the car at a stop on the friction brake and finds the "
@@ -408,7 +421,16 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_AXIS_F", 1, "cos 2e from the d admittance and the identified admittances, low-pass filtered [-]"),
     ("S_DISAGREE_V", 2, "cos and sin of the injection's angle less the EKF's, low-pass filtered (S_DISAGREE_F is "
                         "their angle: no wrap at +-pi) [-]"),
-), size=226)
+    ("S_ID_NOISE", 8, "the identification: sums of the answers' q second difference, its sign the half-wave's [A], "
+                      "on each of its four phases, then of its square [A^2]"),
+    ("S_OFS_SUM", 3, "the offset window at enable (no voltage, no current): sums of the measured i_alpha, i_beta "
+                     "[A], how many samples [-]"),
+    ("S_ID_OFS", 2, "the current sensors' offset measured at enable, alpha and beta [A] (subtracted from the "
+                    "measurements from then on)"),
+    ("S_ID_NOISE_F", 1, "the current measurement's noise floor from the identification's answers: a phase sensor's "
+                        "sigma [A] (0: not identified)"),
+    ("S_ID_ACC", 1, "the angle accuracy injection gives at a stop, rms [rad] (eq ID3; 0: not identified)"),
+), size=258)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -474,6 +496,17 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_DTC_I0", 1, "... its soft sign's current scale [A] (``ControllerParams.dead_time_comp_i0``)"),
     ("C_PSI_ADAPT", 1, "psi adaptation of the stationary-frame EKF5: gain [1/s] (0 = off; ``EkfParams.psi_adapt``)"),
     ("C_PSI_ADAPT_W", 1, "... the least |omega_hat| it adapts at [rad/s]"),
+    # adaptation while driving (``ControllerParams.adaptation``; ``pmsm_ev.kernels.adaptation``)
+    ("C_ADAPT", 1, "ADAPT_OFF, ADAPT_OBSERVE (the estimates computed, not used), ADAPT_USE (the controller's model "
+                   "takes them)"),
+    ("C_AD_GAIN", 1, "dt / ControllerParams.adapt_time: the least-squares sums' forgetting per period [-]"),
+    ("C_AD_PSI_W", 1, "the least |omega_e| at which psi is observable [rad/s, electrical]"),
+    ("C_AD_RS_W", 1, "the largest |omega_e| at which R_s is observable [rad/s, electrical]"),
+    ("C_AD_RS_I", 1, "the least |i| at which R_s is observable [A]"),
+    ("C_AD_RATE", 1, "the largest filtered |di/dt| of a quasi-steady period [A/s]"),
+    ("C_AD_PSI0", 1, "the model's psi: where psi_hat starts [Wb]"),
+    ("C_AD_RS0", 1, "the model's R_s: where R_s_hat starts (until the identification's R_s_id) [Ohm]"),
+    ("C_AD_NOM", 2, "the EKF model's psi-proportional constants at C_AD_PSI0: C_C_WPSI, C_C_TPSI"),
     # the sensorless unit's I-f sizing and synchronism (``pmsm_ev.params.StartupParams``)
     ("C_J_IF", 1, "the EKF model's inertia [kg m^2]"),
     ("C_E_MAX", 1, "the design load angle [rad]"),
@@ -569,7 +602,9 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_SALIENCY_MIN", 1, "the least identified saliency L_q / L_d the injection is trusted at [-]"),
     ("C_AXIS_COS", 1, "the tracking observer has lost the axis where cos 2e from the d admittance stays below this "
                       "[-]"),
-), size=154)
+    ("C_OFS_TIME", 1, "the offset window at enable: no voltage, the sensors' mean is their offset [s] (0: none)"),
+    ("C_ANGLE_MAX", 1, "the largest angle accuracy (eq ID3) at which the injection is trusted [rad]"),
+), size=166)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
@@ -692,6 +727,10 @@ FAULT_NONE, FAULT_RECOVERING, FAULT_LATCHED = 0.0, 1.0, 2.0
 #: observers (``C_OBSERVER``)
 OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
 OBSERVER_CODES = {"ekf5": OBS_EKF5, "ekf4": OBS_EKF4, "ekf5ab": OBS_EKF5AB, "sensored": OBS_SENSORED}
+
+#: adaptation while driving (``C_ADAPT``, ``ControllerParams.adaptation``)
+ADAPT_OFF, ADAPT_OBSERVE, ADAPT_USE = 0.0, 1.0, 2.0
+ADAPT_CODES = {"off": ADAPT_OFF, "observe": ADAPT_OBSERVE, "use": ADAPT_USE}
 
 #: the reference generator's modes (``C_REF_MODE``, ``ControllerParams.reference``)
 REF_PAPER, REF_MTPA, REF_FW = 0.0, 1.0, 2.0

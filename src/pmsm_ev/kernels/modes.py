@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 
+from .adaptation import adapt_period
 from .control import (
     current_step,
     modulate,
@@ -44,6 +45,7 @@ from .injection import (
     blended_frame,
     cross_offset,
     demodulate,
+    error_gain,
     fundamental,
     injection_share,
     injection_voltage,
@@ -59,7 +61,9 @@ from .jit import sig as _sig
 from .layout import (
     C_ACQ_SETTLE,
     C_ACQ_TIME,
+    C_ADAPT,
     C_ADVANCE,
+    C_ANGLE_MAX,
     C_AXIS_COS,
     C_BLEND_HI,
     C_BLEND_HYST,
@@ -85,6 +89,7 @@ from .layout import (
     C_L_D,
     C_L_Q,
     C_LOS_FILTER,
+    C_OFS_TIME,
     C_P0,
     C_P0_ALIGNED,
     C_POL_BAND,
@@ -98,6 +103,7 @@ from .layout import (
     C_RS_TIME,
     C_SALIENCY_MIN,
     C_T_MAX,
+    C_TRK_L,
     FAULT_LATCHED,
     FAULT_NONE,
     FAULT_RECOVERING,
@@ -116,10 +122,15 @@ from .layout import (
     S_EVENT,
     S_FAULT,
     S_HOLD,
+    S_I_D,
     S_I_DL,
     S_I_QL,
+    S_ID_ACC,
     S_ID_BLIND,
     S_ID_DONE,
+    S_ID_NOISE,
+    S_ID_NOISE_F,
+    S_ID_OFS,
     S_ID_RS,
     S_ID_SUM,
     S_ID_Y,
@@ -138,6 +149,7 @@ from .layout import (
     S_INT_Q,
     S_MODE,
     S_MODE_TIME,
+    S_OFS_SUM,
     S_OMEGA_CTRL,
     S_P,
     S_PARKED,
@@ -148,6 +160,9 @@ from .layout import (
     S_RS_SUM,
     S_THETA_CTRL,
     S_TRK,
+    S_V_D,
+    S_V_OUT_ALPHA,
+    S_V_OUT_BETA,
     S_W_INT,
     S_X,
 )
@@ -189,6 +204,11 @@ from .transforms import park, wrap_angle
 #: the q axis at both, the R_s test's d current at its lower and its upper level, over
 (PHASE_AXIS0, PHASE_AXIS45, PHASE_SETTLE, PHASE_ID_D, PHASE_ID_D2, PHASE_ID_Q, PHASE_ID_Q2, PHASE_RS1, PHASE_RS2,
  PHASE_OVER) = range(10)
+#: ... and before them all, at the first acquisition after enable, the offset window: no voltage, no current
+PHASE_OFFSET = 10
+#: eq ID3's noise factor of the tracking observer (I3, three poles at -a): its angle's answer H(s) = (3 a s^2 + 3 a^2 s
+#: + a^3) / (s + a)^3 to the error signal's noise has (1 / pi) int_0^inf |H(j w)|^2 dw = 33 a / 16
+TRACK_NOISE = 33.0 / 16.0
 #: the injection's angle and the EKF's are of opposite polarities where they differ by more than this [rad]:
 #: half a turn of the electrical angle's two candidates 0 and pi (the tracking observer sees the axis, not its
 #: direction; the EKF's back-EMF sees the direction)
@@ -203,6 +223,12 @@ def identification_time(s, c):
 
 
 @kernel()
+def offset_time(s, c):
+    """The offset window's time [s]: ``C_OFS_TIME`` in the first acquisition after enable, 0 after."""
+    return c[C_OFS_TIME] if s[S_ID_DONE] == 0.0 else 0.0
+
+
+@kernel()
 def rs_test_time(s, c):
     """The R_s test's time at each level [s]: ``C_RS_TIME`` in the first acquisition after enable, 0 after."""
     return c[C_RS_TIME] if s[S_ID_DONE] == 0.0 else 0.0
@@ -212,8 +238,12 @@ def rs_test_time(s, c):
 def acquisition_phase(s, c, t):
     """The acquisition's phase (``PHASE_*``) at the time ``t`` [s] in it: on the first axis, on the axis 45 deg
     ahead (``C_ACQ_TIME`` each), the tracking observer settling (``C_ACQ_SETTLE``), the identification on the
-    found d axis and on the q axis (``identification_time`` each, half of it at the square wave's amplitude, half
-    at twice it), over."""
+    found d axis and on the q axis (``identification_time`` each, half of it at half ``C_INJ_V_MAX``, half at all
+    of it), the R_s test's two levels, over; at the first acquisition after enable all of them after the offset
+    window (``offset_time``: ``PHASE_OFFSET``)."""
+    t = t - offset_time(s, c)
+    if t < 0.0:
+        return PHASE_OFFSET
     half = 0.5 * identification_time(s, c)
     t_settled = 2.0 * c[C_ACQ_TIME] + c[C_ACQ_SETTLE]
     if t < c[C_ACQ_TIME]:
@@ -237,7 +267,7 @@ def acquisition_phase(s, c, t):
 def rs_level_time(s, c, t):
     """The time [s] since the R_s test's present level began (``t`` the time in the acquisition, in
     ``PHASE_RS1`` or ``PHASE_RS2``)."""
-    t_rs1 = 2.0 * c[C_ACQ_TIME] + c[C_ACQ_SETTLE] + 2.0 * identification_time(s, c)
+    t_rs1 = offset_time(s, c) + 2.0 * c[C_ACQ_TIME] + c[C_ACQ_SETTLE] + 2.0 * identification_time(s, c)
     return t - t_rs1 - (rs_test_time(s, c) if acquisition_phase(s, c, t) == PHASE_RS2 else 0.0)
 
 
@@ -292,7 +322,7 @@ def identify(s, c):
     for j in range(4):
         if s[S_ID_SUM + 4 + j] < 1.0:
             return
-    v = c[C_INJ_V]
+    v = 0.5 * c[C_INJ_V_MAX]  # the lower amplitude (``identification_amplitude``)
     a_d = s[S_ID_SUM] / s[S_ID_SUM + 4]
     a_q = s[S_ID_SUM + 2] / s[S_ID_SUM + 6]
     y_d = 2.0 * s[S_ID_SUM + 1] / s[S_ID_SUM + 5] - a_d  # (ID1)
@@ -301,9 +331,10 @@ def identify(s, c):
         return
     s[S_ID_Y] = y_d
     s[S_ID_Y + 1] = y_q
+    identify_noise(s)
     s[S_ID_BLIND] = 1.0 if y_d < c[C_SALIENCY_MIN] * y_q else 0.0
     if y_d > y_q:
-        v_a = min(max(v * c[C_INJ_Y] / (0.5 * (y_d - y_q)), v), c[C_INJ_V_MAX])
+        v_a = min(max(c[C_INJ_V] * c[C_INJ_Y] / (0.5 * (y_d - y_q)), c[C_INJ_V]), c[C_INJ_V_MAX])
         s[S_INJ_VA] = v_a
         e_d = y_d - v * (y_d - a_d) / v_a  # a(V_a) of (ID1)
         e_q = y_q - v * (y_q - a_q) / v_a
@@ -311,6 +342,59 @@ def identify(s, c):
         s[S_ID_YE + 1] = e_q
         if e_d > e_q:
             s[S_INJ_YX] = 0.5 * (e_d - e_q)
+            s[S_ID_ACC] = angle_accuracy(c, s[S_ID_NOISE_F], v_a, s[S_INJ_YX])
+            if s[S_ID_ACC] > c[C_ANGLE_MAX]:  # too noisy an angle for the injection to hold the car on
+                s[S_ID_BLIND] = 1.0
+        else:  # no error signal at the amplitude the square wave will have
+            s[S_ID_BLIND] = 1.0
+
+
+@kernel()
+def identify_noise(s):
+    """The current measurement's noise floor from the identification's answers: the q part of each answer's second
+    difference D (I2), its sign the half-wave's, scatters about its phase's mean by the sensors' noise n alone, D =
+    n_k - 2 n_(k-1) + n_(k-2) of variance 6 sigma_q^2 (sigma_q the noise along the answer's q direction). The found
+    d axis's phases see it along q, the q axis's along d: over the two, sigma_q^2 = (sigma_alpha^2 + sigma_beta^2) /
+    2 = 4/3 sigma^2 with two phase sensors of sigma each (i_alpha = i_a, i_beta = (i_a + 2 i_b) / sqrt 3). So sigma =
+    sqrt(v / 8), v the four phases' pooled variance; ``S_ID_NOISE_F`` [A]."""
+    ss = 0.0
+    dof = 0.0
+    for j in range(4):
+        n = s[S_ID_SUM + 4 + j]
+        if n > 1.0:
+            ss += s[S_ID_NOISE + 4 + j] - s[S_ID_NOISE + j] * s[S_ID_NOISE + j] / n
+            dof += n - 1.0
+    if dof > 0.0:
+        s[S_ID_NOISE_F] = math.sqrt(max(ss, 0.0) / dof / 8.0)
+
+
+@kernel()
+def angle_accuracy(c, sigma, v_a, y_x):
+    """The rms angle error [rad] the tracking observer keeps at a stop on the injection's answers, from the noise
+    floor ``sigma`` [A] (a phase sensor's), the square wave's amplitude ``v_a`` [V] and the error signal's gain
+    ``y_x`` [1/H] (I1):
+
+        sigma_theta = sigma_q / (V_a Y_x) sqrt(33 a / (16 m dt)),   sigma_q = sqrt(4/3) sigma          (ID3)
+
+    An answer's error signal is D_q / (2 m dt V_a Y_x) = sin 2e, the angle e half its asin; the noise of the answers,
+    their sign the half-wave's, is (1 + z^-1)^2 on white noise of sigma_q (``identify_noise``), 4 sigma_q at the
+    observer's low frequencies, so e's noise is sigma_q / (m dt V_a Y_x) an answer, white at the answers' period m dt;
+    the observer (I3, three poles at -a, a = l1 / 3) passes (1 / pi) int |H|^2 dw = 33 a / 16 of it
+    (``TRACK_NOISE``). Table I's motor, sigma = 1 A, 30 V, a = 50 rad/s: 0.052 rad (measured from 24 start angles:
+    0.05 rad rms)."""
+    if not (y_x > 0.0 and v_a > 0.0):
+        return 0.0
+    m_dt = c[C_INJ_M] * c[C_DT]
+    a = c[C_TRK_L] / 3.0
+    return math.sqrt(4.0 / 3.0) * sigma / (v_a * y_x) * math.sqrt(TRACK_NOISE * a / m_dt)
+
+
+@kernel()
+def identification_amplitude(c, j):
+    """The square wave's amplitude [V] in the identification's phase ``PHASE_ID_D + j``: half ``C_INJ_V_MAX`` and all
+    of it on the found d axis, then on the q axis (ID1: the largest the voltage limit leaves, so that the dead
+    time's voltage and the sensors' noise take the least share)."""
+    return c[C_INJ_V_MAX] * (1.0 if j % 2 == 1 else 0.5)
 
 
 @kernel()
@@ -514,6 +598,9 @@ def enter_acquire(s, c, i_alpha, i_beta):
         s[S_ACQ + k] = 0.0
     for k in range(8):
         s[S_ID_SUM + k] = 0.0
+        s[S_ID_NOISE + k] = 0.0
+    for k in range(3):
+        s[S_OFS_SUM + k] = 0.0
     for k in range(6):
         s[S_RS_SUM + k] = 0.0
     s[S_INT_D] = 0.0
@@ -699,12 +786,17 @@ def collect(s, c, mode, t, phase, answer, i_d):
         starts = phase_starts(s, c, t, phase)
         if (phase == PHASE_RS1 or phase == PHASE_RS2) and rs_level_time(s, c, t) >= 0.5 * c[C_RS_TIME]:
             j = phase - PHASE_RS1  # the level's second half: the current settled
-            s[S_RS_SUM + 2 * j] += s[S_INT_D]
-            s[S_RS_SUM + 2 * j + 1] += i_d
+            s[S_RS_SUM + 2 * j] += s[S_V_D]  # the last period's d command and the d current it was computed on
+            s[S_RS_SUM + 2 * j + 1] += s[S_I_D]
             s[S_RS_SUM + 4 + j] += 1.0
         if answer and PHASE_ID_D <= phase <= PHASE_ID_Q2 and not starts:
-            s[S_ID_SUM + phase - PHASE_ID_D] += s[S_INJ_ADM]
-            s[S_ID_SUM + 4 + phase - PHASE_ID_D] += 1.0
+            j = phase - PHASE_ID_D
+            s[S_ID_SUM + j] += s[S_INJ_ADM]
+            s[S_ID_SUM + 4 + j] += 1.0
+            # the answer's q second difference [A], its sign the half-wave's (``identify_noise``)
+            x = s[S_INJ_ERR] * error_gain(s, c) * 2.0 * c[C_INJ_M] * dt * identification_amplitude(c, j)
+            s[S_ID_NOISE + j] += x
+            s[S_ID_NOISE + 4 + j] += x * x
         if starts and PHASE_ID_D2 <= phase <= PHASE_RS1 and identification_time(s, c) > 0.0:
             s[S_INJ_SKIP] = 2.0  # the amplitude steps, the axis jumps by 90 deg (to q, back to d)
         if starts and phase == PHASE_OVER and s[S_ID_DONE] == 0.0:
@@ -713,9 +805,11 @@ def collect(s, c, mode, t, phase, answer, i_d):
                 identify(s, c)
             identify_rs(s, c)
             s[S_ID_DONE] = 1.0
-        if phase == 1 and t - dt < c[C_ACQ_TIME]:  # the axis jumps by 45 deg: two answers straddle it
+        if starts and phase == PHASE_AXIS0:  # the square wave begins after the offset window
             s[S_INJ_SKIP] = 2.0
-        elif phase == 2 and t - dt < 2.0 * c[C_ACQ_TIME]:  # the axis found: sin 2e and -cos 2e
+        elif starts and phase == PHASE_AXIS45:  # the axis jumps by 45 deg: two answers straddle it
+            s[S_INJ_SKIP] = 2.0
+        elif starts and phase == PHASE_SETTLE:  # the axis found: sin 2e and -cos 2e
             e = 0.0
             if s[S_ACQ + 2] > 0.0 and s[S_ACQ + 3] > 0.0:
                 e = 0.5 * math.atan2(s[S_ACQ] / s[S_ACQ + 2], -s[S_ACQ + 1] / s[S_ACQ + 3])
@@ -765,6 +859,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
        on the EKF FOC on its angle and speed; the square wave added on its axis.
     """
     dt = c[C_DT]
+    i_alpha -= s[S_ID_OFS]  # the sensors' offsets measured at enable (0 before)
+    i_beta -= s[S_ID_OFS + 1]
     innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
     s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
     mode = s[S_MODE]
@@ -778,9 +874,16 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     answer = injecting and s[S_INJ_NEW] != 0.0
     share = injection_share(s[S_BLEND]) if mode == MODE_INJECTION else 1.0
     e_ekf = wrap_angle(s[S_X + 3] + s[S_CROSS] - s[S_TRK]) if share < 1.0 else 0.0
-    # the answers on the found axis correct the tracking observer (not those on the q axis in the identification)
-    on_axis = answer and phase >= PHASE_SETTLE and phase != PHASE_ID_Q and phase != PHASE_ID_Q2
-    track(s, c, model_torque(c, f_d, f_q), share, on_axis, e_ekf)
+    # the answers on the found axis correct the tracking observer; through the identification and the R_s test it is
+    # held where the settling left it, at rest (no torque is given, the car is held: ``hold_brake``), so that the
+    # axes measured are the found ones (an observer left to run on a speed the settling had not yet taken out, or
+    # corrected by the weak error signal of a motor with little saliency, drifted 0.5 rad on motor A of issue 47)
+    held = mode == MODE_ACQUIRE and (PHASE_ID_D <= phase <= PHASE_RS2 or phase == PHASE_OFFSET)
+    on_axis = answer and phase >= PHASE_SETTLE and not held
+    if held:
+        seat_tracker(s, s[S_TRK], 0.0, 0.0)
+    else:
+        track(s, c, model_torque(c, f_d, f_q), share, on_axis, e_ekf)
     if on_axis and share > 0.0:
         e_inj = angle_error(s[S_INJ_ERR])
         gain = c[C_LOS_FILTER] * c[C_INJ_M]
@@ -792,6 +895,14 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             # current saturates the d axis)
             s[S_AXIS_F] += gain * (axis_cosine(s, s[S_INJ_ADM]) - s[S_AXIS_F])
     collect(s, c, mode, t, phase, answer, f_d)
+    if phase == PHASE_OFFSET:  # no voltage, no current: the sensors' mean is their offset
+        s[S_OFS_SUM] += i_alpha
+        s[S_OFS_SUM + 1] += i_beta
+        s[S_OFS_SUM + 2] += 1.0
+    elif mode == MODE_ACQUIRE and s[S_OFS_SUM + 2] > 0.0:  # the window over: subtracted from the next period on
+        s[S_ID_OFS] = s[S_OFS_SUM] / s[S_OFS_SUM + 2]
+        s[S_ID_OFS + 1] = s[S_OFS_SUM + 1] / s[S_OFS_SUM + 2]
+        s[S_OFS_SUM + 2] = 0.0
     # the event and the transition
     event = detect(s, c, mode, omega_ref)
     s[S_EVENT] = event
@@ -816,20 +927,25 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         elif mode == MODE_ACQUIRE and PHASE_ID_D <= acquisition_phase(s, c, t) <= PHASE_ID_Q2:
             j = acquisition_phase(s, c, t) - PHASE_ID_D  # (ID1): V, 2 V on d, then on q
             offset = 0.5 * math.pi if j >= 2 else 0.0
-            amplitude = c[C_INJ_V] * (2.0 if j % 2 == 1 else 1.0)
+            amplitude = identification_amplitude(c, j)
         elif mode == MODE_ACQUIRE and PHASE_RS1 <= acquisition_phase(s, c, t) <= PHASE_RS2:
             # (ID2): the two levels on the polarity test's frame (held where the acquisition put it: the
             # observer's noise leaks no torque)
             i_dref = c[C_RS_I] * (0.5 if acquisition_phase(s, c, t) == PHASE_RS1 else 1.0)
             theta = polarity_frame(s, c)
             offset = wrap_angle(s[S_TRK] - theta)
+        elif mode == MODE_ACQUIRE and acquisition_phase(s, c, t) == PHASE_OFFSET:
+            amplitude = 0.0  # the inverter's gates off (below: no voltage, no compensation)
         elif mode == MODE_POLARITY:
             i_dref, _, _ = polarity_schedule(c, t)
             theta = polarity_frame(s, c)
             offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the tracking observer's axis
         s[S_CROSS] = 0.0
         i_d, i_q = park(f_alpha, f_beta, theta)
-        v_d, v_q = current_step(s, c, i_dref, 0.0, i_d, i_q, 0.0)
+        if amplitude == 0.0:
+            v_d = v_q = 0.0
+        else:
+            v_d, v_q = current_step(s, c, i_dref, 0.0, i_d, i_q, 0.0)
     elif mode == MODE_INJECTION:  # FOC on the tracking observer, the EKF blended in with the speed
         w = blend_weight(c, s[S_OMEGA_CTRL])
         s[S_BLEND] = w
@@ -868,5 +984,11 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_OMEGA_CTRL] = omega_ctrl
     fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
+    if phase == PHASE_OFFSET:  # the gates off: nothing reaches the winding, the dead time's compensation neither
+        v_alpha = v_beta = 0.0
+        s[S_V_OUT_ALPHA] = 0.0
+        s[S_V_OUT_BETA] = 0.0
+    if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6), on the found axis in every mode
+        adapt_period(s, c, i_alpha, i_beta, theta, omega_ctrl, 1.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta, omega_ctrl)
