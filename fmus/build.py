@@ -57,6 +57,7 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
+import fmpy
 import pythonfmu
 from fmpy.validation import validate_fmu
 from pythonfmu import FmuBuilder
@@ -207,8 +208,6 @@ FMI_VERSIONS = (2, 3)
 
 def fmi3_headers() -> tuple[Path, ...]:
     """The FMI 3.0 headers (fmi3Functions.h and the two it includes) shipped with FMPy."""
-    import fmpy
-
     folder = Path(fmpy.__file__).resolve().parent / "c-code"
     return tuple(folder / name for name in FMI3_HEADER_NAMES)
 
@@ -220,8 +219,8 @@ def fmi3_layer_library() -> tuple[Path | None, str]:
     missing = [str(h) for h in headers if not h.is_file()]
     if missing:
         return None, f"no FMI 3.0 header {missing[0]} (FMPy's c-code/)"
-    return _compiled(FMI3_SOURCE, "fmi3", False, {"FMI2_LOADER": f'"{FMI3_INNER_LOADER}"', "TIME_REFERENCE": f"{FMI3_TIME_REFERENCE}U"},
-                     headers)
+    defines = {"FMI2_LOADER": f'"{FMI3_INNER_LOADER}"', "TIME_REFERENCE": f"{FMI3_TIME_REFERENCE}U"}
+    return _compiled(FMI3_SOURCE, "fmi3", False, defines, headers)
 
 
 def _bind(fmu: Path, name: str, library: Path, loader: Path) -> None:
@@ -818,7 +817,13 @@ def model_description_fmi3(model_description: bytes, where: str = "modelDescript
         if key in _CS_ATTRIBUTES_3:
             cs.set(_CS_ATTRIBUTES_3[key], value)
     cs.set("hasEventMode", "false")
-    for tag in ("UnitDefinitions", "LogCategories", "DefaultExperiment"):
+    units = root.find("UnitDefinitions")
+    if units is None:
+        units = ET.Element("UnitDefinitions")
+    if not any(unit.get("name") == "s" for unit in units.findall("Unit")):  # the unit of time
+        ET.SubElement(ET.SubElement(units, "Unit", {"name": "s"}), "BaseUnit", {"s": "1"})
+    out.append(units)
+    for tag in ("LogCategories", "DefaultExperiment"):
         element = root.find(tag)
         if element is not None:
             out.append(element)

@@ -31,6 +31,9 @@
  * other instantiate functions log and return NULL. The model description (built from the FMI 2.0 one by
  * pmsm_ev_fmus.build) declares hasEventMode="false": a host instantiating with eventModeUsed is refused.
  *
+ * pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls and pmsm_fmu_pulls (the lean binding's counters, fmus/README.md)
+ * take an fmi3 instance and answer its FMI 2.0 instance's.
+ *
  * An instance this layer did not make, or has freed (NULL, a stale pointer), gets fmi3Error from every function
  * without being touched (fmi3FreeInstance of it does nothing): the instances made are in a table, looked up with no
  * lock, as in the lean binding (lean_binding.c). There is no log line for it: the host's logger is the instance's.
@@ -201,9 +204,11 @@ static int enlist(Instance* w)
     return done;
 }
 
+/* take w out of the table: 1, or 0 where it was not in it (NULL never is: a free slot holds NULL) */
 static int delist(const void* w)
 {
     int found = 0;
+    if (w == NULL) return 0;
     pthread_mutex_lock(&live_lock);
     size_t n = atomic_load_explicit(&live_top, memory_order_relaxed);
     for (size_t i = 0; i < n && !found; i++)
@@ -873,6 +878,31 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     if (earlyReturn != NULL) *earlyReturn = false;
     if (lastSuccessfulTime != NULL) *lastSuccessfulTime = last;
     return status3(s);
+}
+
+/* -- the project's counters (fmus/README.md, "The lean binding", "The compiled step") ---------------------- */
+/* pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls, pmsm_fmu_pulls of an instance: the FMI 2.0 stack's counters of its
+ * instance (0 for NULL or an unknown instance, or without the lean binding) */
+static unsigned long long counter(const char* name, fmi3Instance instance)
+{
+    if (!live(instance) || loader == NULL) return 0;
+    calls_t f = (calls_t)dlsym(loader, name);
+    return f ? f(W->inner) : 0;
+}
+
+EXPORT unsigned long long pmsm_fmu_fast_calls(fmi3Instance instance)
+{
+    return counter("pmsm_fmu_fast_calls", instance);
+}
+
+EXPORT unsigned long long pmsm_fmu_compiled_calls(fmi3Instance instance)
+{
+    return counter("pmsm_fmu_compiled_calls", instance);
+}
+
+EXPORT unsigned long long pmsm_fmu_pulls(fmi3Instance instance)
+{
+    return counter("pmsm_fmu_pulls", instance);
 }
 
 /* -- scheduled execution: not this FMU ------------------------------------------------------------------- */

@@ -192,7 +192,7 @@ def cmd_sweep(a) -> int:
 
 
 def cmd_build(a) -> int:
-    kwargs = {"force": a.force, "out_dir": project_fmu_dir()}  # --out/--fmu-dir DIR, else the default
+    kwargs = {"force": a.force, "out_dir": project_fmu_dir(), "fmi": a.fmi}  # --out/--fmu-dir DIR, else the default
     if a.names:
         kwargs["names"] = a.names
     try:
@@ -431,6 +431,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "sources, ~/.cache/pmsm-ev-cosim/fmus/<key>/ on Linux), where runs find them; "
                                    "only those whose sources changed unless --force. Prints each FMU's path.")
     b.add_argument("--force", action="store_true", help="rebuild even when up to date")
+    b.add_argument("--fmi", type=int, choices=fmu_build.FMI_VERSIONS, default=2,
+                   help="FMI version of the units: 2 (default) or 3, FMI 3.0 co-simulation units made from the "
+                        f"FMI 2.0 ones (built too), into DIR/{fmu_build.FMI3_FOLDER}/")
     _fmu_dir_option(b, "--out", "--fmu-dir")
     b.add_argument("names", nargs="*", metavar="NAME", help="build only these FMUs (default: all)")
     b.set_defaults(func=cmd_build)
