@@ -20,6 +20,12 @@ component's queued signal input: from the step the signal changed to that compon
 step, the plain loop's own steps (``Master._plain_steps``, which set the input before that
 component's fmi2DoStep), then machine code again.
 
+An FMI 3.0 unit's calls take one more argument (fmi3Get/fmi3Set: the number of values; fmi3DoStep: the
+addresses of its eventHandlingNeeded, terminateSimulation, earlyReturn and lastSuccessfulTime, the unit's own
+buffers, ``LeanCalls.flags`` and ``last``): a flag per transfer and per component says which call to make, and an
+fmi3DoStep that returns fmi3OK or fmi3Warning with terminateSimulation set is an fmi2Discard, as in the plain
+loop.
+
 A system it cannot step (String connections: the strings are copied between the calls) has
 ``unsupported(master)``; ``Master`` then runs the plain loop, with a line saying so, unless
 this one was asked for by name. numba is imported only here, when this loop is used (the
@@ -40,8 +46,10 @@ from llvmlite import ir
 
 #: codes of the first step that did not complete, as returned by ``_steps``
 OK, GET_FAILED, NOT_FINITE, SET_FAILED, STEP_FAILED = 0, 1, 2, 3, 4
-# columns of the transfer table ``io`` (one row per transfer, in the order of the loop)
-_GET, _SRC, _SVR, _NGET, _SET, _DST, _DVR, _NSET, _BUF = range(9)
+# columns of the transfer table ``io`` (one row per transfer, in the order of the loop); _GET3, _SET3: 1 where
+# the get (set) is FMI 3.0's
+_GET, _SRC, _SVR, _NGET, _SET, _DST, _DVR, _NSET, _BUF, _GET3, _SET3 = range(11)
+_COLUMNS = 11
 
 
 @intrinsic
@@ -73,10 +81,72 @@ def _call_step(typingctx, fn, comp, t, h):
     return sig, codegen
 
 
+@intrinsic
+def _call_io3(typingctx, fn, comp, vr, nvr, value, nvalues):
+    """``fmi3Status fn(fmi3Instance, const fmi3ValueReference*, size_t, void*, size_t)`` at the address ``fn``
+    (fmi3Get*/fmi3Set* of any type)."""
+    sig = types.int32(types.uintp, types.uintp, types.uintp, types.uintp, types.uintp, types.uintp)
+
+    def codegen(context, builder, signature, args):
+        ptr, size = ir.IntType(8).as_pointer(), context.get_value_type(types.uintp)
+        fnty = ir.FunctionType(ir.IntType(32), [ptr, ptr, size, ptr, size])
+        f = builder.inttoptr(args[0], fnty.as_pointer())
+        return builder.call(f, [builder.inttoptr(args[1], ptr), builder.inttoptr(args[2], ptr), args[3],
+                                builder.inttoptr(args[4], ptr), args[5]])
+
+    return sig, codegen
+
+
+@intrinsic
+def _call_step3(typingctx, fn, comp, t, h, out):
+    """``fmi3DoStep(comp, t, h, fmi3True, out, out + 1, out + 2, out + 8)`` at the address ``fn``: ``out`` the
+    address of the unit's three flags (eventHandlingNeeded, terminateSimulation, earlyReturn), followed, at
+    ``out + 8``, by its lastSuccessfulTime (``NativeSteps``' ``outs`` rows)."""
+    sig = types.int32(types.uintp, types.uintp, types.float64, types.float64, types.uintp)
+
+    def codegen(context, builder, signature, args):
+        ptr, dbl, i32 = ir.IntType(8).as_pointer(), ir.DoubleType(), ir.IntType(32)
+        # the C bool noSetFMUStatePriorToCurrentPoint as an int of value 1: its register holds 1 however read
+        fnty = ir.FunctionType(i32, [ptr, dbl, dbl, i32, ptr, ptr, ptr, ptr])
+        f = builder.inttoptr(args[0], fnty.as_pointer())
+        base = builder.inttoptr(args[4], ptr)
+        flag = [builder.gep(base, [ir.Constant(i32, k)]) for k in (0, 1, 2, 8)]
+        return builder.call(f, [builder.inttoptr(args[1], ptr), args[2], args[3], ir.Constant(i32, 1),
+                                *flag])
+
+    return sig, codegen
+
+
+@njit(cache=True)
+def _get(k, io):
+    if io[k, _GET3]:
+        return _call_io3(io[k, _GET], io[k, _SRC], io[k, _SVR], io[k, _NGET], io[k, _BUF], io[k, _NGET])
+    return _call_io(io[k, _GET], io[k, _SRC], io[k, _SVR], io[k, _NGET], io[k, _BUF])
+
+
+@njit(cache=True)
+def _set(k, io):
+    if io[k, _SET3]:
+        return _call_io3(io[k, _SET], io[k, _DST], io[k, _DVR], io[k, _NSET], io[k, _BUF], io[k, _NSET])
+    return _call_io(io[k, _SET], io[k, _DST], io[k, _DVR], io[k, _NSET], io[k, _BUF])
+
+
+@njit(cache=True)
+def _step(c, t, step_fn, comp, step_size, outs, flags):
+    """fmi2DoStep of component c (FMI 3.0: fmi3DoStep into its row of ``outs``; terminateSimulation with
+    fmi3OK or fmi3Warning is fmi2Discard)."""
+    if outs[c] == 0:
+        return _call_step(step_fn[c], comp[c], t, step_size[c])
+    s = _call_step3(step_fn[c], comp[c], t, step_size[c], outs[c])
+    if s <= 1 and flags[c, 1] != 0:
+        return 2
+    return s
+
+
 @njit(cache=True)
 def _read(k, io, values, offset, real):
     """fmi2Get of transfer k; its Real values checked finite. A code (OK, GET_FAILED, NOT_FINITE), status."""
-    s = _call_io(io[k, _GET], io[k, _SRC], io[k, _SVR], io[k, _NGET], io[k, _BUF])
+    s = _get(k, io)
     if s > 1:
         return GET_FAILED, s
     if real[k]:
@@ -92,13 +162,14 @@ def _read(k, io, values, offset, real):
 
 @njit(cache=True)
 def _steps(n0, n1, h, jacobi, io, values, offset, real, first, last, step_fn, comp, step_size, multiple,
-           ramp_slot, ramp):
+           outs, flags, ramp_slot, ramp):
     """Take the base steps n0 .. n1-1. Returns (n, code, index, status): n = n1 and code OK, or the step
     n at which transfer (GET_FAILED, NOT_FINITE, SET_FAILED) or component (STEP_FAILED) ``index`` failed.
 
     Component c's transfers are rows first[c] .. last[c]-1 of ``io``; a Real transfer's values are
     ``values[offset[k]:]``. ``ramp`` row r: the constants (v0, dv, t0, dt) of the segment whose value
-    goes into ``values[ramp_slot[r]]`` at the steps after n0 (at n0 it is set already)."""
+    goes into ``values[ramp_slot[r]]`` at the steps after n0 (at n0 it is set already). ``outs[c]``: 0 for an
+    FMI 2.0 component, else the address of its fmi3DoStep outputs, which ``flags[c]`` (bytes) sees."""
     for n in range(n0, n1):
         t = n * h
         if n > n0:
@@ -114,12 +185,12 @@ def _steps(n0, n1, h, jacobi, io, values, offset, real, first, last, step_fn, co
             for c in range(first.shape[0]):
                 if n % multiple[c] == 0:
                     for k in range(first[c], last[c]):
-                        s = _call_io(io[k, _SET], io[k, _DST], io[k, _DVR], io[k, _NSET], io[k, _BUF])
+                        s = _set(k, io)
                         if s > 1:
                             return n, SET_FAILED, k, s
             for c in range(first.shape[0]):
                 if n % multiple[c] == 0:
-                    s = _call_step(step_fn[c], comp[c], t, step_size[c])
+                    s = _step(c, t, step_fn, comp, step_size, outs, flags)
                     if s > 1:
                         return n, STEP_FAILED, c, s
         else:  # Gauss-Seidel: component by component, the freshest outputs
@@ -130,10 +201,10 @@ def _steps(n0, n1, h, jacobi, io, values, offset, real, first, last, step_fn, co
                     code, s = _read(k, io, values, offset, real)
                     if code != OK:
                         return n, code, k, s
-                    s = _call_io(io[k, _SET], io[k, _DST], io[k, _DVR], io[k, _NSET], io[k, _BUF])
+                    s = _set(k, io)
                     if s > 1:
                         return n, SET_FAILED, k, s
-                s = _call_step(step_fn[c], comp[c], t, step_size[c])
+                s = _step(c, t, step_fn, comp, step_size, outs, flags)
                 if s > 1:
                     return n, STEP_FAILED, c, s
     return n1, OK, 0, 0
@@ -185,10 +256,10 @@ class NativeSteps:
                 get, set_ = tr.get, tr.set
                 io.append([_address(get.func), get.args[0].value, ctypes.addressof(get.args[1]), nget,
                            _address(set_.func), set_.args[0].value, ctypes.addressof(set_.args[1]), nset,
-                           ctypes.addressof(tr.buf)])
+                           ctypes.addressof(tr.buf), int(len(get.args) == 5), int(len(set_.args) == 5)])
                 self.where.append((i, j))
             last.append(len(io))
-        self.io = np.array(io, dtype=np.uintp).reshape(len(io), 9)
+        self.io = np.array(io, dtype=np.uintp).reshape(len(io), _COLUMNS)
         self.offset = np.array(offset, dtype=np.intp)
         self.real = np.array(real, dtype=np.bool_)
         self.first, self.last = np.array(first, dtype=np.intp), np.array(last, dtype=np.intp)
@@ -197,6 +268,17 @@ class NativeSteps:
         self.comp = np.array([st.handle.value for st in steppers], dtype=np.uintp)
         self.step_size = np.array([st.step_size for st in steppers], dtype=np.float64)
         self.multiple = np.array([st.multiple for st in steppers], dtype=np.intp)
+        # FMI 3.0 components: fmi3DoStep's flags and lastSuccessfulTime in a row of 16 bytes of ``flags``, which
+        # their instances' ``LeanCalls.flags`` and ``last`` are re-pointed to (the master reads them there)
+        self.flags = np.zeros((len(steppers), 16), dtype=np.uint8)
+        self.outs = np.zeros(len(steppers), dtype=np.uintp)
+        for c, st in enumerate(steppers):
+            if st.flags is not None:
+                lean = st.inst.lean
+                lean.flags = st.flags = (ctypes.c_bool * 3).from_buffer(self.flags, 16 * c)
+                lean.last = ctypes.c_double.from_buffer(self.flags, 16 * c + 8)
+                lean.last.value = np.nan
+                self.outs[c] = self.flags.ctypes.data + 16 * c
         # signals evaluated in the loop: linear tables whose every input is merged into a transfer
         self.inline = []  # (signal, [slots of its inputs in values])
         for sig in master.signals:
@@ -213,7 +295,8 @@ class NativeSteps:
 
     def _run(self, n0: int, n1: int, slots, consts):
         return _steps(n0, n1, self.h, self.jacobi, self.io, self.values, self.offset, self.real, self.first,
-                      self.last, self.step_fn, self.comp, self.step_size, self.multiple, slots, consts)
+                      self.last, self.step_fn, self.comp, self.step_size, self.multiple, self.outs, self.flags, slots,
+                      consts)
 
     def _rehome(self, tr, off: int, slot_of: dict) -> int:
         """Move transfer ``tr``'s Real values to ``values[off:]``; return the offset after them."""
@@ -221,8 +304,8 @@ class NativeSteps:
         self.values[off:off + n] = tr.values
         buf = (ctypes.c_double * n).from_buffer(self.values, 8 * off)
         get, set_ = tr.get, tr.set
-        tr.get = type(get)(get.func, *get.args[:3], buf)
-        tr.set = type(set_)(set_.func, *set_.args[:3], buf)
+        tr.get = type(get)(get.func, *get.args[:3], buf, *get.args[4:])
+        tr.set = type(set_)(set_.func, *set_.args[:3], buf, *set_.args[4:])
         tr.buf, tr.values = buf, self.values[off:off + n]
         k = n - len(tr.signals)  # the merged signal inputs follow the connections' values
         for sig in self.master.signals:
