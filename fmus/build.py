@@ -739,21 +739,31 @@ def _start_text(value) -> str:
 
 def with_parameter_starts(model_description: bytes, values: dict, where: str = "modelDescription.xml") -> bytes:
     """``model_description`` (the bytes of a modelDescription.xml) with the ``start``
-    attribute of each parameter in ``values`` (name -> value) set to it; everything else
+    attribute of each parameter in ``values`` (name -> value) set to it (FMI 2.0 or 3.0); everything else
     (elements, attributes and their order, comments) as it was. Parsed and written as XML
     (``xml.etree.ElementTree``), UTF-8 with an XML declaration."""
     try:
         root = ET.fromstring(model_description, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
     except ET.ParseError as exc:
         raise BuildError(f"{where}: modelDescription.xml is not valid XML ({exc})") from None
-    variables = {v.get("name"): v for v in root.iter("ScalarVariable")}
+    fmi3 = str(root.get("fmiVersion", "")).startswith("3")
+    if fmi3:  # FMI 3.0: <Float64 name=... start=...>, <String name=...><Start value=.../></String>
+        listed = root.find("ModelVariables")
+        variables = {v.get("name"): v for v in (listed if listed is not None else ())}
+    else:
+        variables = {v.get("name"): v for v in root.iter("ScalarVariable")}
     for name, value in values.items():
         var = variables.get(name)
-        typed = None if var is None else next(
-            (e for e in var if e.tag in ("Real", "Integer", "Boolean", "String") and "start" in e.attrib), None)
+        if var is not None and fmi3:
+            typed, key = (var.find("Start"), "value") if var.tag == "String" else (var, "start")
+            typed = typed if typed is not None and key in typed.attrib else None
+        else:
+            key = "start"
+            typed = None if var is None else next(
+                (e for e in var if e.tag in ("Real", "Integer", "Boolean", "String") and "start" in e.attrib), None)
         if var is None or var.get("causality") != "parameter" or typed is None:
             raise BuildError(f"{where}: no parameter {name!r} with a start value")
-        typed.set("start", _start_text(value))
+        typed.set(key, _start_text(value))
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 
 

@@ -472,3 +472,97 @@ def test_an_fmu_state_restored_gives_the_same_steps_again(units):
     for name in ("PmsmEvPlant", "FocEkf5"):
         assert found[name]["again"] and found[name]["thawed"] and found[name]["bytes"] > 0, found
         assert found[name]["time"] == pytest.approx(22e-4, abs=1e-15)
+
+
+# -- the master ----------------------------------------------------------------------------------------------------
+COUNTERS = ("pmsm_fmu_fast_calls", "pmsm_fmu_compiled_calls")
+
+
+def _run_master(system, fmi, out: Path, stop_time: float, mixed: dict | None = None, loop=None) -> tuple[dict, dict]:
+    """A run of the master on the project's FMUs as FMI ``fmi`` units (``mixed``: instance -> FMI version of those
+    that differ); (metrics.json's content, {instance: (fast calls, compiled calls)} read before each is freed)."""
+    import ctypes
+
+    from pmsm_cosim.app.drive import ensure_fmus, with_fmi
+    from pmsm_cosim.app.overrides import apply_overrides
+    from pmsm_cosim.engine.fmu import FmuInstance
+    from pmsm_cosim.engine.master import Master
+
+    spec = with_fmi(apply_overrides(system, stop_time=stop_time), fmi)
+    for comp in spec.components:
+        if comp.name in (mixed or {}):
+            folder = comp.fmu.parent if fmi == 2 else comp.fmu.parent.parent
+            comp.fmu = (fmu_build.fmi3_out_dir(folder) if mixed[comp.name] == 3 else folder) / comp.fmu.name
+    ensure_fmus(spec, quiet=True)
+    counts, close = {}, FmuInstance.close
+
+    def counted_close(inst):
+        if inst.fmu is not None and inst.handle:
+            functions = [inst.fmu.dll[name] for name in COUNTERS]
+            for f in functions:
+                f.restype = ctypes.c_ulonglong
+            counts[inst.name] = (inst.fmi, *(f(ctypes.c_void_p(inst.handle)) for f in functions))
+        close(inst)
+
+    FmuInstance.close = counted_close
+    try:
+        master = Master(spec, loop=loop, note=lambda line: None)
+        metrics = master.run(out, catch_sigint=False)
+    finally:
+        FmuInstance.close = close
+    return metrics, counts
+
+
+@pytest.mark.parametrize("scenario, stop", [("scenario1", 0.3), ("udds-sensorless", 1.0)])
+def test_the_master_runs_the_fmi3_units_as_the_fmi2_units(units, tmp_path, scenario, stop):
+    """A shipped scenario, cut short, on the FMI 3.0 units, on the FMI 2.0 ones and on both mixed (the controller
+    3.0, the plant 2.0; a sensorless drive cycle: the route's signals and the plant's battery): results.csv byte for
+    byte the same (cmp), the compiled loop, and the lean binding's compiled step serving the plant and the
+    controller through the FMI 3.0 layer as often as through FMI 2.0."""
+    import filecmp
+
+    runs = {}
+    for label, fmi, mixed in (("fmi2", 2, None), ("fmi3", 3, None), ("mixed", 3, {"plant": 2})):
+        runs[label] = _run_master(scenario, fmi, tmp_path / label, stop, mixed)
+    steps = round(stop / 1e-4)
+    for label, (metrics, counts) in runs.items():
+        assert metrics["status"] == "completed" and metrics["macro_steps"] == steps, (label, metrics["status"])
+        assert metrics["loop"] == "compiled", label
+        assert filecmp.cmp(tmp_path / "fmi2" / "results.csv", tmp_path / label / "results.csv", shallow=False), label
+    two, three, mixed = (runs[k][1] for k in ("fmi2", "fmi3", "mixed"))
+    assert {k: v[0] for k, v in three.items()} == {"ctrl": 3, "plant": 3}
+    assert {k: v[0] for k, v in mixed.items()} == {"ctrl": 3, "plant": 2}
+    for name in ("ctrl", "plant"):
+        assert three[name][1:] == two[name][1:] == mixed[name][1:], (name, two, three, mixed)
+        assert three[name][2] >= steps, (name, three)  # at least every step compiled
+    print(scenario, {name: three[name][1:] for name in three})
+
+
+def test_the_plain_loop_and_the_command_line_run_the_fmi3_units(units, tmp_path):
+    """``pmsm-cosim run SCENARIO --fmi 3`` (and ``--plain-loop``) gives the results.csv of ``--fmi 2``, byte for
+    byte; ``export-ssp --fmi 3`` packs the FMI 3.0 units, and the package runs to the same results.csv."""
+    import filecmp
+
+    from pmsm_cosim.app.cli import main
+
+    base = ["--stop-time", "0.1", "--no-figures", "-q"]
+    for label, extra in (("fmi2", ["--fmi", "2"]), ("fmi3", ["--fmi", "3"]), ("plain", ["--fmi", "3", "--plain-loop"])):
+        assert main(["run", "scenario2", *base, *extra, "--out", str(tmp_path / label)]) == 0, label
+        assert filecmp.cmp(tmp_path / "fmi2" / "results.csv", tmp_path / label / "results.csv", shallow=False), label
+    for fmi in ("2", "3"):
+        package = tmp_path / f"scenario2-{fmi}.ssp"
+        assert main(["export-ssp", "scenario2", "--fmi", fmi, "-o", str(package), "-q"]) == 0
+        with zipfile.ZipFile(package) as z:
+            versions = {}
+            for member in z.namelist():
+                if member.endswith(".fmu"):
+                    with zipfile.ZipFile(z.open(member)) as inner:
+                        versions[Path(member).stem] = _description_bytes(inner).get("fmiVersion")
+        assert sorted(versions.values()) == (["2.0", f"{fmi}.0", f"{fmi}.0"] if fmi == "3" else ["2.0"] * 3), versions
+        out = tmp_path / f"ssp{fmi}"
+        assert main(["run", str(package), *base, "--out", str(out)]) == 0
+    assert filecmp.cmp(tmp_path / "ssp2" / "results.csv", tmp_path / "ssp3" / "results.csv", shallow=False)
+
+
+def _description_bytes(z: zipfile.ZipFile) -> ET.Element:
+    return ET.fromstring(z.read("modelDescription.xml"))
