@@ -63,6 +63,7 @@ from fmpy.validation import validate_fmu
 from pythonfmu import FmuBuilder
 
 from pmsm_ev.cycles import load_road
+from pmsm_ev.params import DT_DEFAULT
 from pmsm_ev.scenarios import route_from_json, route_to_json, scenario_route
 
 from .slave_support import BINDING_CONSTANTS, START_VALUES_FILE, WRAPPER_CHECKED, version_tuple
@@ -204,6 +205,13 @@ FMI3_FOLDER = "fmi3"
 FMI3_TIME_REFERENCE = 2**31 - 1
 #: the FMI versions the build makes units of
 FMI_VERSIONS = (2, 3)
+#: the controllers' sample clock in their FMI 3.0 units (fmus/README.md, "FMI 3.0", "The sample clock"): a periodic
+#: input Clock of this name and value reference, its interval the controllers' sample period (``DT_DEFAULT``, what
+#: ``dt`` = 0 samples at in the shipped scenarios), described to the FMI 3.0 layer by ``resources/FMI3_CLOCK_FILE``
+FMI3_CLOCK_NAME = "sample"
+FMI3_CLOCK_REFERENCE = FMI3_TIME_REFERENCE - 1
+FMI3_CLOCK_FILE = "fmi3_clock.txt"
+FMI3_SAMPLE_PERIOD = DT_DEFAULT
 
 
 def fmi3_headers() -> tuple[Path, ...]:
@@ -219,7 +227,8 @@ def fmi3_layer_library() -> tuple[Path | None, str]:
     missing = [str(h) for h in headers if not h.is_file()]
     if missing:
         return None, f"no FMI 3.0 header {missing[0]} (FMPy's c-code/)"
-    defines = {"FMI2_LOADER": f'"{FMI3_INNER_LOADER}"', "TIME_REFERENCE": f"{FMI3_TIME_REFERENCE}U"}
+    defines = {"FMI2_LOADER": f'"{FMI3_INNER_LOADER}"', "TIME_REFERENCE": f"{FMI3_TIME_REFERENCE}U",
+               "CLOCK_FILE": f'"{FMI3_CLOCK_FILE}"'}
     return _compiled(FMI3_SOURCE, "fmi3", False, defines, headers)
 
 
@@ -802,13 +811,21 @@ _TYPE_ATTRIBUTES_3 = ("quantity", "unit", "displayUnit", "relativeQuantity", "un
 _VARIABLE_ATTRIBUTES_3 = ("name", "valueReference", "description", "causality", "variability", "initial")
 
 
-def model_description_fmi3(model_description: bytes, where: str = "modelDescription.xml") -> bytes:
+def clocked(name: str) -> bool:
+    """Whether the FMI 3.0 unit of the FMU ``name`` has the sample clock: the controllers."""
+    return name in OBSERVER_FMUS.values()
+
+
+def model_description_fmi3(model_description: bytes, where: str = "modelDescription.xml",
+                           clock: float | None = None) -> bytes:
     """The FMI 3.0 model description of a co-simulation unit from its FMI 2.0 one (the bytes of a
     modelDescription.xml written by pythonfmu): ``fmiVersion="3.0"``, the GUID as ``instantiationToken``,
     ``<CoSimulation>`` with the same capabilities (``hasEventMode="false"``), the unit definitions, log categories
     and default experiment as they are, each variable as ``<Float64>``, ``<Int32>``, ``<Boolean>`` or ``<String>``
     with the same value reference, causality, variability, initial, start, unit and description, and the model
-    structure's outputs and initial unknowns by value reference (FMI 2.0 names them by index)."""
+    structure's outputs and initial unknowns by value reference (FMI 2.0 names them by index). ``clock``: the sample
+    period of a controller, declared as its periodic input Clock ``FMI3_CLOCK_NAME`` (``intervalVariability=
+    "constant"``, ``intervalDecimal`` the period) and ``hasEventMode="true"``."""
     try:
         root = ET.fromstring(model_description)
     except ET.ParseError as exc:
@@ -826,7 +843,7 @@ def model_description_fmi3(model_description: bytes, where: str = "modelDescript
     for key, value in root.find("CoSimulation").attrib.items():
         if key in _CS_ATTRIBUTES_3:
             cs.set(_CS_ATTRIBUTES_3[key], value)
-    cs.set("hasEventMode", "false")
+    cs.set("hasEventMode", "true" if clock else "false")
     units = root.find("UnitDefinitions")
     if units is None:
         units = ET.Element("UnitDefinitions")
@@ -844,6 +861,13 @@ def model_description_fmi3(model_description: bytes, where: str = "modelDescript
                                          "causality": "independent", "variability": "continuous",
                                          "description": "the simulation time (the independent variable)",
                                          "unit": "s"})
+    if clock:
+        ET.SubElement(variables, "Clock", {
+            "name": FMI3_CLOCK_NAME, "valueReference": str(FMI3_CLOCK_REFERENCE), "causality": "input",
+            "variability": "discrete", "intervalVariability": "constant", "intervalDecimal": repr(float(clock)),
+            "description": "the controller's sample clock: in event mode each tick is one sample (the outputs "
+                           "computed on the inputs of the tick, held until the next); without event mode the "
+                           "unit samples at this period in fmi3DoStep"})
     references = []  # by the FMI 2.0 index (1-based): the value reference
     for var in root.find("ModelVariables").iter("ScalarVariable"):
         typed = next((e for e in var if e.tag in _TYPES_3), None)
@@ -887,6 +911,16 @@ def model_description_fmi3(model_description: bytes, where: str = "modelDescript
     return ET.tostring(out, encoding="UTF-8", xml_declaration=True) + b"\n"
 
 
+def _clock_line(model_description: bytes, where: str) -> str:
+    """The FMI 3.0 layer's description of a controller's sample clock (``resources/FMI3_CLOCK_FILE``): the clock's
+    value reference, its interval and the value reference of the parameter ``dt``."""
+    root = ET.fromstring(model_description)
+    dt = next((v.get("valueReference") for v in root.iter("ScalarVariable") if v.get("name") == "dt"), None)
+    if dt is None:
+        raise BuildError(f"{where}: a controller without the parameter dt (its sample period)")
+    return f"{FMI3_CLOCK_REFERENCE} {FMI3_SAMPLE_PERIOD!r} {dt}\n"
+
+
 def fmi3_out_dir(out_dir=None) -> Path:
     """The folder of the FMI 3.0 units: ``fmi3/`` in the folder of the FMI 2.0 ones (``out_dir``, else
     ``default_out_dir()``)."""
@@ -897,7 +931,8 @@ def fmi3_hash(name: str) -> str:
     """SHA-256 of what an FMI 3.0 unit is made of: its FMI 2.0 unit's (:func:`source_hash`), the FMI 3.0 layer's
     source and headers and the compiler flags."""
     h = hashlib.sha256()
-    for label, data in (("format", b"pmsm-ev-fmus fmi3 1"), ("fmi2", source_hash(name).encode()),
+    for label, data in (("format", f"pmsm-ev-fmus fmi3 2 clock {FMI3_SAMPLE_PERIOD!r}".encode()),
+                        ("fmi2", source_hash(name).encode()),
                         ("fmi3_layer.c", FMI3_SOURCE.read_bytes()),
                         *((f"include/{p.name}", p.read_bytes()) for p in fmi3_headers() if p.is_file()),
                         ("cflags", " ".join(extra_cflags()).encode())):
@@ -942,7 +977,9 @@ def build_fmu3(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool
                     continue
                 data = zin.read(item)
                 if member == "modelDescription.xml":
-                    data = model_description_fmi3(data, f"{source}")
+                    if clocked(name):
+                        zout.writestr(f"resources/{FMI3_CLOCK_FILE}", _clock_line(data, f"{source}"))
+                    data = model_description_fmi3(data, f"{source}", FMI3_SAMPLE_PERIOD if clocked(name) else None)
                 elif member == f"resources/{BUILD_INFO}":
                     data = (json.dumps(info, indent=2) + "\n").encode("utf-8")
                 zout.writestr(item, data)

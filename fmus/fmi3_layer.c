@@ -41,6 +41,7 @@
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <limits.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdatomic.h>
@@ -168,7 +169,20 @@ typedef struct {
     fmi3LogMessageCallback log;       /* the host's (may be NULL) */
     fmi2CallbackFunctions callbacks;  /* given to fmi2Instantiate: relay, calloc, free; environment = this */
     double time;                      /* the independent variable: the start time, then where the last step ended */
+    /* the sample clock of a controller (resources/CLOCK_FILE; clocked = 0: none) */
+    int clocked;
+    fmi3ValueReference clock_reference, dt_reference;
+    double interval;                  /* the clock's interval: the sample period */
+    /* event mode (eventModeUsed): the stack steps only at the clock's ticks, one sample period each */
+    int event_mode_used, in_event_mode, initialized, ticked;
+    double stack_time;                /* where the stack's last step ended (event mode: the next tick) */
 } Instance;
+
+/* the sample clock of the unit: a line "<clock value reference> <interval [s]> <value reference of dt>" in this
+ * file of resources/ (written by pmsm_ev_fmus.build for the controllers) */
+#ifndef CLOCK_FILE
+#error "compile with -DCLOCK_FILE=\"<file name>\" (pmsm_ev_fmus.build does)"
+#endif
 
 #define LIVE_INSTANCES 4096
 static _Atomic(Instance*) live_table[LIVE_INSTANCES];
@@ -345,6 +359,36 @@ static char* resource_uri(fmi3String resourcePath)
     return uri;
 }
 
+/* the unit's sample clock from resources/CLOCK_FILE (uri: the resource folder's file URI, as made above) */
+static void read_clock(Instance* w, const char* uri)
+{
+    char path[PATH_MAX + 64];
+    const char* folder = strncmp(uri, "file://", 7) == 0 ? uri + 7 : uri;
+    size_t k = 0;
+    for (const char* c = folder; *c && k + 1 < PATH_MAX; c++) { /* percent-decoded */
+        if (c[0] == '%' && c[1] && c[2]) {
+            char hex[3] = {c[1], c[2], 0};
+            path[k++] = (char)strtol(hex, NULL, 16);
+            c += 2;
+        } else {
+            path[k++] = *c;
+        }
+    }
+    path[k] = '\0';
+    snprintf(path + k, sizeof path - k, "%s", CLOCK_FILE);
+    FILE* f = fopen(path, "r");
+    if (f == NULL) return;
+    unsigned clock, dt;
+    double interval;
+    if (fscanf(f, "%u %lf %u", &clock, &interval, &dt) == 3 && interval > 0) {
+        w->clocked = 1;
+        w->clock_reference = clock;
+        w->interval = interval;
+        w->dt_reference = dt;
+    }
+    fclose(f);
+}
+
 /* -- common functions ------------------------------------------------------------------------------------ */
 const char* fmi3GetVersion(void) { return fmi3Version; }
 
@@ -391,11 +435,6 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
 {
     (void)earlyReturnAllowed, (void)requiredIntermediateVariables, (void)intermediateUpdate;
     char why[PATH_MAX + 256];
-    if (eventModeUsed) {
-        say(instanceEnvironment, logMessage, fmi3Error,
-            "fmi3InstantiateCoSimulation: eventModeUsed, but this FMU has no event mode (hasEventMode=\"false\")");
-        return NULL;
-    }
     if (nRequiredIntermediateVariables > 0) {
         say(instanceEnvironment, logMessage, fmi3Error,
             "fmi3InstantiateCoSimulation: %zu required intermediate variables, but this FMU provides no "
@@ -416,6 +455,15 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     }
     w->environment = instanceEnvironment;
     w->log = logMessage;
+    read_clock(w, uri);
+    if (eventModeUsed && !w->clocked) {
+        say(instanceEnvironment, logMessage, fmi3Error,
+            "fmi3InstantiateCoSimulation: eventModeUsed, but this FMU has no event mode (hasEventMode=\"false\")");
+        free(w);
+        free(uri);
+        return NULL;
+    }
+    w->event_mode_used = eventModeUsed ? 1 : 0;
     w->callbacks.logger = relay;
     w->callbacks.allocateMemory = calloc;
     w->callbacks.freeMemory = free;
@@ -461,21 +509,49 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
     if (!live(instance)) return fmi3Error;
-    return status3(fmi2.exit_init(W->inner));
+    if (W->event_mode_used) { /* the stack samples once a tick: its sample period must be the clock's */
+        fmi2ValueReference ref = W->dt_reference;
+        fmi2Real dt = 0.0;
+        if (fmi2.get_real(W->inner, &ref, 1, &dt) <= fmi2Warning && dt != 0.0 && dt != W->interval) {
+            say(W->environment, W->log, fmi3Error,
+                "fmi3ExitInitializationMode: dt = %.9g s, but the sample clock ticks every %.9g s in event mode "
+                "(set dt to 0 or to the clock's interval)", dt, W->interval);
+            return fmi3Error;
+        }
+    }
+    fmi2Status s = fmi2.exit_init(W->inner);
+    if (s <= fmi2Warning) {
+        W->initialized = 1;
+        W->stack_time = W->time;
+    }
+    return status3(s);
 }
 
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) { NOT_HERE("this FMU has no event mode"); }
+fmi3Status fmi3EnterEventMode(fmi3Instance instance)
+{
+    if (!live(instance)) return fmi3Error;
+    if (!W->clocked) NOT_HERE("this FMU has no event mode");
+    if (!W->event_mode_used) NOT_HERE("event mode was not asked for at instantiation (eventModeUsed false): the "
+                                      "unit samples at its own period in fmi3DoStep");
+    if (!W->initialized) NOT_HERE("before fmi3ExitInitializationMode");
+    W->in_event_mode = 1;
+    return fmi3OK;
+}
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
     if (!live(instance)) return fmi3Error;
-    return status3(fmi2.terminate(W->inner));
+    fmi2Status s = fmi2.terminate(W->inner);
+    if (s <= fmi2Warning) W->initialized = W->in_event_mode = W->ticked = 0; /* a step now: the stack's refusal */
+    return status3(s);
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
     if (!live(instance)) return fmi3Error;
-    return status3(fmi2.reset(W->inner));
+    fmi2Status s = fmi2.reset(W->inner);
+    if (s <= fmi2Warning) W->initialized = W->in_event_mode = W->ticked = 0;
+    return status3(s);
 }
 
 /* -- getting and setting values -------------------------------------------------------------------------- */
@@ -621,14 +697,26 @@ fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueRef
                         fmi3Clock values[])
 {
     (void)valueReferences, (void)nValueReferences, (void)values;
+    if (live(instance) && W->clocked) NOT_HERE("the sample clock is an input clock: the host sets it (fmi3SetClock)");
     NOT_HERE("this FMU has no clock");
 }
 
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                         const fmi3Clock values[])
 {
-    (void)valueReferences, (void)nValueReferences, (void)values;
-    NOT_HERE("this FMU has no clock");
+    if (!live(instance)) return fmi3Error;
+    if (!W->clocked) NOT_HERE("this FMU has no clock");
+    if (!W->in_event_mode) NOT_HERE("outside event mode: a clock ticks in event mode (fmi3EnterEventMode first); "
+                                    "nothing set");
+    for (size_t i = 0; i < nValueReferences; i++)
+        if (valueReferences[i] != W->clock_reference) {
+            say(W->environment, W->log, fmi3Error, "fmi3SetClock: value reference %u is not a clock of this FMU "
+                "(the sample clock is %u); nothing set", (unsigned)valueReferences[i], (unsigned)W->clock_reference);
+            return fmi3Error;
+        }
+    for (size_t i = 0; i < nValueReferences; i++)
+        if (values[i]) W->ticked = 1;
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueReference valueReference,
@@ -662,7 +750,8 @@ fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
     fmi2Real reached;
     if (s <= fmi2Warning && fmi2.real_status(W->inner, fmi2LastSuccessfulTime, &reached) <= fmi2Warning &&
         reached == reached)
-        W->time = reached;
+        W->time = W->stack_time = reached;
+    if (s <= fmi2Warning) W->ticked = W->in_event_mode = 0;
     return status3(s);
 }
 
@@ -717,8 +806,14 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) { NOT_HERE("this FMU
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Float64 intervals[], fmi3IntervalQualifier qualifiers[])
 {
-    (void)valueReferences, (void)nValueReferences, (void)intervals, (void)qualifiers;
-    NOT_HERE("this FMU has no clock");
+    if (!live(instance)) return fmi3Error;
+    if (!W->clocked) NOT_HERE("this FMU has no clock");
+    for (size_t i = 0; i < nValueReferences; i++) {
+        if (valueReferences[i] != W->clock_reference) NOT_HERE("not a clock of this FMU");
+        intervals[i] = W->interval;
+        qualifiers[i] = fmi3IntervalUnchanged; /* intervalVariability="constant" */
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
@@ -779,9 +874,24 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean* discrete
                                     fmi3Boolean* valuesOfContinuousStatesChanged, fmi3Boolean* nextEventTimeDefined,
                                     fmi3Float64* nextEventTime)
 {
-    (void)discreteStatesNeedUpdate, (void)terminateSimulation, (void)nominalsOfContinuousStatesChanged;
-    (void)valuesOfContinuousStatesChanged, (void)nextEventTimeDefined, (void)nextEventTime;
-    NOT_HERE("this FMU has no event mode");
+    if (!live(instance)) return fmi3Error;
+    if (!W->clocked) NOT_HERE("this FMU has no event mode");
+    if (!W->in_event_mode) NOT_HERE("outside event mode (fmi3EnterEventMode first)");
+    fmi2Status s = fmi2OK;
+    if (W->ticked) { /* the tick: one sample period of the stack from now, its sample at this instant */
+        s = fmi2.do_step(W->inner, W->time, W->interval, 1);
+        if (s <= fmi2Warning) {
+            W->stack_time = W->time + W->interval;
+            W->ticked = 0;
+        }
+    }
+    if (discreteStatesNeedUpdate != NULL) *discreteStatesNeedUpdate = false;
+    if (terminateSimulation != NULL) *terminateSimulation = s == fmi2Fatal;
+    if (nominalsOfContinuousStatesChanged != NULL) *nominalsOfContinuousStatesChanged = false;
+    if (valuesOfContinuousStatesChanged != NULL) *valuesOfContinuousStatesChanged = false;
+    if (nextEventTimeDefined != NULL) *nextEventTimeDefined = true;
+    if (nextEventTime != NULL) *nextEventTime = W->stack_time;
+    return status3(s);
 }
 
 /* -- model exchange: not this FMU ------------------------------------------------------------------------ */
@@ -846,7 +956,15 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t* nConti
 }
 
 /* -- co-simulation --------------------------------------------------------------------------------------- */
-fmi3Status fmi3EnterStepMode(fmi3Instance instance) { NOT_HERE("this FMU has no event mode (it is in step mode)"); }
+fmi3Status fmi3EnterStepMode(fmi3Instance instance)
+{
+    if (!live(instance)) return fmi3Error;
+    if (!W->clocked) NOT_HERE("this FMU has no event mode (it is in step mode)");
+    if (!W->in_event_mode) NOT_HERE("not in event mode");
+    if (W->ticked) NOT_HERE("the clock ticked, but fmi3UpdateDiscreteStates has not run its sample");
+    W->in_event_mode = 0;
+    return fmi3OK;
+}
 
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                     size_t nValueReferences, const fmi3Int32 orders[], fmi3Float64 values[],
@@ -856,12 +974,50 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
     NOT_HERE("this FMU provides no output derivatives (maxOutputDerivativeOrder 0)");
 }
 
+/* fmi3DoStep in event mode: the stack stepped at the tick (fmi3UpdateDiscreteStates), up to the next tick; a step
+ * here only moves the time, within that sample period, with the outputs held (the controller's change only at its
+ * samples) */
+static fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eventHandlingNeeded,
+                               fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
+                               fmi3Float64* lastSuccessfulTime)
+{
+    double end = t + h, slack = 1e-6 * w->interval;
+    fmi3Status s = fmi3OK;
+    if (eventHandlingNeeded != NULL) *eventHandlingNeeded = false;
+    if (terminateSimulation != NULL) *terminateSimulation = false;
+    if (earlyReturn != NULL) *earlyReturn = false;
+    if (lastSuccessfulTime != NULL) *lastSuccessfulTime = t;
+    if (w->in_event_mode) {
+        say(w->environment, w->log, fmi3Error, "fmi3DoStep in event mode (fmi3EnterStepMode first)");
+        s = fmi3Error;
+    } else if (!(h > 0.0)) {
+        say(w->environment, w->log, fmi3Error, "fmi3DoStep of %.9g s: a step size > 0", h);
+        s = fmi3Error;
+    } else if (fabs(t - w->time) > 1e-3 * h) {
+        say(w->environment, w->log, fmi3Error, "fmi3DoStep at t = %.9g s does not continue the last step, which "
+            "ended at %.9g s", t, w->time);
+        s = fmi3Error;
+    } else if (end > w->stack_time + slack) {
+        say(w->environment, w->log, fmi3Error, "fmi3DoStep to t = %.9g s passes the sample clock's tick at %.9g s, "
+            "which was not set (in event mode, set the clock at each tick: fmi3EnterEventMode, fmi3SetClock, "
+            "fmi3UpdateDiscreteStates)", end, w->stack_time);
+        s = fmi3Error;
+    } else {
+        w->time = end;
+        if (lastSuccessfulTime != NULL) *lastSuccessfulTime = end;
+    }
+    return s;
+}
+
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
                       fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                       fmi3Boolean* eventHandlingNeeded, fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
                       fmi3Float64* lastSuccessfulTime)
 {
     if (!live(instance)) return fmi3Error;
+    if (W->event_mode_used && W->initialized) return clocked_step(W, currentCommunicationPoint, communicationStepSize,
+                                                                   eventHandlingNeeded, terminateSimulation,
+                                                                   earlyReturn, lastSuccessfulTime);
     fmi2Status s = fmi2.do_step(W->inner, currentCommunicationPoint, communicationStepSize,
                                 noSetFMUStatePriorToCurrentPoint ? 1 : 0);
     fmi3Boolean terminate = s == fmi2Fatal;

@@ -74,6 +74,7 @@ def test_the_units_are_in_their_own_folder_with_the_fmi2_stack_behind_the_layer(
 
 
 def test_the_units_validate_and_declare_the_fmi2_units_variables(units):
+    """... and the controllers their sample clock (hasEventMode="true")."""
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
@@ -88,8 +89,18 @@ def test_the_units_validate_and_declare_the_fmi2_units_variables(units):
         assert cs3.modelIdentifier == name and cs3.canHandleVariableCommunicationStepSize
         assert (cs3.canGetAndSetFMUstate, cs3.canSerializeFMUstate) == (cs2.canGetAndSetFMUstate,
                                                                           cs2.canSerializeFMUstate)
-        assert not cs3.hasEventMode
-        time, *variables = md3.modelVariables
+        assert cs3.hasEventMode == fmu_build.clocked(name) == (name in fmu_build.OBSERVER_FMUS.values())
+        clocks = [v for v in md3.modelVariables if v.type == "Clock"]
+        if fmu_build.clocked(name):  # the sample clock: a periodic input clock at the sample period
+            (clock,) = clocks
+            element = next(e for e in _description(fmi3[name]).iter("Clock"))
+            assert (clock.name, clock.valueReference, clock.causality, clock.variability, clock.intervalVariability,
+                    float(element.get("intervalDecimal"))) == (fmu_build.FMI3_CLOCK_NAME,
+                                                               fmu_build.FMI3_CLOCK_REFERENCE, "input", "discrete",
+                                                               "constant", 1e-4)
+        else:
+            assert clocks == []
+        time, *variables = [v for v in md3.modelVariables if v.type != "Clock"]
         assert (time.name, time.causality, time.valueReference) == ("time", "independent",
                                                                      fmu_build.FMI3_TIME_REFERENCE)
         assert len(variables) == len(md2.modelVariables)
@@ -249,7 +260,16 @@ def sequence(case):
             out["calls"].append(["instantiate", "NULL"])
         print(END + json.dumps(out), flush=True)
         return
-    fmu = make()
+    if case == "ticks":  # in event mode: the clock set outside event mode, steps past a tick
+        clock = [v.valueReference for v in md.modelVariables if v.type == "Clock"]
+        try:
+            fmu = make(eventModeUsed=True)
+        except Exception:
+            out["calls"].append(["instantiate", "NULL"])
+            print(END + json.dumps(out), flush=True)
+            return
+    else:
+        fmu = make()
     def call(name, *args):
         try:
             result = getattr(fmu, name)(*args)
@@ -303,6 +323,24 @@ def sequence(case):
         call("fmi3SetTime", fmu.component, 0.0)
         call("fmi3GetNumberOfContinuousStates", fmu.component, ctypes.byref(ctypes.c_size_t()))
         call("doStep", 0.0, 1e-4)
+    elif case == "ticks":
+        init()
+        call("setClock", clock, [True])  # in step mode: refused
+        call("doStep", 0.0, 1e-4)        # past the first tick (at 0) without it
+        call("enterEventMode")
+        call("setClock", clock, [True])
+        call("updateDiscreteStates")     # the tick: the sample at 0
+        call("enterStepMode")
+        call("doStep", 0.0, 5e-5)        # within the sample period: the outputs held
+        read("half", outputs)
+        call("doStep", 5e-5, 5e-5)
+        read("period", outputs + ["time"])
+        call("doStep", 1e-4, 1e-4)       # past the next tick (at 1e-4) without it
+        call("enterEventMode")
+        call("setClock", clock, [True])
+        call("updateDiscreteStates")
+        call("enterStepMode")
+        call("doStep", 1e-4, 1e-4)
     elif case == "foreign-instance":  # a freed instance, then NULL: fmi3Error each, nothing touched, no line
         init()
         call("doStep", 0.0, 1e-4)
@@ -333,7 +371,7 @@ for case in sys.argv[3:]:
 """
 _END = "@@sequence@@ "
 CASES = ("step-before-init", "step-after-terminate", "time", "non-finite", "not-applicable", "foreign-instance",
-         "event-mode-used")
+         "event-mode-used", "ticks")
 
 
 @functools.lru_cache(maxsize=None)
@@ -357,7 +395,7 @@ def _misuse(fmu: Path) -> dict[str, tuple[list, list[str], dict]]:
 
 @pytest.fixture(scope="module", params=["PmsmEvPlant", "FocSensorless"])
 def misuse(request, units):
-    return _misuse(units[1][request.param])
+    return {**_misuse(units[1][request.param]), "unit": request.param}
 
 
 def test_a_step_before_initialisation_is_an_error(misuse):
@@ -398,13 +436,23 @@ def test_non_finite_inputs_are_refused(misuse):
 def test_functions_that_do_not_apply_are_errors_with_a_line_each(misuse):
     calls, log, _ = misuse["not-applicable"]
     assert [status for _, status in calls[2:-1]] == [ERROR] * 10 and calls[-1] == ["doStep", 0]
+    if misuse["unit"] == "PmsmEvPlant":
+        events = ["[ERROR] fmi3EnterEventMode: this FMU has no event mode",
+                  "[ERROR] fmi3EnterStepMode: this FMU has no event mode (it is in step mode)",
+                  "[ERROR] fmi3SetClock: this FMU has no clock",
+                  "[ERROR] fmi3GetIntervalDecimal: this FMU has no clock",
+                  "[ERROR] fmi3UpdateDiscreteStates: this FMU has no event mode"]
+    else:  # a controller instantiated without event mode: it samples in fmi3DoStep, its clock is not set
+        events = ["[ERROR] fmi3EnterEventMode: event mode was not asked for at instantiation (eventModeUsed false): "
+                  "the unit samples at its own period in fmi3DoStep",
+                  "[ERROR] fmi3EnterStepMode: not in event mode",
+                  "[ERROR] fmi3SetClock: outside event mode: a clock ticks in event mode (fmi3EnterEventMode "
+                  "first); nothing set",
+                  "[ERROR] fmi3GetIntervalDecimal: not a clock of this FMU",
+                  "[ERROR] fmi3UpdateDiscreteStates: outside event mode (fmi3EnterEventMode first)"]
     assert log == ["[ERROR] fmi3GetFloat32: this FMU has no variable of type fmi3Float32",
                    "[ERROR] fmi3GetInt64: this FMU has no variable of type fmi3Int64",
-                   "[ERROR] fmi3EnterEventMode: this FMU has no event mode",
-                   "[ERROR] fmi3EnterStepMode: this FMU has no event mode (it is in step mode)",
-                   "[ERROR] fmi3SetClock: this FMU has no clock",
-                   "[ERROR] fmi3GetIntervalDecimal: this FMU has no clock",
-                   "[ERROR] fmi3UpdateDiscreteStates: this FMU has no event mode",
+                   *events,
                    "[ERROR] fmi3EnterConfigurationMode: this FMU has no structural parameter",
                    "[ERROR] fmi3SetTime: a function of model exchange; this FMU is for co-simulation",
                    "[ERROR] fmi3GetNumberOfContinuousStates: a function of model exchange; this FMU is for "
@@ -416,11 +464,35 @@ def test_a_null_or_freed_instance_is_an_error_and_touched_nowhere(misuse):
     assert values == {"freed": [ERROR] * 9, "null": [ERROR] * 9} and log == []
 
 
-def test_event_mode_is_refused_at_instantiation(misuse):
+def test_event_mode_is_refused_at_instantiation_without_a_clock(misuse):
     calls, log, _ = misuse["event-mode-used"]
+    if misuse["unit"] != "PmsmEvPlant":  # a controller: event mode with its sample clock
+        assert calls == [["instantiate", 0]] and log == []
+        return
     assert calls == [["instantiate", "NULL"]]
     assert log == ['[ERROR] fmi3InstantiateCoSimulation: eventModeUsed, but this FMU has no event mode '
                    '(hasEventMode="false")']
+
+
+def test_a_clock_set_outside_event_mode_or_a_tick_passed_is_an_error(misuse):
+    """A controller in event mode: fmi3SetClock in step mode and an fmi3DoStep past a tick of the sample clock not
+    set are fmi3Error with a line each, and change nothing (the ticks after them run as they should); within a
+    sample period the outputs are held."""
+    calls, log, values = misuse["ticks"]
+    if misuse["unit"] == "PmsmEvPlant":
+        assert calls == [["instantiate", "NULL"]]
+        return
+    assert calls[2:] == [["setClock", ERROR], ["doStep", ERROR], ["enterEventMode", 0], ["setClock", 0],
+                         ["updateDiscreteStates", 0], ["enterStepMode", 0], ["doStep", 0], ["doStep", 0],
+                         ["doStep", ERROR], ["enterEventMode", 0], ["setClock", 0], ["updateDiscreteStates", 0],
+                         ["enterStepMode", 0], ["doStep", 0]]
+    passing = ("which was not set (in event mode, set the clock at each tick: fmi3EnterEventMode, "
+               "fmi3SetClock, fmi3UpdateDiscreteStates)")
+    assert log == ["[ERROR] fmi3SetClock: outside event mode: a clock ticks in event mode (fmi3EnterEventMode "
+                   "first); nothing set",
+                   f"[ERROR] fmi3DoStep to t = 0.0001 s passes the sample clock's tick at 0 s, {passing}",
+                   f"[ERROR] fmi3DoStep to t = 0.0002 s passes the sample clock's tick at 0.0001 s, {passing}"]
+    assert values["period"][:-1] == values["half"] and values["period"][-1] == 1e-4
 
 
 # -- the FMU state -------------------------------------------------------------------------------------------------

@@ -97,7 +97,7 @@ def cmd_run(a) -> int:
     spec = with_fmi(_load_with_overrides(a), a.fmi)
     out = Path(a.out) if a.out else Path("runs") / spec.name
     ensure_fmus(spec, a.quiet)
-    master = Master(spec, loop=a.loop, note=lambda line: _note(line, a.quiet))
+    master = Master(spec, loop=a.loop, note=lambda line: _note(line, a.quiet), event_mode=not a.no_event_mode)
     if not a.quiet:
         for w in master.warnings:
             _note(w)
@@ -395,6 +395,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--plain-loop", action="store_const", const="plain", dest="loop",
                    help="the same as --loop plain")
     _fmi_option(r)
+    r.add_argument("--no-event-mode", action="store_true",
+                   help="FMI 3.0 units with clocks (the controllers' sample clock) instantiated without event mode: "
+                        "not ticked by the master, they sample at their own period (the same results)")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes")
     r.set_defaults(func=cmd_run)
 

@@ -19,6 +19,13 @@ instantiation has no fmi2SetupExperiment (the start and stop times go to fmi3Ent
 fmi3DoStep that asks to end the simulation (terminateSimulation) is the master's fmi2Discard with fmi2Terminated.
 Variables of the other FMI 3.0 types (Float32, the other integers, Binary, Clock, an Int64 Enumeration) keep their
 FMI 3.0 type name and cannot be connected, recorded or given start values.
+
+Clocks (FMI 3.0 co-simulation with event mode): a unit with ``hasEventMode="true"`` whose every input clock is
+periodic with a constant interval (``intervalVariability="constant"``, ``intervalDecimal``: :meth:`FmuInstance.clocks`)
+is instantiated with eventModeUsed when the master ticks it (``event_mode``), and ticked at each multiple of its
+interval: fmi3EnterEventMode, fmi3SetClock of its clocks that tick then, fmi3UpdateDiscreteStates,
+fmi3EnterStepMode, before its fmi3DoStep from that instant (:meth:`LeanCalls.tick`). Any other clock is refused with
+one line.
 """
 
 from __future__ import annotations
@@ -70,6 +77,8 @@ FMI3_ENUMERATION = "Int64 Enumeration"
 FMI_VERSIONS = ("2.0", "3.0")
 #: the FMI 3.0 calls of each FMI 2.0 family (Enumeration: FMI 2.0's, an Integer)
 FMI3_CALLS = {"Real": "Float64", "Integer": "Int32", "Enumeration": "Int32", "Boolean": "Boolean", "String": "String"}
+#: the FMI 3.0 calls of a clock's tick, in order (``LeanCalls.tick``)
+TICK_CALLS = ("fmi3EnterEventMode", "fmi3SetClock", "fmi3UpdateDiscreteStates", "fmi3EnterStepMode")
 #: causalities whose value may be set before initialization
 SETTABLE_CAUSALITIES = ("parameter", "input")
 _EXC_REPR = re.compile(r"^([A-Za-z_][A-Za-z0-9_.]*(?:Error|Exception))\((.*)\)$", re.S)
@@ -209,7 +218,26 @@ def read_description(path: Path, label: str = ""):
     if version == "3.0":
         for sv in md.modelVariables:  # the FMI 2.0 family of each type the master handles (module doc)
             sv.type = FMI3_ENUMERATION if sv.type == "Enumeration" else FMI3_KINDS.get(sv.type, sv.type)
+        _clock_timing(path, md)
     return md
+
+
+def _clock_timing(path: Path, md) -> None:
+    """The intervalDecimal and shiftDecimal of an FMI 3.0 model description's clocks (fmpy 0.3 does not read them)
+    on its variables."""
+    clocks = {sv.valueReference: sv for sv in md.modelVariables if sv.type == "Clock"}
+    if not clocks:
+        return
+    with zipfile.ZipFile(path) as z:
+        root = ElementTree.fromstring(z.read("modelDescription.xml"))
+    for element in root.iter("Clock"):
+        sv = clocks.get(int(element.get("valueReference", -1)))
+        for key in ("intervalDecimal", "shiftDecimal"):
+            if sv is not None and element.get(key) is not None:
+                try:
+                    setattr(sv, key, float(element.get(key)))
+                except ValueError:
+                    raise CosimError(f"{path}: clock {sv.name!r}: {key}={element.get(key)!r} is not a number") from None
 
 
 def fmi_major(md) -> int:
@@ -270,6 +298,7 @@ class FmuInstance:
         self.variables = {sv.name: sv for sv in self.md.modelVariables}
         self.model_identifier = self.md.coSimulation.modelIdentifier
         self.fmi = fmi_major(self.md)  #: 2 or 3
+        self.event_mode = False  #: FMI 3.0: instantiated with eventModeUsed, its clocks ticked by the master
         self.fmu: FMU2Slave | FMU3Slave | None = None
         self.unzip_dir: str | None = None
         self.handle = None
@@ -292,6 +321,26 @@ class FmuInstance:
             raise CosimError(f"{ctx}{self.name} ({self.path.name}) has no variable {name!r}"
                              f"{close_matches(name, self.variables)}")
         return sv
+
+    def clocks(self) -> dict[int, float]:
+        """{value reference: interval [s]} of this unit's input clocks, for a unit with event mode (FMI 3.0); {} for
+        one without. A clock the master cannot tick (not an input, not periodic with a constant interval given as
+        intervalDecimal, shifted) is a CosimError naming it."""
+        cs = self.md.coSimulation
+        if self.fmi != 3 or not getattr(cs, "hasEventMode", False):
+            return {}
+        out = {}
+        for sv in self.md.modelVariables:
+            if sv.type != "Clock":
+                continue
+            interval = sv.intervalDecimal
+            if (sv.causality != "input" or sv.intervalVariability != "constant" or interval is None
+                    or not math.isfinite(float(interval)) or float(interval) <= 0 or float(sv.shiftDecimal or 0)):
+                raise CosimError(f"{self.name} ({self.path.name}): clock {sv.name!r} is not a periodic input clock "
+                                 f"with a constant interval (intervalVariability=\"constant\", intervalDecimal > 0, "
+                                 f"no shift): the master ticks only those")
+            out[sv.valueReference] = float(interval)
+        return out
 
     def call(self, action: str, kind: str = "") -> str:
         """The name of this instance's FMI function: ``call("DoStep")`` is fmi2DoStep or fmi3DoStep,
@@ -406,11 +455,11 @@ class FmuInstance:
 
     def _instantiate3(self, start_time: float, stop_time: float, start_values: dict, python_fmu: bool) -> None:
         try:
-            self.fmu.instantiate(loggingOn=True, logMessage=self._log3)
+            self.fmu.instantiate(loggingOn=True, logMessage=self._log3, eventModeUsed=self.event_mode)
         except Exception as exc:
             raise self._refused("fmi3InstantiateCoSimulation", exc) from None
         self.handle = self.fmu.component
-        self.lean = LeanCalls(self.fmu, python_fmu, fmi=3)
+        self.lean = LeanCalls(self.fmu, python_fmu, fmi=3, clocks=list(self.clocks()) if self.event_mode else ())
         for var, value in start_values.items():
             self.set_value(var, value, f"start value {self.name}.{var}")
         self.mark()
@@ -513,7 +562,7 @@ class LeanCalls:
     at once to run its Python code. Other FMUs keep the usual release.
     """
 
-    def __init__(self, fmu, python_fmu: bool, fmi: int = 2):
+    def __init__(self, fmu, python_fmu: bool, fmi: int = 2, clocks=()):
         dll = fmu.dll
         self.fmi = fmi
         self._extra_handle = None
@@ -533,6 +582,12 @@ class LeanCalls:
         self.do_step_typed = lib[f"fmi{fmi}DoStep"]
         self.do_step_typed.restype = ctypes.c_int
         self.do_step_typed.argtypes = None
+        #: FMI 3.0 with event mode: the clocks ticked (value references, their values: all true), the functions of a
+        #: tick and fmi3UpdateDiscreteStates' five flags and its nextEventTime (``update_out``, 16 bytes)
+        self.clock_refs = (ctypes.c_uint32 * len(clocks))(*clocks)
+        self.clock_values = (ctypes.c_bool * len(clocks))(*([True] * len(clocks)))
+        self.update_out = (ctypes.c_uint8 * 16)()
+        self.tick_calls = tuple(self._function(lib, name, None) for name in TICK_CALLS) if clocks else ()
         if fmi == 3:
             step3 = self._function(lib, "fmi3DoStep", [ctypes.c_void_p, ctypes.c_double, ctypes.c_double,
                                                        ctypes.c_bool] + [ctypes.c_void_p] * 4)
@@ -545,6 +600,22 @@ class LeanCalls:
         else:
             self.do_step = self._function(lib, "fmi2DoStep",
                                           [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int])
+
+    def tick(self) -> tuple[str, int]:
+        """The tick of this unit's clocks (its FMI 3.0 calls, in order: :data:`TICK_CALLS`): ("", 0), or the call
+        that failed and its status."""
+        handle = self.handle
+        out = ctypes.addressof(self.update_out)
+        enter_event, set_clock, update, enter_step = self.tick_calls
+        for name, call in zip(TICK_CALLS, (
+                lambda: enter_event(handle),
+                lambda: set_clock(handle, self.clock_refs, ctypes.c_size_t(len(self.clock_refs)), self.clock_values),
+                lambda: update(handle, *(ctypes.c_void_p(out + k) for k in (0, 1, 2, 3, 4, 8))),
+                lambda: enter_step(handle))):
+            status = call()
+            if status > 1:
+                return name, status
+        return "", 0
 
     @staticmethod
     def _function(lib, name, argtypes):

@@ -5,6 +5,14 @@ FMI 3.0 units run beside FMI 2.0 ones in one system, with the same calls of thei
 for both. A connection of Booleans joins units of the same version (an FMI 3.0 Boolean is a C bool, FMI 2.0's
 an int).
 
+Clocks: an FMI 3.0 unit with event mode and periodic input clocks (``FmuInstance.clocks``) is ticked at its
+clocks' interval, not at every communication step (``Master(event_mode=True)``, the default): its interval is a
+whole number of its steps, and at the base steps n with ``n % tick == 0`` (``tick`` = interval / h) its tick
+(fmi3EnterEventMode, fmi3SetClock, fmi3UpdateDiscreteStates, fmi3EnterStepMode) comes after its inputs are set and
+before its fmi3DoStep from t_n. With ``event_mode=False`` (``pmsm-cosim run --no-event-mode``) it is instantiated
+without event mode and its clocks are left to it (the project's controllers then sample at their own period inside
+fmi3DoStep: fmus/README.md).
+
 Time grid: base step ``h``; communication points ``t_n = n * h`` (an integer step
 counter times the step, never an accumulated sum). A component with
 ``step_multiple = m`` is stepped at the base steps n with ``n % m == 0``, from t_n with
@@ -201,6 +209,7 @@ class _Stepper:
     do_step: object = None
     do_step_typed: object = None  #: fmi2DoStep without argtypes (``LeanCalls.do_step_typed``)
     flags: object = None  #: FMI 3.0: fmi3DoStep's eventHandlingNeeded, terminateSimulation, earlyReturn
+    tick: int = 0  #: FMI 3.0 in event mode: base steps between the ticks of its clocks (0: no clock ticked)
     transfers: list = field(default_factory=list)  #: [_Transfer] into this component's inputs
     pending: list = field(default_factory=list)  #: queued signal targets (multi-rate)
 
@@ -208,9 +217,10 @@ class _Stepper:
 class Master:
     """Check a :class:`SystemSpec` against its FMUs and run it."""
 
-    def __init__(self, spec: SystemSpec, loop: str | None = None, note=None):
+    def __init__(self, spec: SystemSpec, loop: str | None = None, note=None, event_mode: bool = True):
         """``note(line)``: where the line goes that says the plain loop runs instead of the compiled one,
-        and why (default: ``note: ...`` on stderr)."""
+        and why (default: ``note: ...`` on stderr). ``event_mode``: tick the FMI 3.0 units' clocks in event mode
+        (module doc, "Clocks")."""
         #: "compiled" or "plain" (see the module's docstring); after the set-up, the one that runs
         self.loop, self._loop_named = loop_choice(loop)
         self._note = note if note is not None else _stderr_note
@@ -222,6 +232,7 @@ class Master:
         try:
             for comp in spec.components:
                 self.instances[comp.name] = FmuInstance(comp.name, comp.fmu)
+            self.ticks = self._ticks(spec, event_mode)
             dropped = drop_foreign_starts(spec, self.instances)
             check_wiring(spec, self.instances)
         except BaseException:
@@ -235,6 +246,25 @@ class Master:
         self.terminated: tuple[str, float] | None = None  #: (instance, t) of a termination request
 
     # -- set-up --------------------------------------------------------------------
+    def _ticks(self, spec: SystemSpec, event_mode: bool) -> dict[str, int]:
+        """{instance: base steps between its clocks' ticks} of the units ticked in event mode (module doc)."""
+        ticks = {}
+        for comp in spec.components if event_mode else ():
+            inst = self.instances[comp.name]
+            clocks = inst.clocks()
+            if not clocks:
+                continue
+            intervals = sorted(set(clocks.values()))
+            interval = intervals[0]
+            m = round(interval / self.h)
+            if len(intervals) > 1 or m < 1 or abs(m * self.h - interval) > 1e-9 * interval or m % comp.step_multiple:
+                raise CosimError(f"{comp.name}: its clocks tick every {', '.join(f'{i:g}' for i in intervals)} s, "
+                                 f"which is not one whole number of its steps ({comp.step_multiple * self.h:g} s); "
+                                 f"choose a step that divides it, or run without event mode")
+            inst.event_mode = True
+            ticks[comp.name] = m
+        return ticks
+
     def _build(self) -> None:
         """Instantiate every FMU and prebuild the loop's arrays."""
         s = self.spec
@@ -248,7 +278,7 @@ class Master:
             st = _Stepper(inst, comp.step_multiple, comp.step_multiple * self.h,
                           handle=inst.lean.handle, do_step=inst.lean.do_step,
                           do_step_typed=inst.lean.do_step_typed,
-                          flags=inst.lean.flags if inst.fmi == 3 else None)
+                          flags=inst.lean.flags if inst.fmi == 3 else None, tick=self.ticks.get(comp.name, 0))
             self.steppers.append(st)
             by_name[comp.name] = st
         # connections grouped by (destination, source, type): one get and one set per group
@@ -487,6 +517,10 @@ class Master:
                 raise _StepFailed(f"{conn.src}.{conn.src_var} is not finite ({tr.buf[k]!r}) at t = {t:.9g} s, "
                                   f"before it reached {conn.dst}.{conn.dst_var}")
 
+    def _tick_failed(self, st: _Stepper, t: float, call: str, status: int) -> _StepFailed:
+        st.inst.note_status(status)
+        return _StepFailed(self._describe(st.inst, f"the tick of its clock ({call})", t))
+
     def _step_failed(self, st: _Stepper, t: float, status: int = 3) -> _StepFailed:
         """The exception for an fmi2DoStep from t that returned ``status`` > fmi2Warning:
         :class:`_Terminated` if the FMU discarded the step to end the simulation."""
@@ -515,12 +549,12 @@ class Master:
                     for st in due:
                         self._write_inputs(st, t)
                     for st in due:
-                        self._do_step(st, t)
+                        self._do_step(st, n, t)
                 else:  # Gauss-Seidel: component by component, the freshest outputs
                     for st in due:
                         self._read_inputs(st, t)
                         self._write_inputs(st, t)
-                        self._do_step(st, t)
+                        self._do_step(st, n, t)
         except _StepFailed as exc:
             exc.n = n
             raise
@@ -548,7 +582,11 @@ class Master:
         if st.pending:
             self._flush_pending(st, t)
 
-    def _do_step(self, st: _Stepper, t: float) -> None:
+    def _do_step(self, st: _Stepper, n: int, t: float) -> None:
+        if st.tick and n % st.tick == 0:
+            call, status = st.inst.lean.tick()
+            if status > 1:
+                raise self._tick_failed(st, t, call, status)
         status = st.do_step(st.handle, t, st.step_size, 1)
         if status <= 1 and st.flags is not None and st.flags[1]:  # FMI 3.0: terminateSimulation
             status = FMI2_DISCARD

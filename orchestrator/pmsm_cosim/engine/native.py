@@ -24,7 +24,8 @@ An FMI 3.0 unit's calls take one more argument (fmi3Get/fmi3Set: the number of v
 addresses of its eventHandlingNeeded, terminateSimulation, earlyReturn and lastSuccessfulTime, the unit's own
 buffers, ``LeanCalls.flags`` and ``last``): a flag per transfer and per component says which call to make, and an
 fmi3DoStep that returns fmi3OK or fmi3Warning with terminateSimulation set is an fmi2Discard, as in the plain
-loop.
+loop. A unit ticked in event mode (``Master``'s module doc, "Clocks") has its tick's four calls by address too
+(``_tick``), at the steps its tick is due.
 
 A system it cannot step (String connections: the strings are copied between the calls) has
 ``unsupported(master)``; ``Master`` then runs the plain loop, with a line saying so, unless
@@ -44,8 +45,14 @@ from numba.extending import intrinsic
 # isort: split
 from llvmlite import ir
 
+from .fmu import TICK_CALLS
+
 #: codes of the first step that did not complete, as returned by ``_steps``
-OK, GET_FAILED, NOT_FINITE, SET_FAILED, STEP_FAILED = 0, 1, 2, 3, 4
+OK, GET_FAILED, NOT_FINITE, SET_FAILED, STEP_FAILED, TICK_FAILED = 0, 1, 2, 3, 4, 5
+# columns of the tick table (one row per component): base steps between ticks (0: none), the addresses of
+# fmi3EnterEventMode, fmi3SetClock, fmi3UpdateDiscreteStates, fmi3EnterStepMode, of the clocks' value references,
+# their number, the address of their values and of fmi3UpdateDiscreteStates' outputs
+_EVERY, _ENTER_EVENT, _SET_CLOCK, _UPDATE, _ENTER_STEP, _CLOCK_VR, _NCLOCK, _CLOCK_VALUES, _UPDATE_OUT = range(9)
 # columns of the transfer table ``io`` (one row per transfer, in the order of the loop); _GET3, _SET3: 1 where
 # the get (set) is FMI 3.0's
 _GET, _SRC, _SVR, _NGET, _SET, _DST, _DVR, _NSET, _BUF, _GET3, _SET3 = range(11)
@@ -117,6 +124,53 @@ def _call_step3(typingctx, fn, comp, t, h, out):
     return sig, codegen
 
 
+@intrinsic
+def _call_plain(typingctx, fn, comp):
+    """``fmi3Status fn(fmi3Instance)`` at the address ``fn`` (fmi3EnterEventMode, fmi3EnterStepMode)."""
+    sig = types.int32(types.uintp, types.uintp)
+
+    def codegen(context, builder, signature, args):
+        ptr = ir.IntType(8).as_pointer()
+        f = builder.inttoptr(args[0], ir.FunctionType(ir.IntType(32), [ptr]).as_pointer())
+        return builder.call(f, [builder.inttoptr(args[1], ptr)])
+
+    return sig, codegen
+
+
+@intrinsic
+def _call_update(typingctx, fn, comp, out):
+    """``fmi3UpdateDiscreteStates(comp, out, out + 1, out + 2, out + 3, out + 4, out + 8)`` at the address ``fn``:
+    its five flags and its nextEventTime in the 16 bytes at ``out``."""
+    sig = types.int32(types.uintp, types.uintp, types.uintp)
+
+    def codegen(context, builder, signature, args):
+        ptr, i32 = ir.IntType(8).as_pointer(), ir.IntType(32)
+        f = builder.inttoptr(args[0], ir.FunctionType(i32, [ptr] * 7).as_pointer())
+        base = builder.inttoptr(args[2], ptr)
+        outs = [builder.gep(base, [ir.Constant(i32, k)]) for k in (0, 1, 2, 3, 4, 8)]
+        return builder.call(f, [builder.inttoptr(args[1], ptr), *outs])
+
+    return sig, codegen
+
+
+@njit(cache=True)
+def _tick(c, comp, ticks):
+    """The tick of component c's clocks: (0, 0), or (which of its four calls failed, its status)."""
+    s = _call_plain(ticks[c, _ENTER_EVENT], comp[c])
+    if s > 1:
+        return 0, s
+    s = _call_io(ticks[c, _SET_CLOCK], comp[c], ticks[c, _CLOCK_VR], ticks[c, _NCLOCK], ticks[c, _CLOCK_VALUES])
+    if s > 1:
+        return 1, s
+    s = _call_update(ticks[c, _UPDATE], comp[c], ticks[c, _UPDATE_OUT])
+    if s > 1:
+        return 2, s
+    s = _call_plain(ticks[c, _ENTER_STEP], comp[c])
+    if s > 1:
+        return 3, s
+    return 0, 0
+
+
 @njit(cache=True)
 def _get(k, io):
     if io[k, _GET3]:
@@ -132,15 +186,21 @@ def _set(k, io):
 
 
 @njit(cache=True)
-def _step(c, t, step_fn, comp, step_size, outs, flags):
+def _step(c, n, t, step_fn, comp, step_size, outs, flags, ticks):
     """fmi2DoStep of component c (FMI 3.0: fmi3DoStep into its row of ``outs``; terminateSimulation with
-    fmi3OK or fmi3Warning is fmi2Discard)."""
+    fmi3OK or fmi3Warning is fmi2Discard), after its tick where one is due: (STEP_FAILED or OK, status), or
+    (TICK_FAILED, status) with the call that failed in ``flags[c, 15]``."""
+    if ticks[c, _EVERY] != 0 and n % ticks[c, _EVERY] == 0:
+        which, s = _tick(c, comp, ticks)
+        if s > 1:
+            flags[c, 15] = which
+            return TICK_FAILED, s
     if outs[c] == 0:
-        return _call_step(step_fn[c], comp[c], t, step_size[c])
+        return STEP_FAILED, _call_step(step_fn[c], comp[c], t, step_size[c])
     s = _call_step3(step_fn[c], comp[c], t, step_size[c], outs[c])
     if s <= 1 and flags[c, 1] != 0:
-        return 2
-    return s
+        return STEP_FAILED, 2
+    return STEP_FAILED, s
 
 
 @njit(cache=True)
@@ -162,7 +222,7 @@ def _read(k, io, values, offset, real):
 
 @njit(cache=True)
 def _steps(n0, n1, h, jacobi, io, values, offset, real, first, last, step_fn, comp, step_size, multiple,
-           outs, flags, ramp_slot, ramp):
+           outs, flags, ticks, ramp_slot, ramp):
     """Take the base steps n0 .. n1-1. Returns (n, code, index, status): n = n1 and code OK, or the step
     n at which transfer (GET_FAILED, NOT_FINITE, SET_FAILED) or component (STEP_FAILED) ``index`` failed.
 
@@ -190,9 +250,9 @@ def _steps(n0, n1, h, jacobi, io, values, offset, real, first, last, step_fn, co
                             return n, SET_FAILED, k, s
             for c in range(first.shape[0]):
                 if n % multiple[c] == 0:
-                    s = _step(c, t, step_fn, comp, step_size, outs, flags)
+                    code, s = _step(c, n, t, step_fn, comp, step_size, outs, flags, ticks)
                     if s > 1:
-                        return n, STEP_FAILED, c, s
+                        return n, code, c, s
         else:  # Gauss-Seidel: component by component, the freshest outputs
             for c in range(first.shape[0]):
                 if n % multiple[c] != 0:
@@ -204,9 +264,9 @@ def _steps(n0, n1, h, jacobi, io, values, offset, real, first, last, step_fn, co
                     s = _set(k, io)
                     if s > 1:
                         return n, SET_FAILED, k, s
-                s = _step(c, t, step_fn, comp, step_size, outs, flags)
+                code, s = _step(c, n, t, step_fn, comp, step_size, outs, flags, ticks)
                 if s > 1:
-                    return n, STEP_FAILED, c, s
+                    return n, code, c, s
     return n1, OK, 0, 0
 
 
@@ -279,6 +339,13 @@ class NativeSteps:
                 lean.last = ctypes.c_double.from_buffer(self.flags, 16 * c + 8)
                 lean.last.value = np.nan
                 self.outs[c] = self.flags.ctypes.data + 16 * c
+        self.ticks = np.zeros((len(steppers), 9), dtype=np.uintp)
+        for c, st in enumerate(steppers):
+            if st.tick:
+                lean = st.inst.lean
+                self.ticks[c] = [st.tick, *(_address(f) for f in lean.tick_calls), ctypes.addressof(lean.clock_refs),
+                                 len(lean.clock_refs), ctypes.addressof(lean.clock_values),
+                                 ctypes.addressof(lean.update_out)]
         # signals evaluated in the loop: linear tables whose every input is merged into a transfer
         self.inline = []  # (signal, [slots of its inputs in values])
         for sig in master.signals:
@@ -295,8 +362,8 @@ class NativeSteps:
 
     def _run(self, n0: int, n1: int, slots, consts):
         return _steps(n0, n1, self.h, self.jacobi, self.io, self.values, self.offset, self.real, self.first,
-                      self.last, self.step_fn, self.comp, self.step_size, self.multiple, self.outs, self.flags, slots,
-                      consts)
+                      self.last, self.step_fn, self.comp, self.step_size, self.multiple, self.outs, self.flags,
+                      self.ticks, slots, consts)
 
     def _rehome(self, tr, off: int, slot_of: dict) -> int:
         """Move transfer ``tr``'s Real values to ``values[off:]``; return the offset after them."""
@@ -364,6 +431,8 @@ class NativeSteps:
         m, t = self.master, n * self.h
         if code == STEP_FAILED:
             exc = m._step_failed(m.steppers[index], t, status)
+        elif code == TICK_FAILED:
+            exc = m._tick_failed(m.steppers[index], t, TICK_CALLS[int(self.flags[index, 15])], status)
         else:
             i, j = self.where[index]
             st = m.steppers[i]
