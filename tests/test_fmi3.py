@@ -550,7 +550,8 @@ def test_an_fmu_state_restored_gives_the_same_steps_again(units):
 COUNTERS = ("pmsm_fmu_fast_calls", "pmsm_fmu_compiled_calls")
 
 
-def _run_master(system, fmi, out: Path, stop_time: float, mixed: dict | None = None, loop=None) -> tuple[dict, dict]:
+def _run_master(system, fmi, out: Path, stop_time: float, mixed: dict | None = None, loop=None, event_mode=True,
+                step=None, start=None) -> tuple[dict, dict]:
     """A run of the master on the project's FMUs as FMI ``fmi`` units (``mixed``: instance -> FMI version of those
     that differ); (metrics.json's content, {instance: (fast calls, compiled calls)} read before each is freed)."""
     import ctypes
@@ -560,7 +561,7 @@ def _run_master(system, fmi, out: Path, stop_time: float, mixed: dict | None = N
     from pmsm_cosim.engine.fmu import FmuInstance
     from pmsm_cosim.engine.master import Master
 
-    spec = with_fmi(apply_overrides(system, stop_time=stop_time), fmi)
+    spec = with_fmi(apply_overrides(system, stop_time=stop_time, step_size=step, set=start), fmi)
     for comp in spec.components:
         if comp.name in (mixed or {}):
             folder = comp.fmu.parent if fmi == 2 else comp.fmu.parent.parent
@@ -578,7 +579,9 @@ def _run_master(system, fmi, out: Path, stop_time: float, mixed: dict | None = N
 
     FmuInstance.close = counted_close
     try:
-        master = Master(spec, loop=loop, note=lambda line: None)
+        master = Master(spec, loop=loop, note=lambda line: None, event_mode=event_mode)
+        assert set(master.ticks) == ({c.name for c in spec.components if c.fmu.parent.name == fmu_build.FMI3_FOLDER
+                                      and fmu_build.clocked(c.fmu.stem)} if event_mode else set())
         metrics = master.run(out, catch_sigint=False)
     finally:
         FmuInstance.close = close
@@ -638,3 +641,26 @@ def test_the_plain_loop_and_the_command_line_run_the_fmi3_units(units, tmp_path)
 
 def _description_bytes(z: zipfile.ZipFile) -> ET.Element:
     return ET.fromstring(z.read("modelDescription.xml"))
+
+
+@pytest.mark.parametrize("loop", ["compiled", "plain"])
+def test_the_master_ticks_the_controller_at_its_clock_as_it_samples_alone(units, tmp_path, loop):
+    """scenario1 with a base step of half the sample period (the controller's dt = 1e-4 s): the master ticks the
+    controller's clock in event mode at every other step (the FMI 2.0 stack stepped once a tick: half the compiled
+    steps of the run without event mode, which samples inside fmi3DoStep), and results.csv is the same, byte for
+    byte, as without event mode and as the FMI 2.0 units'."""
+    import filecmp
+
+    runs = {}
+    for label, fmi, event_mode in (("fmi2", 2, False), ("free", 3, False), ("ticked", 3, True)):
+        runs[label] = _run_master("scenario1", fmi, tmp_path / label, 0.2, loop=loop, event_mode=event_mode,
+                                  step=5e-5, start=["ctrl.dt=1e-4"])
+    for label, (metrics, _) in runs.items():
+        assert metrics["status"] == "completed" and metrics["macro_steps"] == 4000 and metrics["loop"] == loop
+        assert filecmp.cmp(tmp_path / "fmi2" / "results.csv", tmp_path / label / "results.csv", shallow=False), label
+    two, free, ticked = (runs[k][1]["ctrl"] for k in ("fmi2", "free", "ticked"))
+    assert free[1:] == two[1:]
+    # per step one fmi2SetReal of the inputs (the compiled path); fmi2DoStep per step without event mode, per tick
+    # with it; the outputs read at each of the controller's steps either way
+    assert free[1] - ticked[1] == 2000, (two, free, ticked)
+    print(loop, {"fmi2": two, "fmi3 without event mode": free, "fmi3 ticked": ticked})
