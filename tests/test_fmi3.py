@@ -664,3 +664,118 @@ def test_the_master_ticks_the_controller_at_its_clock_as_it_samples_alone(units,
     # with it; the outputs read at each of the controller's steps either way
     assert free[1] - ticked[1] == 2000, (two, free, ticked)
     print(loop, {"fmi2": two, "fmi3 without event mode": free, "fmi3 ticked": ticked})
+
+
+# -- a host in C -----------------------------------------------------------------------------------------------------
+C_STEPS = 200
+#: Float64 inputs of each unit, (a, b): a + b k before step k (tests/c_host3.c)
+C_INPUTS = {"PmsmEvPlant": {"v_alpha": (20.0, 0.05), "v_beta": (-5.0, 0.1), "delta": (0.05, 0.0)},
+            "RouteProfile": {}}
+C_CONTROLLER = {"i_alpha": (1.0, 0.01), "i_beta": (0.5, -0.02), "omega_ref": (20.0, 0.1), "theta_meas": (0.3, 0.001),
+                "omega_meas": (15.0, 0.05)}
+
+# the same calls through fmpy's FMU3Slave in a Python process (without event mode: the units sample in fmi3DoStep),
+# printed as the C host prints them
+_FMPY3_HOST = r"""
+import ctypes, sys
+from fmpy import read_model_description
+from fmpy.fmi3 import FMU3Slave
+blocks = []
+for line in open(sys.argv[1]).read().splitlines():
+    word, *rest = line.split()
+    if word == "fmu":
+        blocks.append({"name": rest[0], "binary": rest[1], "in": [], "out": []})
+    elif word == "steps":
+        blocks[-1]["steps"], blocks[-1]["h"] = int(rest[0]), float(rest[1])
+    elif word == "input":
+        blocks[-1]["in"].append((int(rest[0]), float(rest[1]), float(rest[2])))
+    elif word == "output":
+        blocks[-1]["out"].append(int(rest[0]))
+for b in blocks:
+    root = b["binary"].rsplit("/binaries/", 1)[0]
+    md = read_model_description(root)
+    fmu = FMU3Slave(guid=md.guid, unzipDirectory=root, modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName=b["name"])
+    print("fmu", b["name"], fmu.getVersion())
+    fmu.instantiate()
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.exitInitializationMode()
+    for k in range(b["steps"]):
+        if b["in"]:
+            fmu.setFloat64([vr for vr, _, _ in b["in"]], [a + s * k for _, a, s in b["in"]])
+        fmu.doStep(k * b["h"], b["h"])
+        print(k, 0, 0, " ".join("%.17g" % y for y in fmu.getFloat64(b["out"])))
+    fmu.terminate()
+    fmu.freeInstance()
+"""
+
+
+def _c_runs(text: str) -> dict[str, list[list[float]]]:
+    runs, current = {}, None
+    for line in text.splitlines():
+        word = line.split(" ", 1)[0]
+        if word == "fmu":
+            current = runs.setdefault(line.split()[1], [])
+        elif word.isdigit():
+            k, step_status, get_status, *values = line.split()
+            assert (step_status, get_status) == ("0", "0"), line
+            current.append([float(v) for v in values])
+    return runs
+
+
+def test_a_c_host_runs_each_fmi3_unit_with_no_set_up(units, tmp_path):
+    """tests/c_host3.c (FMI 3.0, no libpython linked), compiled with the system's C compiler against FMPy's FMI 3.0
+    headers, runs every FMI 3.0 unit of the project, unzipped, with no environment but PATH, HOME and LANG: the
+    controllers in event mode, their sample clock ticked before every step. Every output of every step equals
+    fmpy's FMU3Slave making the same calls without event mode, bit for bit; the plant and the controllers serve
+    the C host's calls on the compiled path."""
+    import fmpy
+    from c_fmu_support import c_compiler
+    from fmpy import extract, read_model_description
+
+    compiler = c_compiler()
+    if compiler is None:
+        pytest.skip("no C compiler")
+    host = tmp_path / "c_host3"
+    done = subprocess.run([compiler, "-O1", "-std=c99", "-D_GNU_SOURCE", "-Wall", "-Werror",
+                           f"-I{Path(fmpy.__file__).parent / 'c-code'}", str(Path(__file__).parent / "c_host3.c"),
+                           "-o", str(host), "-ldl"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    blocks = []
+    for name, fmu in units[1].items():
+        root = Path(extract(str(fmu), str(tmp_path / name)))
+        md = read_model_description(str(root))
+        by_name = {v.name: v for v in md.modelVariables}
+        lines = [f"fmu {name} {root / 'binaries' / fmu_build.FMI3_PLATFORM / (name + '.so')} {root / 'resources'}/ "
+                 f"{md.guid}", f"steps {C_STEPS} {H!r}"]
+        if fmu_build.clocked(name):
+            lines.append(f"clock {fmu_build.FMI3_CLOCK_REFERENCE} 1")
+        for var, (a, b) in C_INPUTS.get(name, C_CONTROLLER).items():
+            lines.append(f"input {by_name[var].valueReference} {a!r} {b!r}")
+        lines += [f"output {v.valueReference}" for v in md.modelVariables
+                  if v.causality == "output" and v.type == "Float64"]
+        blocks.append("\n".join(lines + ["run", ""]))
+    spec = tmp_path / "spec.txt"
+    spec.write_text("".join(blocks))
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(Path.home()), "LANG": "C.UTF-8"}
+    c = subprocess.run([str(host), str(spec)], capture_output=True, text=True, env=env, timeout=600)
+    assert c.returncode == 0, c.stdout[-3000:] + c.stderr[-3000:]
+    assert "log " not in c.stdout, c.stdout[:3000]
+    py = subprocess.run([sys.executable, "-c", _FMPY3_HOST, str(spec)], capture_output=True, text=True, timeout=600)
+    assert py.returncode == 0, py.stderr[-3000:]
+    c_runs, py_runs = _c_runs(c.stdout), _c_runs(py.stdout)
+    assert sorted(c_runs) == sorted(units[1])
+    calls = {line.split()[1]: None for line in c.stdout.splitlines() if line.startswith("fmu ")}
+    current = None
+    for line in c.stdout.splitlines():
+        if line.startswith("fmu "):
+            current = line.split()[1]
+            assert line.endswith(" 3.0"), line
+        elif line.startswith("calls "):
+            calls[current] = tuple(int(x) for x in line.split()[1:])
+    for name in units[1]:
+        assert len(c_runs[name]) == C_STEPS and c_runs[name] == py_runs[name], name
+        if name != fmu_build.ROUTE_FMU:
+            assert calls[name][1] >= 2 * C_STEPS, (name, calls[name])  # the set and the step compiled, at least
+    assert c_runs["PmsmEvPlant"][-1] != c_runs["PmsmEvPlant"][0]
+    print({name: (len(c_runs[name][0]), calls[name]) for name in units[1]})
