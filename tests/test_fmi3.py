@@ -730,8 +730,9 @@ def test_a_c_host_runs_each_fmi3_unit_with_no_set_up(units, tmp_path):
     fmpy's FMU3Slave making the same calls without event mode, bit for bit; the plant and the controllers serve
     the C host's calls on the compiled path."""
     import fmpy
-    from c_fmu_support import c_compiler
     from fmpy import extract, read_model_description
+
+    from c_fmu_support import c_compiler
 
     compiler = c_compiler()
     if compiler is None:
