@@ -28,8 +28,14 @@
  * that does not continue the last step, a step too long: fmus/README.md, "Misuse"): their statuses and log lines
  * reach the FMI 3.0 host unchanged. Every other function of the FMI 3.0 API is exported and answers fmi3Error with
  * one log line (the model has no variable of that type, no event mode, no clock, no model exchange, ...); the
- * other instantiate functions log and return NULL. The model description (built from the FMI 2.0 one by
- * pmsm_ev_fmus.build) declares hasEventMode="false": a host instantiating with eventModeUsed is refused.
+ * other instantiate functions log and return NULL.
+ *
+ * The sample clock (fmus/README.md, "The sample clock"): a controller's unit has resources/CLOCK_FILE and its model
+ * description a periodic input Clock and hasEventMode="true" (the others: "false", and eventModeUsed is refused).
+ * Instantiated with eventModeUsed, the stack steps only at the clock's ticks: fmi3EnterEventMode, fmi3SetClock,
+ * fmi3UpdateDiscreteStates (fmi2DoStep of one interval from the tick: the sample there), fmi3EnterStepMode; then
+ * fmi3DoStep moves the time within the interval, the outputs held, and refuses to pass a tick not set. Without
+ * eventModeUsed the clock is never set and fmi3DoStep is fmi2DoStep: the unit samples at its own period.
  *
  * pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls and pmsm_fmu_pulls (the lean binding's counters, fmus/README.md)
  * take an fmi3 instance and answer its FMI 2.0 instance's.
