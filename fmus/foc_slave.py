@@ -144,7 +144,7 @@ class FocSlave(DriveSlave):
                                             "MTPA, 5 no torque within the limits (0 with reference 'paper')" + hold,
                         discrete=True)
         # adaptation while driving (``pmsm_ev.kernels.adaptation``): properties reading the unit, no work per step
-        adapt = " (adaptation 'observe' or 'use'; with 'off' the model's value, the flags 0)"
+        adapt = " (adaptation 'observe' or 'use'; 0 with 'off')"
         self.add_output("psi_est", "Wb", "the estimated magnet flux: the q voltage equation's least-squares fit where "
                                          "|omega| >= adapt_psi_speed and the currents are quasi-steady, frozen "
                                          "elsewhere" + adapt + hold, discrete=True)
@@ -276,7 +276,8 @@ class FocSlave(DriveSlave):
     # -- the compiled step (``pmsm_ev.kernels.fmu``: ``unit_fmu_step`` on these buffers) -------------------------
     def compiled_slots(self) -> dict[str, int]:
         return {**IO_SLOTS, "T_brake": _k.UIO_T_BRAKE, "i_dref": _k.UIO_I_DREF, "T_ref": _k.UIO_T_REF,
-                "ref_region": _k.UIO_REF_REGION}
+                "ref_region": _k.UIO_REF_REGION,
+                **{name: _k.UIO_STATUS + j for j, name in enumerate(_k.UNIT_STATUS_OUTPUTS)}}
 
     def compiled_step(self):
         """(the controllers' C step, the unit's buffer ``ControlUnit.io`` filled from the slave, the unit's state and

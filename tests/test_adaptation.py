@@ -92,7 +92,7 @@ def test_observe_changes_nothing_and_use_puts_the_estimates_into_the_model():
     assert runs["observe"][0] == runs["off"][0]
     assert runs["use"][0] != runs["off"][0]
     off, use = runs["off"][1], runs["use"][1]
-    assert off.psi_est == MotorParams().psi and off.psi_observable == 0.0
+    assert off.psi_est == 0.0 and off.R_s_est == 0.0 and off.psi_observable == 0.0  # 0: not estimated
     c = use._c
     assert c[k.C_PSI] == use.psi_est != MotorParams().psi
     assert c[k.C_A_RD] == 1.0 - use.R_s_est * DT / MotorParams().L_d

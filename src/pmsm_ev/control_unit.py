@@ -259,6 +259,7 @@ class ControlUnit:
         self.io = accel.vector(_k.UNIT_IO)
         self._t_brake = accel.direct(self._kernels.unit_t_brake)
         self._reference_outputs = accel.direct(self._kernels.unit_reference_outputs)
+        self._status_outputs = accel.direct(self._kernels.unit_status_outputs)
         #: ``io`` read and written from Python (``FocSlave.do_step``): a memoryview of the numpy vector, whose items
         #: are Python floats (the same doubles, without numpy's scalar per read), or the list
         self._io_items = self.io if isinstance(self.io, list) else memoryview(self.io)
@@ -303,6 +304,7 @@ class ControlUnit:
             io[slot] = values.get(name, 0.0)
         io[_k.UIO_T_BRAKE] = self.T_brake
         io[_k.UIO_I_DREF], io[_k.UIO_T_REF], io[_k.UIO_REF_REGION] = self._reference_outputs(self.io, self._s, self._c)
+        self._status_outputs(self.io, self._s, self._c)
         io[_k.UIO_DT] = dt or 0.0
         io[_k.UIO_T0] = t0
         io[_k.UIO_CLOCK] = 0.0 if k_next is None else 1.0
@@ -383,28 +385,34 @@ class ControlUnit:
         """The EKF's magnet flux over the nominal psi (1 without ``EkfParams.psi_adapt``)."""
         return float(self._s[_k.S_PSI_RATIO])
 
+    def _status_output(self, j: int) -> float:
+        """The output ``UNIT_STATUS_OUTPUTS[j]`` of the state (the kernel ``unit_status_outputs``, which the compiled
+        step calls too)."""
+        self._status_outputs(self.io, self._s, self._c)
+        return float(self.io[_k.UIO_STATUS + j])
+
     # adaptation while driving (``pmsm_ev.kernels.adaptation``)
     @property
     def psi_est(self) -> float:
-        """The estimated magnet flux [Wb] (eq AD3): the model's psi until psi is observable, and with adaptation
+        """The estimated magnet flux [Wb] (eq AD3): the model's psi until psi is observable; 0 with adaptation
         "off"."""
-        return float(self._s[_k.S_AD_PSI]) if self.params.adaptation != "off" else self.motor.psi
+        return self._status_output(0)
 
     @property
     def R_s_est(self) -> float:
         """The estimated stator resistance [Ohm] (eq AD4): the identification's R_s_id or the model's R_s until R_s
-        is observable, and the model's with adaptation "off"."""
-        return float(self._s[_k.S_AD_RS]) if self.params.adaptation != "off" else self.motor.R_s
+        is observable; 0 with adaptation "off"."""
+        return self._status_output(1)
 
     @property
     def psi_observable(self) -> float:
         """1.0 where the last period let psi_hat move (AD5: fast enough, the currents quasi-steady), else 0."""
-        return float(self._s[_k.S_AD_SEEN])
+        return self._status_output(2)
 
     @property
     def R_s_observable(self) -> float:
         """1.0 where the last period let R_s_hat move (AD5: slow enough, current enough, quasi-steady), else 0."""
-        return float(self._s[_k.S_AD_SEEN + 1])
+        return self._status_output(3)
 
     @property
     def fault(self) -> float:
@@ -421,63 +429,59 @@ class ControlUnit:
     def L_d_id(self) -> float:
         """The identified incremental d inductance at zero current [H] (1 / the d admittance the injection measured
         on the found d axis); 0 until identified, and for a unit without injection."""
-        y = float(self._s[_k.S_ID_Y]) if self.injecting else 0.0
-        return 1.0 / y if y > 0.0 else 0.0
+        return self._status_output(4)
 
     @property
     def L_q_id(self) -> float:
         """The identified incremental q inductance at zero current [H]; 0 until identified."""
-        y = float(self._s[_k.S_ID_Y + 1]) if self.injecting else 0.0
-        return 1.0 / y if y > 0.0 else 0.0
+        return self._status_output(5)
 
     @property
     def saliency_id(self) -> float:
         """The identified saliency L_q / L_d [-]; 0 until identified."""
-        return self.L_q_id / self.L_d_id if self.L_d_id > 0.0 else 0.0
+        return self._status_output(6)
 
     @property
     def R_s_id(self) -> float:
         """The identified stator resistance [Ohm] (the R_s test at enable, ``pmsm_ev.kernels.identify_rs``); 0 until
         identified, and for a unit without injection."""
-        return float(self._s[_k.S_ID_RS]) if self.injecting else 0.0
+        return self._status_output(7)
 
     @property
     def noise_id(self) -> float:
         """The current measurement's noise floor from the identification's answers: a phase sensor's sigma [A]
         (``pmsm_ev.kernels.identify_noise``); 0 until identified, and for a unit without injection."""
-        return float(self._s[_k.S_ID_NOISE_F]) if self.injecting else 0.0
+        return self._status_output(8)
 
     @property
     def offset_a_id(self) -> float:
         """Current sensor a's offset measured at enable with no voltage [A] (``InjectionParams.ofs_time``), subtracted
         from the measurements from then on; 0 until measured, and for a unit without injection."""
-        return float(self._s[_k.S_ID_OFS]) if self.injecting else 0.0
+        return self._status_output(9)
 
     @property
     def offset_b_id(self) -> float:
         """Current sensor b's offset measured at enable [A]: i_alpha = i_a, i_beta = (i_a + 2 i_b) / sqrt 3."""
-        if not self.injecting:
-            return 0.0
-        return 0.5 * (math.sqrt(3.0) * float(self._s[_k.S_ID_OFS + 1]) - float(self._s[_k.S_ID_OFS]))
+        return self._status_output(10)
 
     @property
     def angle_accuracy(self) -> float:
         """The rms angle error injection gives at a stop from the measured saliency and noise floor [rad]
         (``pmsm_ev.kernels.angle_accuracy``, eq ID3); 0 until identified."""
-        return float(self._s[_k.S_ID_ACC]) if self.injecting else 0.0
+        return self._status_output(11)
 
     @property
     def blind(self) -> float:
         """1.0 where the identified saliency is below ``InjectionParams.saliency_min`` or the angle accuracy
         (``angle_accuracy``) beyond ``InjectionParams.inj_angle_max``: the injection cannot see the rotor's axis well
         enough; else 0."""
-        return float(self._s[_k.S_ID_BLIND]) if self.injecting else 0.0
+        return self._status_output(12)
 
     @property
     def axis_cos(self) -> float:
         """cos 2e of the tracking observer's axis error from the d admittance, filtered (``S_AXIS_F``) in
         FOC on the injection; 0 there and for a unit without injection)."""
-        return float(self._s[_k.S_AXIS_F]) if self.injecting and self.mode == _k.MODE_INJECTION else 0.0
+        return self._status_output(13)
 
     @property
     def theta_ctrl(self) -> float:

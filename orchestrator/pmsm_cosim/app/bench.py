@@ -39,9 +39,10 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     ``FocSensored``, the linear flux model) and the shipped sensorless drive (``wltc3b-sensorless``: injection at
     standstill, the algebraic flux model; at speed its stationary-frame EKF5, ``FocEkf5AB`` from a flying start,
     as the unit starts from standstill only): the master on ``speed_slice`` s of the system with its plant started
-    at that speed and ``omega_ref`` held there (``held_speed_spec``), each case's errors against the converged reference of the
-    same slice (``pmsm_cosim.app.reference.converged_errors``: the largest differences of the vehicle's speed and
-    of the electrical angle over the rows) and the ratio of the cost at 131 km/h to the cost at standstill;
+    at that speed and ``omega_ref`` held there (``held_speed_spec``), each case's errors against the converged
+    reference of the same slice (``pmsm_cosim.app.reference.converged_errors``: the largest differences of the
+    vehicle's speed and of the electrical angle over the rows) and the ratio of the cost at 131 km/h to the cost at
+    standstill;
 
 and prints one table with the ratios a/b, d/a, j/a, e/f, e/h and a/i, in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
