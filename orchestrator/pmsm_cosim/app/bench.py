@@ -34,8 +34,14 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     ``setReal``, ``doStep``), a Python loop in the order of the system file (Gauss-Seidel, as the master), the
     connections of each destination read from each source in one ``getReal`` and set in one ``setReal``, the
     signals set when their value changes; nothing recorded (``fmpy_loop``: what a user writes with fmpy alone);
+(k) the master and system of (a) on the FMI 3.0 units of the same FMUs (``pmsm-cosim build --fmi 3``: the FMI 3.0
+    layer in front of the same FMI 2.0 stack, fmus/README.md, "FMI 3.0"), the controller's sample clock ticked in
+    event mode at its interval (here every step: fmi3EnterEventMode, fmi3SetClock, fmi3UpdateDiscreteStates,
+    fmi3EnterStepMode, then fmi3DoStep);
+(l) the same without event mode (``--no-event-mode``: the controller samples in fmi3DoStep, as its FMI 2.0 unit);
 
-and prints one table with the ratios a/b, d/a, j/a, e/f, e/h and a/i, in wall time (what a user waits) and in
+and prints one table with the ratios a/b, d/a, j/a, e/f, e/h, a/i, k/a and l/a (the FMI 3.0 units' cost a step
+against the FMI 2.0 units'), in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
 includes its worker threads). (a)-(c) include the recording of a row every 10 ms, (e), (f) every
 50 ms, as in a normal run of their scenario. With ``memory`` it also runs ``pmsm-cosim run scenario1``
@@ -63,7 +69,7 @@ from pathlib import Path
 
 from pmsm_ev import accel
 from pmsm_ev import cycles as pcycles
-from pmsm_ev_fmus.build import BENCH_FMUS, ENV_BINDING, build_all, build_fmu, read_build_info
+from pmsm_ev_fmus.build import BENCH_FMUS, ENV_BINDING, BuildError, build_all, build_fmu, read_build_info
 
 from ..engine.errors import CosimError
 from ..engine.fmu import convert_start
@@ -122,11 +128,11 @@ def cycle_spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = 
 
 
 def cosim_us_per_step(stop_time: float, work: Path, plant: Path | None = None,
-                      ctrl: Path | None = None, spec=None) -> tuple[float, float]:
-    """(a), (b), or (e), (f) with the ``spec`` of ``cycle_spec``: the master's loop (wall, CPU) time
-    per macro step [us]."""
+                      ctrl: Path | None = None, spec=None, event_mode: bool = True) -> tuple[float, float]:
+    """(a), (b), (k), (l) (``event_mode``: the master's, for FMI 3.0 units), or (e), (f) with the ``spec`` of
+    ``cycle_spec``: the master's loop (wall, CPU) time per macro step [us]."""
     out = Path(tempfile.mkdtemp(prefix="cosim-", dir=work))
-    master = Master(spec if spec is not None else _spec(stop_time, plant, ctrl))
+    master = Master(spec if spec is not None else _spec(stop_time, plant, ctrl), event_mode=event_mode)
     m = master.run(out, catch_sigint=False)
     if m["status"] != "completed":
         raise CosimError(f"benchmark run did not complete: {m['status']}")
@@ -290,6 +296,34 @@ def project_fmus() -> dict[str, Path]:
     return build_all(out_dir=project_fmu_dir(), names=["PmsmEvPlant", "FocEkf5", "FocSensorless"])
 
 
+def fmi3_units() -> tuple[dict[str, Path] | None, str]:
+    """(k), (l): the FMI 3.0 units of the FMUs of (a) (``build_all(fmi=3)``, beside the FMI 2.0 ones), or (None, why
+    not: they need the lean build, Linux x86-64 and a C compiler)."""
+    try:
+        return build_all(out_dir=project_fmu_dir(), names=["PmsmEvPlant", "FocEkf5"], fmi=3), ""
+    except BuildError as exc:
+        return None, str(exc)
+
+
+#: the cases of the table, in its order (the module's doc)
+CASES = {
+    "a": "(a) orchestrator + PmsmEvPlant/FocEkf5 FMUs",
+    "b": "(b) orchestrator + pass-through FMUs",
+    "c": "(c) monolithic reference (no FMUs)",
+    "d": "(d) libcosim + PmsmEvPlant/FocEkf5 FMUs",
+    "e": "(e) sensorless cycle drive: FocSensorless FMUs",
+    "f": "(f) the same with pass-through FMUs",
+    "g": "(g) (e) with injection (wltc3b-sensorless)",
+    "h": "(h) whole compiled loop (no FMI), system of (e)",
+    "i": "(i) whole compiled loop (no FMI), system of (a)",
+    "j": "(j) a plain fmpy master + the FMUs of (a)",
+    "k": "(k) (a) on the FMI 3.0 units, clock ticked",
+    "l": "(l) (a) on the FMI 3.0 units, no event mode",
+}
+#: the ratios printed below the table: (numerator, denominator)
+RATIOS = (("a", "b"), ("d", "a"), ("j", "a"), ("e", "f"), ("e", "h"), ("a", "i"), ("k", "a"), ("l", "a"))
+
+
 def bindings() -> str:
     """The FMI binding of the FMUs measured (build_info.json's "binding": fmus/README.md, "The lean binding")."""
     found = {(read_build_info(path) or {}).get("binding", "pythonfmu") for path in project_fmus().values()}
@@ -361,7 +395,7 @@ def memory_runs(say, stop_times, work: Path, system: str = SCENARIO, options=(),
 # -- the report ------------------------------------------------------------------------------
 def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: bool = True,
               out=sys.stdout, cycle_slice: float = DEFAULT_CYCLE_SLICE, cycle_memory: bool = False,
-              fmpy_case: bool = True) -> dict:
+              fmpy_case: bool = True, fmi3_case: bool = True) -> dict:
     def say(text: str = "") -> None:
         print(text, file=out, flush=True)
 
@@ -389,37 +423,25 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         results["h"] = whole_loop_us_per_step(cycle_spec(cycle_slice, plant, real["FocSensorless"]))
         results["i"] = whole_loop_us_per_step(_spec(slice_s, plant, ctrl))
         results["j"] = fmpy_us_per_step(slice_s, plant, ctrl) if fmpy_case else None
-        rows = [
-            ("(a) orchestrator + PmsmEvPlant/FocEkf5 FMUs", results["a"]),
-            ("(b) orchestrator + pass-through FMUs", results["b"]),
-            ("(c) monolithic reference (no FMUs)", results["c"]),
-            ("(d) libcosim + PmsmEvPlant/FocEkf5 FMUs", results["d"]),
-            ("(e) sensorless cycle drive: FocSensorless FMUs", results["e"]),
-            ("(f) the same with pass-through FMUs", results["f"]),
-            ("(g) (e) with injection (wltc3b-sensorless)", results["g"]),
-            ("(h) whole compiled loop (no FMI), system of (e)", results["h"]),
-            ("(i) whole compiled loop (no FMI), system of (a)", results["i"]),
-            ("(j) a plain fmpy master + the FMUs of (a)", results["j"]),
-        ]
+        fmi3, no_fmi3 = fmi3_units() if fmi3_case else (None, "")
+        for case, event_mode in (("k", True), ("l", False)):
+            results[case] = None if fmi3 is None else cosim_us_per_step(
+                slice_s, work, fmi3["PmsmEvPlant"], fmi3["FocEkf5"], event_mode=event_mode)
         say(f"{'case':<50}{'us/step wall':>14}{'us/step CPU':>13}")
-        for label, value in rows:
+        for case, label in CASES.items():
+            value = results[case]
             if value is None:
-                missing = label.startswith("(d)") and libcosim
-                say(f"{label:<50}{'n/a':>14}  (" + ("libcosimpy not installed)" if missing else "skipped)"))
+                why = "skipped"
+                if case == "d" and libcosim:
+                    why = "libcosimpy not installed"
+                elif case in ("k", "l") and no_fmi3:
+                    why = f"no FMI 3.0 units: {no_fmi3}"
+                say(f"{label:<50}{'n/a':>14}  ({why})")
             else:
                 say(f"{label:<50}{value[0]:>14.2f}{value[1]:>13.2f}")
-
-        def ratio(label, x, y):
-            say(f"{label:<50}{x[0] / y[0]:>14.2f}{x[1] / y[1]:>13.2f}")
-
-        ratio("a/b", results["a"], results["b"])
-        if results["d"] is not None:
-            ratio("d/a", results["d"], results["a"])
-        if results["j"] is not None:
-            ratio("j/a", results["j"], results["a"])
-        ratio("e/f", results["e"], results["f"])
-        ratio("e/h", results["e"], results["h"])
-        ratio("a/i", results["a"], results["i"])
+        for x, y in RATIOS:
+            if results[x] is not None and results[y] is not None:
+                say(f"{x + '/' + y:<50}{results[x][0] / results[y][0]:>14.2f}{results[x][1] / results[y][1]:>13.2f}")
         whole = round(pcycles.load(CYCLE).duration / 1e-4)
         for case in ("e", "g"):
             say(f"{f'({case}) x the whole ' + CYCLE + f' ({whole} steps) [s]':<50}"
@@ -449,6 +471,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="skip the 100 s and 350 s runs that measure peak memory (about 2 min)")
     ap.add_argument("--no-libcosim", action="store_true", help="skip case (d)")
     ap.add_argument("--no-fmpy", action="store_true", help="skip case (j), the plain fmpy master")
+    ap.add_argument("--no-fmi3", action="store_true", help="skip cases (k), (l), the FMI 3.0 units")
     ap.add_argument("--cycle-slice", type=float, default=DEFAULT_CYCLE_SLICE, metavar="S",
                     help=f"simulated seconds of {CYCLE} in cases (e), (f), from t = 0 (default "
                          f"{DEFAULT_CYCLE_SLICE:g}; at least 10)")
@@ -469,6 +492,7 @@ def run_from_args(a) -> int:
         raise CosimError(f"--cycle-slice must be at most {CYCLE}'s {pcycles.load(CYCLE).duration:g} s "
                          f"(got {a.cycle_slice:g})")
     run_bench(a.slice, memory=not a.no_memory, libcosim=not a.no_libcosim, fmpy_case=not a.no_fmpy,
+              fmi3_case=not a.no_fmi3,
               cycle_slice=a.cycle_slice,
               cycle_memory=a.cycle_memory)
     return 0
