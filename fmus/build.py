@@ -131,8 +131,9 @@ def binding_requested() -> str:
     return choice
 
 
-#: extra compiler flags for the FMUs' C libraries (the lean binding and the loader), e.g. the sanitizers'
-#: ``-fsanitize=address,undefined`` (tests/test_sanitizers.py); part of their cache key
+#: extra compiler flags for the FMUs' C libraries (the lean binding, the loader and the FMI 3.0 layer: every library
+#: ``_compiled`` makes), e.g. the sanitizers' ``-fsanitize=address,undefined`` (tests/sanitizer_support.py); part of
+#: their cache key, of the FMUs' content key and of the FMI 3.0 units' hash
 ENV_CFLAGS = "PMSM_EV_BINDING_CFLAGS"
 
 

@@ -10,7 +10,11 @@
   a non-finite input, a NULL or freed instance, functions that do not apply) answers fmi3Error with one log line
   each (none for an instance that is not one), and no crash (each sequence in a process of its own: fmpy's
   FMU3Slave with its default logger);
-* an FMU state got, restored, serialized and deserialized gives the same step again.
+* an FMU state got, restored, serialized and deserialized gives the same step again;
+* several instances at once and two threads each stepping its own give the numbers of one instance alone;
+* the misuse sequences, the instances and threads, and the FMU state under AddressSanitizer and UBSan: the layer, the
+  FMI 2.0 loader and the lean binding compiled with ``-fsanitize=address,undefined`` (``PMSM_EV_BINDING_CFLAGS``),
+  ASan's runtime preloaded into the Python host: no report, the same answers as the plain build.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from pathlib import Path
 import pytest
 
 from pmsm_ev_fmus import build as fmu_build
+from sanitizer_support import build_sanitized, is_sanitized, needs_asan, no_report, sanitized_env
 
 pytestmark = pytest.mark.skipif(fmu_build.binding_requested() != "lean",
                                 reason="the FMI 3.0 units need the lean build (Linux x86-64, a C compiler)")
@@ -341,6 +346,35 @@ def sequence(case):
         call("updateDiscreteStates")
         call("enterStepMode")
         call("doStep", 1e-4, 1e-4)
+    elif case == "threads":  # instances side by side, stepped in turn, then two threads each stepping its own
+        import threading
+        refs_in, refs_out = [vr[n] for n in inputs], [vr[n] for n in outputs]
+        def ready(f):
+            f.enterInitializationMode(startTime=0.0)
+            f.exitInitializationMode()
+            return f
+        def step(f, k):
+            f.setFloat64(refs_in, [0.5 + 0.01 * j + 1e-3 * k for j in range(len(refs_in))])
+            f.doStep(k * 1e-4, 1e-4)
+            return f.getFloat64(refs_out)
+        def drive(f, n, into):
+            into.extend(step(f, k) for k in range(n))
+        serial = []
+        drive(ready(fmu), 300, serial)
+        side = [ready(make()) for _ in range(3)]
+        turns = [[step(f, k) for f in side] for k in range(300)]
+        pair, found = [ready(make()), ready(make())], [[], []]
+        workers = [threading.Thread(target=drive, args=(f, 300, into)) for f, into in zip(pair, found)]
+        for t in workers:
+            t.start()
+        for t in workers:
+            t.join()
+        out["values"]["side"] = [[row[i] for row in turns] == serial for i in range(3)]
+        out["values"]["threads"] = [into == serial for into in found]
+        out["values"]["moved"] = serial[-1] != serial[0]
+        for f in side + pair:
+            f.terminate()
+            f.freeInstance()
     elif case == "foreign-instance":  # a freed instance, then NULL: fmi3Error each, nothing touched, no line
         init()
         call("doStep", 0.0, 1e-4)
@@ -371,13 +405,17 @@ for case in sys.argv[3:]:
 """
 _END = "@@sequence@@ "
 CASES = ("step-before-init", "step-after-terminate", "time", "non-finite", "not-applicable", "foreign-instance",
-         "event-mode-used", "ticks")
+         "event-mode-used", "ticks", "threads")
 
 
 @functools.lru_cache(maxsize=None)
-def _misuse(fmu: Path) -> dict[str, tuple[list, list[str], dict]]:
+def _misuse(fmu: Path, sanitized: bool = False) -> dict[str, tuple[list, list[str], dict]]:
+    """{case: (the calls with their statuses, the log lines, the values read)} of the sequences ``CASES`` on the unit
+    ``fmu`` in a process of their own (``sanitized``: with the sanitizers' runtime preloaded, no report)."""
     done = subprocess.run([sys.executable, "-c", _MISUSE, str(fmu), _END, *CASES], capture_output=True, text=True,
-                          timeout=600)
+                          timeout=600, env=sanitized_env() if sanitized else None)
+    if sanitized:
+        no_report(done)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     results, log = {}, []
     for line in done.stdout.strip().splitlines():
@@ -495,6 +533,13 @@ def test_a_clock_set_outside_event_mode_or_a_tick_passed_is_an_error(misuse):
     assert values["period"][:-1] == values["half"] and values["period"][-1] == 1e-4
 
 
+def test_instances_side_by_side_and_in_two_threads_give_the_serial_numbers(misuse):
+    """Three instances at once, stepped in turn, and two more each stepped by a thread of its own: every output at
+    every step equal to one instance stepped alone."""
+    _, log, values = misuse["threads"]
+    assert values == {"side": [True] * 3, "threads": [True] * 2, "moved": True} and log == []
+
+
 # -- the FMU state -------------------------------------------------------------------------------------------------
 _STATE = r"""
 import json, sys
@@ -544,6 +589,49 @@ def test_an_fmu_state_restored_gives_the_same_steps_again(units):
     for name in ("PmsmEvPlant", "FocEkf5"):
         assert found[name]["again"] and found[name]["thawed"] and found[name]["bytes"] > 0, found
         assert found[name]["time"] == pytest.approx(22e-4, abs=1e-15)
+
+
+# -- under the sanitizers ----------------------------------------------------------------------------------------
+SANITIZED = ("PmsmEvPlant", "FocSensorless")
+
+
+@pytest.fixture(scope="module")
+def sanitized(tmp_path_factory) -> dict[str, Path]:
+    """The FMI 3.0 units of the plant and a controller with the FMI 3.0 layer, the FMI 2.0 loader and the lean
+    binding compiled with ``-fsanitize=address,undefined`` (``PMSM_EV_BINDING_CFLAGS``, which the layer takes too)."""
+    return build_sanitized(tmp_path_factory.mktemp("fmi3-sanitized"), SANITIZED, fmi=3)
+
+
+@needs_asan
+def test_the_sanitized_fmi3_build_is_sanitized(sanitized):
+    """The layer, the loader and the binding behind it link the sanitizers' runtimes (so that the tests below check
+    what they say)."""
+    folder = f"binaries/{fmu_build.FMI3_PLATFORM}/"
+    for name, fmu in sanitized.items():
+        for library in (f"{name}.so", fmu_build.FMI3_INNER_LOADER, fmu_build.BINDING_LIBRARY):
+            assert is_sanitized(fmu, folder + library), (name, library)
+
+
+@needs_asan
+@pytest.mark.parametrize("name", SANITIZED)
+def test_the_fmi3_misuse_suite_under_the_sanitizers_reports_nothing_and_answers_as_the_plain_build(units, sanitized,
+                                                                                                   name):
+    """Every sequence above (wrong order, a step after terminate, a time that goes back, non-finite inputs, a clock
+    set outside event mode and a tick passed, functions that do not apply, a freed and a NULL instance, several
+    instances, two threads) on the sanitized unit, in a process with ASan's runtime preloaded: no report, no crash,
+    and the same statuses, log lines and numbers as the plain build."""
+    assert _misuse(sanitized[name], sanitized=True) == _misuse(units[1][name])
+
+
+@needs_asan
+def test_an_fmu_state_under_the_sanitizers_reports_nothing(sanitized):
+    """Got, restored, serialized and deserialized (the layer hands the FMI 2.0 stack's buffers through)."""
+    done = subprocess.run([sys.executable, "-c", _STATE, *(str(sanitized[name]) for name in SANITIZED)],
+                          capture_output=True, text=True, timeout=600, env=sanitized_env())
+    no_report(done)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    found = json.loads(done.stdout.strip().splitlines()[-1])
+    assert all(found[name]["again"] and found[name]["thawed"] for name in SANITIZED), found
 
 
 # -- the master ----------------------------------------------------------------------------------------------------
