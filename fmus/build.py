@@ -954,7 +954,10 @@ def build_fmu3(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"{name}.fmu"
     digest = fmi3_hash(name)
-    if not force and target.is_file() and (read_build_info(target) or {}).get("fmi3_hash") == digest:
+    with zipfile.ZipFile(source) as z:  # the FMI 2.0 unit it wraps: rebuilt (a new GUID), the 3.0 one is too
+        guid = ET.fromstring(z.read("modelDescription.xml")).get("guid")
+    done = (read_build_info(target) or {}) if target.is_file() else {}
+    if not force and done.get("fmi3_hash") == digest and done.get("fmi2_guid") == guid:
         return target, False
     info = read_build_info(source) or {}
     if info.get("binding") != "lean":
@@ -964,7 +967,7 @@ def build_fmu3(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool
     if layer is None:
         raise BuildError(f"{name}: cannot build the FMI 3.0 layer: {why}")
     old_dir, new_dir = "binaries/linux64/", f"binaries/{FMI3_PLATFORM}/"
-    info.update({"fmiVersion": "3.0", "fmi3_hash": digest})
+    info.update({"fmiVersion": "3.0", "fmi3_hash": digest, "fmi2_guid": guid})
     stage = _make_stage(out, name)
     try:
         staged = stage / f"{name}.fmu"
