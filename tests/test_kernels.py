@@ -240,22 +240,22 @@ def test_the_offsets_are_those_the_kernels_were_written_with():
         56, 69, 119, 14, 23)
     assert (kernels.S_X, kernels.S_THETA_PRIOR, kernels.S_P, kernels.S_PHT, kernels.S_K, kernels.S_A,
             kernels.S_STARTED, kernels.S_MODE, kernels.S_STILL_OUT, kernels.UNIT_STATE) == (
-        15, 20, 21, 46, 56, 66, 91, 92, 113, 226)
+        15, 20, 21, 46, 56, 66, 91, 92, 130, 258)
     assert (kernels.C_Q, kernels.C_C_MID, kernels.C_P0, kernels.C_T_RAMP, kernels.C_P0_ALIGNED,
-            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 154)
+            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 93, 166)
     # the reference generator's slots, at the end of both unit vectors
-    assert (kernels.S_I_DREF, kernels.S_T_AVAIL, kernels.C_REF_MODE, kernels.C_BRAKE_GAIN) == (114, 118, 87, 94)
+    assert (kernels.S_I_DREF, kernels.S_T_AVAIL, kernels.C_REF_MODE, kernels.C_BRAKE_GAIN) == (131, 135, 97, 104)
     # the speed loop's feedforward, after them
-    assert (kernels.S_W_REF_PREV, kernels.S_T_FF, kernels.C_FF, kernels.C_FF_T2) == (119, 121, 95, 99)
+    assert (kernels.S_W_REF_PREV, kernels.S_T_FF, kernels.C_FF, kernels.C_FF_T2) == (136, 138, 105, 109)
     # the sensorless unit's handover deadline and stall, after them
-    assert (kernels.S_IF_DUE, kernels.S_REALIGN, kernels.C_IF_DEADLINE, kernels.C_REALIGN_MAX) == (122, 123, 100, 102)
+    assert (kernels.S_IF_DUE, kernels.S_REALIGN, kernels.C_IF_DEADLINE, kernels.C_REALIGN_MAX) == (139, 140, 110, 112)
     # the injection's hill hold, last of the injection strategy's slots
-    assert (kernels.S_HOLD, kernels.C_HOLD_BRAKE) == (196, 138)
+    assert (kernels.S_HOLD, kernels.C_HOLD_BRAKE) == (213, 148)
     # the I-f strategy's alignment timer and damping input, and its guard, trust, relock and stand parameters
     assert (kernels.S_RUNAWAY_T, kernels.S_ALIGN_SPEED, kernels.C_SOFT_GUARD, kernels.C_STILL_TIME) == (
-        197, 198, 139, 143)
+        214, 215, 149, 153)
     # the measured DC link's, last
-    assert (kernels.C_FW_MARGIN, kernels.C_P_DIS) == (144, 147)
+    assert (kernels.C_FW_MARGIN, kernels.C_P_DIS) == (154, 157)
 
 
 @pytest.mark.parametrize("rows,size,message", [
