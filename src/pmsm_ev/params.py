@@ -1753,15 +1753,17 @@ class InjectionParams:
     inj_angle_max: float = 0.15
     #: the back-EMF detector (``pmsm_ev.kernels.detect_emf_lost``, eqs LS1-LS2), in FOC on the injection and the
     #: blend: the back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed
-    #: [rad/s], beyond this (plus ``emf_slip_rel`` of the frame's |omega|) for ``inj_los_time`` is a rotor that
-    #: turns under a frame that does not follow it [chosen: 15 rad/s, 5.4 V with Table I's psi: the blend's lower
-    #: speed ``inj_blend_low``, where the EKF is trusted to see the back-EMF at all; above the voltages a healthy
-    #: drive leaves unexplained at a stop: the dead-time compensation 30 % off the inverter's (about 2 V), R_s 60 %
-    #: above the identified value at the injection's 300 A (1.6 V)]
-    emf_slip_speed: float = 15.0
-    #: ... plus this share of the frame's |omega| [-] [chosen: 0.25: the magnet's psi up to 15 % below the model's
-    #: (cold data sheet, warm magnet) and the decoupling's inductances (L_d, L_q +-15 %) at the injection's current;
-    #: a frame at the rotor's speed but 0.5 rad off its angle leaves 2 sin(e / 2) = 0.49 of it]
+    #: [rad/s], beyond this (plus ``emf_slip_rel`` of the rotor's speed the loops see) for ``inj_los_time`` is a
+    #: rotor that turns under a frame that does not follow it, or a frame that spins over a standing rotor
+    #: [chosen: 10 rad/s, 3.6 V with Table I's psi: the sum of the voltages a healthy drive leaves unexplained at a
+    #: stop, the dead-time compensation 30 % off the inverter's (about 2 V) and R_s 60 % above the identified value
+    #: at the injection's 300 A (1.6 V). Measured on issue 47's motors A and B (udds-sensorless, sigma = 1.5 A): 0
+    #: episodes at 10 and 15 rad/s; 17 on motor A at 5 rad/s]
+    emf_slip_speed: float = 10.0
+    #: ... plus this share of the rotor's speed the current loops see (all the back-EMF they carry, as a speed) [-]
+    #: [chosen: 0.25: the magnet's psi up to 15 % below the model's (cold data sheet, warm magnet) and the
+    #: decoupling's inductances (L_d, L_q +-15 %) at the injection's current; a frame at the rotor's speed but 0.5
+    #: rad off its angle leaves 2 sin(e / 2) = 0.49 of it, a frame spinning over a standing rotor all of its speed]
     emf_slip_rel: float = 0.25
 
     def half_wave(self, dt: float) -> int:

@@ -434,7 +434,9 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_EMF_F", 1, "the back-EMF the current PIs' integrators carry beyond the frame's speed's, as a speed (eq LS1), "
                    "low-pass filtered [rad/s]"),
     ("S_EMF_T", 1, "how long it has been beyond its bound (eq LS2) [s]"),
-), size=260)
+    ("S_EMF_SEEN", 1, "the rotor's speed the current loops see: all the back-EMF they carry as a speed (eq LS2), "
+                      "low-pass filtered [rad/s]"),
+), size=261)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -610,7 +612,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_ANGLE_MAX", 1, "the largest angle accuracy (eq ID3) at which the injection is trusted [rad]"),
     ("C_EMF_SPEED", 1, "the back-EMF detector: the unexplained back-EMF's speed beyond which the frame has lost the "
                        "rotor, at a standing frame [rad/s] (eq LS2)"),
-    ("C_EMF_REL", 1, "... plus this share of the frame's |omega| [-]"),
+    ("C_EMF_REL", 1, "... plus this share of the rotor's speed the current loops see [-]"),
 ), size=168)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)

@@ -31,7 +31,11 @@ not explain. A rotor turning at omega under a frame off it by e leaves N omega p
 (I_d, I_q the integrators, i_d, i_q the currents in the frame, R the identified R_s, psi the model's), and the
 frame has lost the rotor where, filtered as the other detectors (``C_LOS_FILTER``), for ``C_INJ_LOS_TIME``
 
-    r_f > C_EMF_SPEED + C_EMF_REL |omega_hat|                                                         (LS2)
+    r_f > C_EMF_SPEED + C_EMF_REL w_f,   w = |(I_d - R i_d, I_q - R i_q + N omega_hat psi)| / (N psi)    (LS2)
+
+w the rotor's speed the current loops see (all the back-EMF they carry, the frame's feed-forward's with it): the
+share of it a magnet that is not the model's leaves unexplained. A frame that spins over a standing rotor leaves
+r = |omega_hat|, w = 0; a rotor turning under a standing frame r = w = |omega|.
 
 It sees a rotor that turns under a frame that stands or turns otherwise, whatever the injection's error signal or
 the EKF (fed by the injection at low speed) say.
@@ -139,6 +143,7 @@ from .layout import (
     S_DISAGREE_V,
     S_EKF_LOS_T,
     S_EMF_F,
+    S_EMF_SEEN,
     S_EMF_T,
     S_EPISODE,
     S_EVENT,
@@ -557,26 +562,32 @@ def detect_ekf_lost(s, c):
 @kernel()
 def emf_residual(s, c):
     """The back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed [rad/s]
-    (eq LS1): the integrators and the currents of the last period in the control frame, less the resistance's drop
-    on the identified R_s (the model's where none), over N psi."""
+    (eq LS1), and the rotor's speed the current loops see, the magnitude of all the back-EMF they carry (that and
+    the frame's own, N omega_hat psi on q) as a speed [rad/s]: the integrators and the currents of the last period
+    in the control frame, less the resistance's drop on the identified R_s (the model's where none), over N psi."""
     r_s = s[S_ID_RS] if s[S_ID_RS] > 0.0 else c[C_AD_RS0]
-    u_d = s[S_INT_D] - r_s * s[S_I_D]
-    u_q = s[S_INT_Q] - r_s * s[S_I_Q]
-    return math.sqrt(u_d * u_d + u_q * u_q) / (c[C_N] * c[C_PSI])
+    k = 1.0 / (c[C_N] * c[C_PSI])
+    r_d = k * (s[S_INT_D] - r_s * s[S_I_D])
+    r_q = k * (s[S_INT_Q] - r_s * s[S_I_Q])
+    seen_q = r_q + s[S_OMEGA_CTRL]
+    return math.sqrt(r_d * r_d + r_q * r_q), math.sqrt(r_d * r_d + seen_q * seen_q)
 
 
 @kernel()
 def detect_emf_lost(s, c):
     """EV_EMF_LOST in FOC on the injection (the blend included), ``C_INJ_LOS_TIME`` after the mode's start (the
     integrators start from 0 with the torque), when the filtered unexplained back-EMF (eq LS1, ``S_EMF_F``) has
-    stayed beyond ``C_EMF_SPEED`` plus ``C_EMF_REL`` times the frame's |omega| (eq LS2) for ``C_INJ_LOS_TIME`` (its
+    stayed beyond ``C_EMF_SPEED`` plus ``C_EMF_REL`` times the rotor's speed the current loops see (eq LS2,
+    ``S_EMF_SEEN``, filtered the same way) for ``C_INJ_LOS_TIME`` (its
     timer ``S_EMF_T``): the rotor turns under a frame that does not follow it. It does not read the injection's
     error signal nor the EKF, which at low speed is put on the tracking observer."""
-    s[S_EMF_F] += c[C_LOS_FILTER] * (emf_residual(s, c) - s[S_EMF_F])
+    r, seen = emf_residual(s, c)
+    s[S_EMF_F] += c[C_LOS_FILTER] * (r - s[S_EMF_F])
+    s[S_EMF_SEEN] += c[C_LOS_FILTER] * (seen - s[S_EMF_SEEN])
     if s[S_MODE_TIME] < c[C_INJ_LOS_TIME]:
         s[S_EMF_T] = 0.0
         return EV_NONE
-    bound = c[C_EMF_SPEED] + c[C_EMF_REL] * abs(s[S_OMEGA_CTRL])
+    bound = c[C_EMF_SPEED] + c[C_EMF_REL] * s[S_EMF_SEEN]
     s[S_EMF_T] = s[S_EMF_T] + c[C_DT] if s[S_EMF_F] > bound else 0.0
     if s[S_EMF_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
         return EV_NONE
