@@ -215,9 +215,10 @@ def _emf(s, c, omega_ctrl, e, omega, psi_share=1.0, i_q=100.0):
 @pytest.mark.parametrize(("omega_ctrl", "e", "omega", "psi_share", "event"), [
     (0.0, 0.0, 0.0, 1.0, k.EV_NONE),  # standing, locked
     (25.0, 0.1, 25.0, 0.85, k.EV_NONE),  # in the blend, locked, a magnet 15 % weak
-    (0.0, 0.3, 8.0, 1.0, k.EV_NONE),  # a rotor creeping below the bound under a standing frame
+    (0.0, 0.3, 12.0, 1.0, k.EV_NONE),  # a rotor creeping below the bound under a standing frame
     (-3.0, 1.0, 23.0, 0.87, k.EV_EMF_LOST),  # motor A without identification: the car rolls, the frame stands
-    (-14.0, 0.0, 0.0, 1.0, k.EV_EMF_LOST),  # a frame spinning over a standing rotor
+    (-18.0, 0.0, 0.0, 1.0, k.EV_EMF_LOST),  # a frame spinning over a standing rotor
+    (-12.0, 0.0, 0.0, 1.0, k.EV_NONE),  # ... slower than C_EMF_SPEED: not yet
     (20.0, math.pi, 20.0, 1.0, k.EV_EMF_LOST),  # the frame pi off at the rotor's speed
 ])
 def test_the_back_emf_detector_sees_a_rotor_the_frame_does_not_follow(omega_ctrl, e, omega, psi_share, event):
