@@ -363,6 +363,11 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                       "from then on; 0: not measured"),
     "inj_angle_max": ("rad", "the largest angle accuracy at a stop (eq ID3, from the measured saliency and noise "
                              "floor) at which the injection is trusted; beyond it the unit is blind"),
+    "emf_slip_speed": ("rad/s", "loss of synchronism under injection and in the blend: the back-EMF the current PIs' "
+                                "integrators carry beyond what the frame's speed explains, as a speed (eq LS1), "
+                                "beyond this plus emf_slip_rel times the rotor's speed the loops see for inj_los_time"),
+    "emf_slip_rel": (None, "... the share of the rotor's speed the current loops see (all the back-EMF they "
+                           "carry) added to emf_slip_speed"),
     "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "
                            "identified admittances), filtered, stays below this for inj_los_time"),
     # ControlUnit

@@ -19,7 +19,7 @@ from pmsm_ev.params import ControllerParams, InjectionParams, ParameterError
 INJECTION_MODES = (k.MODE_ACQUIRE, k.MODE_POLARITY, k.MODE_INJECTION, k.MODE_EKF)
 EVENTS = (k.EV_ACQUIRED, k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED, k.EV_POLARITY_UNRESOLVED, k.EV_FAST,
           k.EV_SLOW, k.EV_INJECTION_LOST, k.EV_DISAGREE, k.EV_EKF_LOST, k.EV_FLIPPED, k.EV_BLIND_STOP,
-          k.EV_STILL_PARKED)
+          k.EV_STILL_PARKED, k.EV_EMF_LOST)
 
 
 def _unit(**kw):
@@ -40,7 +40,7 @@ ROWS = tuple(row for row in k.TRANSITIONS if row[1] in EVENTS)
 def test_table_has_one_row_per_pair_and_known_modes_and_actions():
     pairs = [(row[0], row[1]) for row in k.TRANSITIONS]
     assert len(pairs) == len(set(pairs))
-    assert len(ROWS) == 13
+    assert len(ROWS) == 14
     actions = {getattr(k, n) for n in dir(k) if n.startswith("A_")}
     for mode, event, new, action in ROWS:
         assert mode in INJECTION_MODES and new in INJECTION_MODES
@@ -186,6 +186,65 @@ def test_still_parked_acquires_again_and_the_first_torque_lets_go():
     assert s[k.S_ACQ] == 0.0 and s[k.S_PARKED] == 1.0 and s[k.S_HOLD] == c[k.C_HOLD_BRAKE]
     assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_RIGHT) == k.MODE_INJECTION
     assert s[k.S_PARKED] == 0.0 and s[k.S_HOLD] == 0.0
+
+
+def test_a_back_emf_the_frame_does_not_explain_stops_the_car_and_reacquires_as_an_episode():
+    """EV_EMF_LOST: an episode, the friction brake asked for, the acquisition from the start (its sums cleared,
+    no current), so that the angle is found on a car that stands again; the first torque lets go."""
+    _, s, c = _unit()
+    s[k.S_ACQ:k.S_ACQ + 4] = [1.0, 2.0, 3.0, 4.0]
+    s[k.S_W_INT], s[k.S_INT_Q], s[k.S_EMF_T] = 9.0, 5.0, 0.01
+    assert _go(s, c, k.MODE_INJECTION, k.EV_EMF_LOST) == k.MODE_ACQUIRE
+    assert s[k.S_EPISODE] > 0.0 and s[k.S_PARKED] == 1.0 and s[k.S_HOLD] == c[k.C_HOLD_BRAKE] > 0.0
+    assert s[k.S_ACQ:k.S_ACQ + 4] == [0.0] * 4 and s[k.S_W_INT] == 0.0 and s[k.S_INT_Q] == 0.0
+    assert s[k.S_EMF_T] == 0.0
+    assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_RIGHT) == k.MODE_INJECTION
+    assert s[k.S_PARKED] == 0.0 and s[k.S_HOLD] == 0.0
+
+
+def _emf(s, c, omega_ctrl, e, omega, psi_share=1.0, i_q=100.0):
+    """The integrators as the current loops settle them (eqs 10-11 at steady state, less the decoupling on the
+    frame's speed, eqs 19-20) for a rotor at ``omega`` under a frame at ``omega_ctrl`` trailing it by ``e``, a
+    magnet of ``psi_share`` of the model's, the current (0, i_q) in the frame."""
+    n, psi, r = c[k.C_N], c[k.C_PSI], c[k.C_AD_RS0]
+    s[k.S_OMEGA_CTRL], s[k.S_I_D], s[k.S_I_Q] = omega_ctrl, 0.0, i_q
+    s[k.S_INT_D] = r * 0.0 - n * omega * psi_share * psi * math.sin(e)
+    s[k.S_INT_Q] = r * i_q + n * omega * psi_share * psi * math.cos(e) - n * omega_ctrl * psi
+
+
+@pytest.mark.parametrize(("omega_ctrl", "e", "omega", "psi_share", "event"), [
+    (0.0, 0.0, 0.0, 1.0, k.EV_NONE),  # standing, locked
+    (25.0, 0.1, 25.0, 0.85, k.EV_NONE),  # in the blend, locked, a magnet 15 % weak
+    (0.0, 0.3, 12.0, 1.0, k.EV_NONE),  # a rotor creeping below the bound under a standing frame
+    (-3.0, 1.0, 23.0, 0.87, k.EV_EMF_LOST),  # motor A without identification: the car rolls, the frame stands
+    (-18.0, 0.0, 0.0, 1.0, k.EV_EMF_LOST),  # a frame spinning over a standing rotor
+    (-12.0, 0.0, 0.0, 1.0, k.EV_NONE),  # ... slower than C_EMF_SPEED: not yet
+    (20.0, math.pi, 20.0, 1.0, k.EV_EMF_LOST),  # the frame pi off at the rotor's speed
+])
+def test_the_back_emf_detector_sees_a_rotor_the_frame_does_not_follow(omega_ctrl, e, omega, psi_share, event):
+    """Eqs LS1-LS2 on the integrators the loops settle at: no event while the frame follows the rotor (a magnet 15 %
+    weaker than the model's included), EV_EMF_LOST after C_INJ_LOS_TIME (and the filter's settling) where the rotor
+    turns under a frame that does not follow it, or the frame spins over a standing rotor."""
+    _, s, c = _unit()
+    s[k.S_MODE_TIME] = 1.0
+    _emf(s, c, omega_ctrl, e, omega, psi_share)
+    n = round(c[k.C_INJ_LOS_TIME] / c[k.C_DT])
+    events = [k.detect_emf_lost(s, c) for _ in range(4 * n)]
+    assert set(events) == ({k.EV_NONE, k.EV_EMF_LOST} if event == k.EV_EMF_LOST else {k.EV_NONE})
+
+
+def test_the_back_emf_detector_waits_for_the_integrators_and_its_time():
+    """No event within C_INJ_LOS_TIME of the mode's start (the integrators start from 0 with the torque), nor before
+    the residual has stayed beyond its bound that long."""
+    _, s, c = _unit()
+    _emf(s, c, 0.0, 0.0, 40.0)
+    n = round(c[k.C_INJ_LOS_TIME] / c[k.C_DT])
+    s[k.S_MODE_TIME] = 0.0
+    assert all(k.detect_emf_lost(s, c) == k.EV_NONE for _ in range(3 * n))  # the mode's clock does not run here
+    s[k.S_MODE_TIME] = 1.0
+    events = [k.detect_emf_lost(s, c) for _ in range(2 * n)]
+    first = events.index(k.EV_EMF_LOST)
+    assert first >= n - 1 and set(events[:first]) == {k.EV_NONE}
 
 
 @pytest.mark.parametrize(("blind", "omega_ref", "omega", "t", "event"), [
@@ -555,6 +614,8 @@ def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
     ({"low_speed": "injection", "inj_voltage_max": 120.0}, "inj_voltage_max"),
     ({"low_speed": "injection", "rs_time": 0.001}, "rs_time"),
     ({"low_speed": "injection", "rs_current": 0.0}, "rs_current"),
+    ({"low_speed": "injection", "emf_slip_speed": 0.0}, "emf_slip_speed"),
+    ({"low_speed": "injection", "emf_slip_rel": -0.1}, "emf_slip_rel"),
 ])
 def test_bad_injection_parameters_are_refused_by_name(kw, names):
     with pytest.raises(ParameterError, match=names) as err:

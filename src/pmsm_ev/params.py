@@ -1770,6 +1770,22 @@ class InjectionParams:
     #: amplitude at ``inj_voltage_max``: 0.06 rad at 1 A, 0.15 rad at 2.6 A: below 2.6 A of noise the saliency
     #: limit is the stricter, beyond it this one
     inj_angle_max: float = 0.15
+    #: the back-EMF detector (``pmsm_ev.kernels.detect_emf_lost``, eqs LS1-LS2), in FOC on the injection and the
+    #: blend: the back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed
+    #: [rad/s], beyond this (plus ``emf_slip_rel`` of the rotor's speed the loops see) for ``inj_los_time`` is a
+    #: rotor that turns under a frame that does not follow it, or a frame that spins over a standing rotor
+    #: [chosen: 15 rad/s, 5.4 V with Table I's psi, the blend's lower speed ``inj_blend_low``: above the voltages a
+    #: healthy drive leaves unexplained at low speed, the dead-time compensation 30 % below the inverter's (2.2 V a
+    #: phase) with a magnet 15 % weak (its EKF's speed 15 % low at the handover down) and the sensors' noise.
+    #: Measured on udds-sensorless, sigma = 1.5 A: issue 47's motors A and B 0 episodes at 10 and 15 rad/s, motor A
+    #: 17 at 5 rad/s; a motor with the compensation 30 % low, psi -15 %, R_s +60 %: at 10 rad/s 2 episodes that were
+    #: not slips beyond the 3 its other detectors give, at 15 none]
+    emf_slip_speed: float = 15.0
+    #: ... plus this share of the rotor's speed the current loops see (all the back-EMF they carry, as a speed) [-]
+    #: [chosen: 0.25: the magnet's psi up to 15 % below the model's (cold data sheet, warm magnet) and the
+    #: decoupling's inductances (L_d, L_q +-15 %) at the injection's current; a frame at the rotor's speed but 0.5
+    #: rad off its angle leaves 2 sin(e / 2) = 0.49 of it, a frame spinning over a standing rotor all of its speed]
+    emf_slip_rel: float = 0.25
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
@@ -1787,7 +1803,7 @@ class InjectionParams:
             _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")
         for name in ("inj_voltage", "inj_bandwidth", "inj_blend_high", "inj_lock_time", "pol_current",
                      "pol_hold", "pol_contrast", "inj_los_angle", "inj_los_time", "ekf_los_current",
-                     "ekf_los_time", "inj_current_limit", "pol_frame_band"):
+                     "ekf_los_time", "inj_current_limit", "pol_frame_band", "emf_slip_speed"):
             _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
         _require(-1.0 < self.inj_axis_cos < 1.0,
                  f"inj_axis_cos must be within (-1, 1): a cosine of 2e (got {self.inj_axis_cos})")

@@ -430,7 +430,13 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_ID_NOISE_F", 1, "the current measurement's noise floor from the identification's answers: a phase sensor's "
                         "sigma [A] (0: not identified)"),
     ("S_ID_ACC", 1, "the angle accuracy injection gives at a stop, rms [rad] (eq ID3; 0: not identified)"),
-), size=258)
+    # the injection strategy's back-EMF detector (``kernels.modes.emf_residual``, eqs LS1-LS2)
+    ("S_EMF_F", 1, "the back-EMF the current PIs' integrators carry beyond the frame's speed's, as a speed (eq LS1), "
+                   "low-pass filtered [rad/s]"),
+    ("S_EMF_T", 1, "how long it has been beyond its bound (eq LS2) [s]"),
+    ("S_EMF_SEEN", 1, "the rotor's speed the current loops see: all the back-EMF they carry as a speed (eq LS2), "
+                      "low-pass filtered [rad/s]"),
+), size=261)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -604,7 +610,10 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                       "[-]"),
     ("C_OFS_TIME", 1, "the offset window at enable: no voltage, the sensors' mean is their offset [s] (0: none)"),
     ("C_ANGLE_MAX", 1, "the largest angle accuracy (eq ID3) at which the injection is trusted [rad]"),
-), size=166)
+    ("C_EMF_SPEED", 1, "the back-EMF detector: the unexplained back-EMF's speed beyond which the frame has lost the "
+                       "rotor, at a standing frame [rad/s] (eq LS2)"),
+    ("C_EMF_REL", 1, "... plus this share of the rotor's speed the current loops see [-]"),
+), size=168)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24

@@ -20,6 +20,26 @@ Each period the detectors (small functions, each of one purpose and timer) retur
 ordered table, and runs the row's entry action. A pair not in the table changes nothing. The mechanism
 is the I-f strategy's too (``kernels.machine``).
 
+A detector that does not judge the estimate by itself (``detect_emf_lost``): the current PIs' integrators carry,
+at steady state, the voltage the motor needs less the decoupling and back-EMF terms the controller adds on the
+frame's speed omega_hat (eqs 19-20); less the resistance's drop, what is left is the back-EMF the frame's speed does
+not explain. A rotor turning at omega under a frame off it by e leaves N omega psi (sin e, cos e) - N omega_hat psi
+(0, 1) there; as a speed
+
+    r = |(I_d - R i_d, I_q - R i_q)| / (N psi)                                                        (LS1)
+
+(I_d, I_q the integrators, i_d, i_q the currents in the frame, R the identified R_s, psi the model's), and the
+frame has lost the rotor where, filtered as the other detectors (``C_LOS_FILTER``), for ``C_INJ_LOS_TIME``
+
+    r_f > C_EMF_SPEED + C_EMF_REL w_f,   w = |(I_d - R i_d, I_q - R i_q + N omega_hat psi)| / (N psi)    (LS2)
+
+w the rotor's speed the current loops see (all the back-EMF they carry, the frame's feed-forward's with it): the
+share of it a magnet that is not the model's leaves unexplained. A frame that spins over a standing rotor leaves
+r = |omega_hat|, w = 0; a rotor turning under a standing frame r = w = |omega|.
+
+It sees a rotor that turns under a frame that stands or turns otherwise, whatever the injection's error signal or
+the EKF (fed by the injection at low speed) say.
+
 The fault output, as the I-f strategy's: a loss of synchronism begins an episode (``FAULT_RECOVERING``),
 which ends after ``C_RECOVER_TIME`` without trouble, or latches the safe state after ``C_FAULT_TIME``:
 stop and hold, closed loop at zero speed (the reference taken as 0). A polarity left unresolved twice
@@ -61,6 +81,7 @@ from .jit import sig as _sig
 from .layout import (
     C_ACQ_SETTLE,
     C_ACQ_TIME,
+    C_AD_RS0,
     C_ADAPT,
     C_ADVANCE,
     C_ANGLE_MAX,
@@ -72,6 +93,8 @@ from .layout import (
     C_EKF_LOS_EMF,
     C_EKF_LOS_I,
     C_EKF_LOS_TIME,
+    C_EMF_REL,
+    C_EMF_SPEED,
     C_FF,
     C_HOLD_BRAKE,
     C_I_D_REF,
@@ -89,6 +112,7 @@ from .layout import (
     C_L_D,
     C_L_Q,
     C_LOS_FILTER,
+    C_N,
     C_OFS_TIME,
     C_P0,
     C_P0_ALIGNED,
@@ -118,12 +142,16 @@ from .layout import (
     S_DISAGREE_F,
     S_DISAGREE_V,
     S_EKF_LOS_T,
+    S_EMF_F,
+    S_EMF_SEEN,
+    S_EMF_T,
     S_EPISODE,
     S_EVENT,
     S_FAULT,
     S_HOLD,
     S_I_D,
     S_I_DL,
+    S_I_Q,
     S_I_QL,
     S_ID_ACC,
     S_ID_BLIND,
@@ -174,6 +202,7 @@ from .machine import (
     A_PARK,
     A_POLARITY,
     A_REACQUIRE,
+    A_REACQUIRE_PARKED,
     A_REPOLARIZE,
     A_RESEAT,
     A_RESTART_EKF,
@@ -183,6 +212,7 @@ from .machine import (
     EV_BLIND_STOP,
     EV_DISAGREE,
     EV_EKF_LOST,
+    EV_EMF_LOST,
     EV_FAST,
     EV_FLIPPED,
     EV_INJECTION_LOST,
@@ -530,6 +560,42 @@ def detect_ekf_lost(s, c):
 
 
 @kernel()
+def emf_residual(s, c):
+    """The back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed [rad/s]
+    (eq LS1), and the rotor's speed the current loops see, the magnitude of all the back-EMF they carry (that and
+    the frame's own, N omega_hat psi on q) as a speed [rad/s]: the integrators and the currents of the last period
+    in the control frame, less the resistance's drop on the identified R_s (the model's where none), over N psi."""
+    r_s = s[S_ID_RS] if s[S_ID_RS] > 0.0 else c[C_AD_RS0]
+    k = 1.0 / (c[C_N] * c[C_PSI])
+    r_d = k * (s[S_INT_D] - r_s * s[S_I_D])
+    r_q = k * (s[S_INT_Q] - r_s * s[S_I_Q])
+    seen_q = r_q + s[S_OMEGA_CTRL]
+    return math.sqrt(r_d * r_d + r_q * r_q), math.sqrt(r_d * r_d + seen_q * seen_q)
+
+
+@kernel()
+def detect_emf_lost(s, c):
+    """EV_EMF_LOST in FOC on the injection (the blend included), ``C_INJ_LOS_TIME`` after the mode's start (the
+    integrators start from 0 with the torque), when the filtered unexplained back-EMF (eq LS1, ``S_EMF_F``) has
+    stayed beyond ``C_EMF_SPEED`` plus ``C_EMF_REL`` times the rotor's speed the current loops see (eq LS2,
+    ``S_EMF_SEEN``, filtered the same way) for ``C_INJ_LOS_TIME`` (its
+    timer ``S_EMF_T``): the rotor turns under a frame that does not follow it. It does not read the injection's
+    error signal nor the EKF, which at low speed is put on the tracking observer."""
+    r, seen = emf_residual(s, c)
+    s[S_EMF_F] += c[C_LOS_FILTER] * (r - s[S_EMF_F])
+    s[S_EMF_SEEN] += c[C_LOS_FILTER] * (seen - s[S_EMF_SEEN])
+    if s[S_MODE_TIME] < c[C_INJ_LOS_TIME]:
+        s[S_EMF_T] = 0.0
+        return EV_NONE
+    bound = c[C_EMF_SPEED] + c[C_EMF_REL] * s[S_EMF_SEEN]
+    s[S_EMF_T] = s[S_EMF_T] + c[C_DT] if s[S_EMF_F] > bound else 0.0
+    if s[S_EMF_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
+        return EV_NONE
+    s[S_EMF_T] = 0.0
+    return EV_EMF_LOST
+
+
+@kernel()
 def detect_blind_stop(s, c, omega_ref):
     """EV_BLIND_STOP in FOC on the injection when the unit is blind (``S_ID_BLIND``: the identified saliency below
     ``C_SALIENCY_MIN``), the driver asks for a stop (the reference 0) and the car is below the blend
@@ -568,6 +634,9 @@ def detect(s, c, mode, omega_ref):
         return ev if ev == EV_INJECTION_LOST else detect_polarity(s, c)
     if mode == MODE_INJECTION:
         ev = detect_injection_lost(s, c)
+        ev_emf = detect_emf_lost(s, c)
+        if ev == EV_NONE:
+            ev = ev_emf
         if ev == EV_NONE:
             ev = detect_blind_stop(s, c, omega_ref)
         return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_OMEGA_CTRL])
@@ -586,6 +655,7 @@ def clear_detectors(s):
     s[S_AXIS_F] = 1.0
     s[S_INJ_LOS_T] = 0.0
     s[S_EKF_LOS_T] = 0.0
+    s[S_EMF_T] = 0.0
 
 
 @kernel()
@@ -752,6 +822,9 @@ def enter(s, c, action, i_alpha, i_beta):
         clear_detectors(s)
     elif action == A_PARK:
         park_car(s, c, i_alpha, i_beta)
+    elif action == A_REACQUIRE_PARKED:
+        begin_episode_now(s, c)
+        park_car(s, c, i_alpha, i_beta)
     elif action == A_REPOLARIZE:
         begin_episode_now(s, c)
         flip_frame(s)
@@ -909,7 +982,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     if event != EV_NONE:
         mode = transition(s, c, mode, event, i_alpha, i_beta)
         t = s[S_MODE_TIME]
-    age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0)
+    age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0 or s[S_EMF_T] > 0.0)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
         omega_ref = 0.0
     if c[C_FF] != 0.0:  # the speed loop's feedforward, its slope kept up in every mode
