@@ -603,6 +603,7 @@ def sanitized(tmp_path_factory) -> dict[str, Path]:
 
 
 @needs_asan
+@pytest.mark.slow
 def test_the_sanitized_fmi3_build_is_sanitized(sanitized):
     """The layer, the loader and the binding behind it link the sanitizers' runtimes (so that the tests below check
     what they say)."""
@@ -614,6 +615,7 @@ def test_the_sanitized_fmi3_build_is_sanitized(sanitized):
 
 @needs_asan
 @pytest.mark.parametrize("name", SANITIZED)
+@pytest.mark.slow
 def test_the_fmi3_misuse_suite_under_the_sanitizers_reports_nothing_and_answers_as_the_plain_build(units, sanitized,
                                                                                                    name):
     """Every sequence above (wrong order, a step after terminate, a time that goes back, non-finite inputs, a clock
@@ -624,6 +626,7 @@ def test_the_fmi3_misuse_suite_under_the_sanitizers_reports_nothing_and_answers_
 
 
 @needs_asan
+@pytest.mark.slow
 def test_an_fmu_state_under_the_sanitizers_reports_nothing(sanitized):
     """Got, restored, serialized and deserialized (the layer hands the FMI 2.0 stack's buffers through)."""
     done = subprocess.run([sys.executable, "-c", _STATE, *(str(sanitized[name]) for name in SANITIZED)],

@@ -328,6 +328,7 @@ def sanitized(tmp_path_factory) -> dict[str, Path]:
 
 
 @needs_asan
+@pytest.mark.slow
 def test_the_sanitized_build_is_sanitized(sanitized):
     """The binding and the loader inside the FMU link the sanitizers' runtimes (so that the test below checks what
     it says)."""
@@ -338,6 +339,7 @@ def test_the_sanitized_build_is_sanitized(sanitized):
 
 @needs_asan
 @pytest.mark.parametrize("name", SANITIZED)
+@pytest.mark.slow
 def test_the_misuse_suite_under_the_sanitizers_reports_nothing_and_answers_as_the_plain_build(fmus, sanitized, name):
     found = run_all(sanitized[name], SEQUENCES[name], env=sanitized_env(), check=no_report)
     assert found == {case: run(fmus[name], case) for case in SEQUENCES[name]}

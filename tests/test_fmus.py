@@ -1160,6 +1160,7 @@ int main(int argc, char **argv) {
 """
 
 
+@pytest.mark.slow
 def test_a_c_host_runs_the_plant_with_or_without_libpython_preloaded(fmus, unzipped, tmp_path):
     """A host that is not Python: the FMU brings up its own Python (fmus/README.md, "Hosts that are not Python";
     tests/test_c_host.py); the set-up README.md once asked for (libpython preloaded, PYTHONHOME) works as well."""

@@ -252,6 +252,7 @@ def run_libcosim_ssp(package: Path, stop_time: float, every: int) -> dict:
 
 
 @pytest.mark.parametrize("angle_source", ["measured", "estimated"])
+@pytest.mark.slow
 def test_libcosim_runs_the_package_as_the_orchestrators_jacobi_run(fmus, tmp_path, angle_source):
     stop = 2.0
     package = export(fmus, tmp_path / "s2.ssp", f"ctrl.angle_source={angle_source}")
