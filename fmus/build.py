@@ -115,6 +115,8 @@ BINDINGS = ("lean", "pythonfmu")
 LOADER_SOURCE = HERE / "fmu_loader.c"
 #: the FMI 2.0 types both C libraries include (beside them: found by ``#include "..."`` from their folder)
 C_HEADER = HERE / "fmi2_binding.h"
+#: the instance table the lean binding and the FMI 3.0 layer include (instance_table.h)
+INSTANCE_TABLE = HERE / "instance_table.h"
 BINDING_LIBRARY = "pmsm-binding.so"
 #: resources/ file naming the interpreter the FMU was built with (the loader's third choice of a Python)
 BUILT_PYTHON_FILE = "build_python.txt"
@@ -151,7 +153,8 @@ def _compiled(source_path: Path, prefix: str, python_headers: bool, defines: dic
     flags = [f"-D{name}={value}" for name, value in (defines or {}).items()] + extra_cflags()
     flags += [f"-I{folder}" for folder in dict.fromkeys(str(h.parent) for h in headers)]
     # the headers it includes change it too
-    source = source_path.read_bytes() + C_HEADER.read_bytes() + b"".join(h.read_bytes() for h in headers)
+    source = (source_path.read_bytes() + C_HEADER.read_bytes() + INSTANCE_TABLE.read_bytes()
+              + b"".join(h.read_bytes() for h in headers))
     include = sysconfig.get_paths()["include"] if python_headers else ""
     key = hashlib.sha256(source + include.encode() + " ".join(flags).encode()).hexdigest()[:16]
     folder = user_cache_dir() / "binding"

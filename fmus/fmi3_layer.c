@@ -190,55 +190,8 @@ typedef struct {
 #error "compile with -DCLOCK_FILE=\"<file name>\" (pmsm_ev_fmus.build does)"
 #endif
 
-#define LIVE_INSTANCES 4096
-static _Atomic(Instance*) live_table[LIVE_INSTANCES];
-static atomic_size_t live_top;
-static pthread_mutex_t live_lock = PTHREAD_MUTEX_INITIALIZER;
-
-/* whether c is an instance this layer made and has not freed (no lock on the look-up) */
-static int live(const void* c)
-{
-    if (c == NULL) return 0;
-    size_t n = atomic_load_explicit(&live_top, memory_order_acquire);
-    for (size_t i = 0; i < n; i++)
-        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == c) return 1;
-    return 0;
-}
-
-static int enlist(Instance* w)
-{
-    int done = 0;
-    pthread_mutex_lock(&live_lock);
-    size_t n = atomic_load_explicit(&live_top, memory_order_relaxed);
-    for (size_t i = 0; i < n && !done; i++)
-        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == NULL) {
-            atomic_store_explicit(&live_table[i], w, memory_order_release);
-            done = 1;
-        }
-    if (!done && n < LIVE_INSTANCES) {
-        atomic_store_explicit(&live_table[n], w, memory_order_release);
-        atomic_store_explicit(&live_top, n + 1, memory_order_release);
-        done = 1;
-    }
-    pthread_mutex_unlock(&live_lock);
-    return done;
-}
-
-/* take w out of the table: 1, or 0 where it was not in it (NULL never is: a free slot holds NULL) */
-static int delist(const void* w)
-{
-    int found = 0;
-    if (w == NULL) return 0;
-    pthread_mutex_lock(&live_lock);
-    size_t n = atomic_load_explicit(&live_top, memory_order_relaxed);
-    for (size_t i = 0; i < n && !found; i++)
-        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == w) {
-            atomic_store_explicit(&live_table[i], NULL, memory_order_release);
-            found = 1;
-        }
-    pthread_mutex_unlock(&live_lock);
-    return found;
-}
+/* the instances this layer made: the instance table (instance_table.h), as the lean binding's */
+#include "instance_table.h"
 
 /* an FMI 2.0 status as FMI 3.0's */
 static fmi3Status status3(fmi2Status s)

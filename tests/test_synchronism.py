@@ -61,6 +61,7 @@ def test_the_matrix_covers_what_was_asked():
     assert grades["stand"](8.0) == pytest.approx(math.radians(20))
 
 
+@pytest.mark.slow
 def test_every_case_keeps_the_car_as_well_as_the_sensored_drive(matrix):
     results, _ = matrix
     rows = synchronism.verdicts(results)
@@ -80,6 +81,7 @@ def test_every_case_keeps_the_car_as_well_as_the_sensored_drive(matrix):
         assert by[name]["roll_back_sensored"] > 0.2 and by[name]["roll_back"] < 0.06, name
 
 
+@pytest.mark.slow
 def test_the_matrix_reaches_the_reference(matrix):
     """Each sensorless run ends at its reference (the last rows), from every angle."""
     results, runs = matrix
@@ -92,6 +94,7 @@ def test_the_matrix_reaches_the_reference(matrix):
         assert err.max() < 15.0, (r["case"], r["k"], err.max())
 
 
+@pytest.mark.slow
 def test_the_injection_keeps_a_parked_or_creeping_car_as_well_as_the_sensored_drive(tmp_path):
     """The shipped strategy (``low_speed = "injection"``, the plant's algebraic flux model) on the matrix's
     cases where the car is parked on a slope, creeps into one, steps to speed and reverses, from two angles
@@ -109,6 +112,7 @@ def test_the_injection_keeps_a_parked_or_creeping_car_as_well_as_the_sensored_dr
         assert all(r["ok"].values()), (r["case"].name, r["ok"], r["extra"])
 
 
+@pytest.mark.slow
 def test_report_section_renders(matrix, tmp_path):
     results, runs = matrix
     text = "\n".join(synchronism.render(results, ["sync_matrix"]))
