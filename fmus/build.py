@@ -57,11 +57,13 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
+import fmpy
 import pythonfmu
 from fmpy.validation import validate_fmu
 from pythonfmu import FmuBuilder
 
 from pmsm_ev.cycles import load_road
+from pmsm_ev.params import DT_DEFAULT
 from pmsm_ev.scenarios import route_from_json, route_to_json, scenario_route
 
 from .slave_support import BINDING_CONSTANTS, START_VALUES_FILE, WRAPPER_CHECKED, version_tuple
@@ -113,6 +115,8 @@ BINDINGS = ("lean", "pythonfmu")
 LOADER_SOURCE = HERE / "fmu_loader.c"
 #: the FMI 2.0 types both C libraries include (beside them: found by ``#include "..."`` from their folder)
 C_HEADER = HERE / "fmi2_binding.h"
+#: the instance table the lean binding and the FMI 3.0 layer include (instance_table.h)
+INSTANCE_TABLE = HERE / "instance_table.h"
 BINDING_LIBRARY = "pmsm-binding.so"
 #: resources/ file naming the interpreter the FMU was built with (the loader's third choice of a Python)
 BUILT_PYTHON_FILE = "build_python.txt"
@@ -129,8 +133,9 @@ def binding_requested() -> str:
     return choice
 
 
-#: extra compiler flags for the FMUs' C libraries (the lean binding and the loader), e.g. the sanitizers'
-#: ``-fsanitize=address,undefined`` (tests/test_sanitizers.py); part of their cache key
+#: extra compiler flags for the FMUs' C libraries (the lean binding, the loader and the FMI 3.0 layer: every library
+#: ``_compiled`` makes), e.g. the sanitizers' ``-fsanitize=address,undefined`` (tests/sanitizer_support.py); part of
+#: their cache key, of the FMUs' content key and of the FMI 3.0 units' hash
 ENV_CFLAGS = "PMSM_EV_BINDING_CFLAGS"
 
 
@@ -139,14 +144,17 @@ def extra_cflags() -> list[str]:
     return shlex.split(os.environ.get(ENV_CFLAGS, ""))
 
 
-def _compiled(source_path: Path, prefix: str, python_headers: bool, defines: dict[str, str] | None = None
-              ) -> tuple[Path | None, str]:
+def _compiled(source_path: Path, prefix: str, python_headers: bool, defines: dict[str, str] | None = None,
+              headers: tuple[Path, ...] = ()) -> tuple[Path | None, str]:
     """``source_path`` compiled into a shared library (``cc``, or ``$CC``; no libpython linked), with ``defines``
-    as ``-D`` definitions, kept in the user's cache (``user_cache_dir()/binding/``) under the hash of its source,
-    of ``C_HEADER``, of the definitions (and of the Python headers, if it uses them): (path, "") or (None, why it
-    cannot be built)."""
+    as ``-D`` definitions and the folders of ``headers`` on the include path, kept in the user's cache
+    (``user_cache_dir()/binding/``) under the hash of its source, of ``C_HEADER`` and ``headers``, of the
+    definitions (and of the Python headers, if it uses them): (path, "") or (None, why it cannot be built)."""
     flags = [f"-D{name}={value}" for name, value in (defines or {}).items()] + extra_cflags()
-    source = source_path.read_bytes() + C_HEADER.read_bytes()  # the header it includes changes it too
+    flags += [f"-I{folder}" for folder in dict.fromkeys(str(h.parent) for h in headers)]
+    # the headers it includes change it too
+    source = (source_path.read_bytes() + C_HEADER.read_bytes() + INSTANCE_TABLE.read_bytes()
+              + b"".join(h.read_bytes() for h in headers))
     include = sysconfig.get_paths()["include"] if python_headers else ""
     key = hashlib.sha256(source + include.encode() + " ".join(flags).encode()).hexdigest()[:16]
     folder = user_cache_dir() / "binding"
@@ -185,6 +193,47 @@ def loader_library() -> tuple[Path | None, str]:
     """The FMU's loader compiled (no Python headers, no Python symbol), kept in the user's cache under the hash of
     its source: (path, "") or (None, why it cannot be built)."""
     return _compiled(LOADER_SOURCE, "loader", False)
+
+
+#: the FMI 3.0 layer (fmus/README.md, "FMI 3.0"): its C source, the FMI 3.0 headers it is compiled against (FMPy's
+#: copy of the standard's, fmpy/c-code/), the file name the FMU's FMI 2.0 loader takes beside it in
+#: binaries/x86_64-linux/ (the layer is binaries/x86_64-linux/<model>.so), the platform folder, and the folder of the
+#: FMI 3.0 units inside the folder of the FMI 2.0 ones
+FMI3_SOURCE = HERE / "fmi3_layer.c"
+FMI3_HEADER_NAMES = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+FMI3_INNER_LOADER = "pmsm-fmi2.so"
+FMI3_PLATFORM = "x86_64-linux"
+FMI3_FOLDER = "fmi3"
+#: the value reference of the independent variable ``time`` of the FMI 3.0 units (FMI 3.0 requires one; the FMI 3.0
+#: layer answers it): the largest Int32, far beyond pythonfmu's value references (0, 1, ... in declaration order)
+FMI3_TIME_REFERENCE = 2**31 - 1
+#: the FMI versions the build makes units of
+FMI_VERSIONS = (2, 3)
+#: the controllers' sample clock in their FMI 3.0 units (fmus/README.md, "FMI 3.0", "The sample clock"): a periodic
+#: input Clock of this name and value reference, its interval the controllers' sample period (``DT_DEFAULT``, what
+#: ``dt`` = 0 samples at in the shipped scenarios), described to the FMI 3.0 layer by ``resources/FMI3_CLOCK_FILE``
+FMI3_CLOCK_NAME = "sample"
+FMI3_CLOCK_REFERENCE = FMI3_TIME_REFERENCE - 1
+FMI3_CLOCK_FILE = "fmi3_clock.txt"
+FMI3_SAMPLE_PERIOD = DT_DEFAULT
+
+
+def fmi3_headers() -> tuple[Path, ...]:
+    """The FMI 3.0 headers (fmi3Functions.h and the two it includes) shipped with FMPy."""
+    folder = Path(fmpy.__file__).resolve().parent / "c-code"
+    return tuple(folder / name for name in FMI3_HEADER_NAMES)
+
+
+def fmi3_layer_library() -> tuple[Path | None, str]:
+    """The FMI 3.0 layer compiled (no Python headers, no Python symbol), kept in the user's cache under the hash of
+    its source and of the FMI 3.0 headers: (path, "") or (None, why it cannot be built)."""
+    headers = fmi3_headers()
+    missing = [str(h) for h in headers if not h.is_file()]
+    if missing:
+        return None, f"no FMI 3.0 header {missing[0]} (FMPy's c-code/)"
+    defines = {"FMI2_LOADER": f'"{FMI3_INNER_LOADER}"', "TIME_REFERENCE": f"{FMI3_TIME_REFERENCE}U",
+               "CLOCK_FILE": f'"{FMI3_CLOCK_FILE}"'}
+    return _compiled(FMI3_SOURCE, "fmi3", False, defines, headers)
 
 
 def _bind(fmu: Path, name: str, library: Path, loader: Path) -> None:
@@ -703,21 +752,31 @@ def _start_text(value) -> str:
 
 def with_parameter_starts(model_description: bytes, values: dict, where: str = "modelDescription.xml") -> bytes:
     """``model_description`` (the bytes of a modelDescription.xml) with the ``start``
-    attribute of each parameter in ``values`` (name -> value) set to it; everything else
+    attribute of each parameter in ``values`` (name -> value) set to it (FMI 2.0 or 3.0); everything else
     (elements, attributes and their order, comments) as it was. Parsed and written as XML
     (``xml.etree.ElementTree``), UTF-8 with an XML declaration."""
     try:
         root = ET.fromstring(model_description, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
     except ET.ParseError as exc:
         raise BuildError(f"{where}: modelDescription.xml is not valid XML ({exc})") from None
-    variables = {v.get("name"): v for v in root.iter("ScalarVariable")}
+    fmi3 = str(root.get("fmiVersion", "")).startswith("3")
+    if fmi3:  # FMI 3.0: <Float64 name=... start=...>, <String name=...><Start value=.../></String>
+        listed = root.find("ModelVariables")
+        variables = {v.get("name"): v for v in (listed if listed is not None else ())}
+    else:
+        variables = {v.get("name"): v for v in root.iter("ScalarVariable")}
     for name, value in values.items():
         var = variables.get(name)
-        typed = None if var is None else next(
-            (e for e in var if e.tag in ("Real", "Integer", "Boolean", "String") and "start" in e.attrib), None)
+        if var is not None and fmi3:
+            typed, key = (var.find("Start"), "value") if var.tag == "String" else (var, "start")
+            typed = typed if typed is not None and key in typed.attrib else None
+        else:
+            key = "start"
+            typed = None if var is None else next(
+                (e for e in var if e.tag in ("Real", "Integer", "Boolean", "String") and "start" in e.attrib), None)
         if var is None or var.get("causality") != "parameter" or typed is None:
             raise BuildError(f"{where}: no parameter {name!r} with a start value")
-        typed.set("start", _start_text(value))
+        typed.set(key, _start_text(value))
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 
 
@@ -739,22 +798,233 @@ def write_fmu_with_starts(source, dest, values: dict) -> Path:
     return _copy_fmu(source, dest, change)
 
 
-def build_all(out_dir=None, force: bool = False, names=None) -> dict[str, Path]:
+# -- FMI 3.0 ----------------------------------------------------------------------------------------------
+#: FMI 2.0 attribute of <CoSimulation> -> its FMI 3.0 name (attributes FMI 3.0 does not have are dropped)
+_CS_ATTRIBUTES_3 = {
+    "modelIdentifier": "modelIdentifier", "needsExecutionTool": "needsExecutionTool",
+    "canBeInstantiatedOnlyOncePerProcess": "canBeInstantiatedOnlyOncePerProcess",
+    "canGetAndSetFMUstate": "canGetAndSetFMUState", "canSerializeFMUstate": "canSerializeFMUState",
+    "providesDirectionalDerivative": "providesDirectionalDerivatives",
+    "canHandleVariableCommunicationStepSize": "canHandleVariableCommunicationStepSize",
+    "maxOutputDerivativeOrder": "maxOutputDerivativeOrder",
+}
+#: FMI 2.0 type element -> the FMI 3.0 variable element, and the attributes of the type carried over
+_TYPES_3 = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+_TYPE_ATTRIBUTES_3 = ("quantity", "unit", "displayUnit", "relativeQuantity", "unbounded", "min", "max", "nominal",
+                      "start")
+_VARIABLE_ATTRIBUTES_3 = ("name", "valueReference", "description", "causality", "variability", "initial")
+
+
+def clocked(name: str) -> bool:
+    """Whether the FMI 3.0 unit of the FMU ``name`` has the sample clock: the controllers."""
+    return name in OBSERVER_FMUS.values()
+
+
+def model_description_fmi3(model_description: bytes, where: str = "modelDescription.xml",
+                           clock: float | None = None) -> bytes:
+    """The FMI 3.0 model description of a co-simulation unit from its FMI 2.0 one (the bytes of a
+    modelDescription.xml written by pythonfmu): ``fmiVersion="3.0"``, the GUID as ``instantiationToken``,
+    ``<CoSimulation>`` with the same capabilities (``hasEventMode="false"``), the unit definitions, log categories
+    and default experiment as they are, each variable as ``<Float64>``, ``<Int32>``, ``<Boolean>`` or ``<String>``
+    with the same value reference, causality, variability, initial, start, unit and description, and the model
+    structure's outputs and initial unknowns by value reference (FMI 2.0 names them by index). ``clock``: the sample
+    period of a controller, declared as its periodic input Clock ``FMI3_CLOCK_NAME`` (``intervalVariability=
+    "constant"``, ``intervalDecimal`` the period) and ``hasEventMode="true"``."""
+    try:
+        root = ET.fromstring(model_description)
+    except ET.ParseError as exc:
+        raise BuildError(f"{where}: modelDescription.xml is not valid XML ({exc})") from None
+    if root.get("fmiVersion") != "2.0" or root.find("CoSimulation") is None:
+        raise BuildError(f"{where}: not an FMI 2.0 co-simulation model description")
+    out = ET.Element("fmiModelDescription")
+    out.set("fmiVersion", "3.0")
+    for key, value in root.attrib.items():
+        if key == "guid":
+            out.set("instantiationToken", value)
+        elif key not in ("fmiVersion", "numberOfEventIndicators"):
+            out.set(key, value)
+    cs = ET.SubElement(out, "CoSimulation")
+    for key, value in root.find("CoSimulation").attrib.items():
+        if key in _CS_ATTRIBUTES_3:
+            cs.set(_CS_ATTRIBUTES_3[key], value)
+    cs.set("hasEventMode", "true" if clock else "false")
+    units = root.find("UnitDefinitions")
+    if units is None:
+        units = ET.Element("UnitDefinitions")
+    if not any(unit.get("name") == "s" for unit in units.findall("Unit")):  # the unit of time
+        ET.SubElement(ET.SubElement(units, "Unit", {"name": "s"}), "BaseUnit", {"s": "1"})
+    out.append(units)
+    for tag in ("LogCategories", "DefaultExperiment"):
+        element = root.find(tag)
+        if element is not None:
+            out.append(element)
+    if root.find("TypeDefinitions") is not None:
+        raise BuildError(f"{where}: type definitions are not carried over to FMI 3.0")
+    variables = ET.SubElement(out, "ModelVariables")
+    ET.SubElement(variables, "Float64", {"name": "time", "valueReference": str(FMI3_TIME_REFERENCE),
+                                         "causality": "independent", "variability": "continuous",
+                                         "description": "the simulation time (the independent variable)",
+                                         "unit": "s"})
+    if clock:
+        ET.SubElement(variables, "Clock", {
+            "name": FMI3_CLOCK_NAME, "valueReference": str(FMI3_CLOCK_REFERENCE), "causality": "input",
+            "variability": "discrete", "intervalVariability": "constant", "intervalDecimal": repr(float(clock)),
+            "description": "the controller's sample clock: in event mode each tick is one sample (the outputs "
+                           "computed on the inputs of the tick, held until the next); without event mode the "
+                           "unit samples at this period in fmi3DoStep"})
+    references = []  # by the FMI 2.0 index (1-based): the value reference
+    for var in root.find("ModelVariables").iter("ScalarVariable"):
+        typed = next((e for e in var if e.tag in _TYPES_3), None)
+        if typed is None or typed.get("declaredType") is not None or typed.get("derivative") is not None:
+            raise BuildError(f"{where}: variable {var.get('name')!r} has a type FMI 3.0 units of this build "
+                             f"do not carry over")
+        new = ET.SubElement(variables, _TYPES_3[typed.tag])
+        for key in _VARIABLE_ATTRIBUTES_3:
+            if var.get(key) is not None:
+                new.set(key, var.get(key))
+        for key in _TYPE_ATTRIBUTES_3:
+            value = typed.get(key)
+            if value is None:
+                continue
+            if key == "start" and typed.tag == "String":  # FMI 3.0: <String><Start value=.../></String>
+                ET.SubElement(new, "Start", {"value": value})
+            else:
+                new.set(key, value)
+        references.append(var.get("valueReference"))
+        if int(var.get("valueReference")) == FMI3_TIME_REFERENCE:
+            raise BuildError(f"{where}: variable {var.get('name')!r} has the value reference of time")
+    structure = ET.SubElement(out, "ModelStructure")
+
+    def reference(index: str) -> str:
+        try:
+            return references[int(index) - 1]
+        except (ValueError, IndexError):
+            raise BuildError(f"{where}: ModelStructure names variable {index!r}, which does not exist") from None
+
+    old = root.find("ModelStructure")
+    for group, tag in (("Outputs", "Output"), ("InitialUnknowns", "InitialUnknown")):
+        for unknown in old.findall(f"{group}/Unknown") if old is not None else ():
+            new = ET.SubElement(structure, tag, {"valueReference": reference(unknown.get("index"))})
+            if unknown.get("dependencies") is not None:
+                new.set("dependencies", " ".join(reference(i) for i in unknown.get("dependencies").split()))
+            if unknown.get("dependenciesKind") is not None:
+                new.set("dependenciesKind", unknown.get("dependenciesKind"))
+    if old is not None and old.find("Derivatives") is not None and len(old.find("Derivatives")):
+        raise BuildError(f"{where}: a co-simulation unit with derivatives is not carried over to FMI 3.0")
+    ET.indent(out, "\t")
+    return ET.tostring(out, encoding="UTF-8", xml_declaration=True) + b"\n"
+
+
+def _clock_line(model_description: bytes, where: str) -> str:
+    """The FMI 3.0 layer's description of a controller's sample clock (``resources/FMI3_CLOCK_FILE``): the clock's
+    value reference, its interval and the value reference of the parameter ``dt``."""
+    root = ET.fromstring(model_description)
+    dt = next((v.get("valueReference") for v in root.iter("ScalarVariable") if v.get("name") == "dt"), None)
+    if dt is None:
+        raise BuildError(f"{where}: a controller without the parameter dt (its sample period)")
+    return f"{FMI3_CLOCK_REFERENCE} {FMI3_SAMPLE_PERIOD!r} {dt}\n"
+
+
+def fmi3_out_dir(out_dir=None) -> Path:
+    """The folder of the FMI 3.0 units: ``fmi3/`` in the folder of the FMI 2.0 ones (``out_dir``, else
+    ``default_out_dir()``)."""
+    return Path(out_dir or default_out_dir()) / FMI3_FOLDER
+
+
+def fmi3_hash(name: str) -> str:
+    """SHA-256 of what an FMI 3.0 unit is made of: its FMI 2.0 unit's (:func:`source_hash`), the FMI 3.0 layer's
+    source and headers and the compiler flags."""
+    h = hashlib.sha256()
+    for label, data in (("format", f"pmsm-ev-fmus fmi3 2 clock {FMI3_SAMPLE_PERIOD!r}".encode()),
+                        ("fmi2", source_hash(name).encode()),
+                        ("fmi3_layer.c", FMI3_SOURCE.read_bytes()),
+                        *((f"include/{p.name}", p.read_bytes()) for p in fmi3_headers() if p.is_file()),
+                        ("cflags", " ".join(extra_cflags()).encode())):
+        h.update(f"{label}\0{len(data)}\0".encode())
+        h.update(data)
+    return h.hexdigest()
+
+
+def build_fmu3(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]:
+    """Build the FMI 3.0 co-simulation unit of the FMU ``name`` into ``fmi3_out_dir(out_dir)`` (its FMI 2.0 unit
+    built first into ``out_dir``, if needed); return (path, whether it was (re)built). The unit is the FMI 2.0 one's
+    files with the model description in FMI 3.0 (:func:`model_description_fmi3`) and its Linux binaries in
+    ``binaries/x86_64-linux/``: the FMI 3.0 layer as ``<name>.so``, in front of the FMI 2.0 loader
+    (``pmsm-fmi2.so``), the lean binding and pythonfmu's library (fmus/README.md, "FMI 3.0"). It needs the lean
+    build (Linux x86-64 and a C compiler)."""
+    source, _ = build_fmu(name, out_dir, force)
+    out = fmi3_out_dir(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    target = out / f"{name}.fmu"
+    digest = fmi3_hash(name)
+    with zipfile.ZipFile(source) as z:  # the FMI 2.0 unit it wraps: rebuilt (a new GUID), the 3.0 one is too
+        guid = ET.fromstring(z.read("modelDescription.xml")).get("guid")
+    done = (read_build_info(target) or {}) if target.is_file() else {}
+    if not force and done.get("fmi3_hash") == digest and done.get("fmi2_guid") == guid:
+        return target, False
+    info = read_build_info(source) or {}
+    if info.get("binding") != "lean":
+        raise BuildError(f"{name}: the FMI 3.0 unit needs the lean build of the FMI 2.0 one (Linux x86-64 and a C "
+                         f"compiler); {source} has {info.get('binding', 'no')} binding")
+    layer, why = fmi3_layer_library()
+    if layer is None:
+        raise BuildError(f"{name}: cannot build the FMI 3.0 layer: {why}")
+    old_dir, new_dir = "binaries/linux64/", f"binaries/{FMI3_PLATFORM}/"
+    info.update({"fmiVersion": "3.0", "fmi3_hash": digest, "fmi2_guid": guid})
+    stage = _make_stage(out, name)
+    try:
+        staged = stage / f"{name}.fmu"
+        with zipfile.ZipFile(source) as zin, zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as zout:
+            for item in zin.infolist():
+                member = item.filename
+                if member.startswith("binaries/"):  # FMI 2.0's platform folders; Linux's moves, below
+                    if member.startswith(old_dir):
+                        base = member[len(old_dir):]
+                        zout.writestr(new_dir + (FMI3_INNER_LOADER if base == f"{name}.so" else base), zin.read(item))
+                    continue
+                data = zin.read(item)
+                if member == "modelDescription.xml":
+                    if clocked(name):
+                        zout.writestr(f"resources/{FMI3_CLOCK_FILE}", _clock_line(data, f"{source}"))
+                    data = model_description_fmi3(data, f"{source}", FMI3_SAMPLE_PERIOD if clocked(name) else None)
+                elif member == f"resources/{BUILD_INFO}":
+                    data = (json.dumps(info, indent=2) + "\n").encode("utf-8")
+                zout.writestr(item, data)
+            zout.writestr(f"{new_dir}{name}.so", layer.read_bytes())
+        _check(staged, name)
+        os.replace(staged, target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+        try:
+            (out / ".build").rmdir()
+        except OSError:
+            pass  # another build is using it
+    return target, True
+
+
+def build_all(out_dir=None, force: bool = False, names=None, fmi: int = 2) -> dict[str, Path]:
     """Build the FMUs ``names`` (default: all) into ``out_dir`` (default: ``default_out_dir()``),
-    skipping those whose sources did not change unless ``force``; return name -> path."""
+    skipping those whose sources did not change unless ``force``; return name -> path. ``fmi=3``: their FMI 3.0
+    units, into ``fmi3_out_dir(out_dir)`` (the FMI 2.0 ones, which they are made from, built too)."""
     names = list(FMUS) if names is None else list(names)
     unknown = [n for n in names if n not in FMUS]
     if unknown:
         raise BuildError(f"unknown FMU {', '.join(unknown)}; choose from {', '.join(FMUS)}")
-    return {name: build_fmu(name, out_dir, force)[0] for name in names}
+    if fmi not in FMI_VERSIONS:
+        raise BuildError(f"FMI version {fmi!r}: choose one of {', '.join(map(str, FMI_VERSIONS))}")
+    build = build_fmu3 if fmi == 3 else build_fmu
+    return {name: build(name, out_dir, force)[0] for name in names}
 
 
 def main(argv=None, prog: str | None = None) -> int:
     ap = argparse.ArgumentParser(prog=prog or "python -m pmsm_ev_fmus",
-                                 description="Build the FMI 2.0 co-simulation FMUs of the drive (pythonfmu).")
+                                 description="Build the FMI 2.0 (or 3.0) co-simulation FMUs of the drive (pythonfmu).")
     ap.add_argument("names", nargs="*", metavar="NAME", help=f"FMUs to build (default: all): {', '.join(FMUS)}")
     ap.add_argument("--out", default=None, help=f"output directory (default: {default_out_dir()})")
     ap.add_argument("--force", action="store_true", help="rebuild even if the sources did not change")
+    ap.add_argument("--fmi", type=int, choices=FMI_VERSIONS, default=2,
+                    help=f"FMI version of the units (default 2; 3: FMI 3.0 co-simulation units, into "
+                         f"DIR/{FMI3_FOLDER}/, made from the FMI 2.0 ones, which are built too)")
     a = ap.parse_args(argv)
     names = a.names or list(FMUS)
     unknown = [n for n in names if n not in FMUS]
@@ -763,7 +1033,7 @@ def main(argv=None, prog: str | None = None) -> int:
     for name in names:
         t0 = time.perf_counter()
         try:
-            path, built = build_fmu(name, a.out, a.force)
+            path, built = (build_fmu3 if a.fmi == 3 else build_fmu)(name, a.out, a.force)
         except (BuildError, OSError) as exc:
             print(f"error: {name}: {exc}", file=sys.stderr)
             return 1

@@ -143,6 +143,44 @@ class FocSlave(DriveSlave):
                                             "3 the current and voltage limits met, 4 the torque or current limit on "
                                             "MTPA, 5 no torque within the limits (0 with reference 'paper')" + hold,
                         discrete=True)
+        # adaptation while driving (``pmsm_ev.kernels.adaptation``): properties reading the unit, no work per step
+        adapt = " (adaptation 'observe' or 'use'; 0 with 'off')"
+        self.add_output("psi_est", "Wb", "the estimated magnet flux: the q voltage equation's least-squares fit where "
+                                         "|omega| >= adapt_psi_speed and the currents are quasi-steady, frozen "
+                                         "elsewhere" + adapt + hold, discrete=True)
+        self.add_output("R_s_est", "Ohm", "the estimated stator resistance: the voltage equation projected on the "
+                                          "current, fitted where |omega| <= adapt_rs_speed, |i| >= adapt_rs_current "
+                                          "and the currents are quasi-steady, frozen elsewhere; it starts from R_s_id "
+                                          "where the unit identified one" + adapt + hold, discrete=True)
+        self.add_output("psi_observable", None, "1: the last period moved psi_est (psi observable), 0: frozen" + adapt,
+                        discrete=True)
+        self.add_output("R_s_observable", None, "1: the last period moved R_s_est (R_s observable), 0: frozen" + adapt,
+                        discrete=True)
+        # the injection strategy's identification at enable (``pmsm_ev.kernels.identify``): properties reading the
+        # unit, no work per step
+        ident = " (low_speed = 'injection'; 0 until identified and for the other units)"
+        self.add_output("L_d_id", "H", "the identified incremental d inductance at zero current: 1 / the d admittance "
+                                       "of the injection's answers on the found d axis" + ident, discrete=True)
+        self.add_output("L_q_id", "H", "the identified incremental q inductance at zero current: 1 / the d admittance "
+                                       "of the injection's answers on the q axis" + ident, discrete=True)
+        self.add_output("saliency_id", None, "the identified saliency L_q_id / L_d_id" + ident, discrete=True)
+        self.add_output("R_s_id", "Ohm", "the identified stator resistance: the d PI's voltage difference over the "
+                                         "current difference of two d current levels at standstill" + ident,
+                        discrete=True)
+        self.add_output("noise_id", "A", "the current measurement's noise floor from the identification's answers: "
+                                         "a phase sensor's sigma" + ident, discrete=True)
+        self.add_output("offset_a_id", "A", "current sensor a's offset, measured at enable with no voltage and "
+                                            "subtracted from then on" + ident, discrete=True)
+        self.add_output("offset_b_id", "A", "current sensor b's offset, measured at enable with no voltage and "
+                                            "subtracted from then on" + ident, discrete=True)
+        self.add_output("angle_accuracy", "rad", "the rms angle error injection gives at a stop from the measured "
+                                                 "saliency and noise floor (eq ID3)" + ident, discrete=True)
+        self.add_output("blind", None, "1: the identified saliency is below saliency_min or the angle accuracy beyond "
+                                       "inj_angle_max, the injection cannot see the rotor's axis well enough; 0 "
+                                       "otherwise", discrete=True)
+        self.add_output("axis_cos", None, "cos 2e of the tracking observer's axis error from the d admittance and "
+                                          "the identified admittances, filtered, in FOC on the injection (0 in the "
+                                          "other modes)" + hold, discrete=True)
         self._sensorless = observer == "sensorless"
         if self._sensorless:  # it never reads the measured angle and speed: any value there, NaN included
             self.unread_inputs = frozenset(("theta_meas", "omega_meas"))
@@ -169,6 +207,20 @@ class FocSlave(DriveSlave):
     T_ref = _unit_output("T_ref", "``ControlUnit.T_ref``")
     T_brake = _unit_output("T_brake", "``ControlUnit.T_brake``")
     ref_region = _unit_output("ref_region", "``ControlUnit.ref_region``")
+    psi_est = _unit_output("psi_est", "``ControlUnit.psi_est``")
+    R_s_est = _unit_output("R_s_est", "``ControlUnit.R_s_est``")
+    psi_observable = _unit_output("psi_observable", "``ControlUnit.psi_observable``")
+    R_s_observable = _unit_output("R_s_observable", "``ControlUnit.R_s_observable``")
+    L_d_id = _unit_output("L_d_id", "``ControlUnit.L_d_id``")
+    L_q_id = _unit_output("L_q_id", "``ControlUnit.L_q_id``")
+    saliency_id = _unit_output("saliency_id", "``ControlUnit.saliency_id``")
+    R_s_id = _unit_output("R_s_id", "``ControlUnit.R_s_id``")
+    noise_id = _unit_output("noise_id", "``ControlUnit.noise_id``")
+    offset_a_id = _unit_output("offset_a_id", "``ControlUnit.offset_a_id``")
+    offset_b_id = _unit_output("offset_b_id", "``ControlUnit.offset_b_id``")
+    angle_accuracy = _unit_output("angle_accuracy", "``ControlUnit.angle_accuracy``")
+    blind = _unit_output("blind", "``ControlUnit.blind``")
+    axis_cos = _unit_output("axis_cos", "``ControlUnit.axis_cos``")
     del _unit_output
 
     # -- physics hooks ---------------------------------------------------------------
@@ -224,7 +276,8 @@ class FocSlave(DriveSlave):
     # -- the compiled step (``pmsm_ev.kernels.fmu``: ``unit_fmu_step`` on these buffers) -------------------------
     def compiled_slots(self) -> dict[str, int]:
         return {**IO_SLOTS, "T_brake": _k.UIO_T_BRAKE, "i_dref": _k.UIO_I_DREF, "T_ref": _k.UIO_T_REF,
-                "ref_region": _k.UIO_REF_REGION}
+                "ref_region": _k.UIO_REF_REGION,
+                **{name: _k.UIO_STATUS + j for j, name in enumerate(_k.UNIT_STATUS_OUTPUTS)}}
 
     def compiled_step(self):
         """(the controllers' C step, the unit's buffer ``ControlUnit.io`` filled from the slave, the unit's state and

@@ -163,58 +163,8 @@ typedef struct {
     unsigned long long pulls;   /* the buffers handed back to the slave's Python (pmsm_fmu_pulls) */
 } Instance;
 
-/* -- the instances this binding made ---------------------------------------------------------------------- */
-/* at most this many at once (a host asking for more gets NULL from fmi2Instantiate, with a log line) */
-#define LIVE_INSTANCES 4096
-static _Atomic(Instance*) live_table[LIVE_INSTANCES];
-static atomic_size_t live_top; /* entries in use are below it */
-static pthread_mutex_t live_lock = PTHREAD_MUTEX_INITIALIZER;
-
-/* whether c is an instance this binding made and has not freed (no lock: a host that frees an instance while
- * another thread still calls it breaks FMI's rules; this catches a freed or foreign pointer, not that race) */
-static int live(const void* c)
-{
-    if (c == NULL) return 0;
-    size_t n = atomic_load_explicit(&live_top, memory_order_acquire);
-    for (size_t i = 0; i < n; i++)
-        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == c) return 1;
-    return 0;
-}
-
-/* put w in the table: 1, or 0 where it is full */
-static int enlist(Instance* w)
-{
-    int done = 0;
-    pthread_mutex_lock(&live_lock);
-    size_t n = atomic_load_explicit(&live_top, memory_order_relaxed);
-    for (size_t i = 0; i < n && !done; i++)
-        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == NULL) {
-            atomic_store_explicit(&live_table[i], w, memory_order_release);
-            done = 1;
-        }
-    if (!done && n < LIVE_INSTANCES) {
-        atomic_store_explicit(&live_table[n], w, memory_order_release);
-        atomic_store_explicit(&live_top, n + 1, memory_order_release);
-        done = 1;
-    }
-    pthread_mutex_unlock(&live_lock);
-    return done;
-}
-
-/* take w out of the table: 1, or 0 where it was not in it */
-static int delist(const void* w)
-{
-    int found = 0;
-    pthread_mutex_lock(&live_lock);
-    size_t n = atomic_load_explicit(&live_top, memory_order_relaxed);
-    for (size_t i = 0; i < n && !found; i++)
-        if (atomic_load_explicit(&live_table[i], memory_order_relaxed) == w) {
-            atomic_store_explicit(&live_table[i], NULL, memory_order_release);
-            found = 1;
-        }
-    pthread_mutex_unlock(&live_lock);
-    return found;
-}
+/* -- the instances this binding made: the instance table (instance_table.h) ------------------------------ */
+#include "instance_table.h"
 
 /* the offer made on this thread during the forwarded fmi2EnterInitializationMode */
 static __thread PyObject* pending_offer = NULL;

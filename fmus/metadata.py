@@ -102,7 +102,12 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     # PlantParams: numerics and initial state
     "rk4_substeps": (None, "RK4 sub-steps per communication step (at least; see substep_angle)"),
     "substep_angle": ("rad", "largest electrical angle per RK4 sub-step: a step takes max(rk4_substeps, "
-                             "ceil(N |omega_m| h / substep_angle)) sub-steps; 0 = off"),
+                             "ceil(N |omega_m| h / substep_angle)) sub-steps; 0 = off (integrator 'rk4_rotor')"),
+    "integrator": (None, "the frame the plant's RK4 integrates in: 'rk4_rotor' (the rotor's dq frame, sub-steps by "
+                         "substep_angle) or 'rk6_stationary' (the flux linkages in the stationary frame, where the "
+                         "held voltage is constant; docs/performance.md)"),
+    "stationary_substep_angle": ("rad", "largest electrical angle per sub-step of the stationary-frame RK4 "
+                                        "(integrator 'rk6_stationary')"),
     "i_d0": ("A", "initial d-axis current"),
     "i_q0": ("A", "initial q-axis current"),
     "omega_m0": ("rad/s", "initial mechanical rotor speed"),
@@ -244,6 +249,15 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "x0_theta": ("rad", "EKF initial electrical-angle estimate, the observer's guess of theta(0)"),
     "J_model": ("kg.m2", "inertia of the EKF's mechanical model (0 = the motor's J_m, the paper's eq 22; "
                          "the drive's J_eq of eq 9 is 0.526 kg m^2)"),
+    "adaptation": (None, "adaptation while driving: 'off', 'observe' (psi_est, R_s_est computed, the controller "
+                         "unchanged) or 'use' (the controller's model and its EKF take them)"),
+    "adapt_time": ("s", "the adaptation's memory: its least-squares sums forget with this time constant over the "
+                        "periods where their parameter is observable"),
+    "adapt_psi_speed": ("rad/s", "psi is observable (psi_est moves) at this |omega| or faster"),
+    "adapt_rs_speed": ("rad/s", "R_s is observable (R_s_est moves) at this |omega| or slower ..."),
+    "adapt_rs_current": ("A", "... and at this current magnitude or more"),
+    "adapt_current_rate": ("A/s", "the adaptation's fits update only while the currents' |di/dt|, filtered over "
+                                  "50 ms, is at most this (quasi-steady)"),
     "psi_adapt": ("1/s", "magnet-flux adaptation gain of the stationary-frame EKF5 (ekf5ab, sensorless); 0 = off"),
     "psi_adapt_speed": ("rad/s", "the magnet-flux adaptation runs while |omega_hat| exceeds this"),
     "discretisation": (None, "the EKFs' current model A2-A3: 'euler' (the paper's forward Euler) or 'bilinear' "
@@ -335,6 +349,27 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "inj_los_time": ("s", "... for this long"),
     "ekf_los_current": ("A", "loss of synchronism on the EKF: its current innovation (filtered) beyond this ..."),
     "ekf_los_time": ("s", "... for this long"),
+    "id_time": ("s", "the identification at enable: the d admittance of the injection's answers on the found d axis, "
+                     "then on the q axis, this long each (1/L_d, 1/L_q and the error signal's gain measured); 0: "
+                     "not measured, the motor model's L_d, L_q"),
+    "saliency_min": (None, "the least identified saliency L_q / L_d the injection is trusted at (output blind: 1 "
+                           "below it)"),
+    "inj_voltage_max": ("V", "the square wave's largest amplitude: after the identification it is the one whose "
+                             "error signal has the data sheet motor's current per unit of sin 2e at inj_voltage"),
+    "rs_current": ("A", "the R_s test at enable: the upper d current level (the lower: half of it), on the found d "
+                        "axis at standstill"),
+    "rs_time": ("s", "the R_s test: the time at each level (the second half measured); 0: no test"),
+    "ofs_time": ("s", "the offset window at enable: no voltage, each current sensor's mean is its offset, subtracted "
+                      "from then on; 0: not measured"),
+    "inj_angle_max": ("rad", "the largest angle accuracy at a stop (eq ID3, from the measured saliency and noise "
+                             "floor) at which the injection is trusted; beyond it the unit is blind"),
+    "emf_slip_speed": ("rad/s", "loss of synchronism under injection and in the blend: the back-EMF the current PIs' "
+                                "integrators carry beyond what the frame's speed explains, as a speed (eq LS1), "
+                                "beyond this plus emf_slip_rel times the rotor's speed the loops see for inj_los_time"),
+    "emf_slip_rel": (None, "... the share of the rotor's speed the current loops see (all the back-EMF they "
+                           "carry) added to emf_slip_speed"),
+    "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "
+                           "identified admittances), filtered, stays below this for inj_los_time"),
     # ControlUnit
     "angle_source": (None, "frame angle of the controller: 'measured' (theta_meas input, as in the paper's "
                            "simulation) or 'estimated' (observer angle, truly sensorless)"),

@@ -119,6 +119,17 @@ if version_tuple(PYTHONFMU_VERSION) < version_tuple(WRAPPER_CHECKED[0]):
 _WRAPPER_LIBRARIES: set[str] = set()
 
 
+#: the folders of an FMU's ``binaries/`` that may hold the project's Linux libraries: FMI 2.0's platform folder, and
+#: FMI 3.0's, where the FMI 3.0 units keep the same FMI 2.0 stack behind their FMI 3.0 layer (fmus/README.md, "FMI 3.0")
+LINUX_BINARIES = ("linux64", "x86_64-linux")
+
+
+def _linux_libraries(resources) -> list[Path]:
+    """The shared libraries of the FMU unpacked around ``resources``, in its Linux platform folders."""
+    binaries = Path(resources).parent / "binaries"
+    return [library for folder in LINUX_BINARIES for library in sorted((binaries / folder).glob("*.so"))]
+
+
 def release_at_exit(resources) -> None:
     """Have the wrapper library of the FMU unpacked around ``resources`` reset its
     interpreter guard when this Python exits (module doc: the wrapper's exit-time write
@@ -127,7 +138,7 @@ def release_at_exit(resources) -> None:
     left to the wrapper."""
     if not resources or not sys.platform.startswith("linux") or not getattr(sys, "orig_argv", None):
         return
-    for library in sorted((Path(resources).parent / "binaries" / "linux64").glob("*.so")):
+    for library in _linux_libraries(resources):
         if not _WRAPPER_LIBRARIES:
             atexit.register(_release_wrapper_libraries)
         _WRAPPER_LIBRARIES.add(str(library))
@@ -163,20 +174,21 @@ def compiled_offer(step: int, *buffers) -> tuple:
     return (step, *(b.ctypes.data for b in buffers), *(b.size for b in buffers))
 
 
-#: the lean binding's offer function of each FMU library folder of this process (None: pythonfmu's own binary)
+#: the lean binding's offer function of each FMU's binaries folder in this process (None: pythonfmu's own binary)
 _LEAN_OFFERS: dict[str, object] = {}
 
 
 def lean_offer(resources):
     """The ``pmsm_fmu_offer`` function of the lean binding that holds the FMU unpacked around
-    ``resources`` (``binaries/linux64/<model>.so``, already loaded by the host), or None when its
-    binary is pythonfmu's own (another platform, a build without a C compiler, another host's copy)."""
+    ``resources`` (``binaries/linux64/pmsm-binding.so``, or ``binaries/x86_64-linux/`` in an FMI 3.0 unit, already
+    loaded by the host), or None when its binary is pythonfmu's own (another platform, a build without a C compiler,
+    another host's copy)."""
     if not resources or not sys.platform.startswith("linux"):
         return None
-    folder = str(Path(resources).parent / "binaries" / "linux64")
+    folder = str(Path(resources).parent / "binaries")
     if folder not in _LEAN_OFFERS:
         _LEAN_OFFERS[folder] = None
-        for library in sorted(Path(folder).glob("*.so")):
+        for library in _linux_libraries(resources):
             try:  # the library the host loaded (by this path), with the GIL held across the call
                 handle = ctypes.PyDLL(str(library), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
             except OSError:

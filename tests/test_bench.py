@@ -8,6 +8,7 @@ import pytest
 from orchestrator_support import project_fmus
 from pmsm_cosim.app import bench
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.reference import CONVERGED_SUBSTEPS
 from pmsm_cosim.engine.master import Master
 from pmsm_cosim.engine.recording import read_results
 
@@ -108,3 +109,68 @@ def test_a_memory_run_reports_its_own_peak_not_the_bench_s(tmp_path):
     assert tail.startswith("completed: 100 steps") and wall > 0
     assert 50.0 < peak < 450.0, (peak, tail)  # a short scenario1 run: ~230 MB of Python, numba and the FMUs
     del held
+
+
+def test_the_held_speed_case_starts_at_the_speed_and_holds_it():
+    """Case (m): the plant started at the speed, the speed reference held there; its converged reference the
+    rotor frame's RK4 with the converged sub-steps."""
+    spec = bench.held_speed_spec("wltc3b-sensorless", 131.0, 1.0)
+    omega = 131.0 / 3.6 / 0.2933 * 12.5
+    plant = spec.component("plant", "test")
+    assert abs(plant.start["omega_m0"] - omega) < 1e-9 and plant.start["integrator"] == "rk6_stationary"
+    ref = spec.signals["omega_ref"].profile
+    assert ref(0.0) == ref(0.5) == ref(1.0) == omega and spec.stop_time == 1.0
+    converged = bench.held_speed_spec("wltc3b-sensorless", 131.0, 1.0, converged=True).component("plant", "test").start
+    assert converged["integrator"] == "rk4_rotor" and converged["rk4_substeps"] == CONVERGED_SUBSTEPS
+
+
+def test_the_fmi3_cases_are_in_the_table_and_its_ratios(monkeypatch):
+    """(k), (l): the system of (a) on the FMI 3.0 units, ticked in event mode and not; their rows and the ratios
+    k/a, l/a printed (the measurements replaced by fixed figures here: no timing)."""
+    import io
+
+    calls = []
+
+    def measured(stop_time, work, plant=None, ctrl=None, spec=None, event_mode=True):
+        calls.append((plant, ctrl, event_mode))
+        return (3.0, 2.0) if plant is not None and plant.parent.name == "fmi3" else (2.0, 2.0)
+
+    monkeypatch.setattr(bench, "cosim_us_per_step", measured)
+    for name in ("reference_us_per_step", "whole_loop_us_per_step"):
+        monkeypatch.setattr(bench, name, lambda *args, **kwargs: (1.0, 1.0))
+    out = io.StringIO()
+    results = bench.run_bench(10.0, memory=False, libcosim=False, out=out, fmpy_case=False, speed_slice=0.0)
+    text = out.getvalue()
+    fmi3, why = bench.fmi3_units()
+    assert [label[:3] for label in bench.CASES.values()] == [f"({c})" for c in "abcdefghijkl"]
+    if fmi3 is None:
+        assert results["k"] is None and f"(no FMI 3.0 units: {why})" in text
+        return
+    turn = [(fmi3["PmsmEvPlant"], fmi3["FocEkf5"], True), (fmi3["PmsmEvPlant"], fmi3["FocEkf5"], False)]
+    assert [call for call in calls if call[0] == fmi3["PmsmEvPlant"]] == turn * bench.FMI3_ROUNDS
+    assert f"(a), (k), (l): the least of {bench.FMI3_ROUNDS + 1}, " in text
+    assert results["k"] == results["l"] == (3.0, 2.0)
+    lines = {line.split()[0]: line.split()[1:] for line in text.splitlines() if line.strip()}
+    assert lines["k/a"] == lines["l/a"] == ["1.50", "1.00"]
+    assert any(line.startswith("(k) (a) on the FMI 3.0 units, clock ticked") for line in text.splitlines())
+
+
+def test_the_fmi3_cases_run_the_system_of_a(tmp_path):
+    """(k), (l) run (a)'s system on the FMI 3.0 units: the controller ticked in event mode in (k) only, and the
+    results those of (a), byte for byte."""
+    import filecmp
+
+    fmi3, why = bench.fmi3_units()
+    if fmi3 is None:
+        pytest.skip(why)
+    real = project_fmus()
+    assert all(fmpy.read_model_description(str(p)).fmiVersion == "3.0" for p in fmi3.values())
+    runs = {"a": (real["PmsmEvPlant"], real["FocEkf5"], True), "k": (fmi3["PmsmEvPlant"], fmi3["FocEkf5"], True),
+            "l": (fmi3["PmsmEvPlant"], fmi3["FocEkf5"], False)}
+    for case, (plant, ctrl, event_mode) in runs.items():
+        spec = bench._spec(0.02, plant, ctrl)
+        spec.output_interval = 1e-3
+        master = Master(spec, event_mode=event_mode)
+        assert master.run(tmp_path / case, catch_sigint=False)["status"] == "completed"
+        assert set(master.ticks) == ({"ctrl"} if case == "k" else set()), case
+        assert filecmp.cmp(tmp_path / "a" / "results.csv", tmp_path / case / "results.csv", shallow=False), case

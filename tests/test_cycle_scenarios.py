@@ -106,6 +106,7 @@ def test_us06_sensorless_through_a_stop_and_restart_from_an_angle_it_was_not_tol
 
 
 @pytest.mark.parametrize("controller", [None, "sensorless"])
+@pytest.mark.slow
 def test_a_stop_and_restart_on_the_ten_percent_climb(fmus, tmp_path, controller):
     """WLTC 3b on the hilly road by position: its first stop (99-137 s) falls at 614 m, on the 10 % climb;
     the car stands on it and drives on uphill, sensored and truly sensorless, inside the band."""

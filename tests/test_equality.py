@@ -145,6 +145,7 @@ def run_libcosim(fmus, stop_time: float, step: float, angle_source: str, every: 
 
 
 @pytest.mark.parametrize("angle_source", ["measured", "estimated"])
+@pytest.mark.slow
 def test_jacobi_equals_libcosim_over_1_s(fmus, tmp_path, angle_source):
     stop, step, every = 1.0, 1e-4, 100
     a = cosim(tmp_path, "jacobi", stop, algorithm="jacobi", fmus=fmus,

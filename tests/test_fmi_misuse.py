@@ -15,16 +15,15 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
-import zipfile
 from pathlib import Path
 
 import pytest
 
 from orchestrator_support import project_fmus
 from pmsm_ev_fmus import build as fmu_build
+from sanitizer_support import build_sanitized, is_sanitized, needs_asan, no_report, sanitized_env
 
 pytestmark = pytest.mark.skipif(fmu_build.binding_requested() != "lean",
                                 reason="fmi2Error needs the lean binding (pythonfmu's alone returns fmi2Fatal)")
@@ -320,47 +319,27 @@ def test_instances_side_by_side_and_in_two_threads_give_the_serial_numbers(fmus,
 
 
 # -- under the sanitizers ----------------------------------------------------------------------------------------
-CC = os.environ.get("CC", "cc")
-#: the runtime ASan needs first in the process (the host, python, is not built with it)
-ASAN_RUNTIME = subprocess.run([CC, "-print-file-name=libasan.so"], capture_output=True, text=True).stdout.strip() \
-    if shutil.which(CC) else ""
-SANITIZE = "-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer -g"
-#: what a sanitizer prints when it finds something
-REPORTS = ("ERROR: AddressSanitizer", "runtime error:", "ERROR: LeakSanitizer", "SUMMARY: UndefinedBehaviorSanitizer")
 SANITIZED = ("PmsmEvPlant", "FocSensorless")  # every sequence of the suite is run on one of them
-needs_asan = pytest.mark.skipif(not os.path.isabs(ASAN_RUNTIME), reason=f"{CC} has no AddressSanitizer runtime")
 
 
 @pytest.fixture(scope="module")
 def sanitized(tmp_path_factory) -> dict[str, Path]:
-    folder = tmp_path_factory.mktemp("fmus-sanitized")
-    env = dict(os.environ, PMSM_EV_BINDING_CFLAGS=SANITIZE, PMSM_COSIM_FMU_DIR=str(folder))
-    subprocess.run([sys.executable, "-m", "pmsm_ev_fmus", "--out", str(folder), *SANITIZED], env=env, check=True,
-                   capture_output=True, text=True, timeout=600)
-    return {name: folder / f"{name}.fmu" for name in SANITIZED}
-
-
-def _no_report(done: subprocess.CompletedProcess) -> None:
-    found = [line for line in done.stderr.splitlines() if any(mark in line for mark in REPORTS)]
-    assert not found, done.stderr[-6000:]
+    return build_sanitized(tmp_path_factory.mktemp("fmus-sanitized"), SANITIZED)
 
 
 @needs_asan
+@pytest.mark.slow
 def test_the_sanitized_build_is_sanitized(sanitized):
     """The binding and the loader inside the FMU link the sanitizers' runtimes (so that the test below checks what
     it says)."""
     for name, fmu in sanitized.items():
-        with zipfile.ZipFile(fmu) as z:
-            for library in ("pmsm-binding.so", f"{name}.so"):
-                data = z.read(f"binaries/linux64/{library}")
-                assert b"__asan_init" in data and b"__ubsan_handle" in data, library
+        for library in ("pmsm-binding.so", f"{name}.so"):
+            assert is_sanitized(fmu, f"binaries/linux64/{library}"), library
 
 
 @needs_asan
 @pytest.mark.parametrize("name", SANITIZED)
+@pytest.mark.slow
 def test_the_misuse_suite_under_the_sanitizers_reports_nothing_and_answers_as_the_plain_build(fmus, sanitized, name):
-    env = dict(os.environ, LD_PRELOAD=ASAN_RUNTIME,
-               ASAN_OPTIONS="detect_leaks=0:halt_on_error=1:alloc_dealloc_mismatch=0",
-               UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1")
-    found = run_all(sanitized[name], SEQUENCES[name], env=env, check=_no_report)
+    found = run_all(sanitized[name], SEQUENCES[name], env=sanitized_env(), check=no_report)
     assert found == {case: run(fmus[name], case) for case in SEQUENCES[name]}

@@ -66,7 +66,12 @@ CTRL_INPUTS = ("i_alpha", "i_beta", "omega_ref", "theta_meas", "omega_meas", "v_
                "P_discharge_max")
 CTRL_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d_hat", "i_q_hat", "omega_hat", "theta_hat", "T_L_hat",
                 "i_d", "i_q", "i_qref", "mode", "fault", "theta_ctrl", "omega_ctrl", "i_dref", "T_ref", "T_brake",
-                "ref_region")
+                "ref_region", "psi_est", "R_s_est", "psi_observable", "R_s_observable", "L_d_id", "L_q_id",
+                "saliency_id", "R_s_id", "noise_id", "offset_a_id", "offset_b_id", "angle_accuracy", "blind",
+                "axis_cos")
+#: the controllers' outputs that are codes, flags or ratios: no unit
+UNITLESS = ("mode", "fault", "ref_region", "soc", "over_temperature", "psi_observable", "R_s_observable",
+            "saliency_id", "blind", "axis_cos")
 DT = 1e-4
 DELTA_22 = math.radians(22.0)
 
@@ -144,7 +149,7 @@ def unit_outputs(u: ControlUnit, theta_meas: float = 0.0):
     """The controller FMU's outputs (CTRL_OUTPUTS) of the unit after a step given ``theta_meas``."""
     theta_ctrl = u.theta_ctrl if u.sensorless or u.angle_source == "estimated" else theta_meas
     return [u.v_alpha, u.v_beta, u.v_d, u.v_q, *u.estimates, u.i_d, u.i_q, u.i_qref, u.mode, u.fault, theta_ctrl,
-            u.omega_ctrl, u.i_dref, u.T_ref, u.T_brake, u.ref_region]
+            u.omega_ctrl, u.i_dref, u.T_ref, u.T_brake, u.ref_region, *(getattr(u, n) for n in CTRL_OUTPUTS[20:])]
 
 
 def omega_ramp(t):
@@ -413,7 +418,7 @@ def test_model_description_is_complete(fmus, name):
     assert [v.name for v in md.modelVariables if v.causality == "input"] == list(inputs)
     assert [v.name for v in md.modelVariables if v.causality == "output"] == list(outputs)
     for n in inputs + outputs:  # all with units, but the mode, the fault, the region (codes 0 / 1 / 2 ...), soc
-        unitless = n in ("mode", "fault", "ref_region", "soc", "over_temperature")
+        unitless = n in UNITLESS
         assert by_name[n].type == "Real" and (by_name[n].unit is None if unitless else by_name[n].unit in units)
     assert by_name["omega_m" if name == "PmsmEvPlant" else "omega_hat"].unit == "rad/s"
     # no direct feedthrough: every output's dependency list is empty
@@ -550,7 +555,7 @@ def test_outputs_before_the_first_step(unzipped):
     p.fmu.exitInitializationMode()
     assert p.get(["omega_m", "i_alpha"]) == [60.0, Plant(plant=PlantParams(**{**start, "omega_m0": 60.0})).i_alpha]
     c = Instance(unzipped, "FocEkf5", start={"u_max": 100.0})
-    assert c.get(CTRL_OUTPUTS) == [0.0] * 12 + [2.0, 0.0, 0.0, 0.0] + [0.0] * 4  # mode 2: closed loop; no fault
+    assert c.get(CTRL_OUTPUTS) == [0.0] * 12 + [2.0, 0.0, 0.0, 0.0] + [0.0] * 18  # mode 2: closed loop; no fault
 
 
 # -- the FMUs in co-simulation -------------------------------------------------------------
@@ -1155,6 +1160,7 @@ int main(int argc, char **argv) {
 """
 
 
+@pytest.mark.slow
 def test_a_c_host_runs_the_plant_with_or_without_libpython_preloaded(fmus, unzipped, tmp_path):
     """A host that is not Python: the FMU brings up its own Python (fmus/README.md, "Hosts that are not Python";
     tests/test_c_host.py); the set-up README.md once asked for (libpython preloaded, PYTHONHOME) works as well."""

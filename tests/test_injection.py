@@ -3,7 +3,7 @@ docs/sensorless.md, "Closed loop at zero speed"): the unit (compiled kernels) on
 saturation injection needs (the algebraic flux model), 1 A of current-sensor noise, in one process.
 
 What must hold, as physics and outcomes: the demodulated error is sin 2e of the rotor's angle; from any
-start angle the magnet's polarity is found and torque is available within 0.3 s while the car moves less
+start angle the magnet's polarity is found and torque is available within 0.5 s while the car moves less
 than 1 mm; on 22 deg the car stands on the current the slope needs and restarts without rolling back; the
 polarity test refuses to guess on a motor without the magnet's asymmetry."""
 
@@ -80,14 +80,16 @@ START_ANGLES = ([2 * math.pi * j / 16 for j in range(16)]
 
 
 @pytest.mark.parametrize("index", range(len(START_ANGLES)))
-def test_polarity_right_torque_within_0_3_s_car_still(index):
+def test_polarity_right_torque_within_0_45_s_car_still(index):
     """From 24 start angles (16 over a turn, +-pi/2, pi, within 0.05 rad of them) with 1 A of noise (a seed
     each) and 2 us of dead time, compensated: the magnet's polarity right, FOC on the injection before
-    0.3 s, the car moved < 1 mm at the wheel before the reference rises (0.5 s)."""
+    0.5 s (the offset window, the acquisition, the identification, the R_s test and the polarity test: 0.46 s), the
+    car moved
+    < 1 mm at the wheel before the reference rises (0.5 s)."""
     p, u = _drive(START_ANGLES[index], seed=400 + index, dead_time=True)
     rows = _run(p, u, 0.5)
     foc = rows[rows[:, 1] == k.MODE_INJECTION]
-    assert len(foc) and foc[0, 0] < 0.3
+    assert len(foc) and foc[0, 0] < 0.5
     assert np.all(rows[rows[:, 0] >= foc[0, 0], 1] == k.MODE_INJECTION)
     assert abs(rows[-1, 8]) < 0.3  # the right polarity: the angle within 0.3 rad, not pi off
     assert np.abs(rows[:, 3]).max() < 1e-3
@@ -97,12 +99,12 @@ def test_polarity_right_torque_within_0_3_s_car_still(index):
 @pytest.mark.parametrize("hold", [1.0, 0.0])
 def test_a_car_parked_on_a_slope_is_held_until_the_unit_gives_torque(hold):
     """Parked on 16 deg with no brake of its own, enabled at rest: with the hill hold (``hold_brake``) the car
-    creeps less than 5 mm before the unit gives torque; without it, it rolls free for the 0.23 s the angle and
-    the polarity take, about 1/2 g sin(delta) t^2 (8 cm; the rotating inertia and rolling resistance make it
-    less)."""
+    creeps less than 5 mm before the unit gives torque; without it, it rolls free for the 0.42 s the angle, the
+    identification, the R_s test and the polarity take, about 1/2 g sin(delta) t^2 (24 cm; the rotating inertia
+    and rolling resistance make it less)."""
     p, u = _drive(1.9, seed=5, hold_brake=hold)
     slope = math.radians(16.0)
-    rows = _run(p, u, 0.35, delta=lambda t: slope)
+    rows = _run(p, u, 0.5, delta=lambda t: slope)
     first = np.nonzero(rows[:, 1] == k.MODE_INJECTION)[0][0]
     travel = abs(rows[first, 3])
     if hold:
@@ -129,7 +131,9 @@ def test_a_motor_without_the_magnets_asymmetry_gets_no_torque():
     rows = _run(p, u, 0.8)
     assert rows[-1, 2] == k.FAULT_LATCHED
     assert not np.any(rows[:, 1] == k.MODE_INJECTION)
-    assert np.abs(rows[:, 5]).max() < 15.0  # only the square wave's ripple on q
+    assert np.abs(rows[:, 5]).max() < 30.0  # only the square wave's ripple on q (+-dt V / (2 L_q) = +-16 A at 90 V
+    # in the identification on the q axis, its first half-wave twice that from a standing current: +-31 A's half; +-5 A
+    # at 30 V)
 
 
 def _slope_current(p: Plant, torque: float) -> float:
@@ -201,6 +205,8 @@ def test_a_stop_on_the_slope_without_roll_back_on_the_ev_drives_reference(feedfo
     ("ctrl.inj_voltage=0", "inj_voltage must be > 0"),
     ("ctrl.inj_voltage=150", "inj_voltage must be < half the voltage limit"),
     ("ctrl.low_speed=hfi", "low_speed must be one of"),
+    ("ctrl.id_time=0.001", "id_time must be 0 (not measured) or >= 0.005 s"),
+    ("ctrl.inj_voltage_max=110", "inj_voltage_max must be < half the voltage limit"),
 ])
 def test_bad_injection_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, setting, names):
     from orchestrator_support import project_fmus
@@ -231,3 +237,87 @@ def test_the_acquisitions_jumps_are_not_slipped_turns_but_a_slip_after_it_is():
     r["theta_ctrl"] = np.where(slip, -2.6 + 2 * math.pi * np.clip((t - 0.5) / 0.1, 0, 1), theta_ctrl)
     r["omega_ctrl"] = np.where(slip & (t < 0.6), 2 * math.pi / 0.1 / 4, 0.0)
     assert slipped_turns(r, 4) == 1
+
+
+#: the identification's start angles: eight over a turn, none of them the start test's
+ID_ANGLES = [0.3 + 2 * math.pi * j / 8 for j in range(8)]
+
+
+@pytest.mark.parametrize("r_s", [1.0, 1.5])
+def test_the_unit_identifies_its_motor_at_enable(r_s):
+    """From 8 rotor angles with 1 A of noise and 2 us of dead time, compensated, on motor A of issue 47 (L_d +11 %,
+    L_q -11 %: a third of the data sheet's 1/L_d - 1/L_q), cold and hot (R_s +50 %): the identified L_d, L_q and
+    their saliency are the plant's incremental values at zero current (``flux_model_coefficients``,
+    ``incremental_inductances``) within 5 % each (the dead time's voltage cancelled by two amplitudes, eq ID1, at
+    half ``inj_voltage_max`` and all of it), R_s (eq ID2, the d command's mean) within 5 % each and 2 % on average
+    (the PI's integral alone, which still settles, gave -1.7 % on average, -5.2 % at worst), the square wave's
+    amplitude raised by about the saliency's shortfall, torque before 0.5 s, the car moved < 1 mm."""
+    motor = MotorParams(L_d=2.2425e-4, L_q=2.5689e-4, R_s=0.010650 * r_s, psi=0.078370)
+    errors = []
+    for j, theta in enumerate(ID_ANGLES):
+        plant = PlantParams(flux_model="algebraic", sensor_noise=1.0, sensor_seed=60 + j, dead_time=DEAD_TIME,
+                            v_dc=V_DC, flux_q_current=385.16, flux_d_current=212.04)
+        l_dd, _, l_qq = k.incremental_inductances(0.0, 0.0, list(flux_model_coefficients(motor, plant)), 0)
+        p, u = _drive(theta, plant=plant, motor=motor, dead_time=True)
+        rows = _run(p, u, 0.5)
+        foc = rows[rows[:, 1] == k.MODE_INJECTION]
+        assert len(foc) and foc[0, 0] < 0.5
+        assert np.abs(rows[:, 3]).max() < 1e-3
+        errors.append((u.L_d_id / l_dd - 1.0, u.L_q_id / l_qq - 1.0, u.saliency_id / (l_qq / l_dd) - 1.0,
+                       u.R_s_id / motor.R_s - 1.0))
+        assert u._s[k.S_INJ_VA] > 1.8 * u.injection.inj_voltage
+    errors = np.array(errors)
+    assert np.abs(errors).max() < 0.05
+    assert abs(errors[:, 3].mean()) < 0.02
+
+
+@pytest.mark.parametrize("r_s", [1.0, 1.5])
+def test_the_identification_has_no_bias_of_its_own(r_s):
+    """Without noise and dead time (Table I's motor, cold and hot, the d axis found either way round: theta = 0.2
+    and pi + 0.2 give the R_s test's current of either sign against the magnet): L_d, L_q within 0.5 % of the
+    plant's incremental values, R_s within 0.2 %. The d PI's integral in the second half of 40 ms levels gave R_s
+    -0.8 ... -2.5 % here (cold; -2.3 ... -3.4 % hot): the integral still settles where the PI's zero is not the
+    plant's R_s / L; the d command's mean is the plant's R_s i whether or not the loop has settled."""
+    motor = MotorParams(R_s=MotorParams().R_s * r_s)
+    for theta in (0.2, math.pi + 0.2):
+        plant = PlantParams(flux_model="algebraic")
+        l_dd, _, l_qq = k.incremental_inductances(0.0, 0.0, list(flux_model_coefficients(motor, plant)), 0)
+        p, u = _drive(theta, plant=plant, motor=motor)
+        _run(p, u, 0.5)
+        assert u.L_d_id == pytest.approx(l_dd, rel=5e-3) and u.L_q_id == pytest.approx(l_qq, rel=5e-3)
+        assert u.R_s_id == pytest.approx(motor.R_s, rel=2e-3)
+
+
+#: motor A of issue 47 on ``udds-sensorless`` (its settings but the grade, given below as a profile)
+MOTOR_A = ("plant.sensor_noise=1.5", "plant.dead_time=2e-6", "plant.L_d=2.2425e-4", "plant.L_q=2.5689e-4",
+           "plant.flux_q_current=385.16", "plant.flux_d_current=212.04", "plant.R_s=0.010650", "plant.psi=0.078370",
+           "plant.m_v=1000", "plant.sensor_offset_a=-0.18817", "plant.sensor_offset_b=0.027255",
+           "plant.sensor_gain_a=0.98105", "plant.sensor_gain_b=1.01075", "ctrl.dead_time_comp=7.5455",
+           "plant.sensor_seed=998717")
+
+
+@pytest.mark.parametrize("detector", [True, False])
+def test_no_silent_slip_the_back_emf_detector_sees_a_frame_that_lost_the_rotor(tmp_path, detector):
+    """Motor A of issue 47 on ``udds-sensorless`` (its settings, the grade of -1.5068 deg as a profile) with the data
+    sheet's error gain (the identification off): at the cycle's first stand the car, asked to stand, rolls while
+    the frame swings about 0, and frames spin over the standing rotor. Without the back-EMF detector (its speed
+    out of reach) that slips 23 turns in 20 s with no episode; with it the slip is an episode (at 15.8 s: a frame
+    that creeps below emf_slip_speed over the standing rotor is seen once it turns faster), its recovery a new
+    acquisition on the braked car, 8 turns in all: a run that slips reports it."""
+    import json
+
+    from orchestrator_support import project_fmus
+    from pmsm_cosim.app.cli import main
+
+    project_fmus()
+    grade = tmp_path / "grade.csv"
+    grade.write_text("time,value\n0,-1.5068\n100,-1.5068\n")
+    out = tmp_path / "out"
+    sets = [*MOTOR_A, "ctrl.id_time=0", "ctrl.rs_time=0"] + ([] if detector else ["ctrl.emf_slip_speed=1e6"])
+    assert main(["run", "udds-sensorless", "--stop-time", "20", "--profile", f"delta={grade}", "--set", *sets,
+                 "--no-figures", "--quiet", "--out", str(out)]) == 0
+    sync = json.loads((out / "metrics.json").read_text())["synchronism"]
+    if detector:
+        assert sync["slipped_turns"] <= 12 and sync["episodes"] >= 1
+    else:
+        assert sync["slipped_turns"] >= 15 and sync["episodes"] == 0  # the silent slip it had

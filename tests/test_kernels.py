@@ -25,7 +25,7 @@ from regression_runs import CASES, ELEVATION, PARAMS
 
 #: the runs the comparisons below make as plain Python: (observer, angle source, *extra), as ``run_here`` takes them
 PLAIN_RUNS = [(observer, angle_source) for observer, angle_source in CASES + (("ekf5", "estimated"),)] + [
-    (observer, "measured", "effects") for observer in ("sensored", "ekf5ab")]
+    (observer, "measured", "effects") for observer in ("sensored", "ekf5ab")] + [("sensored", "measured", "stationary")]
 PLAIN_SCRIPT = """
 import json, sys
 sys.path.insert(0, sys.argv[1])
@@ -44,6 +44,10 @@ def run_here(observer: str, angle_source: str, out, *extra) -> dict:
                                                    T_winding=90.0, T_magnet=70.0, thermal_R=0.05,
                                                    thermal_C=2.0),
                          controller=ControllerParams(dead_time_comp=7.2))
+    if "stationary" in extra:  # the drive cycles' plant: the stationary frame's RK6 on the algebraic flux model
+        params = replace(PARAMS, plant=PlantParams(v_dc=360.0, dead_time=2e-6, flux_model="algebraic",
+                                                   integrator="rk6_stationary", inverter_losses=True,
+                                                   iron_c_h=27.98, iron_c_e=9.191e-3))
     run_reference(out, stop_time=2.0, observer=observer, angle_source=angle_source, params=params,
                   output_interval=0.001, elevation=ELEVATION)
     return {"mode": accel.describe(), "compiled": accel.compiled()}
@@ -80,6 +84,19 @@ def test_plain_python_and_numba_give_the_same_bits(plain_runs, tmp_path, observe
     for col in ALL_COLUMNS:
         assert np.array_equal(plain[col], jit[col]), col
     assert np.max(np.abs(jit["omega_m"])) > 50.0  # the drive moved
+
+
+def test_the_stationary_frame_gives_the_same_bits_compiled_or_not(plain_runs, tmp_path):
+    """The stationary frame's RK6 on the algebraic flux model (with dead time, inverter and iron losses): the same
+    bits (and another run than the default plant's)."""
+    info_plain, plain = plain_runs[("sensored", "measured", "stationary")]
+    assert not info_plain["compiled"]
+    info_jit, jit = _run_compiled(tmp_path, "sensored", "measured", "jit", "stationary")
+    assert info_jit["compiled"], info_jit["mode"]
+    for col in ALL_COLUMNS:
+        assert np.array_equal(plain[col], jit[col]), col
+    _, default = _run_compiled(tmp_path, "sensored", "measured", "default")
+    assert not np.array_equal(default["i_q"], jit["i_q"])
 
 
 @pytest.mark.parametrize("observer", ["sensored", "ekf5ab"])
@@ -223,22 +240,22 @@ def test_the_offsets_are_those_the_kernels_were_written_with():
         56, 69, 119, 14, 23)
     assert (kernels.S_X, kernels.S_THETA_PRIOR, kernels.S_P, kernels.S_PHT, kernels.S_K, kernels.S_A,
             kernels.S_STARTED, kernels.S_MODE, kernels.S_STILL_OUT, kernels.UNIT_STATE) == (
-        15, 20, 21, 46, 56, 66, 91, 92, 113, 199)
+        15, 20, 21, 46, 56, 66, 91, 92, 130, 261)
     assert (kernels.C_Q, kernels.C_C_MID, kernels.C_P0, kernels.C_T_RAMP, kernels.C_P0_ALIGNED,
-            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 83, 148)
+            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 93, 168)
     # the reference generator's slots, at the end of both unit vectors
-    assert (kernels.S_I_DREF, kernels.S_T_AVAIL, kernels.C_REF_MODE, kernels.C_BRAKE_GAIN) == (114, 118, 87, 94)
+    assert (kernels.S_I_DREF, kernels.S_T_AVAIL, kernels.C_REF_MODE, kernels.C_BRAKE_GAIN) == (131, 135, 97, 104)
     # the speed loop's feedforward, after them
-    assert (kernels.S_W_REF_PREV, kernels.S_T_FF, kernels.C_FF, kernels.C_FF_T2) == (119, 121, 95, 99)
+    assert (kernels.S_W_REF_PREV, kernels.S_T_FF, kernels.C_FF, kernels.C_FF_T2) == (136, 138, 105, 109)
     # the sensorless unit's handover deadline and stall, after them
-    assert (kernels.S_IF_DUE, kernels.S_REALIGN, kernels.C_IF_DEADLINE, kernels.C_REALIGN_MAX) == (122, 123, 100, 102)
+    assert (kernels.S_IF_DUE, kernels.S_REALIGN, kernels.C_IF_DEADLINE, kernels.C_REALIGN_MAX) == (139, 140, 110, 112)
     # the injection's hill hold, last of the injection strategy's slots
-    assert (kernels.S_HOLD, kernels.C_HOLD_BRAKE) == (196, 138)
+    assert (kernels.S_HOLD, kernels.C_HOLD_BRAKE) == (213, 148)
     # the I-f strategy's alignment timer and damping input, and its guard, trust, relock and stand parameters
     assert (kernels.S_RUNAWAY_T, kernels.S_ALIGN_SPEED, kernels.C_SOFT_GUARD, kernels.C_STILL_TIME) == (
-        197, 198, 139, 143)
+        214, 215, 149, 153)
     # the measured DC link's, last
-    assert (kernels.C_FW_MARGIN, kernels.C_P_DIS) == (144, 147)
+    assert (kernels.C_FW_MARGIN, kernels.C_P_DIS) == (154, 157)
 
 
 @pytest.mark.parametrize("rows,size,message", [

@@ -94,6 +94,7 @@ def runs(builds, tmp_path_factory):
 
 
 @pytest.mark.parametrize("scenario, stop", RUNS)
+@pytest.mark.slow
 def test_a_run_gives_the_same_bytes_with_either_binding(runs, scenario, stop):
     """The whole co-simulation (plant, controller, route FMU; the compiled loop) through each binding:
     ``results.csv`` identical. With the lean binding the FMUs step in compiled code (``pmsm_ev.kernels.fmu``),

@@ -100,7 +100,7 @@ def broken_fmu(tmp_path: Path, fault: str) -> Path:
     elif fault == "no modelDescription.xml":
         with zipfile.ZipFile(path, "w") as z:
             z.writestr("binaries/linux64/readme.txt", "no model description here")
-    elif fault in ("FMI 1.0", "FMI 3.0"):
+    elif fault in ("FMI 1.0", "FMI 4.0"):
         version = fault.split()[1]
         _copy_fmu(real, path, lambda t: t.replace('fmiVersion="2.0"', f'fmiVersion="{version}"', 1))
     elif fault == "Model Exchange only":
@@ -116,8 +116,8 @@ def broken_fmu(tmp_path: Path, fault: str) -> Path:
     ("directory", "snk: {path}: is a directory, not an .fmu file"),
     ("not a zip", "snk: {path}: not an FMU (not a zip archive)"),
     ("no modelDescription.xml", "snk: {path}: not an FMU (the archive has no modelDescription.xml)"),
-    ("FMI 1.0", "snk: {path}: an FMI 1.0 FMU; only FMI 2.0 co-simulation FMUs are supported"),
-    ("FMI 3.0", "snk: {path}: an FMI 3.0 FMU; only FMI 2.0 co-simulation FMUs are supported"),
+    ("FMI 1.0", "snk: {path}: an FMI 1.0 FMU; only FMI 2.0 and FMI 3.0 co-simulation FMUs are supported"),
+    ("FMI 4.0", "snk: {path}: an FMI 4.0 FMU; only FMI 2.0 and FMI 3.0 co-simulation FMUs are supported"),
     ("Model Exchange only", "snk: {path}: a Model Exchange FMU without a co-simulation interface"),
 ])
 def test_fmu_file_faults(tmp_path, capsys, fault, message):

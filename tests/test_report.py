@@ -165,6 +165,7 @@ SENSORLESS_TINY = [c for c in report.CONFIGS
                    if c.id in ("sl-s1-exact-sensorless", "sl-s1-exact-sensored", "sl-start0-exact-sensorless")]
 
 
+@pytest.mark.slow
 def test_sensorless_section_quotes_its_runs(tmp_path):
     """6 s runs (alignment, I-f, handover): the table's handover time and roll-back are the
     runs' own, read back from results.csv; targets without rows to judge show '-'."""

@@ -96,6 +96,7 @@ def followed_the_start(r: dict) -> bool:
                 and r["mode"][-1] == 2.0)
 
 
+@pytest.mark.slow
 def test_small_maps_on_a_two_worker_cluster(tmp_path):
     """Every map 3 x 3 with 6 s runs (the sensorless unit aligns until 2.3 s, starts in I-f on the
     reference ramped from 2.5 s and hands over to the EKF at about 4.3 s; the EKF5 flying starts hold

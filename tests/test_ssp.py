@@ -160,8 +160,13 @@ def system_annotations(ssd: ET.Element) -> list[str]:
 SCENARIOS = sorted(p.stem for p in (Path(pmsm_cosim.app.__file__).parent / "scenarios").glob("*.toml"))
 
 
+#: the scenarios whose export the default run checks (the paper's, a sensorless cycle); the others are slow
+EXPORT_FAST = ("scenario1", "udds-sensorless")
+
+
 @pytest.mark.parametrize("angle_source", [None, "estimated"])
-@pytest.mark.parametrize("scenario", SCENARIOS)
+@pytest.mark.parametrize("scenario", [pytest.param(s, marks=() if s in EXPORT_FAST else pytest.mark.slow)
+                                      for s in SCENARIOS])
 def test_every_shipped_scenario_exports_a_package_every_tool_reads(fmus, tmp_path, capsys, scenario, angle_source):
     """What OMSimulator needs (its annotation first in the system, no String in an .ssv, no
     annotations at the root), libcosim (the OSP base step) and this master (its run record,
@@ -252,6 +257,7 @@ def run_libcosim_ssp(package: Path, stop_time: float, every: int) -> dict:
 
 
 @pytest.mark.parametrize("angle_source", ["measured", "estimated"])
+@pytest.mark.slow
 def test_libcosim_runs_the_package_as_the_orchestrators_jacobi_run(fmus, tmp_path, angle_source):
     stop = 2.0
     package = export(fmus, tmp_path / "s2.ssp", f"ctrl.angle_source={angle_source}")

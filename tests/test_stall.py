@@ -77,10 +77,10 @@ def test_an_overdue_handover_is_forced_and_the_car_follows_the_trace(fmus, tmp_p
 
 
 @pytest.mark.parametrize("sets, reaction", [
-    ((), _k.MODE_EKF),
-    # the same case nudged (the stand's anchor taken at 5 rad/s instead of 10): the 400 A vector's swing
-    # then has the rotor standing when the stall is detected, not turning at 30 rad/s
-    (("ctrl.anchor_speed=5",), _k.MODE_ALIGN),
+    ((), _k.MODE_ALIGN),
+    # the same case nudged (a 380 A vector instead of 400 A): its swing then has the rotor turning the vector's way
+    # when the stall is detected, not standing
+    (("ctrl.i_if=380",), _k.MODE_EKF),
 ])  # (which reaction a run shows is the detector's, tests/test_if_modes.py: EV_STALL_TURNING or EV_STALL)
 def test_a_stalled_rotor_is_realigned_or_handed_to_foc_and_drives_on(fmus, tmp_path, sets, reaction):
     """The forced handover off: the rotor pulls out and swings on the 400 A vector; stall_time (3 s) after
@@ -103,13 +103,13 @@ def test_a_stalled_rotor_is_realigned_or_handed_to_foc_and_drives_on(fmus, tmp_p
 
 
 def test_a_stall_with_no_realignment_left_latches_the_safe_state(fmus, tmp_path):
-    """realign_max = 0: the stall latches the fault at once: the reference taken as 0, the vector brought to
-    rest and held at the current limit; once it is held the car does not move. How fast the rotor turns at the
-    latch is the swing's phase at that moment (28 or 53 rad/s as the motor's losses change), so the stop is
+    """realign_max = 0 (and the 380 A vector, whose rotor turns at the stall): the stall latches the fault at once:
+    the reference taken as 0, the vector brought to rest and held at the current limit; once it is held the car
+    does not move. How fast the rotor turns at the latch is the swing's phase at that moment, so the stop is
     bounded by that speed: the vector ramps down at the I-f ramp (if_accel), at least half of it while the
     guard keeps it with the rotor."""
     st = StartupParams()
-    r, m = _run(tmp_path, "latched", 22, "ctrl.if_deadline=0", "ctrl.realign_max=0")
+    r, m = _run(tmp_path, "latched", 22, "ctrl.if_deadline=0", "ctrl.realign_max=0", "ctrl.i_if=380")
     t = r["time"]
     s = m["synchronism"]
     assert s["fault_latched"]

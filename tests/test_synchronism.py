@@ -61,6 +61,7 @@ def test_the_matrix_covers_what_was_asked():
     assert grades["stand"](8.0) == pytest.approx(math.radians(20))
 
 
+@pytest.mark.slow
 def test_every_case_keeps_the_car_as_well_as_the_sensored_drive(matrix):
     results, _ = matrix
     rows = synchronism.verdicts(results)
@@ -80,6 +81,7 @@ def test_every_case_keeps_the_car_as_well_as_the_sensored_drive(matrix):
         assert by[name]["roll_back_sensored"] > 0.2 and by[name]["roll_back"] < 0.06, name
 
 
+@pytest.mark.slow
 def test_the_matrix_reaches_the_reference(matrix):
     """Each sensorless run ends at its reference (the last rows), from every angle."""
     results, runs = matrix
@@ -92,6 +94,7 @@ def test_the_matrix_reaches_the_reference(matrix):
         assert err.max() < 15.0, (r["case"], r["k"], err.max())
 
 
+@pytest.mark.slow
 def test_the_injection_keeps_a_parked_or_creeping_car_as_well_as_the_sensored_drive(tmp_path):
     """The shipped strategy (``low_speed = "injection"``, the plant's algebraic flux model) on the matrix's
     cases where the car is parked on a slope, creeps into one, steps to speed and reverses, from two angles
@@ -109,6 +112,7 @@ def test_the_injection_keeps_a_parked_or_creeping_car_as_well_as_the_sensored_dr
         assert all(r["ok"].values()), (r["case"].name, r["ok"], r["extra"])
 
 
+@pytest.mark.slow
 def test_report_section_renders(matrix, tmp_path):
     results, runs = matrix
     text = "\n".join(synchronism.render(results, ["sync_matrix"]))
@@ -257,6 +261,25 @@ def test_slipped_turns_counts_a_frame_spinning_past_a_standing_rotor():
     locked = _rows(t, theta_ctrl=theta, theta_e=theta - 0.5, omega_ctrl=w, omega_m=w)
     assert slipped_turns(locked, N) == 0
 
+
+
+def test_slipped_turns_does_not_integrate_across_a_parked_acquisition():
+    """A blind unit parked at a stop (modes 3, 4: the angle found afresh) for 38 s between two stretches on the
+    injection whose frames stay within 0.3 rad of the rotor but whose speeds at the stretch's edges are 1 rad/s off
+    the rotor's: no turn slipped (integrating the edges' rates across the stop counted 38 N / 2 pi = 24); a
+    frame that spins after the stop still counts."""
+    t = np.arange(0.0, 50.0 + 1e-9, 0.05)
+    mode = np.where((t > 5.0) & (t < 43.0), 3.0, 5.0)
+    zeros = np.zeros_like(t)
+    w_ctrl = np.full_like(t, -1.0)  # the frame's speed noise at a stop
+    theta_ctrl = 0.3 * np.sin(t)
+    r = _rows(t, mode=mode, theta_ctrl=theta_ctrl, theta_e=zeros, omega_ctrl=w_ctrl, omega_m=zeros)
+    assert slipped_turns(r, N) == 0
+    spin = t >= 45.0
+    theta_spin = np.where(spin, ((N * 50.0 * (t - 45.0) + np.pi) % (2 * np.pi)) - np.pi, theta_ctrl)
+    r = _rows(t, mode=mode, theta_ctrl=theta_spin, theta_e=zeros, omega_ctrl=np.where(spin, 50.0, w_ctrl),
+              omega_m=zeros)
+    assert abs(slipped_turns(r, N) - N * 50.0 * 5.0 / (2 * np.pi)) <= 1.0  # 159.2 (and the spin's first row)
 
 def test_wrong_way_travel_follows_the_drivers_direction():
     t = np.linspace(0.0, 4.0, 401)

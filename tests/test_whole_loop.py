@@ -115,6 +115,7 @@ def test_a_system_it_does_not_cover_is_refused(tmp_path):
         run_whole_loop(s)
 
 
+@pytest.mark.slow
 def test_bench_has_the_whole_loop_cases(monkeypatch):
     """``pmsm-cosim bench`` prints (h), the whole loop of (e)'s system, (i), of (a)'s, and the ratios e/h, a/i
     (the cases' runs replaced by fixed figures here)."""

@@ -84,7 +84,10 @@ _INJECTION_SLOTS = (
     ("pol_ramp", _k.C_POL_RAMP), ("pol_hold", _k.C_POL_HOLD), ("pol_contrast", _k.C_POL_CONTRAST),
     ("inj_los_angle", _k.C_INJ_LOS_ANGLE), ("inj_los_time", _k.C_INJ_LOS_TIME),
     ("ekf_los_current", _k.C_EKF_LOS_I), ("ekf_los_time", _k.C_EKF_LOS_TIME),
-    ("inj_current_limit", _k.C_INJ_I_MAX), ("pol_frame_band", _k.C_POL_BAND))
+    ("inj_current_limit", _k.C_INJ_I_MAX), ("pol_frame_band", _k.C_POL_BAND), ("id_time", _k.C_ID_TIME),
+    ("saliency_min", _k.C_SALIENCY_MIN), ("inj_axis_cos", _k.C_AXIS_COS), ("inj_voltage_max", _k.C_INJ_V_MAX),
+    ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME), ("ofs_time", _k.C_OFS_TIME),
+    ("inj_angle_max", _k.C_ANGLE_MAX), ("emf_slip_speed", _k.C_EMF_SPEED), ("emf_slip_rel", _k.C_EMF_REL))
 #: state slots of the sensorless start-up, zeroed by ``reset``
 _STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
                   _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
@@ -249,12 +252,14 @@ class ControlUnit:
         c[_k.C_FF_T0] = float(pr.ff_T0) if road else 0.0
         c[_k.C_FF_T1] = float(pr.ff_T1) if road else 0.0
         c[_k.C_FF_T2] = float(pr.ff_T2) if road else 0.0
+        self._set_adaptation()
         self._set_injection()
         #: the controller FMU's buffer of its step (``pmsm_ev.kernels.UNIT_IO_LAYOUT``): its inputs, outputs and
         #: sample clock (``load_io``), which ``pmsm_ev.kernels.unit_fmu_step`` and ``unit_periods`` step on
         self.io = accel.vector(_k.UNIT_IO)
         self._t_brake = accel.direct(self._kernels.unit_t_brake)
         self._reference_outputs = accel.direct(self._kernels.unit_reference_outputs)
+        self._status_outputs = accel.direct(self._kernels.unit_status_outputs)
         #: ``io`` read and written from Python (``FocSlave.do_step``): a memoryview of the numpy vector, whose items
         #: are Python floats (the same doubles, without numpy's scalar per read), or the list
         self._io_items = self.io if isinstance(self.io, list) else memoryview(self.io)
@@ -299,6 +304,7 @@ class ControlUnit:
             io[slot] = values.get(name, 0.0)
         io[_k.UIO_T_BRAKE] = self.T_brake
         io[_k.UIO_I_DREF], io[_k.UIO_T_REF], io[_k.UIO_REF_REGION] = self._reference_outputs(self.io, self._s, self._c)
+        self._status_outputs(self.io, self._s, self._c)
         io[_k.UIO_DT] = dt or 0.0
         io[_k.UIO_T0] = t0
         io[_k.UIO_CLOCK] = 0.0 if k_next is None else 1.0
@@ -327,6 +333,22 @@ class ControlUnit:
             c[_k.C_CROSS + j] = phi
         c[_k.C_HOLD_BRAKE] = float(p.hold_brake) * c[_k.C_T_MAX] * c[_k.C_BRAKE_GAIN]
 
+    def _set_adaptation(self) -> None:
+        """Adaptation while driving (``ControllerParams.adaptation``, ``pmsm_ev.kernels.adaptation``) into the
+        parameter vector: its mode, thresholds (speeds as electrical rad/s) and where its estimates start, the
+        model's psi and R_s, with the EKF's psi-proportional constants at that psi."""
+        c, p, m = self._c, self.params, self.motor
+        c[_k.C_ADAPT] = _k.ADAPT_CODES[p.adaptation]
+        c[_k.C_AD_GAIN] = min(self.dt / p.adapt_time, 1.0)
+        c[_k.C_AD_PSI_W] = m.N * p.adapt_psi_speed
+        c[_k.C_AD_RS_W] = m.N * p.adapt_rs_speed
+        c[_k.C_AD_RS_I] = float(p.adapt_rs_current)
+        c[_k.C_AD_RATE] = float(p.adapt_current_rate)
+        c[_k.C_AD_PSI0] = m.psi
+        c[_k.C_AD_RS0] = m.R_s
+        c[_k.C_AD_NOM] = c[_k.C_C_WPSI]
+        c[_k.C_AD_NOM + 1] = c[_k.C_C_TPSI]
+
     def reset(self) -> None:
         self.observer.reset()
         self.speed.reset()
@@ -344,6 +366,7 @@ class ControlUnit:
                 for i in _k.UNIT_STATE_LAYOUT.span(name):
                     self._s[i] = 0.0
         self._s[_k.S_PSI_RATIO] = 1.0
+        self._kernels.adapt_reset(self._s, self._c)  # psi_hat, R_s_hat on the model's (and with "use", the model)
         if self.injecting:  # enabled: the acquisition first
             self._s[_k.S_MODE] = _k.MODE_ACQUIRE
             self._s[_k.S_HOLD] = self._c[_k.C_HOLD_BRAKE]  # the hill hold until the first torque
@@ -362,6 +385,35 @@ class ControlUnit:
         """The EKF's magnet flux over the nominal psi (1 without ``EkfParams.psi_adapt``)."""
         return float(self._s[_k.S_PSI_RATIO])
 
+    def _status_output(self, j: int) -> float:
+        """The output ``UNIT_STATUS_OUTPUTS[j]`` of the state (the kernel ``unit_status_outputs``, which the compiled
+        step calls too)."""
+        self._status_outputs(self.io, self._s, self._c)
+        return float(self.io[_k.UIO_STATUS + j])
+
+    # adaptation while driving (``pmsm_ev.kernels.adaptation``)
+    @property
+    def psi_est(self) -> float:
+        """The estimated magnet flux [Wb] (eq AD3): the model's psi until psi is observable; 0 with adaptation
+        "off"."""
+        return self._status_output(0)
+
+    @property
+    def R_s_est(self) -> float:
+        """The estimated stator resistance [Ohm] (eq AD4): the identification's R_s_id or the model's R_s until R_s
+        is observable; 0 with adaptation "off"."""
+        return self._status_output(1)
+
+    @property
+    def psi_observable(self) -> float:
+        """1.0 where the last period let psi_hat move (AD5: fast enough, the currents quasi-steady), else 0."""
+        return self._status_output(2)
+
+    @property
+    def R_s_observable(self) -> float:
+        """1.0 where the last period let R_s_hat move (AD5: slow enough, current enough, quasi-steady), else 0."""
+        return self._status_output(3)
+
     @property
     def fault(self) -> float:
         """The sensorless unit's fault (``pmsm_ev.kernels`` FAULT_*): 0 none, 1 a loss of synchronism
@@ -371,6 +423,65 @@ class ControlUnit:
         s = self._s
         return float(s[_k.S_FAULT]) if s[_k.S_FAULT] == _k.FAULT_LATCHED else (
             _k.FAULT_RECOVERING if s[_k.S_EPISODE] > 0.0 else _k.FAULT_NONE)
+
+    # the injection strategy's identification at enable (``pmsm_ev.kernels.identify``)
+    @property
+    def L_d_id(self) -> float:
+        """The identified incremental d inductance at zero current [H] (1 / the d admittance the injection measured
+        on the found d axis); 0 until identified, and for a unit without injection."""
+        return self._status_output(4)
+
+    @property
+    def L_q_id(self) -> float:
+        """The identified incremental q inductance at zero current [H]; 0 until identified."""
+        return self._status_output(5)
+
+    @property
+    def saliency_id(self) -> float:
+        """The identified saliency L_q / L_d [-]; 0 until identified."""
+        return self._status_output(6)
+
+    @property
+    def R_s_id(self) -> float:
+        """The identified stator resistance [Ohm] (the R_s test at enable, ``pmsm_ev.kernels.identify_rs``); 0 until
+        identified, and for a unit without injection."""
+        return self._status_output(7)
+
+    @property
+    def noise_id(self) -> float:
+        """The current measurement's noise floor from the identification's answers: a phase sensor's sigma [A]
+        (``pmsm_ev.kernels.identify_noise``); 0 until identified, and for a unit without injection."""
+        return self._status_output(8)
+
+    @property
+    def offset_a_id(self) -> float:
+        """Current sensor a's offset measured at enable with no voltage [A] (``InjectionParams.ofs_time``), subtracted
+        from the measurements from then on; 0 until measured, and for a unit without injection."""
+        return self._status_output(9)
+
+    @property
+    def offset_b_id(self) -> float:
+        """Current sensor b's offset measured at enable [A]: i_alpha = i_a, i_beta = (i_a + 2 i_b) / sqrt 3."""
+        return self._status_output(10)
+
+    @property
+    def angle_accuracy(self) -> float:
+        """The rms angle error injection gives at a stop from the measured saliency and noise floor [rad]
+        (``pmsm_ev.kernels.angle_accuracy``, eq ID3); 0 until identified."""
+        return self._status_output(11)
+
+    @property
+    def blind(self) -> float:
+        """1.0 where the identified saliency is below ``InjectionParams.saliency_min`` or the angle accuracy
+        (``angle_accuracy``) beyond ``InjectionParams.inj_angle_max``: the injection cannot see the rotor's axis well
+        enough; else 0."""
+        return self._status_output(12)
+
+    @property
+    def axis_cos(self) -> float:
+        """cos 2e of the tracking observer's axis error from the d admittance, filtered (``S_AXIS_F``) in
+        FOC on the injection; 0 there and for a unit without injection)."""
+        return self._status_output(13)
 
     @property
     def theta_ctrl(self) -> float:
@@ -463,3 +574,5 @@ class ControlUnit:
         """Restore a ``get_state`` dict; ``LayoutError`` (naming the field) if its fields or their
         lengths are not this version's."""
         _k.UNIT_STATE_LAYOUT.restore(self._s, state)
+        if self._c[_k.C_ADAPT] == _k.ADAPT_USE:  # the model follows the restored estimates
+            self._kernels.adapt_apply(self._s, self._c)

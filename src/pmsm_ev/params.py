@@ -22,6 +22,7 @@ from .kernels import (
     FX_PSI0,
     FX_W0,
     REFERENCE_CODES,
+    STATIONARY_SUBSTEP_ANGLE,
     flux_currents,
     flux_energy,
     flux_jacobian,
@@ -46,7 +47,11 @@ DQ_CONVENTIONS = ("paper", "amplitude_invariant")
 CURRENT_CONTROLS = ("paper", "high_speed")
 #: the speed loop's feedforward (``ControllerParams.speed_feedforward``; docs/cycles.md)
 SPEED_FEEDFORWARDS = ("none", "inertia", "inertia+road")
+#: adaptation while driving (``ControllerParams.adaptation``)
+ADAPTATIONS = ("off", "observe", "use")
 DISCRETISATIONS = ("euler", "bilinear")
+#: the frames the plant's RK4 integrates in (``PlantParams.integrator``)
+INTEGRATORS = ("rk4_rotor", "rk6_stationary")
 #: the plant's magnetic model (``PlantParams.flux_model``)
 FLUX_MODELS = ("linear", "algebraic")
 #: the plant's thermal models (``PlantParams.thermal_model``): none (or the one-node winding of ``thermal_R``), the
@@ -497,6 +502,18 @@ class PlantParams:
     #: the rotation is ~(0.1)^5 / 120 = 8e-8 of a sub-step's). 0.1 rad keeps one sub-step up to
     #: 250 rad/s at 10 kHz (the paper's scenarios run as before); 0 = off (always rk4_substeps).
     substep_angle: float = 0.1
+    #: how the plant integrates its winding over a step (docs/performance.md, "The plant's integrator").
+    #: "rk4_rotor" (default; the paper's scenarios): RK4 in the rotor's dq frame, the currents (or, with the
+    #: algebraic flux model, the flux linkages) as the state, sub-steps bounded by ``substep_angle``: the held
+    #: stationary-frame voltage turns in that frame, so the sub-steps, and the cost, grow with the speed.
+    #: "rk6_stationary" (the drive-cycle scenarios): Butcher's RK6 on the flux linkages (psi_alpha, psi_beta) in
+    #: the stationary frame, where the held voltage is constant, the currents explicit functions of them at the
+    #: integrated angle: order 6, seven stages, one sub-step (``rk4_substeps`` at least) up to
+    #: ``stationary_substep_angle`` of electrical angle a sub-step (148 km/h at 1e-4 s); ``substep_angle`` unused
+    integrator: str = "rk4_rotor"
+    #: the largest electrical angle one sub-step of the stationary-frame RK6 may turn [rad] [chosen]
+    #: (``integrator`` 'rk6_stationary'; default ``pmsm_ev.kernels.STATIONARY_SUBSTEP_ANGLE``, its reasons there)
+    stationary_substep_angle: float = STATIONARY_SUBSTEP_ANGLE
     i_d0: float = 0.0  #: initial d current [A]
     i_q0: float = 0.0  #: initial q current [A]
     omega_m0: float = 0.0  #: initial mechanical speed [rad/s] (start-up from standstill)
@@ -722,6 +739,10 @@ class PlantParams:
                  f"rk4_substeps must be a whole number >= 1 (got {self.rk4_substeps})")
         _require(math.isfinite(self.substep_angle) and self.substep_angle >= 0,
                  f"substep_angle must be >= 0 rad, 0 = off (got {self.substep_angle})")
+        _require(self.integrator in INTEGRATORS,
+                 f"integrator must be one of {INTEGRATORS} (got {self.integrator!r})")
+        _require(math.isfinite(self.stationary_substep_angle) and self.stationary_substep_angle > 0,
+                 f"stationary_substep_angle must be > 0 rad (got {self.stationary_substep_angle})")
         for name in ("i_d0", "i_q0", "omega_m0", "theta_e0", "sensor_offset_a", "sensor_offset_b"):
             _require(math.isfinite(getattr(self, name)), f"{name} must be finite")
         _require(math.isfinite(self.sensor_noise) and self.sensor_noise >= 0,
@@ -1155,6 +1176,35 @@ class ControllerParams:
     ff_T1: float = _ROAD_LOAD[1]
     ff_T2: float = _ROAD_LOAD[2]
 
+    # -- adaptation while driving (docs/sensorless.md, "Adaptation while driving"; ``pmsm_ev.kernels.adaptation``) ----
+    #: the magnet flux and the stator resistance tracked as the motor warms, by a model-reference estimator on the
+    #: unit's own voltage and measured currents (eqs AD1-AD6) [chosen: "off", today's drive]. "observe": the
+    #: estimates computed and put out (psi_est, R_s_est), the controller unchanged, bit for bit; "use": the
+    #: controller's model takes them (psi in the feed-forward, the reference generator and the EKF's A3-A4, R_s in
+    #: the EKF's A8, A14)
+    adaptation: str = "off"
+    #: the estimators' memory [s] [chosen]: the least-squares sums forget with this time constant over the periods
+    #: where their parameter is observable. Far below the motor's thermal time constants (the winding's fastest
+    #: 15.9 s, the magnet's 65 min: docs/speed-range.md, "A motor that warms"), so the estimate lags the warming by
+    #: a small share; far above the period (2 s at speed is 20 000 periods: the 4 V rms that the sensors' 1 A puts
+    #: on L_q di/dt a period averages to 0.03 V, 0.1 % of the back-EMF at adapt_psi_speed)
+    adapt_time: float = 2.0
+    #: psi is observable at this |omega_m| or faster [rad/s] [chosen]: back-EMF N omega psi = 54 V at 150 rad/s
+    #: (12.7 km/h), so that a resistance 5 % off at 300 A (0.13 V) or an inverter's residual voltage of 0.5 V moves
+    #: psi_hat by 0.3 % or 1 %; below, the back-EMF is of the order of those errors
+    adapt_psi_speed: float = 150.0
+    #: R_s is observable at this |omega_m| or slower [rad/s] [chosen]: at 15 rad/s (1.3 km/h) a psi_hat 0.5 % off
+    #: moves R_s_hat by N omega Delta psi / |i| = 3 % of R_s at adapt_rs_current; faster, the back-EMF's error
+    #: swamps R_s |i|^2
+    adapt_rs_speed: float = 15.0
+    #: ... and at this current magnitude or more [A] [chosen]: R_s |i| = 0.87 V at 100 A, large against the current
+    #: PI's own noise (K_p sigma = 0.6 V a period, averaged out) and the 0.1 V a 1 % dead-time residual leaves
+    adapt_rs_current: float = 100.0
+    #: the currents are quasi-steady, and both fits update, while |di/dt| (filtered over 50 ms) is at most this
+    #: [A/s] [chosen]: the L di/dt terms are in the fits, but with the model's inductances: 10 % of L_q x 2000 A/s is
+    #: 0.06 V, 0.1 % of the back-EMF at adapt_psi_speed
+    adapt_current_rate: float = 2000.0
+
     @property
     def u_limit(self) -> float:
         """The voltage limit of the current PIs and of field weakening [V]: v_dc / sqrt(3) if ``v_dc`` is
@@ -1225,6 +1275,18 @@ class ControllerParams:
         _require(self.v_dc == 0 or self.u_max == _U_MAX_DEFAULT,
                  f"u_max = {self.u_max:g} V and v_dc = {self.v_dc:g} V are both given: set one of the two "
                  f"(v_dc > 0 sets the voltage limit v_dc/sqrt(3))")
+        self.validate_adaptation()
+
+    def validate_adaptation(self) -> None:
+        """The adaptation's settings (``adaptation``, ``adapt_*``)."""
+        _require(self.adaptation in ADAPTATIONS,
+                 f"adaptation must be one of {ADAPTATIONS} (got {self.adaptation!r})")
+        for name in ("adapt_time", "adapt_psi_speed", "adapt_rs_current", "adapt_current_rate"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, f"{name} must be finite and > 0 (got {value})")
+        _require(math.isfinite(self.adapt_rs_speed) and 0 <= self.adapt_rs_speed < self.adapt_psi_speed,
+                 f"adapt_rs_speed must be >= 0 rad/s and below adapt_psi_speed = {self.adapt_psi_speed:g} rad/s "
+                 f"(got {self.adapt_rs_speed})")
 
 
 @dataclass(frozen=True)
@@ -1644,6 +1706,86 @@ class InjectionParams:
     #: tanh(v / v_eps) (``VehicleParams.v_eps``), so a held car creeps at v_eps atanh(load / brake): 4 mm/s on
     #: 16 deg with 900 kg. 0: no hold
     hold_brake: float = 1.0
+    #: the identification at enable, on each axis [s] [chosen: 50 ms, 500 answers a side]: after the axis is
+    #: found, the d admittance of the square wave's answers on the found d axis and then on the q axis is the
+    #: motor's incremental 1/L_d and 1/L_q at zero current ((I1) at e = 0 and 90 deg,
+    #: ``pmsm_ev.kernels.identify``), and Y_x = (1/L_d - 1/L_q) / 2 the error signal's gain: the tracking
+    #: observer then keeps the bandwidth its poles say on a motor that is not its data sheet (a saliency a third
+    #: of the model's leaves it a third of the gain, and an error signal that never reaches the loss detector's
+    #: angle). The second difference's noise at the square wave's frequency is 4 sigma an answer, over 500
+    #: answers 4 sigma / sqrt(500) / (2 dt V) = 30 1/H a sigma of 1 A (0.7 % of 1/L_d with Table I; Y_x to 21
+    #: 1/H, 3 % of Table I's 751). The acquisition then takes 2 x 40 + 30 + 2 x 50 ms and the polarity test
+    #: 120 ms: 0.33 s from enable to torque, the car held (``hold_brake``). Only at the first acquisition after
+    #: enable (a reacquisition may find the car rolling). 0: not measured, the model's L_d, L_q (a drive whose
+    #: data sheet is its motor's)
+    id_time: float = 0.06
+    #: the least identified saliency L_q / L_d at which the injection is trusted [-] [chosen: 1.10]: the error
+    #: signal's amplitude is Y_x = (1/L_d - 1/L_q) / 2, (L_q/L_d - 1) / (2 L_q) of it; at 1.10 that is 11 % of
+    #: 1/L_d (Table I's 1.44: 31 %), 1.0 A an answer at 30 V against the second difference's 2.8 A of noise
+    #: with sigma = 1 A, the angle's noise at a stop four times Table I's (0.05 rad rms there): 0.2 rad, where
+    #: the load's tilt of the axes (cross-saturation) is of the same size. Below it the unit says so (output
+    #: ``blind``)
+    saliency_min: float = 1.10
+    #: the tracking observer has lost the axis where cos 2e from the d admittance (``pmsm_ev.kernels.axis_cosine``:
+    #: (I1), adm = Y_s + Y_x cos 2e with the identified Y_s, Y_x), filtered as the angle error is, stays below
+    #: this for ``inj_los_time`` [-] [chosen: -0.5, 60 deg]: at 45 deg (cos 2e = 0) the error signal sin 2e no
+    #: longer pulls the observer back harder the farther it is, and beyond it pulls it to the axis 90 deg on (the
+    #: q axis, then the d axis pi from the right one); the margin to 0 is for the load: the d admittance under
+    #: load (a negative d current relieves the d axis, the q current saturates the iron) is not the zero-current
+    #: one the identification measured
+    inj_axis_cos: float = -0.5
+    #: the square wave's largest amplitude [V] [chosen: 90 V, below half the 208 V voltage limit, the rest for the
+    #: current loops at a stop]: after the identification the amplitude is the one whose error signal has the
+    #: current per unit of sin 2e the data sheet's motor gives at ``inj_voltage`` (``pmsm_ev.kernels.identify``):
+    #: a motor with a third of the saliency gets three times the voltage, so that the sensors' noise and the
+    #: inverter's dead time (a voltage of a few V per half-wave, not compensated where the ripple crosses zero)
+    #: take no larger a share of the angle than on the data sheet's motor. The d current's ripple grows with it
+    #: (+-dt V / (2 L_d): +-20 A at 90 V on Table I's L_d)
+    inj_voltage_max: float = 90.0
+    #: the R_s test at enable, its upper d current [A] [chosen: 200 A, the polarity test's: the winding heats no
+    #: more than there]; the lower level is half of it. After the identification, on the found d axis at
+    #: standstill, the d current is held at each level (``rs_time``) and R_s = (v_2 - v_1) / (i_2 - i_1) from
+    #: the d PI's integral (``pmsm_ev.kernels.identify_rs``, eq ID2): the difference cancels the inverter's
+    #: dead-time voltage, which is the same at both levels where the phases' currents keep their signs. 100 A
+    #: apart give 0.87 V on Table I's 8.7 mOhm
+    rs_current: float = 200.0
+    #: ... the time at each level [s] [chosen: 40 ms, the second half measured: the current loop settles in a
+    #: few ms]; 0: no test (a drive already commissioned). Enable to torque with it: 0.41 s, within the 0.5 s a
+    #: driver waits for a car that has said it is ready
+    rs_time: float = 0.04
+    #: the offset window at enable [s] [chosen: 20 ms, 200 samples: a sensor's offset to sigma / sqrt(200), 0.07 A
+    #: at sigma = 1 A]: before the square wave starts the unit sends no voltage (the inverter's gates off, as a
+    #: drive calibrates its current sensors), the motor at rest carries no current, and the mean of each sensor is
+    #: its offset, subtracted from the measurements from then on (``pmsm_ev.kernels.modes``, outputs
+    #: ``offset_a_id``, ``offset_b_id``). With the current loops closed the measured mean is held at 0 whatever the
+    #: offset (the motor then carries minus the offset), so the offset shows only with no voltage. Only at the
+    #: first acquisition after enable; 0: not measured
+    ofs_time: float = 0.02
+    #: the largest angle accuracy at a stop (eq ID3: the tracking observer's rms angle error from the measured
+    #: saliency, noise floor and amplitude) at which the injection is trusted [rad] [chosen: 0.15 rad, the polarity
+    #: test's frame band ``pol_frame_band`` and a third of the loss detector's ``inj_los_angle``]: a noisier angle
+    #: moves the polarity test's frame with its noise (the torque it leaks moves the car) and meets the loss
+    #: detector's angle at three of its rms. Beyond it the unit is blind as below ``saliency_min``. Table I's motor
+    #: at sigma = 1 A and 30 V: 0.05 rad (as measured from 24 start angles); at the saliency limit 1.10 with the
+    #: amplitude at ``inj_voltage_max``: 0.06 rad at 1 A, 0.15 rad at 2.6 A: below 2.6 A of noise the saliency
+    #: limit is the stricter, beyond it this one
+    inj_angle_max: float = 0.15
+    #: the back-EMF detector (``pmsm_ev.kernels.detect_emf_lost``, eqs LS1-LS2), in FOC on the injection and the
+    #: blend: the back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed
+    #: [rad/s], beyond this (plus ``emf_slip_rel`` of the rotor's speed the loops see) for ``inj_los_time`` is a
+    #: rotor that turns under a frame that does not follow it, or a frame that spins over a standing rotor
+    #: [chosen: 15 rad/s, 5.4 V with Table I's psi, the blend's lower speed ``inj_blend_low``: above the voltages a
+    #: healthy drive leaves unexplained at low speed, the dead-time compensation 30 % below the inverter's (2.2 V a
+    #: phase) with a magnet 15 % weak (its EKF's speed 15 % low at the handover down) and the sensors' noise.
+    #: Measured on udds-sensorless, sigma = 1.5 A: issue 47's motors A and B 0 episodes at 10 and 15 rad/s, motor A
+    #: 17 at 5 rad/s; a motor with the compensation 30 % low, psi -15 %, R_s +60 %: at 10 rad/s 2 episodes that were
+    #: not slips beyond the 3 its other detectors give, at 15 none]
+    emf_slip_speed: float = 15.0
+    #: ... plus this share of the rotor's speed the current loops see (all the back-EMF they carry, as a speed) [-]
+    #: [chosen: 0.25: the magnet's psi up to 15 % below the model's (cold data sheet, warm magnet) and the
+    #: decoupling's inductances (L_d, L_q +-15 %) at the injection's current; a frame at the rotor's speed but 0.5
+    #: rad off its angle leaves 2 sin(e / 2) = 0.49 of it, a frame spinning over a standing rotor all of its speed]
+    emf_slip_rel: float = 0.25
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
@@ -1655,14 +1797,29 @@ class InjectionParams:
         _require(self.low_speed in LOW_SPEED_STRATEGIES,
                  f"low_speed must be one of {LOW_SPEED_STRATEGIES} (got {self.low_speed!r})")
         for f in fields(self):
-            if f.name in ("low_speed", "inj_cross_comp"):
+            if f.name in ("low_speed", "inj_cross_comp", "inj_axis_cos"):
                 continue
             value = getattr(self, f.name)
             _require(math.isfinite(value) and value >= 0, f"{f.name} must be finite and >= 0 (got {value})")
         for name in ("inj_voltage", "inj_bandwidth", "inj_blend_high", "inj_lock_time", "pol_current",
                      "pol_hold", "pol_contrast", "inj_los_angle", "inj_los_time", "ekf_los_current",
-                     "ekf_los_time", "inj_current_limit", "pol_frame_band"):
+                     "ekf_los_time", "inj_current_limit", "pol_frame_band", "emf_slip_speed"):
             _require(getattr(self, name) > 0, f"{name} must be > 0 (got {getattr(self, name)})")
+        _require(-1.0 < self.inj_axis_cos < 1.0,
+                 f"inj_axis_cos must be within (-1, 1): a cosine of 2e (got {self.inj_axis_cos})")
+        _require(self.saliency_min >= 1.0,
+                 f"saliency_min must be >= 1: a saliency L_q / L_d (got {self.saliency_min})")
+        _require(self.rs_time == 0.0 or self.rs_time >= 0.002,
+                 f"rs_time must be 0 (no test) or >= 0.002 s, ten current-loop time constants (got {self.rs_time})")
+        _require(self.rs_time == 0.0 or self.rs_current > 0.0,
+                 f"rs_current must be > 0 A (got {self.rs_current})")
+        _require(self.ofs_time == 0.0 or self.ofs_time >= 0.001,
+                 f"ofs_time must be 0 (not measured) or >= 0.001 s, ten samples (got {self.ofs_time})")
+        _require(0.0 < self.inj_angle_max < 0.25 * math.pi,
+                 f"inj_angle_max must be within (0, pi/4) rad: beyond pi/4 the error signal sin 2e no longer points "
+                 f"back to the axis (got {self.inj_angle_max})")
+        _require(self.id_time == 0.0 or self.id_time >= 0.005,
+                 f"id_time must be 0 (not measured) or >= 0.005 s, 50 answers an axis (got {self.id_time})")
         _require(self.inj_blend_low < self.inj_blend_high,
                  f"inj_blend_low must be < inj_blend_high (got {self.inj_blend_low} >= {self.inj_blend_high} rad/s)")
         _require(self.inj_hysteresis < self.inj_blend_high - self.inj_blend_low,
@@ -1670,6 +1827,12 @@ class InjectionParams:
         if u_max is not None:
             _require(self.inj_voltage < 0.5 * u_max,
                      f"inj_voltage must be < half the voltage limit {0.5 * u_max:.4g} V (got {self.inj_voltage})")
+        _require(self.inj_voltage_max >= self.inj_voltage,
+                 f"inj_voltage_max must be >= inj_voltage (got {self.inj_voltage_max} < {self.inj_voltage} V)")
+        if u_max is not None:
+            _require(self.inj_voltage_max < 0.5 * u_max,
+                     f"inj_voltage_max must be < half the voltage limit {0.5 * u_max:.4g} V "
+                     f"(got {self.inj_voltage_max})")
         if dt is not None and self.inj_frequency != 0:
             m = 1.0 / (2.0 * self.inj_frequency * dt)
             allowed = ", ".join(f"{1.0 / (2.0 * k * dt):.6g}" for k in range(1, 9))

@@ -76,6 +76,14 @@ BALANCE_TERMS = ("E_copper", "E_inverter", "E_iron", "E_friction", "E_gear", "E_
                  "E_brake", "dE_kinetic", "dW_magnetic")
 
 
+def substep_angle_slot(p: PlantParams) -> float:
+    """The plant vector's ``P_SUBSTEP_ANGLE``: ``substep_angle`` in the rotor's frame, ``stationary_substep_angle``
+    negated with ``integrator`` 'rk6_stationary' (``pmsm_ev.kernels.stationary_frame``: the sign tells the frame)."""
+    if p.integrator == "rk6_stationary":
+        return -p.stationary_substep_angle
+    return p.substep_angle
+
+
 def inverter_loss_voltage(p: PlantParams) -> float:
     """The inverter's per-phase loss voltage [V] (``pmsm_ev.kernels.inverter_loss``): the mean of the IGBT's
     and the diode's knees, (``inv_v0`` + ``inv_vf0``) / 2, plus the switching losses per ampere,
@@ -191,7 +199,7 @@ class Plant:
                   _k.P_A_F: v.A_f, _k.P_R_W: v.r_w, _k.P_ETA: v.eta, _k.P_N_G: v.n_g, _k.P_V_A: v.v_a,
                   _k.P_V_EPS: v.v_eps, _k.P_PAPER: 1.0 if v.load_model == "paper" else 0.0,
                   _k.P_SUBSTEPS: p.rk4_substeps, _k.P_DT_I0: p.dead_time_i0,
-                  _k.P_K_DQ: m.k_dq, _k.P_SUBSTEP_ANGLE: p.substep_angle,
+                  _k.P_K_DQ: m.k_dq, _k.P_SUBSTEP_ANGLE: substep_angle_slot(p),
                   _k.P_GEAR_PF: 1.0 if v.gear_model == "power_flow" else 0.0, _k.P_J_M: m.J_m,
                   _k.P_M_R: v.m_v * v.r_w**2 / v.n_g**2,
                   _k.P_INV: 1.0 if p.inverter_losses else 0.0, **inverter_slot_values(p),

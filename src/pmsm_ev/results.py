@@ -35,6 +35,10 @@ ALL_COLUMNS = CONTRACT_COLUMNS + EXTRA_COLUMNS
 #: (0 alignment, 1 I-f, 2 closed loop on the observer; ``pmsm_ev.control_unit.MODES``), the fault
 #: (``pmsm_ev.kernels`` FAULT_*) and the control frame's angle [rad] and speed [rad/s] (synchronism)
 SENSORLESS_COLUMNS = ("x_vehicle", "mode", "fault", "theta_ctrl", "omega_ctrl")
+#: the injection strategy's identification at enable (the sensorless controller's outputs of the same names): a run
+#: that records them gets the identification block of its metrics, the identified values beside the plant's
+IDENTIFICATION_COLUMNS = ("L_d_id", "L_q_id", "saliency_id", "R_s_id", "noise_id", "offset_a_id", "offset_b_id",
+                          "angle_accuracy", "blind")
 #: the plant's energy outputs [J] (``pmsm_ev.plant.Plant.energies``, the plant FMU's outputs of the same
 #: names) and the position [m]: a run that records them all gets the energy block of its metrics
 #: (``energy_balance``); the acceleration and drive-cycle scenarios record them

@@ -35,6 +35,7 @@ from .drive import (
     export_ssp,
     fmu_dir_override,
     project_fmu_dir,
+    with_fmi,
 )
 from .metrics.verdicts import cycle_verdict, verdict_line
 from .overrides import CONTROLLER_INSTANCE, PLANT_INSTANCE, apply_overrides, fmu_choices, resolve_fmu
@@ -93,10 +94,10 @@ def _load_with_overrides(a):
 
 
 def cmd_run(a) -> int:
-    spec = _load_with_overrides(a)
+    spec = with_fmi(_load_with_overrides(a), a.fmi)
     out = Path(a.out) if a.out else Path("runs") / spec.name
     ensure_fmus(spec, a.quiet)
-    master = Master(spec, loop=a.loop, note=lambda line: _note(line, a.quiet))
+    master = Master(spec, loop=a.loop, note=lambda line: _note(line, a.quiet), event_mode=not a.no_event_mode)
     if not a.quiet:
         for w in master.warnings:
             _note(w)
@@ -152,7 +153,7 @@ def cmd_run(a) -> int:
 
 
 def cmd_export_ssp(a) -> int:
-    spec = _load_with_overrides(a)
+    spec = with_fmi(_load_with_overrides(a), a.fmi)
     if not a.output.lower().endswith(".ssp"):
         raise CosimError(f"-o {a.output}: an SSP package file name ends in .ssp")
     ensure_fmus(spec, a.quiet)
@@ -192,7 +193,7 @@ def cmd_sweep(a) -> int:
 
 
 def cmd_build(a) -> int:
-    kwargs = {"force": a.force, "out_dir": project_fmu_dir()}  # --out/--fmu-dir DIR, else the default
+    kwargs = {"force": a.force, "out_dir": project_fmu_dir(), "fmi": a.fmi}  # --out/--fmu-dir DIR, else the default
     if a.names:
         kwargs["names"] = a.names
     try:
@@ -362,6 +363,13 @@ def _fmu_dir_option(p: argparse.ArgumentParser, *names: str) -> None:
                         "else the user's cache, e.g. ~/.cache/pmsm-ev-cosim/fmus/<content key>/)")
 
 
+def _fmi_option(p) -> None:
+    p.add_argument("--fmi", type=int, choices=fmu_build.FMI_VERSIONS, default=None,
+                   help="the project's FMUs of the system as FMI 2.0 units (2) or FMI 3.0 units (3: built into "
+                        f"DIR/{fmu_build.FMI3_FOLDER}/ from the same FMI 2.0 stack); default: as the system names them "
+                        "({fmus}/X.fmu, {fmus}/fmi3/X.fmu: one system may mix both)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(
         prog="pmsm-cosim",
@@ -386,6 +394,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "debugger); also: PMSM_COSIM_LOOP=...")
     r.add_argument("--plain-loop", action="store_const", const="plain", dest="loop",
                    help="the same as --loop plain")
+    _fmi_option(r)
+    r.add_argument("--no-event-mode", action="store_true",
+                   help="FMI 3.0 units with clocks (the controllers' sample clock) instantiated without event mode: "
+                        "not ticked by the master, they sample at their own period (the same results)")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no notes")
     r.set_defaults(func=cmd_run)
 
@@ -398,6 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"{' or '.join(PACKAGED_SCENARIOS)}, or the path of a system file or .ssp package")
     e.add_argument("-o", "--output", required=True, metavar="FILE.ssp", help="the package to write")
     _system_options(e)
+    _fmi_option(e)
     e.add_argument("--quiet", "-q", action="store_true", help="no notes")
     e.set_defaults(func=cmd_export_ssp)
 
@@ -431,6 +444,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "sources, ~/.cache/pmsm-ev-cosim/fmus/<key>/ on Linux), where runs find them; "
                                    "only those whose sources changed unless --force. Prints each FMU's path.")
     b.add_argument("--force", action="store_true", help="rebuild even when up to date")
+    b.add_argument("--fmi", type=int, choices=fmu_build.FMI_VERSIONS, default=2,
+                   help="FMI version of the units: 2 (default) or 3, FMI 3.0 co-simulation units made from the "
+                        f"FMI 2.0 ones (built too), into DIR/{fmu_build.FMI3_FOLDER}/")
     _fmu_dir_option(b, "--out", "--fmu-dir")
     b.add_argument("names", nargs="*", metavar="NAME", help="build only these FMUs (default: all)")
     b.set_defaults(func=cmd_build)

@@ -1,7 +1,8 @@
 """What this drive adds to the co-simulation engine: its FMUs, its scenarios, its figures of merit.
 
 * the project's FMUs (``pmsm_ev_fmus``): where they are built (:func:`project_fmu_dir`, what
-  ``{fmus}`` stands for in a system file) and building them before a run (:func:`ensure_fmus`);
+  ``{fmus}`` stands for in a system file; their FMI 3.0 units in its ``fmi3/``), building them before a run
+  (:func:`ensure_fmus`) and a system's FMUs as the units of one FMI version (:func:`with_fmi`);
 * the shipped scenarios (``pmsm_cosim/app/scenarios/*.toml``) by name (:func:`load_system`
   takes a name, a system file or an SSP package);
 * the drive's figures of merit of a run (:func:`drive_metrics`, the ``metrics_of`` the engine's
@@ -13,6 +14,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import sys
 from collections.abc import Iterator
@@ -30,6 +32,8 @@ from ..engine.loading import load_system as load_system_file
 from ..engine.recording import read_results
 from ..engine.system import SystemSpec, parse_system, read_toml
 from . import cycles
+from .metrics.cycle_energy import plant_params
+from .metrics.identification import identification_truth, plant_settings
 from .metrics.run import compute_metrics
 
 #: where the shipped scenarios are (package data)
@@ -126,7 +130,15 @@ def drive_metrics(out_dir, columns, rows: int) -> dict:
                                 + " (pmsm_ev.results.CONTRACT_COLUMNS)"}
     if not rows:
         return {}
-    return compute_metrics(read_results(out_dir))
+    m = compute_metrics(read_results(out_dir))
+    if "identification" in m:  # the plant's truth beside it, from the run's settings (metrics.json, written first)
+        try:
+            settings = json.loads((Path(out_dir) / "metrics.json").read_text())
+            m["identification"].update(identification_truth(plant_params(settings)[0], m["identification"],
+                                                            plant_settings(settings)))
+        except (OSError, ValueError):
+            pass
+    return m
 
 
 # --- the project's FMUs ------------------------------------------------------------------
@@ -136,25 +148,46 @@ def _note(message: str, quiet: bool = False) -> None:
         print(f"note: {message}", file=sys.stderr)
 
 
+def _project_fmu(path: Path, folder: Path) -> bool:
+    return path.parent == folder and path.name == f"{path.stem}.fmu" and path.stem in fmu_build.FMUS
+
+
+def with_fmi(spec: SystemSpec, fmi: int | None) -> SystemSpec:
+    """``spec`` with its project FMUs (``{fmus}/X.fmu``, ``{fmus}/fmi3/X.fmu``) as the units of FMI ``fmi``: 2, the
+    FMI 2.0 units in :func:`project_fmu_dir`; 3, the FMI 3.0 units in its ``fmi3/`` (``pmsm-cosim build --fmi
+    3``), made from the same FMI 2.0 stack. None: as the system says (a system may mix both). Other FMUs are
+    left as they are. Changes ``spec`` and returns it."""
+    if fmi is None:
+        return spec
+    if fmi not in fmu_build.FMI_VERSIONS:
+        raise CosimError(f"--fmi {fmi}: choose one of {', '.join(map(str, fmu_build.FMI_VERSIONS))}")
+    fmu_dir = project_fmu_dir()
+    folders = {2: fmu_dir, 3: fmu_build.fmi3_out_dir(fmu_dir)}
+    for c in spec.components:
+        if any(_project_fmu(c.fmu, folder) for folder in folders.values()):
+            c.fmu = folders[fmi] / c.fmu.name
+    return spec
+
+
 def ensure_fmus(spec: SystemSpec, quiet: bool = False) -> None:
     """Build (or bring up to date) the project's FMUs a system uses (those in
-    :func:`project_fmu_dir`), before loading it."""
+    :func:`project_fmu_dir`, and its FMI 3.0 units in its ``fmi3/``), before loading it."""
     fmu_dir = project_fmu_dir()
-    needed = [c for c in spec.components if c.fmu.parent == fmu_dir]
-    names = sorted({c.fmu.stem for c in needed if c.fmu.name == f"{c.fmu.stem}.fmu" and c.fmu.stem in fmu_build.FMUS})
-    if not needed:
-        return
-    missing = [c for c in needed if not c.fmu.is_file()]
-    if missing:
-        _note(f"building FMUs into {fmu_dir} ...", quiet)
-    try:
-        if names:
-            fmu_build.build_all(out_dir=fmu_dir, names=names)
-    except Exception as exc:
-        raise CosimError(f"building the FMUs failed: {type(exc).__name__}: {exc}") from None
-    for c in needed:
-        if not c.fmu.is_file():
-            raise CosimError(f"{c.name}: FMU not found: {c.fmu} (not among the project's built FMUs)")
+    for fmi, folder in ((2, fmu_dir), (3, fmu_build.fmi3_out_dir(fmu_dir))):
+        needed = [c for c in spec.components if c.fmu.parent == folder]
+        if not needed:
+            continue
+        names = sorted({c.fmu.stem for c in needed if _project_fmu(c.fmu, folder)})
+        if any(not c.fmu.is_file() for c in needed):
+            _note(f"building FMUs into {folder} ...", quiet)
+        try:
+            if names:
+                fmu_build.build_all(out_dir=fmu_dir, names=names, fmi=fmi)
+        except Exception as exc:
+            raise CosimError(f"building the FMUs failed: {type(exc).__name__}: {one_line(exc)}") from None
+        for c in needed:
+            if not c.fmu.is_file():
+                raise CosimError(f"{c.name}: FMU not found: {c.fmu} (not among the project's built FMUs)")
 
 
 def project_route_fmu(quiet: bool = False) -> Path:

@@ -134,6 +134,8 @@ def _columns(spec: SystemSpec, roles: dict[str, str], signals: list[str]) -> lis
             cols.append((_k.COL_LATER, 0))
         elif hasattr(_k, "UIO_" + col.variable.upper()):
             cols.append((_k.COL_UNIT, getattr(_k, "UIO_" + col.variable.upper())))
+        elif col.variable in _k.UNIT_STATUS_OUTPUTS:  # written by the compiled step (unit_status_outputs)
+            cols.append((_k.COL_UNIT, _k.UIO_STATUS + _k.UNIT_STATUS_OUTPUTS.index(col.variable)))
         else:
             raise NotCovered(f"{spec.name}: the whole loop does not record ctrl.{col.variable}")
     return cols

@@ -93,6 +93,10 @@ def check_wiring(s: SystemSpec, instances: dict[str, FmuInstance]) -> None:
             raise CosimError(f"{ctx}: {conn.dst}.{conn.dst_var} is {_a(dst.causality)}, not an input "
                              f"(a connection goes from an output to an input)")
         problem = connection_types_problem(src, dst)
+        if not problem and src.type not in (*NUMBER_TYPES, "Enumeration", "String"):
+            problem = "the master connects Real (FMI 3.0: Float64), Integer (Int32), Enumeration, Boolean and String"
+        if not problem and src.type == "Boolean" and instances[conn.src].fmi != instances[conn.dst].fmi:
+            problem = "a Boolean connection joins units of the same FMI version (FMI 3.0's is a C bool, 2.0's an int)"
         if problem:
             raise CosimError(f"{ctx}: {conn.src}.{conn.src_var} is {_a(src.type)}, {conn.dst}.{conn.dst_var} is "
                              f"{_a(dst.type)}: {problem}")

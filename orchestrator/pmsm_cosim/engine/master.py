@@ -1,4 +1,17 @@
-"""The co-simulation master: a fixed-step loop over FMI 2.0 co-simulation FMUs.
+"""The co-simulation master: a fixed-step loop over FMI 2.0 and FMI 3.0 co-simulation FMUs.
+
+FMI 3.0 units run beside FMI 2.0 ones in one system, with the same calls of their version
+(:mod:`pmsm_cosim.engine.fmu`: fmi3GetFloat64 for fmi2GetReal, ...); below, "fmi2Get" and "fmi2DoStep" stand
+for both. A connection of Booleans joins units of the same version (an FMI 3.0 Boolean is a C bool, FMI 2.0's
+an int).
+
+Clocks: an FMI 3.0 unit with event mode and periodic input clocks (``FmuInstance.clocks``) is ticked at its
+clocks' interval, not at every communication step (``Master(event_mode=True)``, the default): its interval is a
+whole number of its steps, and at the base steps n with ``n % tick == 0`` (``tick`` = interval / h) its tick
+(fmi3EnterEventMode, fmi3SetClock, fmi3UpdateDiscreteStates, fmi3EnterStepMode) comes after its inputs are set and
+before its fmi3DoStep from t_n. With ``event_mode=False`` (``pmsm-cosim run --no-event-mode``) it is instantiated
+without event mode and its clocks are left to it (the project's controllers then sample at their own period inside
+fmi3DoStep: fmus/README.md).
 
 Time grid: base step ``h``; communication points ``t_n = n * h`` (an integer step
 counter times the step, never an accumulated sum). A component with
@@ -65,7 +78,6 @@ from __future__ import annotations
 import array
 import bisect
 import ctypes
-import functools
 import math
 import os
 import signal
@@ -90,8 +102,6 @@ _NEVER = sys.maxsize
 LOOPS = ("compiled", "plain")
 #: the environment variable that selects the loop when ``Master(loop=None)``
 LOOP_ENV = "PMSM_COSIM_LOOP"
-#: ctypes type of a value of each FMI type in fmi2Get*/fmi2Set* (Enumeration: Integer calls)
-_CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int, "String": ctypes.c_char_p}
 
 
 def loop_choice(loop: str | None = None) -> tuple[str, bool]:
@@ -198,6 +208,8 @@ class _Stepper:
     handle: object = None
     do_step: object = None
     do_step_typed: object = None  #: fmi2DoStep without argtypes (``LeanCalls.do_step_typed``)
+    flags: object = None  #: FMI 3.0: fmi3DoStep's eventHandlingNeeded, terminateSimulation, earlyReturn
+    tick: int = 0  #: FMI 3.0 in event mode: base steps between the ticks of its clocks (0: no clock ticked)
     transfers: list = field(default_factory=list)  #: [_Transfer] into this component's inputs
     pending: list = field(default_factory=list)  #: queued signal targets (multi-rate)
 
@@ -205,9 +217,10 @@ class _Stepper:
 class Master:
     """Check a :class:`SystemSpec` against its FMUs and run it."""
 
-    def __init__(self, spec: SystemSpec, loop: str | None = None, note=None):
+    def __init__(self, spec: SystemSpec, loop: str | None = None, note=None, event_mode: bool = True):
         """``note(line)``: where the line goes that says the plain loop runs instead of the compiled one,
-        and why (default: ``note: ...`` on stderr)."""
+        and why (default: ``note: ...`` on stderr). ``event_mode``: tick the FMI 3.0 units' clocks in event mode
+        (module doc, "Clocks")."""
         #: "compiled" or "plain" (see the module's docstring); after the set-up, the one that runs
         self.loop, self._loop_named = loop_choice(loop)
         self._note = note if note is not None else _stderr_note
@@ -219,6 +232,7 @@ class Master:
         try:
             for comp in spec.components:
                 self.instances[comp.name] = FmuInstance(comp.name, comp.fmu)
+            self.ticks = self._ticks(spec, event_mode)
             dropped = drop_foreign_starts(spec, self.instances)
             check_wiring(spec, self.instances)
         except BaseException:
@@ -232,6 +246,25 @@ class Master:
         self.terminated: tuple[str, float] | None = None  #: (instance, t) of a termination request
 
     # -- set-up --------------------------------------------------------------------
+    def _ticks(self, spec: SystemSpec, event_mode: bool) -> dict[str, int]:
+        """{instance: base steps between its clocks' ticks} of the units ticked in event mode (module doc)."""
+        ticks = {}
+        for comp in spec.components if event_mode else ():
+            inst = self.instances[comp.name]
+            clocks = inst.clocks()
+            if not clocks:
+                continue
+            intervals = sorted(set(clocks.values()))
+            interval = intervals[0]
+            m = round(interval / self.h)
+            if len(intervals) > 1 or m < 1 or abs(m * self.h - interval) > 1e-9 * interval or m % comp.step_multiple:
+                raise CosimError(f"{comp.name}: its clocks tick every {', '.join(f'{i:g}' for i in intervals)} s, "
+                                 f"which is not one whole number of its steps ({comp.step_multiple * self.h:g} s); "
+                                 f"choose a step that divides it, or run without event mode")
+            inst.event_mode = True
+            ticks[comp.name] = m
+        return ticks
+
     def _build(self) -> None:
         """Instantiate every FMU and prebuild the loop's arrays."""
         s = self.spec
@@ -244,7 +277,8 @@ class Master:
             inst = self.instances[comp.name]
             st = _Stepper(inst, comp.step_multiple, comp.step_multiple * self.h,
                           handle=inst.lean.handle, do_step=inst.lean.do_step,
-                          do_step_typed=inst.lean.do_step_typed)
+                          do_step_typed=inst.lean.do_step_typed,
+                          flags=inst.lean.flags if inst.fmi == 3 else None, tick=self.ticks.get(comp.name, 0))
             self.steppers.append(st)
             by_name[comp.name] = st
         # connections grouped by (destination, source, type): one get and one set per group
@@ -264,11 +298,10 @@ class Master:
                 values = array.array("d", [0.0] * len(conns))
                 buf = (ctypes.c_double * len(conns)).from_buffer(values)
             else:  # String: pointers, copied at once by hold_strings (the source owns the strings)
-                buf = (_CTYPES[kind] * len(conns))()
+                buf = (si.lean.value_type(kind) * len(conns))()
             count = si.lean.count(len(conns))
-            get, set_ = si.lean.getter(kind), di.lean.setter(kind)
-            by_name[dst].transfers.append(_Transfer(functools.partial(get, si.lean.handle, svr, count, buf),
-                                                    functools.partial(set_, di.lean.handle, dvr, count, buf),
+            by_name[dst].transfers.append(_Transfer(si.lean.bind_get(kind, svr, count, buf),
+                                                    di.lean.bind_set(kind, dvr, count, buf),
                                                     src, kind, buf, conns, values))
         # scenario signals; their inputs get the value at t = 0 in initialization mode
         self.signals = []
@@ -277,8 +310,8 @@ class Master:
             for inst_name, var in spec.drives:
                 inst, st = self.instances[inst_name], by_name[inst_name]
                 buf = real_array([0.0])
-                setter = functools.partial(inst.lean.set_real, inst.lean.handle,
-                                           vr_array([inst.variables[var].valueReference]), inst.lean.count(1), buf)
+                setter = inst.lean.bind_set("Real", vr_array([inst.variables[var].valueReference]),
+                                            inst.lean.count(1), buf)
                 sig.targets.append(_SignalTarget(st, setter, buf, f"{inst_name}.{var}", st.multiple == 1))
             self.signals.append(sig)
         try:
@@ -348,9 +381,8 @@ class Master:
                                   for label in tr.signals + [tg.label]])
                 values = array.array("d", list(tr.values) + [sig.value])
                 buf = (ctypes.c_double * len(values)).from_buffer(values)
-                tr.get = functools.partial(src.lean.getter("Real"), src.lean.handle, svr, src.lean.count(k), buf)
-                tr.set = functools.partial(inst.lean.setter("Real"), inst.lean.handle, dvr,
-                                           inst.lean.count(len(values)), buf)
+                tr.get = src.lean.bind_get("Real", svr, src.lean.count(k), buf)
+                tr.set = inst.lean.bind_set("Real", dvr, inst.lean.count(len(values)), buf)
                 tr.values, tr.buf = values, buf
                 tr.signals.append(tg.label)
                 tg.buf = (ctypes.c_double * 1).from_buffer(values, 8 * (len(values) - 1))
@@ -370,12 +402,8 @@ class Master:
         buffers = {}
         for (name, kind), refs in reads.items():
             inst = self.instances[name]
-            if kind == "Real":
-                fn, buf = inst.get_real, real_array([0.0] * len(refs))
-            else:
-                fn = inst.get_boolean if kind == "Boolean" else inst.get_integer
-                buf = (ctypes.c_int * len(refs))()
-            self.record_reads.append((fn, inst.handle, vr_array(refs), len(refs), buf, name))
+            buf = (inst.lean.value_type(kind) * len(refs))()
+            self.record_reads.append((inst.lean.bind_get(kind, vr_array(refs), inst.lean.count(len(refs)), buf), name))
             buffers[(name, kind)] = (buf, refs)
         sig_by_name = {sig.name: sig for sig in self.signals}
         plan = []
@@ -471,13 +499,14 @@ class Master:
         tr = st.transfers[j]
         src = self.instances[tr.src]
         src.note_status(status)
-        return _StepFailed(self._describe(src, f"fmi2Get{tr.kind}", t))
+        return _StepFailed(self._describe(src, src.call("Get", tr.kind), t))
 
     def _put_failed(self, st: _Stepper, j: int, t: float, status: int) -> _StepFailed:
         tr = st.transfers[j]
         st.inst.note_status(status)
         extra = "".join(f", {label}" for label in tr.signals)
-        return _StepFailed(self._describe(st.inst, f"fmi2Set{tr.kind} of the inputs from {tr.src}{extra}", t))
+        return _StepFailed(self._describe(st.inst, f"{st.inst.call('Set', tr.kind)} of the inputs from {tr.src}{extra}",
+                                          t))
 
     def _check_finite(self, st: _Stepper, j: int, t: float) -> None:
         """Raise if a Real value just read for a connection is NaN or infinite (the loop calls
@@ -488,13 +517,17 @@ class Master:
                 raise _StepFailed(f"{conn.src}.{conn.src_var} is not finite ({tr.buf[k]!r}) at t = {t:.9g} s, "
                                   f"before it reached {conn.dst}.{conn.dst_var}")
 
+    def _tick_failed(self, st: _Stepper, t: float, call: str, status: int) -> _StepFailed:
+        st.inst.note_status(status)
+        return _StepFailed(self._describe(st.inst, f"the tick of its clock ({call})", t))
+
     def _step_failed(self, st: _Stepper, t: float, status: int = 3) -> _StepFailed:
         """The exception for an fmi2DoStep from t that returned ``status`` > fmi2Warning:
         :class:`_Terminated` if the FMU discarded the step to end the simulation."""
         st.inst.note_status(status)
         if status == FMI2_DISCARD and st.inst.terminate_requested() and not st.inst.logged_error():
             return _Terminated(st.inst.name, t)
-        return _StepFailed(self._describe(st.inst, "fmi2DoStep", t))
+        return _StepFailed(self._describe(st.inst, st.inst.call("DoStep"), t))
 
     def _plain_steps(self, n0: int, n1: int, sig_next: int) -> int:
         """The stepping loop as ordinary Python, for reading and debugging: the same calls, in the same
@@ -516,12 +549,12 @@ class Master:
                     for st in due:
                         self._write_inputs(st, t)
                     for st in due:
-                        self._do_step(st, t)
+                        self._do_step(st, n, t)
                 else:  # Gauss-Seidel: component by component, the freshest outputs
                     for st in due:
                         self._read_inputs(st, t)
                         self._write_inputs(st, t)
-                        self._do_step(st, t)
+                        self._do_step(st, n, t)
         except _StepFailed as exc:
             exc.n = n
             raise
@@ -549,8 +582,14 @@ class Master:
         if st.pending:
             self._flush_pending(st, t)
 
-    def _do_step(self, st: _Stepper, t: float) -> None:
+    def _do_step(self, st: _Stepper, n: int, t: float) -> None:
+        if st.tick and n % st.tick == 0:
+            call, status = st.inst.lean.tick()
+            if status > 1:
+                raise self._tick_failed(st, t, call, status)
         status = st.do_step(st.handle, t, st.step_size, 1)
+        if status <= 1 and st.flags is not None and st.flags[1]:  # FMI 3.0: terminateSimulation
+            status = FMI2_DISCARD
         if status > 1:
             raise self._step_failed(st, t, status)
 
@@ -558,8 +597,8 @@ class Master:
     def _row(self, n: int, t: float | None = None) -> list:
         """The row of t_n (``t``: of that time instead, the variables and signals as they are)."""
         t = n * self.h if t is None else t
-        for fn, handle, vrs, cnt, buf, name in self.record_reads:
-            status = fn(handle, vrs, cnt, buf)
+        for read, name in self.record_reads:
+            status = read()
             if status > 1:
                 self.instances[name].note_status(status)
                 raise _StepFailed(self._describe(self.instances[name], "reading the recorded variables", t))

@@ -10,6 +10,7 @@ each function's docstring citing its equations:
   inverter's dead time, saturation and temperature;
 * ``control``: the controller (eqs 14-20), the dead-time compensation and the control unit's step;
 * ``observers``: the EKFs (eqs 23-27, A2-A33) and the magnet flux adaptation;
+* ``adaptation``: psi and R_s tracked while driving, a model-reference estimator (eqs AD1-AD6);
 * ``references``: the reference generator (torque, speed and voltage to the current references: MTPA,
   field weakening, MTPV, the current and torque limits), the regenerative-braking limit and the friction
   brake's share;
@@ -47,7 +48,8 @@ the last bit).
 
 from __future__ import annotations
 
-from .control import *  # noqa: F403 - the package's interface is all its kernels and constants
+from .adaptation import *  # noqa: F403 - the package's interface is all its kernels and constants
+from .control import *  # noqa: F403
 from .fmu import *  # noqa: F403
 from .injection import *  # noqa: F403
 from .jit import CACHE, JIT  # noqa: F401 - how this copy was loaded (pmsm_ev.accel reads it)

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import math
 
+from .adaptation import adapt_period
 from .jit import F as _F
 from .jit import V as _V
 from .jit import kernel
 from .jit import sig as _sig
 from .layout import (
+    C_ADAPT,
     C_ADVANCE,
     C_BAT_LINK,
     C_BRAKE_GAIN,
@@ -443,5 +445,7 @@ def control_step(s, c, i_alpha, i_beta, omega_ref, theta_meas, omega_meas):
     v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_hat)  # (15)-(20)
     v_alpha, v_beta = modulate(c, v_d, v_q, theta_ctrl, omega_hat, True)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
+    if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6)
+        adapt_period(s, c, i_alpha, i_beta, theta_ctrl, omega_hat, 1.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4])

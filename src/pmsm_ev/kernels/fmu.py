@@ -37,6 +37,8 @@ from .jit import F as _F
 from .jit import V as _V
 from .jit import sig as _sig
 from .layout import (
+    ADAPT_OFF,
+    C_ADAPT,
     C_I_D_REF,
     C_K_T,
     MODE_EKF,
@@ -51,10 +53,20 @@ from .layout import (
     PLANT_ENERGY,
     PLANT_IO,
     PLANT_PARAMS,
+    S_AD_PSI,
+    S_AD_RS,
+    S_AD_SEEN,
+    S_AXIS_F,
     S_HOLD,
     S_I_DREF,
     S_I_MAG,
     S_I_QREF,
+    S_ID_ACC,
+    S_ID_BLIND,
+    S_ID_NOISE_F,
+    S_ID_OFS,
+    S_ID_RS,
+    S_ID_Y,
     S_MODE,
     S_REGION,
     S_T_BRAKE,
@@ -83,6 +95,7 @@ from .layout import (
     UIO_REF_REGION,
     UIO_REFERENCE,
     UIO_SAVE,
+    UIO_STATUS,
     UIO_T0,
     UIO_T_BRAKE,
     UIO_T_L_HAT,
@@ -169,6 +182,36 @@ def unit_reference_outputs(io, s, c):
     return c[C_I_D_REF], c[C_K_T] * s[S_I_QREF], 0.0
 
 
+@kernel(_sig("void", _V, _V, _V))
+def unit_status_outputs(io, s, c):
+    """Write the outputs ``UNIT_STATUS_OUTPUTS`` of the state ``s`` into the buffer ``io`` from ``UIO_STATUS`` on
+    (``ControlUnit.psi_est`` ... ``axis_cos`` read them there; the compiled step writes them after each step): the
+    adaptation's estimates and flags (0 with adaptation off, as before the first step); the identification's values, 0
+    for a unit without injection (``UIO_KIND``) and until identified; L_q_id / L_d_id; sensor b's offset from the
+    alpha, beta ones (i_beta = (i_a + 2 i_b) / sqrt 3); cos 2e of the axis in FOC on the injection, else 0."""
+    o = UIO_STATUS
+    adapt = c[C_ADAPT] != ADAPT_OFF
+    io[o] = s[S_AD_PSI] if adapt else 0.0
+    io[o + 1] = s[S_AD_RS] if adapt else 0.0
+    io[o + 2] = s[S_AD_SEEN]
+    io[o + 3] = s[S_AD_SEEN + 1]
+    inj = io[UIO_KIND] == UNIT_KIND_INJECTION
+    y_d = s[S_ID_Y] if inj else 0.0
+    y_q = s[S_ID_Y + 1] if inj else 0.0
+    l_d = 1.0 / y_d if y_d > 0.0 else 0.0
+    l_q = 1.0 / y_q if y_q > 0.0 else 0.0
+    io[o + 4] = l_d
+    io[o + 5] = l_q
+    io[o + 6] = l_q / l_d if l_d > 0.0 else 0.0
+    io[o + 7] = s[S_ID_RS] if inj else 0.0
+    io[o + 8] = s[S_ID_NOISE_F] if inj else 0.0
+    io[o + 9] = s[S_ID_OFS] if inj else 0.0
+    io[o + 10] = 0.5 * (math.sqrt(3.0) * s[S_ID_OFS + 1] - s[S_ID_OFS]) if inj else 0.0
+    io[o + 11] = s[S_ID_ACC] if inj else 0.0
+    io[o + 12] = s[S_ID_BLIND] if inj else 0.0
+    io[o + 13] = s[S_AXIS_F] if inj and s[S_MODE] == MODE_INJECTION else 0.0
+
+
 @kernel(_sig("int64", _F, _F, _F, _F))
 def sample_instant(t, t0, dt, tolerance):
     """The index of the first sample instant t0 + k dt at or after t of a controller FMU's sample clock, an
@@ -233,6 +276,7 @@ def unit_fmu_step(io, s, c, t, h):
         io[UIO_K_NEXT] = k_end
     io[UIO_T_BRAKE] = unit_t_brake(io, s)
     io[UIO_I_DREF], io[UIO_T_REF], io[UIO_REF_REGION] = unit_reference_outputs(io, s, c)
+    unit_status_outputs(io, s, c)
     return STEP_TAKEN
 
 

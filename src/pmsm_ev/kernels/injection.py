@@ -18,7 +18,8 @@ what the fundamental adds, the same in both half-waves, and doubles the injectio
     D = (i_k - i_(k-m)) - (i_(k-m) - i_(k-2m)) = m dt (v_1 - v_2) L^-1 e_d,             (I2)
 
 v_1, v_2 the signed voltages of the last two half-waves. ``demodulate`` returns D_q / (m dt (v_1 - v_2)
-Y_x) = sin 2e, the angle error signal, and D_d / (m dt (v_1 - v_2)), the d axis's admittance (the
+Y_x) = sin 2e, the angle error signal (Y_x the motor's as identified at enable, ``error_gain``), and
+D_d / (m dt (v_1 - v_2)), the d axis's admittance (the
 polarity test's measure, larger where the d axis saturates). The error signal sees the axis, not its
 direction (sin 2e is the same at e and e + pi): the polarity is the modes' test.
 
@@ -64,6 +65,7 @@ from .layout import (
     S_INJ_SKIP,
     S_INJ_V1,
     S_INJ_V2,
+    S_INJ_YX,
     S_TRK,
 )
 from .transforms import park, wrap_angle
@@ -91,6 +93,15 @@ def start_injection(s):
 
 
 @kernel()
+def error_gain(s, c):
+    """The error signal's gain Y_x of (I1) [1/H]: the identified one (``S_INJ_YX``, ``kernels.modes.identify``)
+    once the unit has measured its motor, else the model's (``C_INJ_Y``). With the measured gain the error
+    signal is sin 2e itself, so that the tracking observer keeps the poles its gains were placed for (I3)."""
+    y = s[S_INJ_YX]
+    return y if y > 0.0 else c[C_INJ_Y]
+
+
+@kernel()
 def demodulate(s, c, i_alpha, i_beta, theta):
     """At the end of a half-wave (every m periods): the second difference (I2) of the currents at the
     last three half-wave ends, in the frame at ``theta`` (the injection's axis), turned into the angle
@@ -107,7 +118,7 @@ def demodulate(s, c, i_alpha, i_beta, theta):
     if s[S_INJ_SKIP] > 0.0:
         s[S_INJ_SKIP] -= 1.0
     elif abs(v1 - s[S_INJ_V1]) >= _LEAST_STEP * 2.0 * c[C_INJ_V]:
-        s[S_INJ_ERR] = (d1_q - d2_q) / (step * c[C_INJ_Y])
+        s[S_INJ_ERR] = (d1_q - d2_q) / (step * error_gain(s, c))
         s[S_INJ_ADM] = (d1_d - d2_d) / step
         s[S_INJ_NEW] = 1.0
     s[S_INJ_I2] = s[S_INJ_I1]

@@ -315,6 +315,19 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_V_OUT_ALPHA", 1, "with dead-time compensation: the vector sent to the inverter, alpha [V]"),
     ("S_V_OUT_BETA", 1, "... beta [V]"),
     ("S_PSI_RATIO", 1, "with psi adaptation: the EKF's magnet flux over the nominal psi [-]"),
+    # adaptation while driving (``C_ADAPT``; ``pmsm_ev.kernels.adaptation``): the model-reference estimates of psi
+    # and R_s, their least-squares sums and the last period's frame, currents and held vector
+    ("S_AD_PSI", 1, "the estimated magnet flux psi_hat [Wb] (eq AD3)"),
+    ("S_AD_RS", 1, "the estimated stator resistance R_s_hat [Ohm] (eq AD4)"),
+    ("S_AD_SUM", 4, "the exponentially weighted sums of the two least-squares fits: omega_e^2, omega_e y_psi "
+                    "[V^2, V^2/Wb ...], |i|^4, |i|^2 y_R (AD3, AD4)"),
+    ("S_AD_PREV", 3, "the last period's frame angle [rad] and currents i_d, i_q in it [A]"),
+    ("S_AD_V", 2, "the vector held over the present period (alpha, beta) [V]: the command kept at the end of the "
+                  "last period"),
+    ("S_AD_RATE", 2, "d and q current rates, low-pass filtered (AD_RATE_FILTER) [A/s]: the quasi-steady test"),
+    ("S_AD_SEEN", 2, "1.0 in a period where psi (first) and R_s (second) were observable and their fits updated"),
+    ("S_AD_PRIMED", 2, "1.0 once a period has left S_AD_PREV, S_AD_V (first); 1.0 once R_s_hat was seeded on the "
+                       "identification's R_s_id (second)"),
     # the sensorless unit's synchronism (``sync_guard``, ``slip_detector``)
     ("S_GUARD", 1, "the load-angle guard holding the I-f vector back (GUARD_SOFT, GUARD_HARD; 0 = not)"),
     ("S_LOS", 1, "I-f: how long the unit has been in trouble (the slip beyond its bound, or the limit reached) [s]"),
@@ -387,7 +400,43 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_RUNAWAY_T", 1, "alignment: how long |omega_hat| has been above C_ALIGN_SLIP [s]"),
     ("S_ALIGN_SPEED", 1, "alignment: the rotor's speed the back-EMF shows on the vector's q axis less the sweep's, "
                          "low-pass filtered (the alignment damping's input) [rad/s]"),
-), size=199)
+    # the injection strategy's identification at enable and its axis and polarity detectors
+    # (``kernels.modes``: ``identify``, ``detect_injection_lost``)
+    ("S_INJ_YX", 1, "the error signal's gain, Y_x = (1/L_d - 1/L_q) / 2 [1/H]: C_INJ_Y until the identification "
+                    "measures it (``demodulate``)"),
+    ("S_ID_SUM", 8, "the identification: sums of the d admittance on the found d axis at the square wave's amplitude "
+                    "and at twice it, on the q axis at both [1/H], how many answers each [-]"),
+    ("S_ID_Y", 2, "the identified incremental admittances 1/L_d, 1/L_q at zero current [1/H] (0: not identified)"),
+    ("S_ID_YE", 2, "... as the square wave at the amplitude S_INJ_VA sees them, the inverter's dead time included "
+                   "[1/H]"),
+    ("S_INJ_VA", 1, "the square wave's amplitude after the identification [V] (0: C_INJ_V)"),
+    ("S_ID_DONE", 1, "1.0 once the first acquisition after enable has run its identification"),
+    ("S_RS_SUM", 6, "the R_s test: sums of the d command [V] and of the d current [A] at the lower level, the "
+                    "same at the upper, how many samples each [-]"),
+    ("S_ID_RS", 1, "the identified stator resistance [Ohm] (0: not identified)"),
+    ("S_PARKED", 1, "1.0 while a blind unit (S_ID_BLIND) holds the car at a stop on the friction brake and finds the "
+                    "angle afresh for the restart"),
+    ("S_ID_BLIND", 1, "1.0 where the identified saliency L_q / L_d is below C_SALIENCY_MIN: the injection cannot "
+                      "see the axis well enough"),
+    ("S_AXIS_F", 1, "cos 2e from the d admittance and the identified admittances, low-pass filtered [-]"),
+    ("S_DISAGREE_V", 2, "cos and sin of the injection's angle less the EKF's, low-pass filtered (S_DISAGREE_F is "
+                        "their angle: no wrap at +-pi) [-]"),
+    ("S_ID_NOISE", 8, "the identification: sums of the answers' q second difference, its sign the half-wave's [A], "
+                      "on each of its four phases, then of its square [A^2]"),
+    ("S_OFS_SUM", 3, "the offset window at enable (no voltage, no current): sums of the measured i_alpha, i_beta "
+                     "[A], how many samples [-]"),
+    ("S_ID_OFS", 2, "the current sensors' offset measured at enable, alpha and beta [A] (subtracted from the "
+                    "measurements from then on)"),
+    ("S_ID_NOISE_F", 1, "the current measurement's noise floor from the identification's answers: a phase sensor's "
+                        "sigma [A] (0: not identified)"),
+    ("S_ID_ACC", 1, "the angle accuracy injection gives at a stop, rms [rad] (eq ID3; 0: not identified)"),
+    # the injection strategy's back-EMF detector (``kernels.modes.emf_residual``, eqs LS1-LS2)
+    ("S_EMF_F", 1, "the back-EMF the current PIs' integrators carry beyond the frame's speed's, as a speed (eq LS1), "
+                   "low-pass filtered [rad/s]"),
+    ("S_EMF_T", 1, "how long it has been beyond its bound (eq LS2) [s]"),
+    ("S_EMF_SEEN", 1, "the rotor's speed the current loops see: all the back-EMF they carry as a speed (eq LS2), "
+                      "low-pass filtered [rad/s]"),
+), size=261)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
@@ -453,6 +502,17 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_DTC_I0", 1, "... its soft sign's current scale [A] (``ControllerParams.dead_time_comp_i0``)"),
     ("C_PSI_ADAPT", 1, "psi adaptation of the stationary-frame EKF5: gain [1/s] (0 = off; ``EkfParams.psi_adapt``)"),
     ("C_PSI_ADAPT_W", 1, "... the least |omega_hat| it adapts at [rad/s]"),
+    # adaptation while driving (``ControllerParams.adaptation``; ``pmsm_ev.kernels.adaptation``)
+    ("C_ADAPT", 1, "ADAPT_OFF, ADAPT_OBSERVE (the estimates computed, not used), ADAPT_USE (the controller's model "
+                   "takes them)"),
+    ("C_AD_GAIN", 1, "dt / ControllerParams.adapt_time: the least-squares sums' forgetting per period [-]"),
+    ("C_AD_PSI_W", 1, "the least |omega_e| at which psi is observable [rad/s, electrical]"),
+    ("C_AD_RS_W", 1, "the largest |omega_e| at which R_s is observable [rad/s, electrical]"),
+    ("C_AD_RS_I", 1, "the least |i| at which R_s is observable [A]"),
+    ("C_AD_RATE", 1, "the largest filtered |di/dt| of a quasi-steady period [A/s]"),
+    ("C_AD_PSI0", 1, "the model's psi: where psi_hat starts [Wb]"),
+    ("C_AD_RS0", 1, "the model's R_s: where R_s_hat starts (until the identification's R_s_id) [Ohm]"),
+    ("C_AD_NOM", 2, "the EKF model's psi-proportional constants at C_AD_PSI0: C_C_WPSI, C_C_TPSI"),
     # the sensorless unit's I-f sizing and synchronism (``pmsm_ev.params.StartupParams``)
     ("C_J_IF", 1, "the EKF model's inertia [kg m^2]"),
     ("C_E_MAX", 1, "the design load angle [rad]"),
@@ -540,7 +600,20 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                    "at most this"),
     ("C_P_DIS", 1, "the battery's discharge power [W] (input P_discharge_max): a motoring torque's power at the shaft "
                    "at most this"),
-), size=148)
+    # the injection strategy's identification and detectors (``pmsm_ev.params.InjectionParams``)
+    ("C_ID_TIME", 1, "the identification's time on each axis, d then q [s] (0: none, the model's admittances)"),
+    ("C_INJ_V_MAX", 1, "the square wave's largest amplitude, that the identified motor's answer may ask for [V]"),
+    ("C_RS_I", 1, "the R_s test's upper d current [A] (the lower: half of it)"),
+    ("C_RS_TIME", 1, "the R_s test's time at each level [s] (0: no test)"),
+    ("C_SALIENCY_MIN", 1, "the least identified saliency L_q / L_d the injection is trusted at [-]"),
+    ("C_AXIS_COS", 1, "the tracking observer has lost the axis where cos 2e from the d admittance stays below this "
+                      "[-]"),
+    ("C_OFS_TIME", 1, "the offset window at enable: no voltage, the sensors' mean is their offset [s] (0: none)"),
+    ("C_ANGLE_MAX", 1, "the largest angle accuracy (eq ID3) at which the injection is trusted [rad]"),
+    ("C_EMF_SPEED", 1, "the back-EMF detector: the unexplained back-EMF's speed beyond which the frame has lost the "
+                       "rotor, at a standing frame [rad/s] (eq LS2)"),
+    ("C_EMF_REL", 1, "... plus this share of the rotor's speed the current loops see [-]"),
+), size=168)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
@@ -642,9 +715,16 @@ UNIT_IO_LAYOUT = Layout("controller FMU buffer", "UIO_", (
     ("UIO_I_DREF", 1, "output i_dref: ControlUnit.i_dref of the state [A]"),
     ("UIO_T_REF", 1, "output T_ref: ControlUnit.T_ref of the state [N m]"),
     ("UIO_REF_REGION", 1, "output ref_region: ControlUnit.ref_region of the state"),
+    # the identification's and the adaptation's outputs of the state (``unit_status_outputs``, UNIT_STATUS_OUTPUTS),
+    # written after each step likewise: read from here with no Python
+    ("UIO_STATUS", 14, "outputs psi_est ... axis_cos (UNIT_STATUS_OUTPUTS, in that order) of the state"),
     # scratch
     ("UIO_SAVE", UNIT_STATE, "the state vector before the step (restored when a kernel raises)"),
-), size=37 + UNIT_STATE)
+), size=51 + UNIT_STATE)
+#: the controller FMUs' outputs of the identification at enable and the adaptation while driving, in the order of
+#: their slots from ``UIO_STATUS`` (``pmsm_ev.kernels.unit_status_outputs``)
+UNIT_STATUS_OUTPUTS = ("psi_est", "R_s_est", "psi_observable", "R_s_observable", "L_d_id", "L_q_id", "saliency_id",
+                       "R_s_id", "noise_id", "offset_a_id", "offset_b_id", "angle_accuracy", "blind", "axis_cos")
 PLANT_IO_LAYOUT.export(globals())
 UNIT_IO_LAYOUT.export(globals())
 PLANT_IO = PLANT_IO_LAYOUT.size  #: length of the plant FMU's buffer
@@ -663,6 +743,10 @@ FAULT_NONE, FAULT_RECOVERING, FAULT_LATCHED = 0.0, 1.0, 2.0
 #: observers (``C_OBSERVER``)
 OBS_EKF5, OBS_EKF4, OBS_EKF5AB, OBS_SENSORED = 0, 1, 2, 3
 OBSERVER_CODES = {"ekf5": OBS_EKF5, "ekf4": OBS_EKF4, "ekf5ab": OBS_EKF5AB, "sensored": OBS_SENSORED}
+
+#: adaptation while driving (``C_ADAPT``, ``ControllerParams.adaptation``)
+ADAPT_OFF, ADAPT_OBSERVE, ADAPT_USE = 0.0, 1.0, 2.0
+ADAPT_CODES = {"off": ADAPT_OFF, "observe": ADAPT_OBSERVE, "use": ADAPT_USE}
 
 #: the reference generator's modes (``C_REF_MODE``, ``ControllerParams.reference``)
 REF_PAPER, REF_MTPA, REF_FW = 0.0, 1.0, 2.0

@@ -42,8 +42,12 @@ EV_SLOW = 6.0  #: the speed fell below C_BLEND_HI - C_BLEND_HYST: the injection 
 EV_INJECTION_LOST = 7.0  #: the tracking observer's angle error stayed beyond C_INJ_LOS_ANGLE
 EV_DISAGREE = 8.0  #: in the blend, the EKF's angle stayed that far from the tracking observer's
 EV_EKF_LOST = 9.0  #: the EKF's current innovation stayed beyond C_EKF_LOS_I
+EV_FLIPPED = 10.0  #: in the blend, the EKF's angle stayed more than pi/2 from the tracking observer's: a pi slip
+EV_BLIND_STOP = 25.0  #: a blind unit (its saliency below C_SALIENCY_MIN) at a stop: park the car, find the angle afresh
+EV_STILL_PARKED = 26.0  #: an acquisition over while parked and the reference still 0: another one
+EV_EMF_LOST = 27.0  #: the current loops carry a back-EMF the frame's speed does not explain (eqs LS1-LS2)
 EVENT_NAMES = ("none", "acquired", "polarity right", "polarity flipped", "polarity unresolved", "fast", "slow",
-               "injection lost", "disagree", "EKF lost")
+               "injection lost", "disagree", "EKF lost", "flipped")
 
 # -- entry actions --------------------------------------------------------------------------------
 A_ACQUIRE = 0.0  #: start the acquisition afresh (``enter_acquire``)
@@ -56,6 +60,9 @@ A_INJECTION_ON = 6.0  #: the injection on again, the tracking observer on the EK
 A_REACQUIRE = 7.0  #: an episode; then as A_ACQUIRE
 A_RESEAT = 8.0  #: an episode; the EKF put on the tracking observer (``reseat``)
 A_RESTART_EKF = 9.0  #: an episode; the EKF's covariance back to an unknown start's (``restart_ekf_search``)
+A_REPOLARIZE = 10.0  #: an episode; the tracking observer turned by pi onto the EKF's polarity (``flip_frame``)
+A_PARK = 25.0  #: the friction brake held, the acquisition afresh (``park_car``)
+A_REACQUIRE_PARKED = 26.0  #: an episode; then as A_PARK: the car stopped on the brake while the angle is found
 
 
 # == the I-f strategy (``kernels.startup``) ======================================================
@@ -65,7 +72,7 @@ A_RESTART_EKF = 9.0  #: an episode; the EKF's covariance back to an unknown star
 # the guard and the sizing then take from when the EKF last saw the rotor turn. The safe state is the
 # fault latched (``S_FAULT``) over the modes, as in the injection strategy: the reference taken as 0.
 
-# -- events (``EV_*``; ``EV_NONE``, 0, none): distinct from the injection strategy's (1 .. 9) --------
+# -- events (``EV_*``; ``EV_NONE``, 0, none): distinct from the injection strategy's (1 .. 10, 25 .. 27) --
 EV_RUNAWAY = 11.0  #: alignment: |omega_hat| above C_ALIGN_SLIP for C_ALIGN_SLIP_TIME (a load beyond the vector)
 EV_ALIGNED = 12.0  #: alignment: its schedule is over, the magnet on the vector
 EV_SLOWED = 13.0  #: EKF: |omega_hat| below C_W_DOWN (no back-EMF to see the angle by much longer)
@@ -85,7 +92,7 @@ IF_EVENT_NAMES = {EV_RUNAWAY: "runaway", EV_ALIGNED: "aligned", EV_SLOWED: "slow
                   EV_STALL_TURNING: "stall, turning", EV_STALL: "stall", EV_STALL_LAST: "stall, none left",
                   EV_STANDS: "stands", EV_VECTOR_TURNS: "vector turns", EV_ROTOR_MOVES: "rotor moves"}
 
-# -- entry actions (``A_*``): distinct from the injection strategy's (0 .. 9) ------------------------
+# -- entry actions (``A_*``): distinct from the injection strategy's (0 .. 10, 25, 26) ---------------
 A_CATCH = 11.0  #: a new episode, I-f on the EKF's angle at the current limit (``catch_runaway``)
 A_START_IF = 12.0  #: the EKF restarted on the aligned vector, at rest (``start_if``)
 A_HANDOVER_DOWN = 13.0  #: the vector left where the current is (``hand_down``)
@@ -116,6 +123,10 @@ TRANSITIONS = (
     (MODE_POLARITY, EV_INJECTION_LOST, MODE_ACQUIRE, A_REACQUIRE),
     (MODE_INJECTION, EV_INJECTION_LOST, MODE_ACQUIRE, A_REACQUIRE),
     (MODE_INJECTION, EV_DISAGREE, MODE_INJECTION, A_RESEAT),
+    (MODE_INJECTION, EV_FLIPPED, MODE_INJECTION, A_REPOLARIZE),
+    (MODE_INJECTION, EV_BLIND_STOP, MODE_ACQUIRE, A_PARK),
+    (MODE_ACQUIRE, EV_STILL_PARKED, MODE_ACQUIRE, A_ACQUIRE),
+    (MODE_INJECTION, EV_EMF_LOST, MODE_ACQUIRE, A_REACQUIRE_PARKED),
     (MODE_INJECTION, EV_FAST, MODE_EKF, A_EKF_ALONE),
     (MODE_EKF, EV_EKF_LOST, MODE_EKF, A_RESTART_EKF),
     (MODE_EKF, EV_SLOW, MODE_INJECTION, A_INJECTION_ON),

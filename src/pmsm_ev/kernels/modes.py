@@ -5,7 +5,10 @@
 Modes (``S_MODE``):
 
 * ``MODE_ACQUIRE``: the square wave on, no current: the rotor's axis from the answers on two axes 45
-  deg apart (``C_ACQ_TIME`` each), then the tracking observer settles (``C_ACQ_SETTLE``);
+  deg apart (``C_ACQ_TIME`` each), then the tracking observer settles (``C_ACQ_SETTLE``); at the first
+  acquisition after enable the unit then measures its motor (``identify``: the d admittance on the found
+  d axis, then on the q axis, ``C_ID_TIME`` each), so that the injection's error signal has the motor's
+  gain, not the data sheet's;
 * ``MODE_POLARITY``: d current pulses of +- ``C_POL_I`` (no torque on the d axis): the sign whose d
   admittance is the larger is the magnet's direction (its saturation);
 * ``MODE_INJECTION``: FOC (eqs 14-20) on the tracking observer's angle and speed, the EKF's blended in
@@ -17,6 +20,26 @@ Each period the detectors (small functions, each of one purpose and timer) retur
 ordered table, and runs the row's entry action. A pair not in the table changes nothing. The mechanism
 is the I-f strategy's too (``kernels.machine``).
 
+A detector that does not judge the estimate by itself (``detect_emf_lost``): the current PIs' integrators carry,
+at steady state, the voltage the motor needs less the decoupling and back-EMF terms the controller adds on the
+frame's speed omega_hat (eqs 19-20); less the resistance's drop, what is left is the back-EMF the frame's speed does
+not explain. A rotor turning at omega under a frame off it by e leaves N omega psi (sin e, cos e) - N omega_hat psi
+(0, 1) there; as a speed
+
+    r = |(I_d - R i_d, I_q - R i_q)| / (N psi)                                                        (LS1)
+
+(I_d, I_q the integrators, i_d, i_q the currents in the frame, R the identified R_s, psi the model's), and the
+frame has lost the rotor where, filtered as the other detectors (``C_LOS_FILTER``), for ``C_INJ_LOS_TIME``
+
+    r_f > C_EMF_SPEED + C_EMF_REL w_f,   w = |(I_d - R i_d, I_q - R i_q + N omega_hat psi)| / (N psi)    (LS2)
+
+w the rotor's speed the current loops see (all the back-EMF they carry, the frame's feed-forward's with it): the
+share of it a magnet that is not the model's leaves unexplained. A frame that spins over a standing rotor leaves
+r = |omega_hat|, w = 0; a rotor turning under a standing frame r = w = |omega|.
+
+It sees a rotor that turns under a frame that stands or turns otherwise, whatever the injection's error signal or
+the EKF (fed by the injection at low speed) say.
+
 The fault output, as the I-f strategy's: a loss of synchronism begins an episode (``FAULT_RECOVERING``),
 which ends after ``C_RECOVER_TIME`` without trouble, or latches the safe state after ``C_FAULT_TIME``:
 stop and hold, closed loop at zero speed (the reference taken as 0). A polarity left unresolved twice
@@ -27,6 +50,7 @@ from __future__ import annotations
 
 import math
 
+from .adaptation import adapt_period
 from .control import (
     current_step,
     modulate,
@@ -41,6 +65,7 @@ from .injection import (
     blended_frame,
     cross_offset,
     demodulate,
+    error_gain,
     fundamental,
     injection_share,
     injection_voltage,
@@ -56,26 +81,39 @@ from .jit import sig as _sig
 from .layout import (
     C_ACQ_SETTLE,
     C_ACQ_TIME,
+    C_AD_RS0,
+    C_ADAPT,
     C_ADVANCE,
+    C_ANGLE_MAX,
+    C_AXIS_COS,
     C_BLEND_HI,
     C_BLEND_HYST,
+    C_BLEND_LO,
     C_DT,
     C_EKF_LOS_EMF,
     C_EKF_LOS_I,
     C_EKF_LOS_TIME,
+    C_EMF_REL,
+    C_EMF_SPEED,
     C_FF,
+    C_HOLD_BRAKE,
     C_I_D_REF,
     C_I_Q_MAX,
+    C_ID_TIME,
     C_INJ_I_MAX,
     C_INJ_LOS_ANGLE,
     C_INJ_LOS_TIME,
     C_INJ_M,
     C_INJ_V,
+    C_INJ_V_MAX,
+    C_INJ_Y,
     C_K_DQN,
     C_K_T,
     C_L_D,
     C_L_Q,
     C_LOS_FILTER,
+    C_N,
+    C_OFS_TIME,
     C_P0,
     C_P0_ALIGNED,
     C_POL_BAND,
@@ -85,7 +123,11 @@ from .layout import (
     C_POL_RAMP,
     C_PSI,
     C_REF_MODE,
+    C_RS_I,
+    C_RS_TIME,
+    C_SALIENCY_MIN,
     C_T_MAX,
+    C_TRK_L,
     FAULT_LATCHED,
     FAULT_NONE,
     FAULT_RECOVERING,
@@ -94,16 +136,33 @@ from .layout import (
     MODE_INJECTION,
     MODE_POLARITY,
     S_ACQ,
+    S_AXIS_F,
     S_BLEND,
     S_CROSS,
     S_DISAGREE_F,
+    S_DISAGREE_V,
     S_EKF_LOS_T,
+    S_EMF_F,
+    S_EMF_SEEN,
+    S_EMF_T,
     S_EPISODE,
     S_EVENT,
     S_FAULT,
     S_HOLD,
+    S_I_D,
     S_I_DL,
+    S_I_Q,
     S_I_QL,
+    S_ID_ACC,
+    S_ID_BLIND,
+    S_ID_DONE,
+    S_ID_NOISE,
+    S_ID_NOISE_F,
+    S_ID_OFS,
+    S_ID_RS,
+    S_ID_SUM,
+    S_ID_Y,
+    S_ID_YE,
     S_INJ_ADM,
     S_INJ_AXIS,
     S_INJ_ERR,
@@ -111,19 +170,27 @@ from .layout import (
     S_INJ_LOS_T,
     S_INJ_NEW,
     S_INJ_SKIP,
+    S_INJ_VA,
+    S_INJ_YX,
     S_INSYNC,
     S_INT_D,
     S_INT_Q,
     S_MODE,
     S_MODE_TIME,
+    S_OFS_SUM,
     S_OMEGA_CTRL,
     S_P,
+    S_PARKED,
     S_POL,
     S_POL_AXIS,
     S_POL_TRIES,
     S_RESID_F,
+    S_RS_SUM,
     S_THETA_CTRL,
     S_TRK,
+    S_V_D,
+    S_V_OUT_ALPHA,
+    S_V_OUT_BETA,
     S_W_INT,
     S_X,
 )
@@ -132,41 +199,253 @@ from .machine import (
     A_EKF_ALONE,
     A_FLIP_TORQUE,
     A_INJECTION_ON,
+    A_PARK,
     A_POLARITY,
     A_REACQUIRE,
+    A_REACQUIRE_PARKED,
+    A_REPOLARIZE,
     A_RESEAT,
     A_RESTART_EKF,
     A_RETRY,
     A_TORQUE,
     EV_ACQUIRED,
+    EV_BLIND_STOP,
     EV_DISAGREE,
     EV_EKF_LOST,
+    EV_EMF_LOST,
     EV_FAST,
+    EV_FLIPPED,
     EV_INJECTION_LOST,
     EV_NONE,
     EV_POLARITY_FLIPPED,
     EV_POLARITY_RIGHT,
     EV_POLARITY_UNRESOLVED,
     EV_SLOW,
+    EV_STILL_PARKED,
     next_mode,
 )
 from .observers import ekf5ab_period
 from .startup import age_episode
 from .transforms import park, wrap_angle
 
-
 # -- the schedules of the acquisition and the polarity test ----------------------------------------
+#: the acquisition's phases (``acquisition_phase``): on the first axis, on the axis 45 deg ahead, the tracking
+#: observer settling, the identification on the found d axis at the square wave's amplitude and at twice it, on
+#: the q axis at both, the R_s test's d current at its lower and its upper level, over
+(PHASE_AXIS0, PHASE_AXIS45, PHASE_SETTLE, PHASE_ID_D, PHASE_ID_D2, PHASE_ID_Q, PHASE_ID_Q2, PHASE_RS1, PHASE_RS2,
+ PHASE_OVER) = range(10)
+#: ... and before them all, at the first acquisition after enable, the offset window: no voltage, no current
+PHASE_OFFSET = 10
+#: eq ID3's noise factor of the tracking observer (I3, three poles at -a): its angle's answer H(s) = (3 a s^2 + 3 a^2 s
+#: + a^3) / (s + a)^3 to the error signal's noise has (1 / pi) int_0^inf |H(j w)|^2 dw = 33 a / 16
+TRACK_NOISE = 33.0 / 16.0
+#: the injection's angle and the EKF's are of opposite polarities where they differ by more than this [rad]:
+#: half a turn of the electrical angle's two candidates 0 and pi (the tracking observer sees the axis, not its
+#: direction; the EKF's back-EMF sees the direction)
+FLIP_ANGLE = 0.5 * math.pi
+
+
 @kernel()
-def acquisition_phase(c, t):
-    """The acquisition's phase at the time ``t`` [s] in it: 0 on the first axis, 1 on the axis 45 deg
-    ahead, 2 the tracking observer settling, 3 over."""
+def identification_time(s, c):
+    """The identification's time on each axis [s]: ``C_ID_TIME`` in the first acquisition after enable, 0 after
+    (a reacquisition, which may find the car rolling, does not measure again)."""
+    return c[C_ID_TIME] if s[S_ID_DONE] == 0.0 else 0.0
+
+
+@kernel()
+def offset_time(s, c):
+    """The offset window's time [s]: ``C_OFS_TIME`` in the first acquisition after enable, 0 after."""
+    return c[C_OFS_TIME] if s[S_ID_DONE] == 0.0 else 0.0
+
+
+@kernel()
+def rs_test_time(s, c):
+    """The R_s test's time at each level [s]: ``C_RS_TIME`` in the first acquisition after enable, 0 after."""
+    return c[C_RS_TIME] if s[S_ID_DONE] == 0.0 else 0.0
+
+
+@kernel()
+def acquisition_phase(s, c, t):
+    """The acquisition's phase (``PHASE_*``) at the time ``t`` [s] in it: on the first axis, on the axis 45 deg
+    ahead (``C_ACQ_TIME`` each), the tracking observer settling (``C_ACQ_SETTLE``), the identification on the
+    found d axis and on the q axis (``identification_time`` each, half of it at half ``C_INJ_V_MAX``, half at all
+    of it), the R_s test's two levels, over; at the first acquisition after enable all of them after the offset
+    window (``offset_time``: ``PHASE_OFFSET``)."""
+    t = t - offset_time(s, c)
+    if t < 0.0:
+        return PHASE_OFFSET
+    half = 0.5 * identification_time(s, c)
+    t_settled = 2.0 * c[C_ACQ_TIME] + c[C_ACQ_SETTLE]
     if t < c[C_ACQ_TIME]:
-        return 0
+        return PHASE_AXIS0
     if t < 2.0 * c[C_ACQ_TIME]:
-        return 1
-    if t < 2.0 * c[C_ACQ_TIME] + c[C_ACQ_SETTLE]:
-        return 2
-    return 3
+        return PHASE_AXIS45
+    if t < t_settled:
+        return PHASE_SETTLE
+    for j in range(4):
+        if t < t_settled + (j + 1) * half:
+            return PHASE_ID_D + j
+    t_rs = rs_test_time(s, c)
+    if t < t_settled + 4.0 * half + t_rs:
+        return PHASE_RS1
+    if t < t_settled + 4.0 * half + 2.0 * t_rs:
+        return PHASE_RS2
+    return PHASE_OVER
+
+
+@kernel()
+def rs_level_time(s, c, t):
+    """The time [s] since the R_s test's present level began (``t`` the time in the acquisition, in
+    ``PHASE_RS1`` or ``PHASE_RS2``)."""
+    t_rs1 = offset_time(s, c) + 2.0 * c[C_ACQ_TIME] + c[C_ACQ_SETTLE] + 2.0 * identification_time(s, c)
+    return t - t_rs1 - (rs_test_time(s, c) if acquisition_phase(s, c, t) == PHASE_RS2 else 0.0)
+
+
+@kernel()
+def identify_rs(s, c):
+    """R_s from the R_s test: the d current held at two levels on the found d axis at standstill (no back-EMF, no
+    change of flux: the d voltage is R_s i_d plus the inverter's dead-time voltage, about the same at both levels
+    where the current keeps its sign), the d PI's integral (its steady voltage, without the proportional part's
+    noise) over the current:
+
+        R_s = (v_2 - v_1) / (i_2 - i_1)                                                         (ID2)
+
+    the difference cancelling the dead-time voltage. Nothing where a level brought no sample or the current did
+    not rise by half the levels' difference (``S_ID_RS`` stays 0)."""
+    n1 = s[S_RS_SUM + 4]
+    n2 = s[S_RS_SUM + 5]
+    if n1 < 1.0 or n2 < 1.0:
+        return
+    di = s[S_RS_SUM + 3] / n2 - s[S_RS_SUM + 1] / n1
+    if not di > 0.25 * c[C_RS_I]:
+        return
+    r = (s[S_RS_SUM + 2] / n2 - s[S_RS_SUM] / n1) / di  # (ID2)
+    if r > 0.0:
+        s[S_ID_RS] = r
+
+
+@kernel()
+def phase_starts(s, c, t, phase):
+    """True in the first period of the acquisition's ``phase`` (the time ``t`` [s] in the acquisition)."""
+    return acquisition_phase(s, c, t - c[C_DT]) != phase
+
+
+@kernel()
+def identify(s, c):
+    """The motor identified from the acquisition's identification phases: the mean d admittance a of the answers
+    on the found d axis and on the q axis, each at the square wave's amplitude V and at 2 V. (I1) at e = 0 and at
+    e = 90 deg gives Y_s + Y_x = 1/L_d and Y_s - Y_x = 1/L_q, the incremental admittances at zero current; the
+    inverter's dead time takes a voltage of about constant size from each half-wave (the ripple crosses zero in
+    its middle, whatever its amplitude), so that a(V) = y (1 - V_e / V), and the difference of the two amplitudes
+    cancels it (as the two levels of a DC test cancel the dead time's voltage in R_s):
+
+        y = (2 V a(2 V) - V a(V)) / (2 V - V) = 2 a(2 V) - a(V)                                   (ID1)
+
+    ``S_ID_BLIND`` says whether the saliency L_q / L_d = y_d / y_q is below ``C_SALIENCY_MIN``. The square wave's
+    amplitude from then on (``S_INJ_VA``) gives the error signal the current per unit of sin 2e the data sheet's
+    motor gives at ``C_INJ_V`` (its noise and the dead time's share the design's), V_a = C_INJ_V C_INJ_Y / Y_x,
+    within [C_INJ_V, C_INJ_V_MAX]; the admittances as the square wave sees them at V_a (the dead time's share
+    with them, (ID1) solved for a(V_a)), ``S_ID_YE``, give the error signal's gain Y_x (``S_INJ_YX``,
+    ``error_gain``) and the axis's cos 2e (``axis_cosine``). Nothing is identified where an amplitude on an axis
+    brought no answer or an admittance that is not positive (no voltage reached the motor): the model's gain
+    and amplitude stay."""
+    for j in range(4):
+        if s[S_ID_SUM + 4 + j] < 1.0:
+            return
+    v = 0.5 * c[C_INJ_V_MAX]  # the lower amplitude (``identification_amplitude``)
+    a_d = s[S_ID_SUM] / s[S_ID_SUM + 4]
+    a_q = s[S_ID_SUM + 2] / s[S_ID_SUM + 6]
+    y_d = 2.0 * s[S_ID_SUM + 1] / s[S_ID_SUM + 5] - a_d  # (ID1)
+    y_q = 2.0 * s[S_ID_SUM + 3] / s[S_ID_SUM + 7] - a_q
+    if not (y_d > 0.0 and y_q > 0.0 and a_d > 0.0 and a_q > 0.0):
+        return
+    s[S_ID_Y] = y_d
+    s[S_ID_Y + 1] = y_q
+    identify_noise(s)
+    s[S_ID_BLIND] = 1.0 if y_d < c[C_SALIENCY_MIN] * y_q else 0.0
+    if y_d > y_q:
+        v_a = min(max(c[C_INJ_V] * c[C_INJ_Y] / (0.5 * (y_d - y_q)), c[C_INJ_V]), c[C_INJ_V_MAX])
+        s[S_INJ_VA] = v_a
+        e_d = y_d - v * (y_d - a_d) / v_a  # a(V_a) of (ID1)
+        e_q = y_q - v * (y_q - a_q) / v_a
+        s[S_ID_YE] = e_d
+        s[S_ID_YE + 1] = e_q
+        if e_d > e_q:
+            s[S_INJ_YX] = 0.5 * (e_d - e_q)
+            s[S_ID_ACC] = angle_accuracy(c, s[S_ID_NOISE_F], v_a, s[S_INJ_YX])
+            if s[S_ID_ACC] > c[C_ANGLE_MAX]:  # too noisy an angle for the injection to hold the car on
+                s[S_ID_BLIND] = 1.0
+        else:  # no error signal at the amplitude the square wave will have
+            s[S_ID_BLIND] = 1.0
+
+
+@kernel()
+def identify_noise(s):
+    """The current measurement's noise floor from the identification's answers: the q part of each answer's second
+    difference D (I2), its sign the half-wave's, scatters about its phase's mean by the sensors' noise n alone, D =
+    n_k - 2 n_(k-1) + n_(k-2) of variance 6 sigma_q^2 (sigma_q the noise along the answer's q direction). The found
+    d axis's phases see it along q, the q axis's along d: over the two, sigma_q^2 = (sigma_alpha^2 + sigma_beta^2) /
+    2 = 4/3 sigma^2 with two phase sensors of sigma each (i_alpha = i_a, i_beta = (i_a + 2 i_b) / sqrt 3). So sigma =
+    sqrt(v / 8), v the four phases' pooled variance; ``S_ID_NOISE_F`` [A]."""
+    ss = 0.0
+    dof = 0.0
+    for j in range(4):
+        n = s[S_ID_SUM + 4 + j]
+        if n > 1.0:
+            ss += s[S_ID_NOISE + 4 + j] - s[S_ID_NOISE + j] * s[S_ID_NOISE + j] / n
+            dof += n - 1.0
+    if dof > 0.0:
+        s[S_ID_NOISE_F] = math.sqrt(max(ss, 0.0) / dof / 8.0)
+
+
+@kernel()
+def angle_accuracy(c, sigma, v_a, y_x):
+    """The rms angle error [rad] the tracking observer keeps at a stop on the injection's answers, from the noise
+    floor ``sigma`` [A] (a phase sensor's), the square wave's amplitude ``v_a`` [V] and the error signal's gain
+    ``y_x`` [1/H] (I1):
+
+        sigma_theta = sigma_q / (V_a Y_x) sqrt(33 a / (16 m dt)),   sigma_q = sqrt(4/3) sigma          (ID3)
+
+    An answer's error signal is D_q / (2 m dt V_a Y_x) = sin 2e, the angle e half its asin; the noise of the answers,
+    their sign the half-wave's, is (1 + z^-1)^2 on white noise of sigma_q (``identify_noise``), 4 sigma_q at the
+    observer's low frequencies, so e's noise is sigma_q / (m dt V_a Y_x) an answer, white at the answers' period m dt;
+    the observer (I3, three poles at -a, a = l1 / 3) passes (1 / pi) int |H|^2 dw = 33 a / 16 of it
+    (``TRACK_NOISE``). Table I's motor, sigma = 1 A, 30 V, a = 50 rad/s: 0.052 rad (measured from 24 start angles:
+    0.05 rad rms)."""
+    if not (y_x > 0.0 and v_a > 0.0):
+        return 0.0
+    m_dt = c[C_INJ_M] * c[C_DT]
+    a = c[C_TRK_L] / 3.0
+    return math.sqrt(4.0 / 3.0) * sigma / (v_a * y_x) * math.sqrt(TRACK_NOISE * a / m_dt)
+
+
+@kernel()
+def identification_amplitude(c, j):
+    """The square wave's amplitude [V] in the identification's phase ``PHASE_ID_D + j``: half ``C_INJ_V_MAX`` and all
+    of it on the found d axis, then on the q axis (ID1: the largest the voltage limit leaves, so that the dead
+    time's voltage and the sensors' noise take the least share)."""
+    return c[C_INJ_V_MAX] * (1.0 if j % 2 == 1 else 0.5)
+
+
+@kernel()
+def injection_amplitude(s, c):
+    """The square wave's full amplitude [V]: the identification's (``S_INJ_VA``) once it has run, else
+    ``C_INJ_V``."""
+    return s[S_INJ_VA] if s[S_INJ_VA] > 0.0 else c[C_INJ_V]
+
+
+@kernel()
+def axis_cosine(s, adm):
+    """cos 2e of the tracking observer's axis error e from a d admittance ``adm`` [1/H] at the square wave's full
+    amplitude and the identified admittances as it sees them (``S_ID_YE``): (I1) adm = Y_s + Y_x cos 2e, clipped
+    to +-1; 1 where the motor is not identified. Independent of the error signal sin 2e: a tracking observer
+    pulled 45 deg or more off the axis shows cos 2e <= 0 whatever its own error signal says."""
+    y_d = s[S_ID_YE]
+    y_q = s[S_ID_YE + 1]
+    if not (y_d > y_q and y_q > 0.0):
+        return 1.0
+    x = (adm - 0.5 * (y_d + y_q)) / (0.5 * (y_d - y_q))
+    return min(max(x, -1.0), 1.0)
 
 
 @kernel()
@@ -211,7 +490,7 @@ def detect_acquired(s, c):
     unresolved stops the unit here)."""
     if s[S_FAULT] == FAULT_LATCHED and s[S_POL_TRIES] >= 2.0:
         return EV_NONE
-    return EV_ACQUIRED if acquisition_phase(c, s[S_MODE_TIME]) == 3 else EV_NONE
+    return EV_ACQUIRED if acquisition_phase(s, c, s[S_MODE_TIME]) == PHASE_OVER else EV_NONE
 
 
 @kernel()
@@ -235,21 +514,34 @@ def detect_polarity(s, c):
 
 
 @kernel()
+def axis_lost(s, c):
+    """The tracking observer has left the rotor's axis by the d admittance (``axis_cosine``, filtered:
+    ``S_AXIS_F``): cos 2e below ``C_AXIS_COS``, in FOC on the injection once the motor is identified. It does not
+    judge the observer by its own error signal, whose gain a mismatched motor changes and which points back to
+    the axis only within 45 deg."""
+    return s[S_MODE] == MODE_INJECTION and s[S_ID_Y] > 0.0 and s[S_AXIS_F] < c[C_AXIS_COS]
+
+
+@kernel()
 def detect_injection_lost(s, c):
     """EV_INJECTION_LOST when the tracking observer's filtered angle error has stayed beyond
-    ``C_INJ_LOS_ANGLE`` for ``C_INJ_LOS_TIME`` (its timer ``S_INJ_LOS_T``): the injection no longer
-    sees the axis it tracks (the saliency gone, or the rotor slipped faster than the observer follows);
-    EV_DISAGREE when, in the blend's first quarter (the square wave at half its amplitude or more:
-    ``injection_share``), the injection's angle and the EKF's (plus the cross-saturation's offset), both
-    against the tracking observer, filtered, have stayed that far apart."""
+    ``C_INJ_LOS_ANGLE`` for ``C_INJ_LOS_TIME`` (its timer ``S_INJ_LOS_T``), or the d admittance has shown its
+    axis lost that long (``axis_lost``): the injection no longer sees the axis it tracks (the saliency gone, or
+    the rotor slipped faster than the observer follows); in the blend's first quarter (the square wave at half
+    its amplitude or more: ``injection_share``), where the injection's angle and the EKF's (plus the
+    cross-saturation's offset), both against the tracking observer, filtered as a vector (``S_DISAGREE_V``: no
+    wrap at +-pi), have stayed that far apart: EV_FLIPPED beyond ``FLIP_ANGLE`` (the tracking observer on the
+    axis's other direction, which the injection cannot see and the back-EMF can), else EV_DISAGREE."""
     w = s[S_BLEND]
-    far = abs(s[S_INJ_ERR_F]) > c[C_INJ_LOS_ANGLE]
+    far = abs(s[S_INJ_ERR_F]) > c[C_INJ_LOS_ANGLE] or axis_lost(s, c)
     apart = 0.0 < w <= 0.25 and abs(s[S_DISAGREE_F]) > c[C_INJ_LOS_ANGLE]
     s[S_INJ_LOS_T] = s[S_INJ_LOS_T] + c[C_DT] if (far or apart) else 0.0
     if s[S_INJ_LOS_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
         return EV_NONE
     s[S_INJ_LOS_T] = 0.0
-    return EV_INJECTION_LOST if far else EV_DISAGREE
+    if far:
+        return EV_INJECTION_LOST
+    return EV_FLIPPED if abs(s[S_DISAGREE_F]) > FLIP_ANGLE else EV_DISAGREE
 
 
 @kernel()
@@ -268,6 +560,54 @@ def detect_ekf_lost(s, c):
 
 
 @kernel()
+def emf_residual(s, c):
+    """The back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed [rad/s]
+    (eq LS1), and the rotor's speed the current loops see, the magnitude of all the back-EMF they carry (that and
+    the frame's own, N omega_hat psi on q) as a speed [rad/s]: the integrators and the currents of the last period
+    in the control frame, less the resistance's drop on the identified R_s (the model's where none), over N psi."""
+    r_s = s[S_ID_RS] if s[S_ID_RS] > 0.0 else c[C_AD_RS0]
+    k = 1.0 / (c[C_N] * c[C_PSI])
+    r_d = k * (s[S_INT_D] - r_s * s[S_I_D])
+    r_q = k * (s[S_INT_Q] - r_s * s[S_I_Q])
+    seen_q = r_q + s[S_OMEGA_CTRL]
+    return math.sqrt(r_d * r_d + r_q * r_q), math.sqrt(r_d * r_d + seen_q * seen_q)
+
+
+@kernel()
+def detect_emf_lost(s, c):
+    """EV_EMF_LOST in FOC on the injection (the blend included), ``C_INJ_LOS_TIME`` after the mode's start (the
+    integrators start from 0 with the torque), when the filtered unexplained back-EMF (eq LS1, ``S_EMF_F``) has
+    stayed beyond ``C_EMF_SPEED`` plus ``C_EMF_REL`` times the rotor's speed the current loops see (eq LS2,
+    ``S_EMF_SEEN``, filtered the same way) for ``C_INJ_LOS_TIME`` (its
+    timer ``S_EMF_T``): the rotor turns under a frame that does not follow it. It does not read the injection's
+    error signal nor the EKF, which at low speed is put on the tracking observer."""
+    r, seen = emf_residual(s, c)
+    s[S_EMF_F] += c[C_LOS_FILTER] * (r - s[S_EMF_F])
+    s[S_EMF_SEEN] += c[C_LOS_FILTER] * (seen - s[S_EMF_SEEN])
+    if s[S_MODE_TIME] < c[C_INJ_LOS_TIME]:
+        s[S_EMF_T] = 0.0
+        return EV_NONE
+    bound = c[C_EMF_SPEED] + c[C_EMF_REL] * s[S_EMF_SEEN]
+    s[S_EMF_T] = s[S_EMF_T] + c[C_DT] if s[S_EMF_F] > bound else 0.0
+    if s[S_EMF_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
+        return EV_NONE
+    s[S_EMF_T] = 0.0
+    return EV_EMF_LOST
+
+
+@kernel()
+def detect_blind_stop(s, c, omega_ref):
+    """EV_BLIND_STOP in FOC on the injection when the unit is blind (``S_ID_BLIND``: the identified saliency below
+    ``C_SALIENCY_MIN``), the driver asks for a stop (the reference 0) and the car is below the blend
+    (``C_BLEND_LO``: the injection alone carries the angle), ``C_INJ_LOS_TIME`` after the mode's start: a
+    tracking observer on so weak an error signal drifts while the car stands, so the car is held on the friction
+    brake and the angle found afresh for the restart (``park_car``)."""
+    if s[S_ID_BLIND] == 0.0 or omega_ref != 0.0 or s[S_MODE_TIME] < c[C_INJ_LOS_TIME]:
+        return EV_NONE
+    return EV_BLIND_STOP if abs(s[S_OMEGA_CTRL]) < c[C_BLEND_LO] else EV_NONE
+
+
+@kernel()
 def detect_speed(s, c, mode, omega):
     """EV_FAST in injection at |omega| >= ``C_BLEND_HI``; EV_SLOW on the EKF below ``C_BLEND_HI`` less
     ``C_BLEND_HYST``; neither within ``C_INJ_LOS_TIME`` of the mode's start (a speed that jumps, as an
@@ -282,15 +622,23 @@ def detect_speed(s, c, mode, omega):
 
 
 @kernel()
-def detect(s, c, mode):
-    """This period's event, by priority: a loss of synchronism first, then the mode's own."""
+def detect(s, c, mode, omega_ref):
+    """This period's event, by priority: a loss of synchronism first, then the mode's own (``omega_ref`` [rad/s]:
+    the speed reference of the period). A parked acquisition (``S_PARKED``) that is over with the reference still
+    0 gives EV_STILL_PARKED: the angle is found again, not held by the tracking observer."""
     if mode == MODE_ACQUIRE:
-        return detect_acquired(s, c)
+        ev = detect_acquired(s, c)
+        return EV_STILL_PARKED if ev == EV_ACQUIRED and s[S_PARKED] != 0.0 and omega_ref == 0.0 else ev
     if mode == MODE_POLARITY:
         ev = detect_injection_lost(s, c)
         return ev if ev == EV_INJECTION_LOST else detect_polarity(s, c)
     if mode == MODE_INJECTION:
         ev = detect_injection_lost(s, c)
+        ev_emf = detect_emf_lost(s, c)
+        if ev == EV_NONE:
+            ev = ev_emf
+        if ev == EV_NONE:
+            ev = detect_blind_stop(s, c, omega_ref)
         return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_OMEGA_CTRL])
     ev = detect_ekf_lost(s, c)
     return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_X + 2])
@@ -302,8 +650,12 @@ def clear_detectors(s):
     """The detectors' timers and filters from zero."""
     s[S_INJ_ERR_F] = 0.0
     s[S_DISAGREE_F] = 0.0
+    s[S_DISAGREE_V] = 1.0
+    s[S_DISAGREE_V + 1] = 0.0
+    s[S_AXIS_F] = 1.0
     s[S_INJ_LOS_T] = 0.0
     s[S_EKF_LOS_T] = 0.0
+    s[S_EMF_T] = 0.0
 
 
 @kernel()
@@ -314,6 +666,13 @@ def enter_acquire(s, c, i_alpha, i_beta):
     seed_fundamental(s, c, i_alpha, i_beta)
     for k in range(4):
         s[S_ACQ + k] = 0.0
+    for k in range(8):
+        s[S_ID_SUM + k] = 0.0
+        s[S_ID_NOISE + k] = 0.0
+    for k in range(3):
+        s[S_OFS_SUM + k] = 0.0
+    for k in range(6):
+        s[S_RS_SUM + k] = 0.0
     s[S_INT_D] = 0.0
     s[S_INT_Q] = 0.0
     s[S_I_DL] = 0.0
@@ -348,9 +707,10 @@ def polarity_frame(s, c):
 @kernel()
 def enter_torque(s, c):
     """FOC on the injection: the speed loop's integral from 0 (the car is at rest, no torque yet), the EKF
-    put on the tracking observer; the hill hold of enable released (``S_HOLD``)."""
+    put on the tracking observer; the hill hold of enable (or a blind unit's park) released (``S_HOLD``)."""
     s[S_W_INT] = 0.0
     s[S_HOLD] = 0.0
+    s[S_PARKED] = 0.0
     trust_injection(s, c)
     clear_detectors(s)
 
@@ -416,6 +776,15 @@ def begin_episode_now(s, c):
 
 
 @kernel()
+def park_car(s, c, i_alpha, i_beta):
+    """A blind unit at a stop: the friction brake asked for (``S_HOLD`` = ``C_HOLD_BRAKE``, as the hill hold at
+    enable), the acquisition afresh (no identification: it ran at enable); the first torque releases both."""
+    s[S_PARKED] = 1.0
+    s[S_HOLD] = c[C_HOLD_BRAKE]
+    enter_acquire(s, c, i_alpha, i_beta)
+
+
+@kernel()
 def enter(s, c, action, i_alpha, i_beta):
     """Run an entry action (``A_*``)."""
     if action == A_ACQUIRE:
@@ -451,6 +820,15 @@ def enter(s, c, action, i_alpha, i_beta):
         begin_episode_now(s, c)
         restart_ekf_search(s, c)
         clear_detectors(s)
+    elif action == A_PARK:
+        park_car(s, c, i_alpha, i_beta)
+    elif action == A_REACQUIRE_PARKED:
+        begin_episode_now(s, c)
+        park_car(s, c, i_alpha, i_beta)
+    elif action == A_REPOLARIZE:
+        begin_episode_now(s, c)
+        flip_frame(s)
+        clear_detectors(s)
 
 
 @kernel()
@@ -467,19 +845,44 @@ def transition(s, c, mode, event, i_alpha, i_beta):
 
 # -- the step ------------------------------------------------------------------------------------
 @kernel()
-def collect(s, c, mode, t, phase, answer):
+def collect(s, c, mode, t, phase, answer, i_d):
     """The measurements of the acquisition and of the polarity test: the answers' sin 2e summed on each of
     the acquisition's axes (and, as it ends, the tracking observer put on the axis they give: 2e =
-    atan2(sin 2e, -(-cos 2e)), and the polarity test's frame with it), the d admittances summed at each sign of
-    the polarity test."""
+    atan2(sin 2e, -(-cos 2e)), and the polarity test's frame with it), the d admittances summed on the found d
+    axis and on the q axis in the identification (and, as it ends, the motor identified: ``identify``), the d
+    admittances summed at each sign of the polarity test."""
     dt = c[C_DT]
     if mode == MODE_ACQUIRE:
         if answer and phase < 2:
             s[S_ACQ + phase] += s[S_INJ_ERR]
             s[S_ACQ + 2 + phase] += 1.0
-        if phase == 1 and t - dt < c[C_ACQ_TIME]:  # the axis jumps by 45 deg: two answers straddle it
+        starts = phase_starts(s, c, t, phase)
+        if (phase == PHASE_RS1 or phase == PHASE_RS2) and rs_level_time(s, c, t) >= 0.5 * c[C_RS_TIME]:
+            j = phase - PHASE_RS1  # the level's second half: the current settled
+            s[S_RS_SUM + 2 * j] += s[S_V_D]  # the last period's d command and the d current it was computed on
+            s[S_RS_SUM + 2 * j + 1] += s[S_I_D]
+            s[S_RS_SUM + 4 + j] += 1.0
+        if answer and PHASE_ID_D <= phase <= PHASE_ID_Q2 and not starts:
+            j = phase - PHASE_ID_D
+            s[S_ID_SUM + j] += s[S_INJ_ADM]
+            s[S_ID_SUM + 4 + j] += 1.0
+            # the answer's q second difference [A], its sign the half-wave's (``identify_noise``)
+            x = s[S_INJ_ERR] * error_gain(s, c) * 2.0 * c[C_INJ_M] * dt * identification_amplitude(c, j)
+            s[S_ID_NOISE + j] += x
+            s[S_ID_NOISE + 4 + j] += x * x
+        if starts and PHASE_ID_D2 <= phase <= PHASE_RS1 and identification_time(s, c) > 0.0:
+            s[S_INJ_SKIP] = 2.0  # the amplitude steps, the axis jumps by 90 deg (to q, back to d)
+        if starts and phase == PHASE_OVER and s[S_ID_DONE] == 0.0:
+            if identification_time(s, c) > 0.0:
+                s[S_INJ_SKIP] = 2.0
+                identify(s, c)
+            identify_rs(s, c)
+            s[S_ID_DONE] = 1.0
+        if starts and phase == PHASE_AXIS0:  # the square wave begins after the offset window
             s[S_INJ_SKIP] = 2.0
-        elif phase == 2 and t - dt < 2.0 * c[C_ACQ_TIME]:  # the axis found: sin 2e and -cos 2e
+        elif starts and phase == PHASE_AXIS45:  # the axis jumps by 45 deg: two answers straddle it
+            s[S_INJ_SKIP] = 2.0
+        elif starts and phase == PHASE_SETTLE:  # the axis found: sin 2e and -cos 2e
             e = 0.0
             if s[S_ACQ + 2] > 0.0 and s[S_ACQ + 3] > 0.0:
                 e = 0.5 * math.atan2(s[S_ACQ] / s[S_ACQ + 2], -s[S_ACQ + 1] / s[S_ACQ + 3])
@@ -529,6 +932,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
        on the EKF FOC on its angle and speed; the square wave added on its axis.
     """
     dt = c[C_DT]
+    i_alpha -= s[S_ID_OFS]  # the sensors' offsets measured at enable (0 before)
+    i_beta -= s[S_ID_OFS + 1]
     innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
     s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
     mode = s[S_MODE]
@@ -538,45 +943,82 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     f_alpha, f_beta = fundamental(s, c, i_alpha, i_beta)
     f_d, f_q = park(f_alpha, f_beta, s[S_TRK])
     injecting = mode != MODE_EKF
-    phase = acquisition_phase(c, t) if mode == MODE_ACQUIRE else 3
+    phase = acquisition_phase(s, c, t) if mode == MODE_ACQUIRE else PHASE_OVER
     answer = injecting and s[S_INJ_NEW] != 0.0
     share = injection_share(s[S_BLEND]) if mode == MODE_INJECTION else 1.0
     e_ekf = wrap_angle(s[S_X + 3] + s[S_CROSS] - s[S_TRK]) if share < 1.0 else 0.0
-    if True:  # the polarity test's frame held where the acquisition put it
-        track(s, c, model_torque(c, f_d, f_q), share, answer and phase >= 2, e_ekf)
-    if answer and phase >= 2 and share > 0.0:
+    # the answers on the found axis correct the tracking observer; through the identification and the R_s test it is
+    # held where the settling left it, at rest (no torque is given, the car is held: ``hold_brake``), so that the
+    # axes measured are the found ones (an observer left to run on a speed the settling had not yet taken out, or
+    # corrected by the weak error signal of a motor with little saliency, drifted 0.5 rad on motor A of issue 47)
+    held = mode == MODE_ACQUIRE and (PHASE_ID_D <= phase <= PHASE_RS2 or phase == PHASE_OFFSET)
+    on_axis = answer and phase >= PHASE_SETTLE and not held
+    if held:
+        seat_tracker(s, s[S_TRK], 0.0, 0.0)
+    else:
+        track(s, c, model_torque(c, f_d, f_q), share, on_axis, e_ekf)
+    if on_axis and share > 0.0:
         e_inj = angle_error(s[S_INJ_ERR])
-        s[S_INJ_ERR_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (e_inj - s[S_INJ_ERR_F])
-        s[S_DISAGREE_F] += c[C_LOS_FILTER] * c[C_INJ_M] * (e_inj - e_ekf - s[S_DISAGREE_F])
-    collect(s, c, mode, t, phase, answer)
+        gain = c[C_LOS_FILTER] * c[C_INJ_M]
+        s[S_INJ_ERR_F] += gain * (e_inj - s[S_INJ_ERR_F])
+        s[S_DISAGREE_V] += gain * (math.cos(e_inj - e_ekf) - s[S_DISAGREE_V])
+        s[S_DISAGREE_V + 1] += gain * (math.sin(e_inj - e_ekf) - s[S_DISAGREE_V + 1])
+        s[S_DISAGREE_F] = math.atan2(s[S_DISAGREE_V + 1], s[S_DISAGREE_V])
+        if mode == MODE_INJECTION and share == 1.0:  # (at the full amplitude, not in the polarity test: its d
+            # current saturates the d axis)
+            s[S_AXIS_F] += gain * (axis_cosine(s, s[S_INJ_ADM]) - s[S_AXIS_F])
+    collect(s, c, mode, t, phase, answer, f_d)
+    if phase == PHASE_OFFSET:  # no voltage, no current: the sensors' mean is their offset
+        s[S_OFS_SUM] += i_alpha
+        s[S_OFS_SUM + 1] += i_beta
+        s[S_OFS_SUM + 2] += 1.0
+    elif mode == MODE_ACQUIRE and s[S_OFS_SUM + 2] > 0.0:  # the window over: subtracted from the next period on
+        s[S_ID_OFS] = s[S_OFS_SUM] / s[S_OFS_SUM + 2]
+        s[S_ID_OFS + 1] = s[S_OFS_SUM + 1] / s[S_OFS_SUM + 2]
+        s[S_OFS_SUM + 2] = 0.0
     # the event and the transition
-    event = detect(s, c, mode)
+    event = detect(s, c, mode, omega_ref)
     s[S_EVENT] = event
     if event != EV_NONE:
         mode = transition(s, c, mode, event, i_alpha, i_beta)
         t = s[S_MODE_TIME]
-    age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0)
+    age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0 or s[S_EMF_T] > 0.0)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
         omega_ref = 0.0
     if c[C_FF] != 0.0:  # the speed loop's feedforward, its slope kept up in every mode
         speed_feedforward(s, c, omega_ref)
     # the mode's control
     offset = 0.0
-    amplitude = c[C_INJ_V]
+    amplitude = injection_amplitude(s, c)
     i_qref = 0.0
     if mode == MODE_ACQUIRE or mode == MODE_POLARITY:  # no torque: the current PIs alone, frame at rest
         theta = s[S_TRK]
         omega_ctrl = 0.0
         i_dref = 0.0
-        if mode == MODE_ACQUIRE and acquisition_phase(c, t) == 1:
+        if mode == MODE_ACQUIRE and acquisition_phase(s, c, t) == PHASE_AXIS45:
             offset = 0.25 * math.pi
+        elif mode == MODE_ACQUIRE and PHASE_ID_D <= acquisition_phase(s, c, t) <= PHASE_ID_Q2:
+            j = acquisition_phase(s, c, t) - PHASE_ID_D  # (ID1): V, 2 V on d, then on q
+            offset = 0.5 * math.pi if j >= 2 else 0.0
+            amplitude = identification_amplitude(c, j)
+        elif mode == MODE_ACQUIRE and PHASE_RS1 <= acquisition_phase(s, c, t) <= PHASE_RS2:
+            # (ID2): the two levels on the polarity test's frame (held where the acquisition put it: the
+            # observer's noise leaks no torque)
+            i_dref = c[C_RS_I] * (0.5 if acquisition_phase(s, c, t) == PHASE_RS1 else 1.0)
+            theta = polarity_frame(s, c)
+            offset = wrap_angle(s[S_TRK] - theta)
+        elif mode == MODE_ACQUIRE and acquisition_phase(s, c, t) == PHASE_OFFSET:
+            amplitude = 0.0  # the inverter's gates off (below: no voltage, no compensation)
         elif mode == MODE_POLARITY:
             i_dref, _, _ = polarity_schedule(c, t)
             theta = polarity_frame(s, c)
             offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the tracking observer's axis
         s[S_CROSS] = 0.0
         i_d, i_q = park(f_alpha, f_beta, theta)
-        v_d, v_q = current_step(s, c, i_dref, 0.0, i_d, i_q, 0.0)
+        if amplitude == 0.0:
+            v_d = v_q = 0.0
+        else:
+            v_d, v_q = current_step(s, c, i_dref, 0.0, i_d, i_q, 0.0)
     elif mode == MODE_INJECTION:  # FOC on the tracking observer, the EKF blended in with the speed
         w = blend_weight(c, s[S_OMEGA_CTRL])
         s[S_BLEND] = w
@@ -588,7 +1030,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             s[S_X + 4] = s[S_TRK + 2]
         theta, omega_ctrl = blended_frame(s, s[S_X + 3], s[S_X + 2], phi)
         offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the injection's axis
-        amplitude = c[C_INJ_V] * injection_share(w)
+        amplitude = injection_amplitude(s, c) * injection_share(w)
         i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl, 1.0 - w)  # within the injection's limit
         i_d, i_q = park(f_alpha, f_beta, theta)
         v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
@@ -615,5 +1057,11 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_OMEGA_CTRL] = omega_ctrl
     fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
+    if phase == PHASE_OFFSET:  # the gates off: nothing reaches the winding, the dead time's compensation neither
+        v_alpha = v_beta = 0.0
+        s[S_V_OUT_ALPHA] = 0.0
+        s[S_V_OUT_BETA] = 0.0
+    if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6), on the found axis in every mode
+        adapt_period(s, c, i_alpha, i_beta, theta, omega_ctrl, 1.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta, omega_ctrl)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+from .adaptation import adapt_period
 from .control import (
     current_step,
     generate_references,
@@ -26,6 +27,7 @@ from .jit import V as _V
 from .jit import kernel
 from .jit import sig as _sig
 from .layout import (
+    C_ADAPT,
     C_ADVANCE,
     C_AGREE_TIME,
     C_AGREE_TOL,
@@ -813,5 +815,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
     v_alpha, v_beta = modulate(c, v_d, v_q, theta_ctrl, omega_ctrl, False)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
+    if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6), in FOC on the EKF only
+        adapt_period(s, c, i_alpha, i_beta, theta_ctrl, omega_ctrl, 1.0 if mode == MODE_EKF else 0.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
             s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta_ctrl, omega_ctrl)

@@ -11,6 +11,7 @@ import numpy as np
 from pmsm_ev.results import BATTERY_COLUMNS, ENERGY_COLUMNS, SENSORLESS_COLUMNS, angle_error
 
 from .energy import battery_metrics, energy_metrics
+from .identification import identification_metrics
 from .rows import rms
 from .sensorless import sensorless_metrics
 from .speed_range import acceleration_figures, behind_figures
@@ -70,6 +71,9 @@ def compute_metrics(r: dict[str, np.ndarray]) -> dict:
     if all(c in r for c in SENSORLESS_COLUMNS):
         m["sensorless"] = sensorless_metrics(r)
         m["synchronism"] = synchronism_metrics(r)
+    ident = identification_metrics(r)
+    if ident is not None:
+        m["identification"] = ident
     if "v_vehicle" in r:  # the whole speed range: where the car fell behind, the data sheet's figures
         behind = behind_figures(r)
         if behind is not None:

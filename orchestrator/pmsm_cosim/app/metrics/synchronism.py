@@ -41,15 +41,21 @@ def slipped_turns(r: dict[str, np.ndarray], pole_pairs: int) -> int:
     polarity test, modes 3 and 4, where the frame jumps onto the rotor's axis and turns by pi when the
     polarity says so): the lead theta_ctrl - theta_e unwrapped row by row with the rotation the
     recorded speeds predict (N (omega_ctrl - omega_m) per second), so that a frame spinning
-    past a standing rotor is counted even when it turns more than pi between rows."""
+    past a standing rotor is counted even when it turns more than pi between rows. Across a stretch of those
+    modes (a blind unit's parked acquisitions at a stop last tens of seconds) the step is the lead's wrapped
+    change alone: the frame was found afresh on the rotor there, and the speeds at the stretch's two edges say
+    nothing of what it did in between (integrated over a 38 s stop, a frame's speed noise of 1 rad/s at its edges
+    counted 14 turns that never were: motor A of issue 47, 67 turns, its frame within 0.8 rad of the rotor in
+    every row)."""
     t, lead = r["time"], r["theta_ctrl"] - r["theta_e"]
     keep = (r["mode"] != 0.0) & (r["mode"] != 3.0) & (r["mode"] != 4.0)
     if np.count_nonzero(keep) < 2:
         return 0
+    rows = np.nonzero(keep)[0]
     t, lead = t[keep], lead[keep]
     rate = pole_pairs * (r["omega_ctrl"][keep] - r["omega_m"][keep])
     dt = np.diff(t)
-    predicted = 0.5 * (rate[1:] + rate[:-1]) * dt
+    predicted = np.where(np.diff(rows) == 1, 0.5 * (rate[1:] + rate[:-1]) * dt, 0.0)
     steps = wrap_angle(np.diff(lead) - predicted) + predicted
     unwrapped = lead[0] + np.concatenate(([0.0], np.cumsum(steps)))
     turns = np.round((unwrapped - wrap_angle(unwrapped)) / (2.0 * np.pi))
