@@ -195,6 +195,8 @@ def held_speed_spec(system: str, kmh: float, stop_time: float, converged: bool =
 def speed_cases(say, work: Path, stop_time: float) -> dict:
     """Case (m), printed: {(system, km/h): (us/step wall, us/step CPU, errors)}."""
     out = {}
+    # the drives' FMUs (the held speeds' systems name FocSensored and FocEkf5AB beside (a)'s and (e)'s)
+    build_all(out_dir=project_fmu_dir(), names=["PmsmEvPlant", "FocSensored", "FocSensorless", "FocEkf5AB"])
     say(f"{'(m) drive at a held speed':<34}{'km/h':>6}{'us/step wall':>14}{'us/step CPU':>13}"
         f"{'speed err km/h':>16}{'angle err rad':>15}")
     for system, at_speed in SPEED_SYSTEMS:
