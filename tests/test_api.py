@@ -215,7 +215,7 @@ def exit_of_a_fresh_process(kind: str, tmp_path: Path) -> tuple[int, str, str]:
     return r.returncode, r.stdout.strip(), r.stderr
 
 
-@pytest.mark.parametrize("repeat", range(4))
+@pytest.mark.parametrize("repeat", [0] + [pytest.param(k, marks=pytest.mark.slow) for k in range(1, 4)])  # again: slow
 def test_a_process_that_simulated_with_compiled_kernels_exits_with_code_0(fmus, tmp_path, repeat):
     code, out, err = exit_of_a_fresh_process("completed", tmp_path)
     assert code == 0, f"exit code {code}: {err[-2000:]}"

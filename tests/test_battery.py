@@ -201,11 +201,15 @@ def test_bad_battery_input_is_refused(change, message):
     assert str(info.value).startswith(message)
 
 
+# the command line's path once in the default run; the other settings' messages are test_bad_battery_input_is_refused's
 @pytest.mark.parametrize("setting,message", [("plant.bat_capacity=0", "bat_capacity must be > 0 Ah"),
-                                             ("plant.bat_ocv_v=288,380,370,390,395,396,397,398,399,400,401",
-                                              "bat_ocv_v (the open-circuit voltage table) is not monotonic"),
-                                             ("plant.bat_soc0=1.5", "bat_soc0 must be in [0, 1]"),
-                                             ("plant.bat_R0=-0.1", "bat_R0 must be finite and >= 0")])
+                                             pytest.param("plant.bat_ocv_v=288,380,370,390,395,396,397,398,399,400,401",
+                                                          "bat_ocv_v (the open-circuit voltage table) is not monotonic",
+                                                          marks=pytest.mark.slow),
+                                             pytest.param("plant.bat_soc0=1.5", "bat_soc0 must be in [0, 1]",
+                                                          marks=pytest.mark.slow),
+                                             pytest.param("plant.bat_R0=-0.1", "bat_R0 must be finite and >= 0",
+                                                          marks=pytest.mark.slow)])
 def test_bad_battery_input_on_the_command_line_is_one_line_and_exit_2(tmp_path, setting, message):
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-c", "from pmsm_cosim.app.cli import entry_point; entry_point()", "run",

@@ -269,6 +269,7 @@ def test_failed_run_is_recorded_and_resume_skips_completed_runs(tmp_path, client
     assert (outcome.ran, outcome.skipped) == (4, 0)
 
 
+@pytest.mark.slow
 def test_local_cluster_of_the_command_and_fmu_choice(tmp_path, capsys):
     """Without --scheduler the command starts (and stops) its own LocalCluster; fmu.ctrl
     takes the shipped controller names."""
