@@ -117,6 +117,10 @@ LOADER_SOURCE = HERE / "fmu_loader.c"
 C_HEADER = HERE / "fmi2_binding.h"
 #: the instance table the lean binding and the FMI 3.0 layer include (instance_table.h)
 INSTANCE_TABLE = HERE / "instance_table.h"
+#: own_directory, which the loader and the FMI 3.0 layer include (own_directory.h)
+OWN_DIRECTORY = HERE / "own_directory.h"
+#: the project's headers every compiled library's key covers (a change in one rebuilds them and the FMUs)
+SHARED_HEADERS = (C_HEADER, INSTANCE_TABLE, OWN_DIRECTORY)
 BINDING_LIBRARY = "pmsm-binding.so"
 #: resources/ file naming the interpreter the FMU was built with (the loader's third choice of a Python)
 BUILT_PYTHON_FILE = "build_python.txt"
@@ -148,13 +152,12 @@ def _compiled(source_path: Path, prefix: str, python_headers: bool, defines: dic
               headers: tuple[Path, ...] = ()) -> tuple[Path | None, str]:
     """``source_path`` compiled into a shared library (``cc``, or ``$CC``; no libpython linked), with ``defines``
     as ``-D`` definitions and the folders of ``headers`` on the include path, kept in the user's cache
-    (``user_cache_dir()/binding/``) under the hash of its source, of ``C_HEADER`` and ``headers``, of the
+    (``user_cache_dir()/binding/``) under the hash of its source, of ``SHARED_HEADERS`` and ``headers``, of the
     definitions (and of the Python headers, if it uses them): (path, "") or (None, why it cannot be built)."""
     flags = [f"-D{name}={value}" for name, value in (defines or {}).items()] + extra_cflags()
     flags += [f"-I{folder}" for folder in dict.fromkeys(str(h.parent) for h in headers)]
     # the headers it includes change it too
-    source = (source_path.read_bytes() + C_HEADER.read_bytes() + INSTANCE_TABLE.read_bytes()
-              + b"".join(h.read_bytes() for h in headers))
+    source = source_path.read_bytes() + b"".join(h.read_bytes() for h in (*SHARED_HEADERS, *headers))
     include = sysconfig.get_paths()["include"] if python_headers else ""
     key = hashlib.sha256(source + include.encode() + " ".join(flags).encode()).hexdigest()[:16]
     folder = user_cache_dir() / "binding"
@@ -440,7 +443,8 @@ def source_hash(name: str) -> str:
     if binding == "lean":
         add("lean_binding.c", LEAN_SOURCE.read_bytes())
         add("fmu_loader.c", LOADER_SOURCE.read_bytes())
-        add("fmi2_binding.h", C_HEADER.read_bytes())
+        for header in SHARED_HEADERS:
+            add(header.name, header.read_bytes())
         add("cflags", " ".join(extra_cflags()).encode())
     for module in sorted(_fmus_modules(script)):
         add(f"fmus/{module}", (HERE / module).read_bytes())
@@ -466,7 +470,7 @@ def _source_signature() -> tuple:
             except OSError:
                 continue
             files.append((str(path), st.st_size, st.st_mtime_ns))
-    for source in (LEAN_SOURCE, LOADER_SOURCE, C_HEADER):
+    for source in (LEAN_SOURCE, LOADER_SOURCE, *SHARED_HEADERS):
         st = source.stat()
         files.append((str(source), st.st_size, st.st_mtime_ns))
     return (_pythonfmu_version(), os.environ.get(ENV_BINDING, ""), os.environ.get(ENV_CFLAGS, ""), tuple(files))

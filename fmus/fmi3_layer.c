@@ -95,17 +95,7 @@ static Stack fmi2;
 static void* loader = NULL;
 static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
 
-/* the directory of this library (with a trailing '/'), or "" */
-static void own_directory(char* out, size_t size)
-{
-    Dl_info self;
-    out[0] = '\0';
-    if (!dladdr((void*)&own_directory, &self) || self.dli_fname == NULL) return;
-    snprintf(out, size, "%s", self.dli_fname);
-    char* slash = strrchr(out, '/');
-    if (slash) slash[1] = '\0';
-    else out[0] = '\0';
-}
+#include "own_directory.h" /* own_directory: the directory of this library */
 
 /* load the FMI 2.0 loader beside this library and its functions, once: 0, or -1 with the reason in `why` */
 static int load_stack(char* why, size_t size)

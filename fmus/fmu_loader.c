@@ -105,17 +105,7 @@ static int is_library(const char* path)
     return strncmp(base, "libpython", 9) == 0 && strstr(base, ".so") != NULL;
 }
 
-/* the directory of this library (with a trailing '/'), or "" */
-static void own_directory(char* out, size_t size)
-{
-    Dl_info self;
-    out[0] = '\0';
-    if (!dladdr((void*)&own_directory, &self) || self.dli_fname == NULL) return;
-    snprintf(out, size, "%s", self.dli_fname);
-    char* slash = strrchr(out, '/');
-    if (slash) slash[1] = '\0';
-    else out[0] = '\0';
-}
+#include "own_directory.h" /* own_directory: the directory of this library */
 
 /* the FMU's resources folder: from the URI the host gives (file:///x, file:/x, percent-encoded), else
  * ../../resources from this library */
