@@ -660,11 +660,7 @@ def build_fmu(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool]
         for module in set(sys.modules) - saved_modules:
             if module.endswith(f"_{tag}") or f"_{tag}." in module:
                 del sys.modules[module]
-        shutil.rmtree(stage, ignore_errors=True)
-        try:
-            (out / ".build").rmdir()
-        except OSError:
-            pass  # another build is using it
+        _drop_stage(out, stage)
     return target, True
 
 
@@ -677,6 +673,15 @@ def _make_stage(out: Path, name: str) -> Path:
         except FileNotFoundError:
             continue
     raise BuildError(f"cannot create a staging directory in {out / '.build'}")
+
+
+def _drop_stage(out: Path, stage: Path) -> None:
+    """Remove a build's staging folder (``_make_stage``) and ``out/.build`` where no other build uses it."""
+    shutil.rmtree(stage, ignore_errors=True)
+    try:
+        (out / ".build").rmdir()
+    except OSError:
+        pass  # another build is using it
 
 
 def _check(fmu: Path, name: str) -> None:
@@ -998,11 +1003,7 @@ def build_fmu3(name: str, out_dir=None, force: bool = False) -> tuple[Path, bool
         _check(staged, name)
         os.replace(staged, target)
     finally:
-        shutil.rmtree(stage, ignore_errors=True)
-        try:
-            (out / ".build").rmdir()
-        except OSError:
-            pass  # another build is using it
+        _drop_stage(out, stage)
     return target, True
 
 
