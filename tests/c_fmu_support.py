@@ -43,3 +43,19 @@ def build_c_fmu(name: str, out_dir: Path, compiler: str) -> Path:
         for src in (f"{name}.c", "fmu_base.h"):
             z.write(C_FMUS / src, f"sources/{src}")
     return fmu
+
+
+def host_steps(text: str) -> dict[str, list[list[float]]]:
+    """{fmu: [[outputs of step k] ...]} of what a C host (tests/c_host.c, tests/c_host3.c) or its Python twin
+    printed: a line "fmu NAME" starts an FMU's steps, a line "k step_status get_status values..." is a step (both
+    statuses OK), the other lines (log lines, counters) are passed over."""
+    runs, current = {}, None
+    for line in text.splitlines():
+        word = line.split(" ", 1)[0]
+        if word == "fmu":
+            current = runs.setdefault(line.split()[1], [])
+        elif word.isdigit():
+            k, step_status, get_status, *values = line.split()
+            assert (step_status, get_status) == ("0", "0"), line
+            current.append([float(v) for v in values])
+    return runs

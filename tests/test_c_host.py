@@ -19,7 +19,7 @@ import fmpy
 import pytest
 
 import pmsm_ev_fmus
-from c_fmu_support import FMI2_HEADERS, c_compiler
+from c_fmu_support import FMI2_HEADERS, c_compiler, host_steps
 from pmsm_ev_fmus import build as fmu_build
 
 pytestmark = pytest.mark.skipif(
@@ -142,18 +142,6 @@ def _calls(text: str) -> dict[str, tuple[int, int]]:
     return calls
 
 
-def _steps(text: str) -> dict[str, list[list[float]]]:
-    """{fmu: [[outputs of step k] ...]} of what a host printed (its log lines and status lines apart)."""
-    runs, current = {}, None
-    for line in text.splitlines():
-        word = line.split(" ", 1)[0]
-        if word == "fmu":
-            current = runs.setdefault(line.split()[1], [])
-        elif word.isdigit():
-            k, step_status, get_status, *values = line.split()
-            assert (step_status, get_status) == ("0", "0"), line
-            current.append([float(v) for v in values])
-    return runs
 
 
 def test_every_fmu_runs_in_a_c_host_with_no_python_set_up_as_in_fmpy(unzipped, host, tmp_path):
@@ -173,7 +161,7 @@ def test_every_fmu_runs_in_a_c_host_with_no_python_set_up_as_in_fmpy(unzipped, h
     reference = subprocess.run([sys.executable, "-c", _FMPY_HOST, str(spec)], capture_output=True, text=True,
                                timeout=300)
     assert reference.returncode == 0, reference.stderr[-3000:]
-    c_runs, py_runs = _steps(done.stdout), _steps(reference.stdout)
+    c_runs, py_runs = host_steps(done.stdout), host_steps(reference.stdout)
     assert sorted(c_runs) == sorted(unzipped)
     for name in unzipped:
         assert f"fmu {name} 2.0 default" in done.stdout
@@ -203,7 +191,7 @@ def test_the_c_host_with_plain_python_kernels_gives_the_same_numbers(unzipped, h
         done = subprocess.run([str(host), str(spec)], capture_output=True, text=True,
                               env=_clean_env(tmp_path, PMSM_EV_JIT=jit), timeout=300)
         assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
-        runs[jit] = (_steps(done.stdout), _calls(done.stdout))
+        runs[jit] = (host_steps(done.stdout), _calls(done.stdout))
     assert runs["0"][0] == runs["1"][0]
     assert runs["1"][1] == {"PmsmEvPlant": (3 * STEPS, 2 * STEPS), "FocSensorless": (3 * STEPS, 3 * STEPS)}
     assert runs["0"][1] == {name: (3 * STEPS, 0) for name in names}
@@ -254,7 +242,7 @@ def test_a_python_named_by_the_user_is_used(plant_alone, host, tmp_path, how):
     done = subprocess.run([str(host), str(spec)], capture_output=True, text=True,
                           env=_clean_env(tmp_path, PATH=str(empty), **extra), timeout=120)
     assert done.returncode == 0, done.stdout[-3000:]
-    steps = _steps(done.stdout)["PmsmEvPlant"]
+    steps = host_steps(done.stdout)["PmsmEvPlant"]
     assert len(steps) == STEPS and all(v == v for row in steps for v in row)
 
 

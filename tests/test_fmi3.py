@@ -801,17 +801,6 @@ for b in blocks:
 """
 
 
-def _c_runs(text: str) -> dict[str, list[list[float]]]:
-    runs, current = {}, None
-    for line in text.splitlines():
-        word = line.split(" ", 1)[0]
-        if word == "fmu":
-            current = runs.setdefault(line.split()[1], [])
-        elif word.isdigit():
-            k, step_status, get_status, *values = line.split()
-            assert (step_status, get_status) == ("0", "0"), line
-            current.append([float(v) for v in values])
-    return runs
 
 
 def test_a_c_host_runs_each_fmi3_unit_with_no_set_up(units, tmp_path):
@@ -823,7 +812,7 @@ def test_a_c_host_runs_each_fmi3_unit_with_no_set_up(units, tmp_path):
     import fmpy
     from fmpy import extract, read_model_description
 
-    from c_fmu_support import c_compiler
+    from c_fmu_support import c_compiler, host_steps
 
     compiler = c_compiler()
     if compiler is None:
@@ -855,7 +844,7 @@ def test_a_c_host_runs_each_fmi3_unit_with_no_set_up(units, tmp_path):
     assert "log " not in c.stdout, c.stdout[:3000]
     py = subprocess.run([sys.executable, "-c", _FMPY3_HOST, str(spec)], capture_output=True, text=True, timeout=600)
     assert py.returncode == 0, py.stderr[-3000:]
-    c_runs, py_runs = _c_runs(c.stdout), _c_runs(py.stdout)
+    c_runs, py_runs = host_steps(c.stdout), host_steps(py.stdout)
     assert sorted(c_runs) == sorted(units[1])
     calls = {line.split()[1]: None for line in c.stdout.splitlines() if line.startswith("fmu ")}
     current = None
