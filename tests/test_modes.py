@@ -493,18 +493,19 @@ def _sums(s, y_d, y_q, v_e, v, n=250):
 @pytest.mark.parametrize("v_e", [0.0, 5.0, 10.0])
 def test_identify_cancels_the_dead_times_voltage_by_two_amplitudes(v_e):
     """(ID1): the admittances found whatever voltage the dead time takes; the amplitude that gives the data
-    sheet's error signal (motor A of the issue: a third of the saliency, 2.7 times the voltage), within its
-    bounds, and the error signal's gain as the square wave sees it there."""
+    sheet's error signal as the square wave sees it (ID4: motor A of the issue, a third of the saliency, 2.7 times
+    the voltage and the dead time's share on top), within its bounds, and the error signal's gain there."""
     _, s, c = _unit()
     y_d, y_q = 1 / 2.2425e-4, 1 / 2.5689e-4
     v = c[k.C_INJ_V]
     _sums(s, y_d, y_q, v_e, 0.5 * c[k.C_INJ_V_MAX])
     k.identify(s, c)
     assert s[k.S_ID_Y:k.S_ID_Y + 2] == pytest.approx([y_d, y_q], rel=1e-12)
-    v_a = v * c[k.C_INJ_Y] / (0.5 * (y_d - y_q))
-    assert v_a == pytest.approx(2.66 * v, rel=0.01) and s[k.S_INJ_VA] == pytest.approx(v_a)
+    v_a = v * c[k.C_INJ_Y] / (0.5 * (y_d - y_q)) + v_e  # a(V) = y (1 - v_e / V): V_a Y_x - v_e Y_x = v C_INJ_Y
+    assert v_a == pytest.approx(2.66 * v + v_e, rel=0.01) and s[k.S_INJ_VA] == pytest.approx(v_a)
     assert s[k.S_ID_YE] == pytest.approx(y_d * (1 - v_e / v_a), rel=1e-12)
     assert s[k.S_INJ_YX] == pytest.approx(0.5 * (y_d - y_q) * (1 - v_e / v_a), rel=1e-12)
+    assert s[k.S_INJ_VA] * s[k.S_INJ_YX] == pytest.approx(v * c[k.C_INJ_Y], rel=1e-12)  # the design's signal
     assert s[k.S_ID_BLIND] == 0.0  # 1.146 >= 1.10
 
 

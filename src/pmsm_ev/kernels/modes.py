@@ -343,10 +343,16 @@ def identify(s, c):
 
     ``S_ID_BLIND`` says whether the saliency L_q / L_d = y_d / y_q is below ``C_SALIENCY_MIN``. The square wave's
     amplitude from then on (``S_INJ_VA``) gives the error signal the current per unit of sin 2e the data sheet's
-    motor gives at ``C_INJ_V`` (its noise and the dead time's share the design's), V_a = C_INJ_V C_INJ_Y / Y_x,
-    within [C_INJ_V, C_INJ_V_MAX]; the admittances as the square wave sees them at V_a (the dead time's share
-    with them, (ID1) solved for a(V_a)), ``S_ID_YE``, give the error signal's gain Y_x (``S_INJ_YX``,
-    ``error_gain``) and the axis's cos 2e (``axis_cosine``). Nothing is identified where an amplitude on an axis
+    motor gives at ``C_INJ_V`` without dead time, C_INJ_V C_INJ_Y, as the square wave sees it: the error signal's
+    gain at V is E(V) = Y_x - B / V with (ID1)'s dead-time share B = V ((y_d - a_d(V)) - (y_q - a_q(V))) / 2, so
+
+        V_a E(V_a) = C_INJ_V C_INJ_Y,   V_a = (C_INJ_V C_INJ_Y + B) / Y_x                          (ID4)
+
+    within [C_INJ_V, C_INJ_V_MAX] (the angle's noise at a stop, eq ID3, then the design's whatever the dead time
+    takes; sized on Y_x alone, a motor whose answers lose a quarter to the dead time at 30 V kept three quarters
+    of the design's signal and was found blind by ID3 at 1.5 A). The admittances as the square wave sees them at
+    V_a ((ID1) solved for a(V_a)), ``S_ID_YE``, give the error signal's gain (``S_INJ_YX``, ``error_gain``) and
+    the axis's cos 2e (``axis_cosine``). Nothing is identified where an amplitude on an axis
     brought no answer or an admittance that is not positive (no voltage reached the motor): the model's gain
     and amplitude stay."""
     for j in range(4):
@@ -364,7 +370,8 @@ def identify(s, c):
     identify_noise(s)
     s[S_ID_BLIND] = 1.0 if y_d < c[C_SALIENCY_MIN] * y_q else 0.0
     if y_d > y_q:
-        v_a = min(max(c[C_INJ_V] * c[C_INJ_Y] / (0.5 * (y_d - y_q)), c[C_INJ_V]), c[C_INJ_V_MAX])
+        b = 0.5 * v * ((y_d - a_d) - (y_q - a_q))  # the dead time's share of the error signal's gain, times V
+        v_a = min(max((c[C_INJ_V] * c[C_INJ_Y] + b) / (0.5 * (y_d - y_q)), c[C_INJ_V]), c[C_INJ_V_MAX])  # (ID4)
         s[S_INJ_VA] = v_a
         e_d = y_d - v * (y_d - a_d) / v_a  # a(V_a) of (ID1)
         e_q = y_q - v * (y_q - a_q) / v_a
