@@ -354,6 +354,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                      "not measured, the motor model's L_d, L_q"),
     "saliency_min": (None, "the least identified saliency L_q / L_d the injection is trusted at (output blind: 1 "
                            "below it)"),
+    "saliency_trust": (None, "a blind unit measures its motor again at every stop; it trusts the injection again "
+                             "where the answers pooled since enable give at least this saliency L_q / L_d"),
     "inj_voltage_max": ("V", "the square wave's largest amplitude: after the identification it is the one whose "
                              "error signal has the data sheet motor's current per unit of sin 2e at inj_voltage"),
     "rs_current": ("A", "the R_s test at enable: the upper d current level (the lower: half of it), on the found d "

@@ -520,6 +520,42 @@ def test_identify_says_blind_below_the_least_saliency_and_bounds_the_amplitude()
     assert s[k.S_ID_BLIND] == 0.0 and s[k.S_INJ_VA] == c[k.C_INJ_V]
 
 
+@pytest.mark.parametrize(("blind", "parked", "measures"), [(0.0, 0.0, False), (0.0, 1.0, False), (1.0, 0.0, False),
+                                                            (1.0, 1.0, True)])
+def test_only_a_blind_units_parked_acquisitions_measure_the_motor_again(blind, parked, measures):
+    """``refining``: after the enable's identification only a blind unit holding the car at a stop runs the
+    identification's phases again (not the offset window or the R_s test), and its acquisition keeps the sums."""
+    _, s, c = _unit()
+    s[k.S_ID_DONE], s[k.S_ID_BLIND], s[k.S_PARKED] = 1.0, blind, parked
+    assert bool(k.refining(s)) is measures
+    assert k.identification_time(s, c) == (c[k.C_ID_TIME] if measures else 0.0)
+    assert k.offset_time(s, c) == 0.0 and k.rs_test_time(s, c) == 0.0
+    s[k.S_ID_SUM:k.S_ID_SUM + 8] = [1.0] * 8
+    k.enter_acquire(s, c, 0.0, 0.0)
+    assert s[k.S_ID_SUM:k.S_ID_SUM + 8] == [blind] * 8  # a blind unit's pooled, a seeing unit's cleared
+
+
+@pytest.mark.parametrize(("parked", "trusted"), [(1.146, False), (1.25, True)])
+def test_a_blind_unit_that_the_pooled_answers_find_salient_is_no_longer_blind(parked, trusted):
+    """The enable's answers read a saliency below ``C_SALIENCY_MIN`` (blind); a parked acquisition's answers pooled
+    with them (four times as many) give the saliency of all: still blind below ``C_SALIENCY_TRUST`` (issue 47's
+    motor A, 1.146: pooled 1.128), trusted above it, the amplitude and the gain from all the answers."""
+    _, s, c = _unit()
+    y_d = 1 / 2.2425e-4
+    _sums(s, y_d, y_d / 1.06, 0.0, 0.5 * c[k.C_INJ_V_MAX])
+    k.identify(s, c)
+    assert s[k.S_ID_BLIND] == 1.0
+    s[k.S_ID_DONE] = 1.0
+    enable = list(s[k.S_ID_SUM:k.S_ID_SUM + 8])
+    _sums(s, y_d, y_d / parked, 0.0, 0.5 * c[k.C_INJ_V_MAX], n=1000)
+    s[k.S_ID_SUM:k.S_ID_SUM + 8] = [a + b for a, b in zip(enable, s[k.S_ID_SUM:k.S_ID_SUM + 8])]
+    k.identify(s, c)
+    pooled = (0.2 / 1.06 + 0.8 / parked) * y_d
+    assert c[k.C_SALIENCY_MIN] < y_d / pooled
+    assert s[k.S_ID_BLIND] == (0.0 if trusted else 1.0) and s[k.S_ID_Y + 1] == pytest.approx(pooled, rel=1e-12)
+    assert s[k.S_INJ_YX] == pytest.approx(0.5 * (y_d - pooled), rel=1e-12)
+
+
 @pytest.mark.parametrize("v_dt", [0.0, 0.3])
 def test_identify_rs_cancels_the_dead_times_voltage_by_two_levels(v_dt):
     """(ID2): the d command's mean R i + v_dt at the two levels gives R whatever the dead time's v_dt; a current
@@ -610,6 +646,7 @@ def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
     ({"low_speed": "injection", "id_time": 0.001}, "id_time"),
     ({"low_speed": "injection", "id_time": -0.05}, "id_time"),
     ({"low_speed": "injection", "saliency_min": 0.9}, "saliency_min"),
+    ({"low_speed": "injection", "saliency_trust": 1.05}, "saliency_trust"),
     ({"low_speed": "injection", "inj_axis_cos": 1.0}, "inj_axis_cos"),
     ({"low_speed": "injection", "inj_voltage_max": 20.0}, "inj_voltage_max"),
     ({"low_speed": "injection", "inj_voltage_max": 120.0}, "inj_voltage_max"),

@@ -405,12 +405,14 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_INJ_YX", 1, "the error signal's gain, Y_x = (1/L_d - 1/L_q) / 2 [1/H]: C_INJ_Y until the identification "
                     "measures it (``demodulate``)"),
     ("S_ID_SUM", 8, "the identification: sums of the d admittance on the found d axis at the square wave's amplitude "
-                    "and at twice it, on the q axis at both [1/H], how many answers each [-]"),
+                    "and at twice it, on the q axis at both [1/H], how many answers each [-] (a blind unit's pooled "
+                    "over its parked acquisitions)"),
     ("S_ID_Y", 2, "the identified incremental admittances 1/L_d, 1/L_q at zero current [1/H] (0: not identified)"),
     ("S_ID_YE", 2, "... as the square wave at the amplitude S_INJ_VA sees them, the inverter's dead time included "
                    "[1/H]"),
     ("S_INJ_VA", 1, "the square wave's amplitude after the identification [V] (0: C_INJ_V)"),
-    ("S_ID_DONE", 1, "1.0 once the first acquisition after enable has run its identification"),
+    ("S_ID_DONE", 1, "1.0 once the first acquisition after enable has run its identification (a blind unit's parked "
+                     "acquisitions run it again: ``refining``)"),
     ("S_RS_SUM", 6, "the R_s test: sums of the d command [V] and of the d current [A] at the lower level, the "
                     "same at the upper, how many samples each [-]"),
     ("S_ID_RS", 1, "the identified stator resistance [Ohm] (0: not identified)"),
@@ -606,6 +608,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_RS_I", 1, "the R_s test's upper d current [A] (the lower: half of it)"),
     ("C_RS_TIME", 1, "the R_s test's time at each level [s] (0: no test)"),
     ("C_SALIENCY_MIN", 1, "the least identified saliency L_q / L_d the injection is trusted at [-]"),
+    ("C_SALIENCY_TRUST", 1, "the least saliency a blind unit's pooled answers must show to trust the injection [-]"),
     ("C_AXIS_COS", 1, "the tracking observer has lost the axis where cos 2e from the d admittance stays below this "
                       "[-]"),
     ("C_OFS_TIME", 1, "the offset window at enable: no voltage, the sensors' mean is their offset [s] (0: none)"),
@@ -613,7 +616,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_EMF_SPEED", 1, "the back-EMF detector: the unexplained back-EMF's speed beyond which the frame has lost the "
                        "rotor, at a standing frame [rad/s] (eq LS2)"),
     ("C_EMF_REL", 1, "... plus this share of the rotor's speed the current loops see [-]"),
-), size=168)
+), size=169)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
