@@ -357,7 +357,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "saliency_trust": (None, "a blind unit measures its motor again at every stop; it trusts the injection again "
                              "where the answers pooled since enable give at least this saliency L_q / L_d"),
     "inj_voltage_max": ("V", "the square wave's largest amplitude: after the identification it is the one whose "
-                             "error signal has the data sheet motor's current per unit of sin 2e at inj_voltage"),
+                             "error signal, the dead time's share made up, has the data sheet motor's current per "
+                             "unit of sin 2e at inj_voltage"),
     "rs_current": ("A", "the R_s test at enable: the upper d current level (the lower: half of it), on the found d "
                         "axis at standstill"),
     "rs_time": ("s", "the R_s test: the time at each level (the second half measured); 0: no test"),

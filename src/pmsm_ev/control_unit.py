@@ -85,7 +85,8 @@ _INJECTION_SLOTS = (
     ("inj_los_angle", _k.C_INJ_LOS_ANGLE), ("inj_los_time", _k.C_INJ_LOS_TIME),
     ("ekf_los_current", _k.C_EKF_LOS_I), ("ekf_los_time", _k.C_EKF_LOS_TIME),
     ("inj_current_limit", _k.C_INJ_I_MAX), ("pol_frame_band", _k.C_POL_BAND), ("id_time", _k.C_ID_TIME),
-    ("saliency_min", _k.C_SALIENCY_MIN), ("saliency_trust", _k.C_SALIENCY_TRUST), ("inj_axis_cos", _k.C_AXIS_COS), ("inj_voltage_max", _k.C_INJ_V_MAX),
+    ("saliency_min", _k.C_SALIENCY_MIN), ("saliency_trust", _k.C_SALIENCY_TRUST), ("inj_axis_cos", _k.C_AXIS_COS),
+    ("inj_voltage_max", _k.C_INJ_V_MAX),
     ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME), ("ofs_time", _k.C_OFS_TIME),
     ("inj_angle_max", _k.C_ANGLE_MAX), ("emf_slip_speed", _k.C_EMF_SPEED), ("emf_slip_rel", _k.C_EMF_REL))
 #: state slots of the sensorless start-up, zeroed by ``reset``

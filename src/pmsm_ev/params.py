@@ -1743,7 +1743,8 @@ class InjectionParams:
     inj_axis_cos: float = -0.5
     #: the square wave's largest amplitude [V] [chosen: 90 V, below half the 208 V voltage limit, the rest for the
     #: current loops at a stop]: after the identification the amplitude is the one whose error signal has the
-    #: current per unit of sin 2e the data sheet's motor gives at ``inj_voltage`` (``pmsm_ev.kernels.identify``):
+    #: current per unit of sin 2e the data sheet's motor gives at ``inj_voltage``, as the square wave sees it (the
+    #: inverter's dead time's share of the answers made up, eq ID4 in ``pmsm_ev.kernels.identify``):
     #: a motor with a third of the saliency gets three times the voltage, so that the sensors' noise and the
     #: inverter's dead time (a voltage of a few V per half-wave, not compensated where the ripple crosses zero)
     #: take no larger a share of the angle than on the data sheet's motor. The d current's ripple grows with it
