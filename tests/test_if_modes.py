@@ -72,7 +72,7 @@ def test_codes_are_distinct_from_the_injection_strategys():
     injection_actions = {row[3] for row in k.TRANSITIONS if row not in IF_ROWS}
     assert injection_events == {k.EV_ACQUIRED, k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED, k.EV_POLARITY_UNRESOLVED,
                                 k.EV_FAST, k.EV_SLOW, k.EV_INJECTION_LOST, k.EV_DISAGREE, k.EV_EKF_LOST, k.EV_FLIPPED,
-                                k.EV_BLIND_STOP, k.EV_STILL_PARKED, k.EV_EMF_LOST}
+                                k.EV_BLIND_STOP, k.EV_STILL_PARKED, k.EV_EMF_LOST, k.EV_CANNOT_SEE}
     assert not injection_events & (set(IF_EVENTS) | set(STAND_EVENTS))
     assert not injection_actions & (set(IF_ACTIONS) | set(STAND_ACTIONS))
     assert k.EV_NONE not in set(IF_EVENTS) | set(STAND_EVENTS)

@@ -19,7 +19,7 @@ from pmsm_ev.params import ControllerParams, InjectionParams, ParameterError
 INJECTION_MODES = (k.MODE_ACQUIRE, k.MODE_POLARITY, k.MODE_INJECTION, k.MODE_EKF)
 EVENTS = (k.EV_ACQUIRED, k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED, k.EV_POLARITY_UNRESOLVED, k.EV_FAST,
           k.EV_SLOW, k.EV_INJECTION_LOST, k.EV_DISAGREE, k.EV_EKF_LOST, k.EV_FLIPPED, k.EV_BLIND_STOP,
-          k.EV_STILL_PARKED, k.EV_EMF_LOST)
+          k.EV_STILL_PARKED, k.EV_EMF_LOST, k.EV_CANNOT_SEE)
 
 
 def _unit(**kw):
@@ -40,16 +40,17 @@ ROWS = tuple(row for row in k.TRANSITIONS if row[1] in EVENTS)
 def test_table_has_one_row_per_pair_and_known_modes_and_actions():
     pairs = [(row[0], row[1]) for row in k.TRANSITIONS]
     assert len(pairs) == len(set(pairs))
-    assert len(ROWS) == 14
+    assert len(ROWS) == 15
     actions = {getattr(k, n) for n in dir(k) if n.startswith("A_")}
     for mode, event, new, action in ROWS:
-        assert mode in INJECTION_MODES and new in INJECTION_MODES
+        # the one way out of the strategy: a unit that cannot see its motor's axis takes the I-f strategy's alignment
+        assert mode in INJECTION_MODES and (new in INJECTION_MODES or (event, new) == (k.EV_CANNOT_SEE, k.MODE_ALIGN))
         assert event in EVENTS
         assert action in actions
 
 
 def test_every_mode_is_reachable_from_the_acquisition():
-    assert reachable(ROWS, k.MODE_ACQUIRE) == set(INJECTION_MODES)
+    assert reachable(ROWS, k.MODE_ACQUIRE) == set(INJECTION_MODES) | {k.MODE_ALIGN}
 
 
 def test_a_pair_not_in_the_table_changes_nothing():
@@ -102,6 +103,36 @@ def test_an_unresolved_polarity_is_tried_again_once_then_latches_without_torque(
     assert s[k.S_FAULT] == k.FAULT_LATCHED
     s[k.S_MODE_TIME] = 10.0  # the acquisition is over, but no torque follows
     assert k.detect_acquired(s, c) == k.EV_NONE
+
+
+def test_a_unit_that_cannot_see_takes_the_if_strategy_from_its_alignment_with_the_brake_released():
+    """Row (MODE_ACQUIRE, EV_CANNOT_SEE, MODE_ALIGN, A_IF_FALLBACK): the I-f strategy for good (``S_IF_FALLBACK``),
+    its state from its start (the alignment's clock, no fault, no episode), the brake and the park let go, the
+    loops' integrators from 0; the identification kept."""
+    u, s, c = _unit()
+    s[k.S_ID_Y:k.S_ID_Y + 2] = [4300.0, 4220.0]
+    s[k.S_CLOCK], s[k.S_EPISODE], s[k.S_PARKED] = 123.0, 1.0, 1.0
+    s[k.S_INT_D], s[k.S_INT_Q], s[k.S_W_INT] = 1.5, -0.5, 7.0
+    assert _go(s, c, k.MODE_ACQUIRE, k.EV_CANNOT_SEE) == k.MODE_ALIGN
+    assert s[k.S_IF_FALLBACK] == 1.0 and s[k.S_HOLD] == 0.0 and s[k.S_PARKED] == 0.0 and _t_brake(u, s) == 0.0
+    assert [s[i] for i in (k.S_CLOCK, k.S_EPISODE, k.S_FAULT, k.S_INT_D, k.S_INT_Q, k.S_W_INT)] == [0.0] * 6
+    assert s[k.S_ID_Y:k.S_ID_Y + 2] == [4300.0, 4220.0]
+
+
+@pytest.mark.parametrize(("y", "blind", "acc", "sees"), [
+    ((4300.0, 4220.0), 1.0, 0.77, False),  # the design's corner motor: blind, its angle 0.77 rad rms
+    ((4300.0, 4300.0), 1.0, 0.0, False),  # no saliency at all: no error signal
+    ((4459.0, 3893.0), 1.0, 0.087, True),  # issue 47's motor A: blind by its saliency, its angle found at a stop
+    ((4459.0, 3893.0), 0.0, 0.07, True),  # seeing
+    ((0.0, 0.0), 1.0, 0.0, True),  # nothing identified (no current: an open phase): the polarity test latches
+])
+def test_cannot_see_is_a_blind_unit_whose_angle_the_injection_cannot_find(y, blind, acc, sees):
+    _, s, c = _unit()
+    s[k.S_ID_Y:k.S_ID_Y + 2] = list(y)
+    s[k.S_ID_BLIND], s[k.S_ID_ACC] = blind, acc
+    assert bool(k.cannot_see(s, c)) is not sees
+    s[k.S_MODE_TIME] = 10.0  # the acquisition over
+    assert k.detect(s, c, k.MODE_ACQUIRE, 0.0) == (k.EV_ACQUIRED if sees else k.EV_CANNOT_SEE)
 
 
 def _t_brake(u, s):
@@ -604,11 +635,16 @@ def test_ekf_lost_only_after_its_time():
 @given(st.lists(st.sampled_from(EVENTS), max_size=40))
 def test_no_torque_before_a_polarity_test_decided(events):
     """Whatever the events, FOC (modes injection and EKF) is reached from enable only through a decided
-    polarity test, and the mode stays one of the strategy's."""
+    polarity test, and the mode stays one of the strategy's, but for the I-f strategy's alignment once the unit
+    cannot see (EV_CANNOT_SEE), where the injection's events change nothing."""
     _, s, c = _unit()
     mode, decided = k.MODE_ACQUIRE, False
     for ev in events:
         new = _go(s, c, mode, ev)
+        if k.MODE_ALIGN in (mode, new):
+            assert new == k.MODE_ALIGN and (mode == k.MODE_ALIGN or (mode, ev) == (k.MODE_ACQUIRE, k.EV_CANNOT_SEE))
+            mode = new
+            continue
         assert new in INJECTION_MODES
         if mode == k.MODE_POLARITY and ev in (k.EV_POLARITY_RIGHT, k.EV_POLARITY_FLIPPED):
             decided = True

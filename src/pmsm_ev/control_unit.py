@@ -90,11 +90,7 @@ _INJECTION_SLOTS = (
     ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME), ("ofs_time", _k.C_OFS_TIME),
     ("inj_angle_max", _k.C_ANGLE_MAX), ("emf_slip_speed", _k.C_EMF_SPEED), ("emf_slip_rel", _k.C_EMF_REL))
 #: state slots of the sensorless start-up, zeroed by ``reset``
-_STARTUP_STATE = (_k.S_MODE, _k.S_CLOCK, _k.S_PHI, _k.S_I_MAG, _k.S_I_TGT, _k.S_OMEGA_IF, _k.S_AGREE,
-                  _k.S_SLIP, _k.S_GUARD, _k.S_LOS, _k.S_EPISODE, _k.S_INSYNC, _k.S_FAULT, _k.S_THETA_CTRL,
-                  _k.S_OMEGA_CTRL, _k.S_ANCHOR, _k.S_ANCHORED, _k.S_ANCHOR_TL,
-                  _k.S_STILL_OUT, _k.S_IF_DUE, _k.S_REALIGN, _k.S_TRUST_OFF, _k.S_TRUST_TL, _k.S_ANCHOR_REL,
-                  _k.S_RUNAWAY_T, _k.S_ALIGN_SPEED)
+_STARTUP_STATE = _k.IF_STATE
 #: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 #: the reference generator's outputs, zeroed by ``reset``

@@ -438,7 +438,9 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_EMF_T", 1, "how long it has been beyond its bound (eq LS2) [s]"),
     ("S_EMF_SEEN", 1, "the rotor's speed the current loops see: all the back-EMF they carry as a speed (eq LS2), "
                       "low-pass filtered [rad/s]"),
-), size=261)
+    ("S_IF_FALLBACK", 1, "1.0 once a unit that cannot see its motor's axis (``kernels.modes.cannot_see``) runs the I-f "
+                         "strategy (``sensorless_step``) for good"),
+), size=262)
 
 #: the control unit's parameter vector
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (

@@ -46,6 +46,7 @@ EV_FLIPPED = 10.0  #: in the blend, the EKF's angle stayed more than pi/2 from t
 EV_BLIND_STOP = 25.0  #: a blind unit (its saliency below C_SALIENCY_MIN) at a stop: park the car, find the angle afresh
 EV_STILL_PARKED = 26.0  #: an acquisition over while parked and the reference still 0: another one
 EV_EMF_LOST = 27.0  #: the current loops carry a back-EMF the frame's speed does not explain (eqs LS1-LS2)
+EV_CANNOT_SEE = 28.0  #: the identification over, blind and the angle accuracy beyond C_ANGLE_MAX (``cannot_see``)
 EVENT_NAMES = ("none", "acquired", "polarity right", "polarity flipped", "polarity unresolved", "fast", "slow",
                "injection lost", "disagree", "EKF lost", "flipped")
 
@@ -63,6 +64,7 @@ A_RESTART_EKF = 9.0  #: an episode; the EKF's covariance back to an unknown star
 A_REPOLARIZE = 10.0  #: an episode; the tracking observer turned by pi onto the EKF's polarity (``flip_frame``)
 A_PARK = 25.0  #: the friction brake held, the acquisition afresh (``park_car``)
 A_REACQUIRE_PARKED = 26.0  #: an episode; then as A_PARK: the car stopped on the brake while the angle is found
+A_IF_FALLBACK = 27.0  #: the I-f strategy for good, from its alignment, the brake released (``fall_back_to_if``)
 
 
 # == the I-f strategy (``kernels.startup``) ======================================================
@@ -72,7 +74,7 @@ A_REACQUIRE_PARKED = 26.0  #: an episode; then as A_PARK: the car stopped on the
 # the guard and the sizing then take from when the EKF last saw the rotor turn. The safe state is the
 # fault latched (``S_FAULT``) over the modes, as in the injection strategy: the reference taken as 0.
 
-# -- events (``EV_*``; ``EV_NONE``, 0, none): distinct from the injection strategy's (1 .. 10, 25 .. 27) --
+# -- events (``EV_*``; ``EV_NONE``, 0, none): distinct from the injection strategy's (1 .. 10, 25 .. 28) --
 EV_RUNAWAY = 11.0  #: alignment: |omega_hat| above C_ALIGN_SLIP for C_ALIGN_SLIP_TIME (a load beyond the vector)
 EV_ALIGNED = 12.0  #: alignment: its schedule is over, the magnet on the vector
 EV_SLOWED = 13.0  #: EKF: |omega_hat| below C_W_DOWN (no back-EMF to see the angle by much longer)
@@ -92,7 +94,7 @@ IF_EVENT_NAMES = {EV_RUNAWAY: "runaway", EV_ALIGNED: "aligned", EV_SLOWED: "slow
                   EV_STALL_TURNING: "stall, turning", EV_STALL: "stall", EV_STALL_LAST: "stall, none left",
                   EV_STANDS: "stands", EV_VECTOR_TURNS: "vector turns", EV_ROTOR_MOVES: "rotor moves"}
 
-# -- entry actions (``A_*``): distinct from the injection strategy's (0 .. 10, 25, 26) ---------------
+# -- entry actions (``A_*``): distinct from the injection strategy's (0 .. 10, 25 .. 27) ------------
 A_CATCH = 11.0  #: a new episode, I-f on the EKF's angle at the current limit (``catch_runaway``)
 A_START_IF = 12.0  #: the EKF restarted on the aligned vector, at rest (``start_if``)
 A_HANDOVER_DOWN = 13.0  #: the vector left where the current is (``hand_down``)
@@ -117,6 +119,7 @@ A_PUT_BACK = 24.0  #: the EKF's angle and load put back on the anchor (``release
 TRANSITIONS = (
     # the injection strategy
     (MODE_ACQUIRE, EV_ACQUIRED, MODE_POLARITY, A_POLARITY),
+    (MODE_ACQUIRE, EV_CANNOT_SEE, MODE_ALIGN, A_IF_FALLBACK),
     (MODE_POLARITY, EV_POLARITY_RIGHT, MODE_INJECTION, A_TORQUE),
     (MODE_POLARITY, EV_POLARITY_FLIPPED, MODE_INJECTION, A_FLIP_TORQUE),
     (MODE_POLARITY, EV_POLARITY_UNRESOLVED, MODE_ACQUIRE, A_RETRY),

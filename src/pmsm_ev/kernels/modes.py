@@ -164,6 +164,7 @@ from .layout import (
     S_ID_SUM,
     S_ID_Y,
     S_ID_YE,
+    S_IF_FALLBACK,
     S_INJ_ADM,
     S_INJ_AXIS,
     S_INJ_ERR,
@@ -199,6 +200,7 @@ from .machine import (
     A_ACQUIRE,
     A_EKF_ALONE,
     A_FLIP_TORQUE,
+    A_IF_FALLBACK,
     A_INJECTION_ON,
     A_PARK,
     A_POLARITY,
@@ -211,6 +213,7 @@ from .machine import (
     A_TORQUE,
     EV_ACQUIRED,
     EV_BLIND_STOP,
+    EV_CANNOT_SEE,
     EV_DISAGREE,
     EV_EKF_LOST,
     EV_EMF_LOST,
@@ -226,7 +229,7 @@ from .machine import (
     next_mode,
 )
 from .observers import ekf5ab_period
-from .startup import age_episode
+from .startup import age_episode, enter_if_strategy, sensorless_step
 from .transforms import park, wrap_angle
 
 # -- the schedules of the acquisition and the polarity test ----------------------------------------
@@ -517,6 +520,18 @@ def detect_acquired(s, c):
 
 
 @kernel()
+def cannot_see(s, c):
+    """True where the identification found the motor (both admittances) but its angle accuracy at a stop (eq ID3,
+    ``S_ID_ACC``) is beyond ``C_ANGLE_MAX``, or there is no error signal at all (no saliency: ``S_ID_ACC`` 0): the
+    injection cannot find the axis the acquisition and the polarity test need (the design's corner motor, saliency
+    1.06 at 1.5 A: 0.77 rad, its polarity test unresolved twice, the fault latched at enable), where a motor blind
+    by its saliency alone (``C_SALIENCY_MIN``) with an accurate angle is still found at every stop (``park_car``)."""
+    if not (s[S_ID_Y] > 0.0 and s[S_ID_Y + 1] > 0.0 and s[S_ID_BLIND] != 0.0):
+        return False
+    return not (0.0 < s[S_ID_ACC] <= c[C_ANGLE_MAX])
+
+
+@kernel()
 def detect_polarity(s, c):
     """At the end of the polarity test: EV_POLARITY_RIGHT where the d admittance at +i exceeds that at -i
     by at least ``C_POL_CONTRAST`` of their mean (a positive d current saturates the d axis),
@@ -651,6 +666,8 @@ def detect(s, c, mode, omega_ref):
     0 gives EV_STILL_PARKED: the angle is found again, not held by the tracking observer."""
     if mode == MODE_ACQUIRE:
         ev = detect_acquired(s, c)
+        if ev == EV_ACQUIRED and cannot_see(s, c):
+            return EV_CANNOT_SEE
         return EV_STILL_PARKED if ev == EV_ACQUIRED and s[S_PARKED] != 0.0 and omega_ref == 0.0 else ev
     if mode == MODE_POLARITY:
         ev = detect_injection_lost(s, c)
@@ -811,6 +828,21 @@ def park_car(s, c, i_alpha, i_beta):
 
 
 @kernel()
+def fall_back_to_if(s):
+    """A unit that cannot see its motor's axis (``cannot_see``) takes the I-f strategy for good (``S_IF_FALLBACK``:
+    ``injection_unit_step`` runs ``sensorless_step`` from the next period): the alignment from its start, the brake
+    released (the alignment turns the rotor onto the vector; the I-f strategy holds the car on its vector, its
+    stand), the current loops' and the speed loop's integrators from 0; the identification's outputs stay."""
+    s[S_IF_FALLBACK] = 1.0
+    s[S_HOLD] = 0.0
+    s[S_PARKED] = 0.0
+    s[S_INT_D] = 0.0
+    s[S_INT_Q] = 0.0
+    s[S_W_INT] = 0.0
+    enter_if_strategy(s)
+
+
+@kernel()
 def enter(s, c, action, i_alpha, i_beta):
     """Run an entry action (``A_*``)."""
     if action == A_ACQUIRE:
@@ -851,6 +883,8 @@ def enter(s, c, action, i_alpha, i_beta):
     elif action == A_REACQUIRE_PARKED:
         begin_episode_now(s, c)
         park_car(s, c, i_alpha, i_beta)
+    elif action == A_IF_FALLBACK:
+        fall_back_to_if(s)
     elif action == A_REPOLARIZE:
         begin_episode_now(s, c)
         flip_frame(s)
@@ -961,6 +995,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     dt = c[C_DT]
     i_alpha -= s[S_ID_OFS]  # the sensors' offsets measured at enable (0 before)
     i_beta -= s[S_ID_OFS + 1]
+    if s[S_IF_FALLBACK] != 0.0:  # a unit that cannot see its motor's axis: the I-f strategy (``fall_back_to_if``)
+        return sensorless_step(s, c, i_alpha, i_beta, omega_ref)
     innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
     s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
     mode = s[S_MODE]
@@ -1008,6 +1044,13 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_EVENT] = event
     if event != EV_NONE:
         mode = transition(s, c, mode, event, i_alpha, i_beta)
+    if s[S_IF_FALLBACK] != 0.0:  # taken this period: no voltage in it, the I-f strategy's alignment from the next
+        s[S_MODE] = mode
+        s[S_MODE_TIME] = 0.0
+        s[S_V_OUT_ALPHA] = 0.0
+        s[S_V_OUT_BETA] = 0.0
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode,
+                FAULT_NONE, 0.0, 0.0)
         t = s[S_MODE_TIME]
     age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0 or s[S_EMF_T] > 0.0)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold

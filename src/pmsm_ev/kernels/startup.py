@@ -168,6 +168,19 @@ from .machine import (
 from .observers import adapt_psi, ekf5ab_period
 from .transforms import park, wrap_angle
 
+#: the I-f strategy's state slots, zeroed where it starts: at reset (``pmsm_ev.control_unit``) and where a unit with
+#: injection that cannot see its motor's axis takes it for good (``kernels.modes.fall_back_to_if``)
+IF_STATE = (S_MODE, S_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE, S_SLIP, S_GUARD, S_LOS, S_EPISODE, S_INSYNC,
+            S_FAULT, S_THETA_CTRL, S_OMEGA_CTRL, S_ANCHOR, S_ANCHORED, S_ANCHOR_TL, S_STILL_OUT, S_IF_DUE, S_REALIGN,
+            S_TRUST_OFF, S_TRUST_TL, S_ANCHOR_REL, S_RUNAWAY_T, S_ALIGN_SPEED)
+
+
+@kernel()
+def enter_if_strategy(s):
+    """The I-f strategy from its start (``IF_STATE`` zeroed): the alignment (``MODE_ALIGN``) from its clock's 0."""
+    for slot in IF_STATE:
+        s[slot] = 0.0
+
 # -- the I-f strategy's physics: the handovers' seating, the EKF's restart, the vector's sizing ----
 
 
