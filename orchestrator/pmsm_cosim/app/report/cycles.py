@@ -252,11 +252,20 @@ def _cost_table(cost: list[dict]) -> list[str]:
     return L + ["", "(Δ: sensorless minus sensored; energies in Wh)", ""]
 
 
+#: what the sensorless unit does at and near zero speed, by its ``low_speed`` (the FMU's default: "if")
+LOW_SPEED_TEXT = {"injection": "high-frequency injection at and near zero speed: the acquisition, the polarity "
+                               "test and FOC on the injection, the stationary-frame EKF5 above",
+                  "if": "alignment, I-f, the stationary-frame EKF5, back to I-f at every stop"}
+
+
 def setting_text(scenarios) -> dict[str, str]:
     """What the cycle scenarios' system files set alike, as text: ``noise`` (the plant's current-sensor noise
-    [A]) and ``rows`` (the output interval [s]), each "…" where they differ, and ``climb`` (the steepest grade
-    of the road ``hilly`` [%])."""
+    [A]) and ``rows`` (the output interval [s]), each "…" where they differ, ``low_speed`` (the sensorless
+    scenarios' strategy at and near zero speed, ``LOW_SPEED_TEXT``) and ``climb`` (the steepest grade of the road
+    ``hilly`` [%])."""
     specs = [load_system(s) for s in scenarios]
+    strategies = {s.component("ctrl").start.get("low_speed", "if") for s in specs
+                  if s.component("ctrl").fmu.name == "FocSensorless.fmu"}
 
     def alike(values, fmt):
         values = set(values)
@@ -264,6 +273,7 @@ def setting_text(scenarios) -> dict[str, str]:
 
     return {"noise": alike((s.component("plant").start.get("sensor_noise", 0.0) for s in specs), "g"),
             "rows": alike((s.output_interval for s in specs), "g"),
+            "low_speed": LOW_SPEED_TEXT[strategies.pop()] if len(strategies) == 1 else "…",
             "climb": f"{100 * float(np.max(cycles.load_road('hilly').grade)):g}"}
 
 
@@ -275,6 +285,7 @@ def render(data, fig_names) -> list[str]:
         return L + ["(no runs)\n"]
     lim = _limits()
     st = setting_text(scen for _, scen, _ in RUNS)
+    suffix = {scen.rsplit("-", 1)[-1] for _, scen, setup in RUNS if setup.key == "sensorless"}
     descr = []
     for name in cycles.names():
         c = cycles.load(name)
@@ -282,8 +293,8 @@ def render(data, fig_names) -> list[str]:
                      f"{c.stops} stop{'' if c.stops == 1 else 's'})")
     L.append(
         "The shipped cycle scenarios (docs/cycles.md): " + ", ".join(descr) + ", each with the sensored drive "
-        "(`FocSensored`, the reference) and truly sensorless from standstill at an unknown angle (`-sensorless`, "
-        "`FocSensorless`: alignment, I-f, the stationary-frame EKF5, back to I-f at every stop), and "
+        "(`FocSensored`, the reference) and truly sensorless from standstill at an unknown angle "
+        f"(`-{suffix.pop() if len(suffix) == 1 else '…'}`, `FocSensorless`: {st['low_speed']}), and "
         f"`wltc3b-hilly` (sensored, the road `hilly` by position: a stop and restart on its {st['climb']} % climb). "
         f"All with σ = {st['noise']} A current noise, the speed loop's feedforward (inertia and road load), the "
         "reference generator in "
