@@ -119,17 +119,19 @@ def test_a_unit_that_cannot_see_takes_the_if_strategy_from_its_alignment_with_th
     assert s[k.S_ID_Y:k.S_ID_Y + 2] == [4300.0, 4220.0]
 
 
-@pytest.mark.parametrize(("y", "blind", "acc", "sees"), [
-    ((4300.0, 4220.0), 1.0, 0.77, False),  # the design's corner motor: blind, its angle 0.77 rad rms
-    ((4300.0, 4300.0), 1.0, 0.0, False),  # no saliency at all: no error signal
-    ((4459.0, 3893.0), 1.0, 0.087, True),  # issue 47's motor A: blind by its saliency, its angle found at a stop
-    ((4459.0, 3893.0), 0.0, 0.07, True),  # seeing
-    ((0.0, 0.0), 1.0, 0.0, True),  # nothing identified (no current: an open phase): the polarity test latches
+@pytest.mark.parametrize(("y", "blind", "acc", "held", "sees"), [
+    ((4300.0, 4220.0), 1.0, 0.77, True, False),  # the design's corner motor: blind, its angle 0.77 rad rms
+    ((4300.0, 4300.0), 1.0, 0.0, True, False),  # no saliency at all: no error signal
+    ((4459.0, 3893.0), 1.0, 0.087, True, True),  # issue 47's motor A: blind by its saliency, its angle found at a stop
+    ((4459.0, 3893.0), 0.0, 0.07, True, True),  # seeing
+    ((0.0, 0.0), 1.0, 0.0, True, True),  # nothing identified (no current: an open phase): the polarity test latches
+    ((4300.0, 4220.0), 1.0, 0.77, False, True),  # measured on a car the brake did not hold: it may have rolled
 ])
-def test_cannot_see_is_a_blind_unit_whose_angle_the_injection_cannot_find(y, blind, acc, sees):
+def test_cannot_see_is_a_blind_unit_whose_angle_the_injection_cannot_find(y, blind, acc, held, sees):
     _, s, c = _unit()
     s[k.S_ID_Y:k.S_ID_Y + 2] = list(y)
     s[k.S_ID_BLIND], s[k.S_ID_ACC] = blind, acc
+    s[k.S_HOLD] = c[k.C_HOLD_BRAKE] if held else 0.0
     assert bool(k.cannot_see(s, c)) is not sees
     s[k.S_MODE_TIME] = 10.0  # the acquisition over
     assert k.detect(s, c, k.MODE_ACQUIRE, 0.0) == (k.EV_ACQUIRED if sees else k.EV_CANNOT_SEE)

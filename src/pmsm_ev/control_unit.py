@@ -131,7 +131,7 @@ def _slot(index: int, doc: str) -> property:
     return property(get, set_, doc=doc)
 
 
-def cross_saturation_offsets(motor: MotorParams, step: float = 50.0, n: int = 9) -> list[float]:
+def cross_saturation_offsets(motor: MotorParams, step: float = _k.CROSS_STEP, n: int = _k.CROSS_POINTS) -> list[float]:
     """The injection's axis less the rotor's d axis [rad] at i_d = 0, i_q = 0, step, .. (n - 1) step [A]:
     the angle from d of the incremental inductance's least axis (the injection's error signal is 0 there,
     ``pmsm_ev.kernels.injection``) in the algebraic flux model with its default shape (``PlantParams``) on
@@ -326,7 +326,7 @@ class ControlUnit:
             c[slot] = float(getattr(p, name))
         c[_k.C_LOS_FILTER] = min(3.0 * self.dt / p.inj_los_time, 1.0)
         c[_k.C_EKF_LOS_EMF] = self.dt * m.N * m.psi / m.L_q
-        for j, phi in enumerate(cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * 9):
+        for j, phi in enumerate(cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * _k.CROSS_POINTS):
             c[_k.C_CROSS + j] = phi
         c[_k.C_HOLD_BRAKE] = float(p.hold_brake) * c[_k.C_T_MAX] * c[_k.C_BRAKE_GAIN]
 

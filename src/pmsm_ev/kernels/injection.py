@@ -51,6 +51,7 @@ from .layout import (
     C_N,
     C_TRK_J,
     C_TRK_L,
+    CROSS_POINTS,
     S_AVG,
     S_AVG_POS,
     S_BLEND,
@@ -75,6 +76,9 @@ from .transforms import park, wrap_angle
 _LEAST_STEP = 0.2
 #: how many entries S_AVG holds for each axis: m <= 8
 AVG_LENGTH = 16
+#: the half-waves whose answer is not used after the square wave starts, or its amplitude or its axis steps: an
+#: answer's second difference (I2) spans the two half-waves before it, which straddle the step
+SKIP_HALF_WAVES = 2.0
 
 
 @kernel()
@@ -86,7 +90,7 @@ def start_injection(s):
     s[S_INJ_AMP] = 0.0
     s[S_INJ_V1] = 0.0
     s[S_INJ_V2] = 0.0
-    s[S_INJ_SKIP] = 2.0
+    s[S_INJ_SKIP] = SKIP_HALF_WAVES
     s[S_INJ_NEW] = 0.0
     s[S_INJ_ERR] = 0.0
     s[S_INJ_ADM] = 0.0
@@ -214,9 +218,9 @@ CROSS_STEP = 50.0
 def cross_offset(c, i_q):
     """The injection's axis less the rotor's d axis [rad] at the q current ``i_q`` [A]: cross-saturation tilts
     the incremental inductance's axes, and the injection locks onto the one nearest d (no q answer there),
-    not onto d. Linear in the table ``C_CROSS`` (the controller's model), odd in i_q, held beyond 400 A."""
-    x = min(abs(i_q) / CROSS_STEP, 8.0)
-    j = min(int(x), 7)
+    not onto d. Linear in the table ``C_CROSS`` (the controller's model), odd in i_q, held beyond its last point."""
+    x = min(abs(i_q) / CROSS_STEP, CROSS_POINTS - 1.0)
+    j = min(int(x), CROSS_POINTS - 2)
     phi = c[C_CROSS + j] + (x - j) * (c[C_CROSS + j + 1] - c[C_CROSS + j])
     return phi if i_q >= 0.0 else -phi
 

@@ -443,6 +443,10 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
 ), size=262)
 
 #: the control unit's parameter vector
+#: the points of the cross-saturation table ``C_CROSS``, at i_q = 0, ``CROSS_STEP``, .. (CROSS_POINTS - 1)
+#: ``CROSS_STEP`` (``kernels.injection.cross_offset``; held beyond the last)
+CROSS_POINTS = 9
+
 UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_DT", 1, "control period [s]"),
     ("C_KP_W", 1, "speed PI proportional gain [A s/rad]"),
@@ -581,8 +585,9 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_EKF_LOS_EMF", 1, "... plus this times |omega_hat|: the current the back-EMF drives in a period, dt N psi / L_q "
                          "[A s/rad]"),
     ("C_LOS_FILTER", 1, "dt / the detectors' filter time constant (C_INJ_LOS_TIME / 3) [-]"),
-    ("C_CROSS", 9, "the injection's axis less the rotor's d axis at i_q = 0, 50, .. 400 A [rad]: cross-saturation's "
-                   "offset in the controller's model of the saturation (0: not compensated)"),
+    ("C_CROSS", CROSS_POINTS, "the injection's axis less the rotor's d axis at i_q = 0, 50, .. 400 A [rad]: "
+                              "cross-saturation's offset in the controller's model of the saturation (0: not "
+                              "compensated)"),
     ("C_INJ_I_MAX", 1, "the q current limit while the injection carries the angle [A]"),
     ("C_POL_BAND", 1, "the polarity test's frame: how far the tracking observer may move from it before it follows "
                       "[rad]"),

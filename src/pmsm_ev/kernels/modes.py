@@ -60,6 +60,7 @@ from .control import (
     torque_speed_step_within,
 )
 from .injection import (
+    SKIP_HALF_WAVES,
     angle_error,
     blend_weight,
     blended_frame,
@@ -131,7 +132,6 @@ from .layout import (
     C_TRK_L,
     FAULT_LATCHED,
     FAULT_NONE,
-    FAULT_RECOVERING,
     MODE_ACQUIRE,
     MODE_EKF,
     MODE_INJECTION,
@@ -229,7 +229,7 @@ from .machine import (
     next_mode,
 )
 from .observers import ekf5ab_period
-from .startup import age_episode, enter_if_strategy, sensorless_step
+from .startup import age_episode, enter_if_strategy, fault_output, sensorless_step
 from .transforms import park, wrap_angle
 
 # -- the schedules of the acquisition and the polarity test ----------------------------------------
@@ -247,6 +247,21 @@ TRACK_NOISE = 33.0 / 16.0
 #: half a turn of the electrical angle's two candidates 0 and pi (the tracking observer sees the axis, not its
 #: direction; the EKF's back-EMF sees the direction)
 FLIP_ANGLE = 0.5 * math.pi
+#: the acquisition's second axis, this far ahead of the first [rad]: the answers' sin 2e on the first and on it
+#: (-cos 2e there) give the axis's angle 2e by atan2 whatever its quadrant
+AXIS_AHEAD = 0.25 * math.pi
+#: the polarity test's tries: the second left unresolved latches the fault (a direction the test cannot tell at
+#: two acquisitions' angles in a row is not one the injection can drive on)
+POL_TRIES = 2.0
+#: each hold of the polarity test is measured after this share of it: the current loop settles in its first quarter
+POL_SETTLE_SHARE = 0.25
+#: the blend's weight up to which the injection's angle and the EKF's are judged against each other
+#: (``detect_injection_lost``): its first quarter, where the square wave is at half its amplitude or more
+#: (``injection_share``) and the injection's angle still worth the EKF's
+DISAGREE_BLEND = 0.25
+#: the R_s test gives nothing where the current rose by less than half the levels' difference (``C_RS_I`` / 2):
+#: this share of ``C_RS_I`` (a current that does not follow its reference: an open phase, no DC link)
+RS_RISE_MIN = 0.25
 
 
 @kernel()
@@ -334,7 +349,7 @@ def identify_rs(s, c):
     if n1 < 1.0 or n2 < 1.0:
         return
     di = s[S_RS_SUM + 3] / n2 - s[S_RS_SUM + 1] / n1
-    if not di > 0.25 * c[C_RS_I]:
+    if not di > RS_RISE_MIN * c[C_RS_I]:
         return
     r = (s[S_RS_SUM + 2] / n2 - s[S_RS_SUM] / n1) / di  # (ID2)
     if r > 0.0:
@@ -495,15 +510,15 @@ def polarity_schedule(c, t):
     if t < r:
         return i * t / r, 0.0, 0.0
     if t < t1:
-        return i, 1.0 if t >= r + 0.25 * h_plus else 0.0, 0.0
+        return i, 1.0 if t >= r + POL_SETTLE_SHARE * h_plus else 0.0, 0.0
     if t < t2:
         return i - i * (t - t1) / r, 0.0, 0.0
     if t < t3:
-        return -i, -1.0 if t >= t2 + 0.25 * h else 0.0, 0.0
+        return -i, -1.0 if t >= t2 + POL_SETTLE_SHARE * h else 0.0, 0.0
     if t < t4:
         return -i + i * (t - t3) / r, 0.0, 0.0
     if t < t5:
-        return i, 1.0 if t >= t4 + 0.25 * h_plus else 0.0, 0.0
+        return i, 1.0 if t >= t4 + POL_SETTLE_SHARE * h_plus else 0.0, 0.0
     if t < t5 + r:
         return i - i * (t - t5) / r, 0.0, 0.0
     return 0.0, 0.0, 1.0
@@ -514,7 +529,7 @@ def polarity_schedule(c, t):
 def detect_acquired(s, c):
     """EV_ACQUIRED once the acquisition is over (none while the fault is latched: a polarity left
     unresolved stops the unit here)."""
-    if s[S_FAULT] == FAULT_LATCHED and s[S_POL_TRIES] >= 2.0:
+    if s[S_FAULT] == FAULT_LATCHED and s[S_POL_TRIES] >= POL_TRIES:
         return EV_NONE
     return EV_ACQUIRED if acquisition_phase(s, c, s[S_MODE_TIME]) == PHASE_OVER else EV_NONE
 
@@ -525,8 +540,10 @@ def cannot_see(s, c):
     ``S_ID_ACC``) is beyond ``C_ANGLE_MAX``, or there is no error signal at all (no saliency: ``S_ID_ACC`` 0): the
     injection cannot find the axis the acquisition and the polarity test need (the design's corner motor, saliency
     1.06 at 1.5 A: 0.77 rad, its polarity test unresolved twice, the fault latched at enable), where a motor blind
-    by its saliency alone (``C_SALIENCY_MIN``) with an accurate angle is still found at every stop (``park_car``)."""
-    if not (s[S_ID_Y] > 0.0 and s[S_ID_Y + 1] > 0.0 and s[S_ID_BLIND] != 0.0):
+    by its saliency alone (``C_SALIENCY_MIN``) with an accurate angle is still found at every stop (``park_car``).
+    Only on a car the brake held through the identification (``S_HOLD``: the hill hold at enable, a parked stop):
+    a rotor rolling under it turns the axes it measures on and reads no saliency whatever the motor's."""
+    if not (s[S_ID_Y] > 0.0 and s[S_ID_Y + 1] > 0.0 and s[S_ID_BLIND] != 0.0 and s[S_HOLD] > 0.0):
         return False
     return not (0.0 < s[S_ID_ACC] <= c[C_ANGLE_MAX])
 
@@ -572,7 +589,7 @@ def detect_injection_lost(s, c):
     axis's other direction, which the injection cannot see and the back-EMF can), else EV_DISAGREE."""
     w = s[S_BLEND]
     far = abs(s[S_INJ_ERR_F]) > c[C_INJ_LOS_ANGLE] or axis_lost(s, c)
-    apart = 0.0 < w <= 0.25 and abs(s[S_DISAGREE_F]) > c[C_INJ_LOS_ANGLE]
+    apart = 0.0 < w <= DISAGREE_BLEND and abs(s[S_DISAGREE_F]) > c[C_INJ_LOS_ANGLE]
     s[S_INJ_LOS_T] = s[S_INJ_LOS_T] + c[C_DT] if (far or apart) else 0.0
     if s[S_INJ_LOS_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
         return EV_NONE
@@ -856,7 +873,7 @@ def enter(s, c, action, i_alpha, i_beta):
         enter_torque(s, c)
     elif action == A_RETRY:
         s[S_POL_TRIES] += 1.0
-        if s[S_POL_TRIES] >= 2.0:
+        if s[S_POL_TRIES] >= POL_TRIES:
             s[S_FAULT] = FAULT_LATCHED
         enter_acquire(s, c, i_alpha, i_beta)
     elif action == A_EKF_ALONE:
@@ -931,25 +948,25 @@ def collect(s, c, mode, t, phase, answer, i_d):
             s[S_ID_NOISE + j] += x
             s[S_ID_NOISE + 4 + j] += x * x
         if starts and PHASE_ID_D2 <= phase <= PHASE_RS1 and identification_time(s, c) > 0.0:
-            s[S_INJ_SKIP] = 2.0  # the amplitude steps, the axis jumps by 90 deg (to q, back to d)
+            s[S_INJ_SKIP] = SKIP_HALF_WAVES  # the amplitude steps, the axis jumps by 90 deg (to q, back to d)
         if starts and phase == PHASE_OVER and (s[S_ID_DONE] == 0.0 or refining(s)):
             if identification_time(s, c) > 0.0:
-                s[S_INJ_SKIP] = 2.0
+                s[S_INJ_SKIP] = SKIP_HALF_WAVES
                 identify(s, c)  # a blind unit's parked acquisitions: from the answers pooled since enable
             if s[S_ID_DONE] == 0.0:
                 identify_rs(s, c)
             s[S_ID_DONE] = 1.0
         if starts and phase == PHASE_AXIS0:  # the square wave begins after the offset window
-            s[S_INJ_SKIP] = 2.0
+            s[S_INJ_SKIP] = SKIP_HALF_WAVES
         elif starts and phase == PHASE_AXIS45:  # the axis jumps by 45 deg: two answers straddle it
-            s[S_INJ_SKIP] = 2.0
+            s[S_INJ_SKIP] = SKIP_HALF_WAVES
         elif starts and phase == PHASE_SETTLE:  # the axis found: sin 2e and -cos 2e
             e = 0.0
             if s[S_ACQ + 2] > 0.0 and s[S_ACQ + 3] > 0.0:
                 e = 0.5 * math.atan2(s[S_ACQ] / s[S_ACQ + 2], -s[S_ACQ + 1] / s[S_ACQ + 3])
             seat_tracker(s, wrap_angle(s[S_TRK] + e), 0.0, 0.0)
             s[S_POL_AXIS] = s[S_TRK]  # the polarity test's frame: the acquisition's average, not the settling's
-            s[S_INJ_SKIP] = 2.0
+            s[S_INJ_SKIP] = SKIP_HALF_WAVES
     elif mode == MODE_POLARITY and answer:
         _, sign, _ = polarity_schedule(c, t)
         if sign > 0.0:
@@ -1044,6 +1061,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_EVENT] = event
     if event != EV_NONE:
         mode = transition(s, c, mode, event, i_alpha, i_beta)
+        t = s[S_MODE_TIME]
     if s[S_IF_FALLBACK] != 0.0:  # taken this period: no voltage in it, the I-f strategy's alignment from the next
         s[S_MODE] = mode
         s[S_MODE_TIME] = 0.0
@@ -1051,7 +1069,6 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         s[S_V_OUT_BETA] = 0.0
         return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode,
                 FAULT_NONE, 0.0, 0.0)
-        t = s[S_MODE_TIME]
     age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0 or s[S_EMF_T] > 0.0)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
         omega_ref = 0.0
@@ -1066,7 +1083,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         omega_ctrl = 0.0
         i_dref = 0.0
         if mode == MODE_ACQUIRE and acquisition_phase(s, c, t) == PHASE_AXIS45:
-            offset = 0.25 * math.pi
+            offset = AXIS_AHEAD
         elif mode == MODE_ACQUIRE and PHASE_ID_D <= acquisition_phase(s, c, t) <= PHASE_ID_Q2:
             j = acquisition_phase(s, c, t) - PHASE_ID_D  # (ID1): V, 2 V on d, then on q
             offset = 0.5 * math.pi if j >= 2 else 0.0
@@ -1125,7 +1142,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     s[S_MODE_TIME] = t + dt
     s[S_THETA_CTRL] = theta
     s[S_OMEGA_CTRL] = omega_ctrl
-    fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
+    fault = fault_output(s)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     if phase == PHASE_OFFSET:  # the gates off: nothing reaches the winding, the dead time's compensation neither
         v_alpha = v_beta = 0.0

@@ -175,6 +175,25 @@ IF_STATE = (S_MODE, S_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE, S_SLI
             S_TRUST_OFF, S_TRUST_TL, S_ANCHOR_REL, S_RUNAWAY_T, S_ALIGN_SPEED)
 
 
+#: the least current [A] the vector's damping gain k / sqrt(i) is taken at (``damping_gain``): the gain, placed for
+#: the swing of a rotor held by psi i, stays finite while the vector's current ramps up from 0
+DAMP_I_MIN = 1.0
+
+
+@kernel()
+def damping_gain(s, c):
+    """The vector's damping gain [rad per rad/s]: k = 2 zeta sqrt(J / (psi i)) at the vector's current i
+    (``S_I_MAG``, at least ``DAMP_I_MIN``), ``C_IF_DAMP`` / sqrt(i) (docs/sensorless.md)."""
+    return c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], DAMP_I_MIN))
+
+
+@kernel()
+def fault_output(s):
+    """The unit's ``fault`` output: ``FAULT_LATCHED`` in the safe state, else ``FAULT_RECOVERING`` during an episode,
+    else ``FAULT_NONE`` (both strategies)."""
+    return s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
+
+
 @kernel()
 def enter_if_strategy(s):
     """The I-f strategy from its start (``IF_STATE`` zeroed): the alignment (``MODE_ALIGN``) from its clock's 0."""
@@ -718,7 +737,7 @@ def turn_vector(s, c, omega_ref, omega_hat):
     if_vector_step(s, c, omega_ref, s[S_ANCHOR_TL] if anchored else s[S_TRUST_TL])
     s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - s[S_OMEGA_IF] - s[S_SLIP])
     if c[C_GUARD] != 0.0 or s[S_EPISODE] > 0.0 or s[S_FAULT] == FAULT_LATCHED:
-        sync_guard(s, c, omega_hat, c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP],
+        sync_guard(s, c, omega_hat, damping_gain(s, c) * s[S_SLIP],
                    s[S_ANCHOR] if anchored else s[S_X + 3])
 
 
@@ -811,13 +830,13 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         if mode == MODE_IF:  # damp the rotor's swing on the vector: pull the vector back by
             # k (omega_hat - omega_if), filtered (updated with the vector's turn, above; 0 in the period
             # it is placed), k = 2 zeta sqrt(J / (psi i)) (docs/sensorless.md)
-            theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_SLIP]
+            theta_ctrl -= damping_gain(s, c) * s[S_SLIP]
         elif c[C_ALIGN_DAMP] != 0.0:  # alignment: the same damping on the speed the back-EMF shows
             # on the vector's q axis, v_q / (N psi) = omega_m cos(e) (e the vector's lead; the EKF's
             # angle is unknown here), less the sweep's own speed: the torque it adds is
             # -N psi i k omega_m cos^2(e), a damping whatever the angle (docs/sensorless.md)
             s[S_ALIGN_SPEED] += c[C_SLIP_FILTER] * (s[S_V_Q] / (c[C_N] * c[C_PSI]) - omega_ctrl - s[S_ALIGN_SPEED])
-            theta_ctrl -= c[C_IF_DAMP] / math.sqrt(max(s[S_I_MAG], 1.0)) * s[S_ALIGN_SPEED]
+            theta_ctrl -= damping_gain(s, c) * s[S_ALIGN_SPEED]
         else:
             s[S_ALIGN_SPEED] = 0.0
         i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
@@ -825,7 +844,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         v_d, v_q = current_step(s, c, s[S_I_MAG], 0.0, i_d, i_q, 0.0)  # (15)-(16), no decoupling
     s[S_THETA_CTRL] = theta_ctrl
     s[S_OMEGA_CTRL] = omega_ctrl
-    fault = s[S_FAULT] if s[S_FAULT] == FAULT_LATCHED else (FAULT_RECOVERING if s[S_EPISODE] > 0.0 else FAULT_NONE)
+    fault = fault_output(s)
     v_alpha, v_beta = modulate(c, v_d, v_q, theta_ctrl, omega_ctrl, False)
     v_alpha, v_beta = store_command(s, c, i_alpha, i_beta, i_d, i_q, i_qref, v_d, v_q, v_alpha, v_beta)
     if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6), in FOC on the EKF only
