@@ -99,14 +99,17 @@ def test_integers_law_draws_whole_numbers_low_to_high_included():
 def test_summary_metrics_of_a_cycle_run():
     m = {"trace": {"inside_share": 0.9925}, "synchronism": {"slipped_turns": 2, "fault_latched": True, "episodes": 3,
                                                             "roll_back_m": 0.004},
-         "energy": {"dc_Wh_per_km": 131.5}}
+         "energy": {"dc_Wh_per_km": 131.5}, "identification": {"saliency": 1.069, "saliency_plant": 1.106,
+                                                                 "blind": True}}
     s = summary_metrics(m)
     assert tuple(s) == SUMMARY_METRICS
     assert (s["inside_share"], s["slipped_turns"], s["episodes"], s["roll_back_m"], s["fault_latched"],
             s["dc_Wh_per_km"]) == (0.9925, 2.0, 3.0, 0.004, 1.0, 131.5)
+    assert (s["saliency_id"], s["saliency_plant"], s["blind"]) == (1.069, 1.106, 1.0)
     s = summary_metrics({"synchronism": {"fault_latched": False}, "energy": {"dc_Wh_per_km": None}})
     assert s["fault_latched"] == 0.0
-    assert all(math.isnan(s[k]) for k in ("inside_share", "slipped_turns", "episodes", "roll_back_m", "dc_Wh_per_km"))
+    assert all(math.isnan(s[k]) for k in ("inside_share", "slipped_turns", "episodes", "roll_back_m", "dc_Wh_per_km",
+                                           "saliency_id", "saliency_plant", "blind"))
 
 
 def test_the_wide_injection_sweep_draws_the_stated_design():

@@ -10,6 +10,7 @@ SUMMARY_METRICS = (
     "speed_rms_error", "omega_hat_rms_error", "theta_error_rms", "theta_error_max",
     "max_speed_deviation", "max_settling_time", "T_L_hat_error_max",
     "inside_share", "slipped_turns", "episodes", "roll_back_m", "fault_latched", "dc_Wh_per_km",
+    "saliency_id", "saliency_plant", "blind",
 )
 
 #: their units
@@ -17,7 +18,7 @@ SUMMARY_UNITS = {
     "speed_rms_error": "rad/s", "omega_hat_rms_error": "rad/s", "theta_error_rms": "rad", "theta_error_max": "rad",
     "max_speed_deviation": "rad/s", "max_settling_time": "s", "T_L_hat_error_max": "N m",
     "inside_share": "-", "slipped_turns": "-", "episodes": "-", "roll_back_m": "m", "fault_latched": "-",
-    "dc_Wh_per_km": "Wh/km",
+    "dc_Wh_per_km": "Wh/km", "saliency_id": "-", "saliency_plant": "-", "blind": "-",
 }
 
 
@@ -35,7 +36,9 @@ def summary_metrics(m: dict) -> dict[str, float]:
       unit itself reported: a slip with none went unseen), ``roll_back_m`` [m] (the largest travel against the
       driver's direction) and ``fault_latched`` [-] (1 if the safe state latched, else 0) of the sensorless unit
       (``synchronism``); ``dc_Wh_per_km`` [Wh/km], the DC link's
-      energy per distance (``energy``).
+      energy per distance (``energy``);
+    * of a unit that identified its motor (``identification``): ``saliency_id`` [-] as it measured it beside the
+      plant's ``saliency_plant`` [-], and ``blind`` [-] (1 if it found itself blind, else 0).
 
     NaN where the run has no such figure (no steps, no plateau long enough, no metrics).
     """
@@ -60,4 +63,9 @@ def summary_metrics(m: dict) -> dict[str, float]:
     latched = sync.get("fault_latched")
     out["fault_latched"] = float(latched) if isinstance(latched, bool) else nan
     out["dc_Wh_per_km"] = num(energy.get("dc_Wh_per_km"))
+    ident = m.get("identification") if isinstance(m.get("identification"), dict) else {}
+    out["saliency_id"] = num(ident.get("saliency"))
+    out["saliency_plant"] = num(ident.get("saliency_plant"))
+    blind = ident.get("blind")
+    out["blind"] = float(blind) if isinstance(blind, bool) else nan
     return out
