@@ -77,7 +77,9 @@ def test_the_elevation_headings_follow_the_tables(monkeypatch):
 
 def test_the_cycle_settings_are_the_system_files(monkeypatch):
     scenarios = [scen for _, scen, _ in cycles.RUNS]
-    assert cycles.setting_text(scenarios) == {"noise": "1", "rows": "0.05", "climb": "10"}
+    assert cycles.setting_text(scenarios) == {"noise": "1", "rows": "0.05", "climb": "10",
+                                              "low_speed": cycles.LOW_SPEED_TEXT["if"]}  # the -if scenarios
+    assert cycles.setting_text(["udds-sensorless"])["low_speed"] == cycles.LOW_SPEED_TEXT["injection"]
 
     def changed(name):
         spec = load_system(name)
