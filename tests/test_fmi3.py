@@ -29,6 +29,7 @@ from pathlib import Path
 
 import pytest
 
+from pmsm_cosim.app.drive import PACKAGED_SCENARIOS
 from pmsm_ev_fmus import build as fmu_build
 from sanitizer_support import build_sanitized, is_sanitized, needs_asan, no_report, sanitized_env
 
@@ -703,6 +704,25 @@ def test_the_master_runs_the_fmi3_units_as_the_fmi2_units(units, tmp_path, scena
         assert three[name][2] >= steps, (name, three)  # at least every step compiled
     print(scenario, {name: three[name][1:] for name in three})
 
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", sorted(PACKAGED_SCENARIOS))
+def test_every_shipped_scenario_whole_on_the_fmi3_units(units, tmp_path, scenario):
+    """Every shipped scenario, whole, on the FMI 3.0 units (the controllers ticked at their clock in event mode)
+    and on the FMI 2.0 units: the same status, results.csv byte for byte (cmp), the compiled loop, and the lean
+    binding's compiled step counted as often through the FMI 3.0 layer as through FMI 2.0 (slow tier: some
+    40 minutes on one core for all of them)."""
+    import filecmp
+
+    runs = {fmi: _run_master(scenario, fmi, tmp_path / f"fmi{fmi}", None) for fmi in (2, 3)}
+    (two, counts2), (three, counts3) = runs[2], runs[3]
+    assert three["status"] == two["status"] and three["macro_steps"] == two["macro_steps"], (two, three)
+    assert two["loop"] == three["loop"] == "compiled", (two["loop"], three["loop"])
+    assert filecmp.cmp(tmp_path / "fmi2" / "results.csv", tmp_path / "fmi3" / "results.csv", shallow=False)
+    assert {k: v[0] for k, v in counts3.items()} == {k: 3 for k in counts2}
+    assert {k: v[1:] for k, v in counts3.items()} == {k: v[1:] for k, v in counts2.items()}, (counts2, counts3)
+    print(scenario, two["status"], two["macro_steps"], {k: v[1:] for k, v in counts3.items()})
 
 def test_the_plain_loop_and_the_command_line_run_the_fmi3_units(units, tmp_path):
     """``pmsm-cosim run SCENARIO --fmi 3`` (and ``--plain-loop``) gives the results.csv of ``--fmi 2``, byte for

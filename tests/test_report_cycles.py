@@ -79,7 +79,7 @@ def test_the_section_holds_the_runs_figures_and_writes_its_figures(runs, tmp_pat
         assert c[10] == f"{m['energy']['dc_Wh_per_km']:.2f}" == f"{whole['energy']['dc_Wh_per_km']:.2f}"
         assert c[11] == f"{100 * whole['regen_share']:.1f} %"
         assert c[12] == f"{whole['balance']['relative']:.2e}"
-        assert c[14] == f"{m['wall_time_s']:.0f} s" and c[15] == f"{m['us_per_step']:.1f}"
+        assert len(c) == 14  # no wall time: what a run costs is the bench's
         (low,) = cycle_energy.phase_energy(r, pcycles.load("wltc3b"), vehicle)
         p = cell(lines, "low (to 30 s)", label)
         assert p[3] == f"{low['energy']['dc_Wh_per_km']:.2f}"

@@ -93,6 +93,9 @@ _INJECTION_SLOTS = (
 _STARTUP_STATE = _k.IF_STATE
 #: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``
 _DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
+#: the injection strategy's loss detectors low-pass filter their inputs over a third of ``inj_los_time`` (the time
+#: constant): a step then reaches 95 % (1 - e^-3) of its size within the time the detector waits [chosen]
+LOS_FILTER_CONSTANTS = 3.0
 #: the reference generator's outputs, zeroed by ``reset``
 _REFERENCE_STATE = (_k.S_I_DREF, _k.S_T_REF, _k.S_T_BRAKE, _k.S_REGION, _k.S_T_AVAIL,
                     _k.S_W_REF_PREV, _k.S_FF_PRIMED, _k.S_T_FF)
@@ -324,7 +327,7 @@ class ControlUnit:
         c[_k.C_TRK_J] = j
         for name, slot in _INJECTION_SLOTS:
             c[slot] = float(getattr(p, name))
-        c[_k.C_LOS_FILTER] = min(3.0 * self.dt / p.inj_los_time, 1.0)
+        c[_k.C_LOS_FILTER] = min(LOS_FILTER_CONSTANTS * self.dt / p.inj_los_time, 1.0)
         c[_k.C_EKF_LOS_EMF] = self.dt * m.N * m.psi / m.L_q
         for j, phi in enumerate(cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * _k.CROSS_POINTS):
             c[_k.C_CROSS + j] = phi

@@ -584,7 +584,8 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_EKF_LOS_TIME", 1, "... time [s]"),
     ("C_EKF_LOS_EMF", 1, "... plus this times |omega_hat|: the current the back-EMF drives in a period, dt N psi / L_q "
                          "[A s/rad]"),
-    ("C_LOS_FILTER", 1, "dt / the detectors' filter time constant (C_INJ_LOS_TIME / 3) [-]"),
+    ("C_LOS_FILTER", 1, "dt / the detectors' filter time constant (inj_los_time / "
+                        "``control_unit.LOS_FILTER_CONSTANTS``) [-]"),
     ("C_CROSS", CROSS_POINTS, "the injection's axis less the rotor's d axis at i_q = 0, 50, .. 400 A [rad]: "
                               "cross-saturation's offset in the controller's model of the saturation (0: not "
                               "compensated)"),

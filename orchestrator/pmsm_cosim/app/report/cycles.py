@@ -60,7 +60,7 @@ def _limits():
 def figures_of(data, cid: str) -> dict | None:
     """One run's figures (None without the run): ``status``, ``trace`` (metrics.json's), ``synchronism``,
     ``cycle`` (``pmsm_ev.cycles.Cycle``, None if the run has no trace), ``whole`` (``cycle_energy.whole_run``),
-    ``phases`` (``cycle_energy.phase_energy``), ``wall_time_s``, ``us_per_step``. Computed once per run."""
+    ``phases`` (``cycle_energy.phase_energy``). Computed once per run."""
     cache = data.__dict__.setdefault("_cycle_figures", {})
     if cid in cache:
         return cache[cid]
@@ -76,7 +76,7 @@ def figures_of(data, cid: str) -> dict | None:
     out = {"status": m.get("status"), "trace": trace, "synchronism": m.get("synchronism") or {}, "cycle": cycle,
            "whole": cycle_energy.whole_run(r, vehicle) if has_energy else None,
            "phases": cycle_energy.phase_energy(r, cycle, vehicle) if has_energy and cycle is not None else [],
-           "wall_time_s": m.get("wall_time_s"), "us_per_step": m.get("us_per_step"), "t_end": float(r["time"][-1])}
+           "t_end": float(r["time"][-1])}
     cache[cid] = out
     return out
 
@@ -147,7 +147,7 @@ def diagnosis(run, f: dict, lim) -> str:
 def _cycle_table(data, rows: dict) -> list[str]:
     head = ("| cycle | controller | completed | inside the band | excursions | longest | RMSE | largest deviation | "
             "slipped turns | loss-of-sync episodes | Wh/km (DC) | regenerated / drawn | balance residual / "
-            "throughput | road-load integral vs wheel (net, traction) | run time | µs/step |")
+            "throughput | road-load integral vs wheel (net, traction) |")
     L = [head, "|" + "---|" * (head.count("|") - 1)]
     for cid, scen, setup in RUNS:
         f = rows.get(cid)
@@ -168,8 +168,7 @@ def _cycle_table(data, rows: dict) -> list[str]:
             f"{_num(tr.get('t_max_deviation'), '.1f')} s | {s.get('slipped_turns', '-')} | {s.get('episodes', '-')} | "
             f"{_num(e.get('dc_Wh_per_km'))} | {_pct(wh.get('regen_share'), '.1f')} | "
             f"{_num(bal.get('relative'), '.2e')} | {_pct(wc.get('net_rel'), '.3f')}, "
-            f"{_pct(wc.get('traction_rel'), '.3f')} | {_num(f['wall_time_s'], '.0f')} s | "
-            f"{_num(f['us_per_step'], '.1f')} |")
+            f"{_pct(wc.get('traction_rel'), '.3f')} |")
     return L + [""]
 
 
@@ -311,8 +310,9 @@ def render(data, fig_names) -> list[str]:
         f"(∫|P_dc| dt; required ≤ {cycle_energy.BALANCE_TOL:g} over a WLTC); *road-load integral vs wheel*: "
         "the integral of (m_v a + f_f + f_a + f_g) v dt from the recorded speed and grade (eqs 1-5) against the "
         "wheel energy of the plant's accumulators (what the drive delivers through the gear minus the friction "
-        f"brake), relative, net and the traction part (required within {100 * cycle_energy.WHEEL_TOL:g} %); "
-        "*run time* the co-simulation's wall time as measured by the run (metrics.json).\n")
+        f"brake), relative, net and the traction part (required within {100 * cycle_energy.WHEEL_TOL:g} %). "
+        "What a run costs is the bench's (docs/performance.md): a report's runs share the machine with one another, "
+        "and their wall times say more of that than of the drive.\n")
     L += _cycle_table(data, rows)
     # the requirements, computed
     fails = []
