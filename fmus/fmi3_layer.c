@@ -266,8 +266,10 @@ static void say(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
         say(W->environment, W->log, fmi3Error, "%s: %s", __func__, why);                                     \
         return fmi3Error;                                                                                    \
     } while (0)
-/* the scalar variables of this model: one value a value reference */
-#define SCALARS(nvr, nvalues)                                                                                \
+/* the scalar variables of this model: one value a value reference, and none of them the sample clock (a Clock is
+ * read and set by fmi3GetClock, fmi3SetClock: a host that takes it for a value is answered here, not by the FMI 2.0
+ * stack, which does not know the reference) */
+#define SCALARS(nvr, nvalues, refs)                                                                          \
     do {                                                                                                     \
         if ((nvr) != (nvalues)) {                                                                            \
             say(W->environment, W->log, fmi3Error,                                                           \
@@ -275,6 +277,13 @@ static void say(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
                 (size_t)(nvalues), (size_t)(nvr));                                                           \
             return fmi3Error;                                                                                \
         }                                                                                                    \
+        for (size_t clock_i = 0; W->clocked && clock_i < (nvr); clock_i++)                                   \
+            if ((refs)[clock_i] == W->clock_reference) {                                                     \
+                say(W->environment, W->log, fmi3Error, "%s: value reference %u is the sample clock, not a "     \
+                    "value of this type (fmi3SetClock sets it); nothing done", __func__,                     \
+                    (unsigned)W->clock_reference);                                                           \
+                return fmi3Error;                                                                            \
+            }                                                                                                \
     } while (0)
 
 /* the resource folder (a path, ending in '/') as the file URI of FMI 2.0 (percent-encoded as fmpy's
@@ -508,7 +517,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           fmi3Float64 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
+    SCALARS(nValueReferences, nValues, valueReferences);
     size_t times = 0;
     for (size_t i = 0; i < nValueReferences; i++) times += valueReferences[i] == TIME_REFERENCE;
     if (times == 0) return status3(fmi2.get_real(W->inner, valueReferences, nValueReferences, values));
@@ -534,7 +543,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           const fmi3Float64 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
+    SCALARS(nValueReferences, nValues, valueReferences);
     for (size_t i = 0; i < nValueReferences; i++)
         if (valueReferences[i] == TIME_REFERENCE) {
             say(W->environment, W->log, fmi3Error, "fmi3SetFloat64: the independent variable time cannot be set; "
@@ -548,7 +557,7 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
                         fmi3Int32 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
+    SCALARS(nValueReferences, nValues, valueReferences);
     return status3(fmi2.get_int(W->inner, valueReferences, nValueReferences, (fmi2Integer*)values));
 }
 
@@ -556,7 +565,7 @@ fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
                         const fmi3Int32 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
+    SCALARS(nValueReferences, nValues, valueReferences);
     return status3(fmi2.set_int(W->inner, valueReferences, nValueReferences, (const fmi2Integer*)values));
 }
 
@@ -564,7 +573,7 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
                           fmi3Boolean values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
+    SCALARS(nValueReferences, nValues, valueReferences);
     fmi2Boolean* wide = calloc(nValueReferences ? nValueReferences : 1, sizeof(fmi2Boolean));
     if (wide == NULL) return fmi3Error;
     fmi2Status s = fmi2.get_bool(W->inner, valueReferences, nValueReferences, wide);
@@ -578,7 +587,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
                           const fmi3Boolean values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
+    SCALARS(nValueReferences, nValues, valueReferences);
     fmi2Boolean* wide = calloc(nValueReferences ? nValueReferences : 1, sizeof(fmi2Boolean));
     if (wide == NULL) return fmi3Error;
     for (size_t i = 0; i < nValueReferences; i++) wide[i] = values[i] ? 1 : 0;
@@ -591,7 +600,7 @@ fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueRe
                          fmi3String values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
+    SCALARS(nValueReferences, nValues, valueReferences);
     return status3(fmi2.get_str(W->inner, valueReferences, nValueReferences, values));
 }
 
@@ -599,7 +608,7 @@ fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueRe
                          const fmi3String values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
+    SCALARS(nValueReferences, nValues, valueReferences);
     return status3(fmi2.set_str(W->inner, valueReferences, nValueReferences, values));
 }
 

@@ -498,6 +498,30 @@ static int refused_set(Instance* w, const fmi2ValueReference vr[], size_t nvr, c
     return status;
 }
 
+/* refused() for a typed get or set (fmi2GetReal, fmi2SetInteger, ...) on its value references: the slave's refusal
+ * of one that names no variable or one of another type (GIL taken here) */
+static int refused_refs(Instance* w, const char* call, const fmi2ValueReference vr[], size_t nvr)
+{
+    if (w->refusal == NULL) return -1;
+    PyGILState_STATE gil = PyGILState_Ensure();
+    PyObject* refs = PyList_New((Py_ssize_t)nvr);
+    for (size_t i = 0; refs && i < nvr; i++) PyList_SetItem(refs, (Py_ssize_t)i, PyLong_FromUnsignedLong(vr[i]));
+    PyObject* args = (refs && !PyErr_Occurred()) ? PyTuple_Pack(1, refs) : NULL;
+    Py_XDECREF(refs);
+    int status = refused(w, call, args);
+    PyGILState_Release(gil);
+    return status;
+}
+
+/* a typed get or set other than of Reals: refused (refused_refs), else forwarded */
+#define CHECKED_FORWARD(name, type, ...)                                                                     \
+    do {                                                                                                     \
+        if (!live(c)) return fmi2Error;                                                                      \
+        int refusal = refused_refs(W, #name, vr, nvr);                                                       \
+        if (refusal >= 0) return (fmi2Status)refusal;                                                        \
+        FORWARD(name, type, __VA_ARGS__);                                                                    \
+    } while (0)
+
 /* the direct path on, after fmi2ExitInitializationMode or fmi2SetFMUstate succeeded: when the slave is in step
  * mode; a step from any time; the slave's longest step (GIL taken here) */
 static void direct_path(Instance* w)
@@ -660,6 +684,13 @@ static fmi2Status forward_get_real(fmi2Component c, const fmi2ValueReference vr[
     FORWARD(fmi2GetReal, get_real_t, W->inner, vr, nvr, value);
 }
 
+/* fmi2GetReal on pythonfmu's path, unless the slave refuses its value references (refused_refs) */
+static fmi2Status checked_get_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    int status = refused_refs(W, "fmi2GetReal", vr, nvr);
+    return status >= 0 ? (fmi2Status)status : forward_get_real(c, vr, nvr, value);
+}
+
 static fmi2Status forward_set_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                    const fmi2Real value[])
 {
@@ -680,9 +711,9 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
 {
     if (!live(c)) return fmi2Error;
     Instance* w = W;
-    if (!w->ready || nvr == 0) return forward_get_real(c, vr, nvr, value);
+    if (!w->ready || nvr == 0) return checked_get_real(c, vr, nvr, value);
     for (size_t i = 0; i < nvr; i++)
-        if ((Py_ssize_t)vr[i] >= w->n || w->names[vr[i]] == NULL) return forward_get_real(c, vr, nvr, value);
+        if ((Py_ssize_t)vr[i] >= w->n || w->names[vr[i]] == NULL) return checked_get_real(c, vr, nvr, value);
     if (w->c_owned) { /* the buffers hold the values: read there, if every one is there (or live) */
         size_t i = 0;
         int live = 0;
@@ -763,30 +794,30 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
 
 EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
 {
-    FORWARD(fmi2GetInteger, get_int_t, W->inner, vr, nvr, value);
+    CHECKED_FORWARD(fmi2GetInteger, get_int_t, W->inner, vr, nvr, value);
 }
 EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
 {
-    FORWARD(fmi2GetBoolean, get_int_t, W->inner, vr, nvr, value);
+    CHECKED_FORWARD(fmi2GetBoolean, get_int_t, W->inner, vr, nvr, value);
 }
 EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
 {
-    FORWARD(fmi2GetString, get_str_t, W->inner, vr, nvr, value);
+    CHECKED_FORWARD(fmi2GetString, get_str_t, W->inner, vr, nvr, value);
 }
 EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                  const fmi2Integer value[])
 {
-    FORWARD(fmi2SetInteger, set_int_t, W->inner, vr, nvr, value);
+    CHECKED_FORWARD(fmi2SetInteger, set_int_t, W->inner, vr, nvr, value);
 }
 EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                  const fmi2Boolean value[])
 {
-    FORWARD(fmi2SetBoolean, set_int_t, W->inner, vr, nvr, value);
+    CHECKED_FORWARD(fmi2SetBoolean, set_int_t, W->inner, vr, nvr, value);
 }
 EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                 const fmi2String value[])
 {
-    FORWARD(fmi2SetString, set_str_t, W->inner, vr, nvr, value);
+    CHECKED_FORWARD(fmi2SetString, set_str_t, W->inner, vr, nvr, value);
 }
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state)

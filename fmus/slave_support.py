@@ -214,6 +214,12 @@ class FmiCallError(FmuUsageError):
 INSTANTIATED, INITIALIZATION, STEP_MODE, TERMINATED = "instantiated", "initialization mode", "step mode", "terminated"
 #: the statuses a refusal returns
 FMI2_DISCARD, FMI2_ERROR = 2, 3
+#: the typed get and set calls, by the variable type each reads or writes (``DriveSlave.refusal``: a value reference
+#: that names no variable, or one of another type, is refused with fmi2Error and a log line, where pythonfmu would
+#: raise and answer fmi2Fatal)
+_TYPED_ACCESS = {f"fmi2{op}{name}": kind for op in ("Get", "Set")
+                 for name, kind in (("Real", Real), ("Integer", Integer), ("Boolean", Boolean), ("String", String))}
+_DONE = {"Get": "read", "Set": "set"}
 #: a communication point continues the last step when within this share of the last step size of where it ended
 #: (plus a few ulps of the time): a master's own rounding of t + h, never a step back or forward
 CONTINUITY_TOLERANCE = 1e-3
@@ -506,6 +512,10 @@ class DriveSlave(Fmi2Slave):
                                     f"{last!r} s (restore an FMU state to step from another time)")
             if h > self._max_step:
                 return FMI2_DISCARD, f"fmi2DoStep of {h!r} s discarded: {self.max_step()[1]}"
+        if call in _TYPED_ACCESS:
+            wrong = self._wrong_reference(call, args[0])
+            if wrong is not None:
+                return FMI2_ERROR, wrong
         if call == "fmi2SetReal":
             vrs, values = args
             inputs = self._real_inputs
@@ -513,6 +523,19 @@ class DriveSlave(Fmi2Slave):
                 if (0 <= vr < len(inputs) and inputs[vr] is not None and inputs[vr] not in self.unread_inputs
                         and not math.isfinite(value)):
                     return FMI2_ERROR, f"fmi2SetReal: input {inputs[vr]!r} = {value!r} is not finite; not set"
+        return None
+
+    def _wrong_reference(self, call: str, vrs) -> str | None:
+        """The log line for the first of ``vrs`` that names no variable, or one not of the type ``call`` reads or
+        writes (``_TYPED_ACCESS``); None when all are right."""
+        kind = _TYPED_ACCESS[call]
+        for vr in vrs:
+            var = self.vars.get(vr)
+            if var is None:
+                return f"{call}: no variable has the value reference {vr}; nothing {_DONE[call[4:7]]}"
+            if not isinstance(var, kind):
+                return (f"{call}: value reference {vr} is {var.name!r}, a {type(var).__name__}, not a {kind.__name__}; "
+                        f"nothing {_DONE[call[4:7]]}")
         return None
 
     def _refuse(self, call: str, *args) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -347,6 +348,17 @@ def sequence(case):
         call("updateDiscreteStates")
         call("enterStepMode")
         call("doStep", 1e-4, 1e-4)
+    elif case == "wrong-reference":  # the clock taken for a value (an FMI 3.0 host did), a reference of nothing
+        init()
+        clock = [v.valueReference for v in md.modelVariables if v.type == "Clock"]
+        nowhere = max(v.valueReference for v in md.modelVariables) + 1000
+        for refs in ([clock] if clock else []) + [[nowhere]]:
+            call("getFloat64", refs)
+            call("setFloat64", refs, [1.0])
+            call("getBoolean", refs)
+        call("doStep", 0.0, 1e-4)
+        read("after", outputs)
+        out["values"]["nowhere"] = nowhere
     elif case == "threads":  # instances side by side, stepped in turn, then two threads each stepping its own
         import threading
         refs_in, refs_out = [vr[n] for n in inputs], [vr[n] for n in outputs]
@@ -406,7 +418,7 @@ for case in sys.argv[3:]:
 """
 _END = "@@sequence@@ "
 CASES = ("step-before-init", "step-after-terminate", "time", "non-finite", "not-applicable", "foreign-instance",
-         "event-mode-used", "ticks", "threads")
+         "event-mode-used", "ticks", "threads", "wrong-reference")
 
 
 @functools.lru_cache(maxsize=None)
@@ -532,6 +544,27 @@ def test_a_clock_set_outside_event_mode_or_a_tick_passed_is_an_error(misuse):
                    f"[ERROR] fmi3DoStep to t = 0.0001 s passes the sample clock's tick at 0 s, {passing}",
                    f"[ERROR] fmi3DoStep to t = 0.0002 s passes the sample clock's tick at 0.0001 s, {passing}"]
     assert values["period"][:-1] == values["half"] and values["period"][-1] == 1e-4
+
+
+def test_the_clock_or_a_reference_of_nothing_taken_for_a_value_is_an_error(misuse):
+    """fmi3GetFloat64, fmi3SetFloat64, fmi3GetBoolean on a controller's sample clock (OMSimulator's FMI 3.0 prototype
+    reads it as a value, docs: fmus/README.md) or on a reference of no variable: fmi3Error with a line each (the
+    clock's from the layer; the other from the FMI 2.0 stack, which pythonfmu alone answered with fmi2Fatal), nothing
+    read or set, and the unit steps on."""
+    calls, log, values = misuse["wrong-reference"]
+    clocked = misuse["unit"] != "PmsmEvPlant"
+    assert calls[2:] == [["getFloat64", ERROR], ["setFloat64", ERROR], ["getBoolean", ERROR]] * (1 + clocked) + [
+        ["doStep", 0]]
+    nowhere = values["nowhere"]
+    lines = [f"[ERROR] fmi2GetReal: no variable has the value reference {nowhere}; nothing read",
+             f"[ERROR] fmi2SetReal: no variable has the value reference {nowhere}; nothing set",
+             f"[ERROR] fmi2GetBoolean: no variable has the value reference {nowhere}; nothing read"]
+    if clocked:
+        lines = [f"[ERROR] {f}: value reference {fmu_build.FMI3_CLOCK_REFERENCE} is the sample clock, not a value of "
+                 "this type (fmi3SetClock sets it); nothing done"
+                 for f in ("fmi3GetFloat64", "fmi3SetFloat64", "fmi3GetBoolean")] + lines
+    assert log == lines
+    assert all(isinstance(v, float) and math.isfinite(v) for v in values["after"])
 
 
 def test_instances_side_by_side_and_in_two_threads_give_the_serial_numbers(misuse):

@@ -97,6 +97,20 @@ def sequence(case):
         fmu.setFMUstate(state)
         call("doStep", 2e-4, 1e-4)      # from the restored state: the same point again
         call("doStep", 3e-4 + 1e-19, 1e-4)  # a master's rounding: continues
+    elif case == "wrong-reference":  # no such variable, or one of another type: fmi2Error, nothing read or set
+        init()
+        nowhere = max(v.valueReference for v in md.modelVariables) + 1000
+        text = next(v for v in md.modelVariables if v.type == "String")
+        real = next(v for v in md.modelVariables if v.causality == "output" and v.type == "Real")
+        call("getReal", [nowhere])
+        call("getReal", [vr[real.name], vr[text.name]])
+        call("setReal", [nowhere], [1.0])
+        call("getInteger", [nowhere])
+        call("setBoolean", [vr[real.name]], [True])
+        call("getString", [vr[real.name]])
+        call("doStep", 0.0, 1e-4)
+        read("after", [real.name])
+        out["values"]["names"] = [nowhere, text.name, real.name]
     elif case == "long-step":
         init()
         call("setReal", [vr["v_alpha"], vr["v_beta"]], [20.0, 5.0])
@@ -176,9 +190,9 @@ def fmus() -> dict[str, Path]:
 
 #: the call sequences the tests below make on each FMU, run one after the other in one process per FMU
 SEQUENCES = {"PmsmEvPlant": ("step-before-init", "step-after-terminate", "non-finite", "time", "long-step",
-                             "foreign-instance", "threads"),
+                             "foreign-instance", "threads", "wrong-reference"),
              "FocSensorless": ("step-before-init", "step-after-terminate", "enter-twice", "time", "foreign-instance",
-                               "threads"),
+                               "threads", "wrong-reference"),
              "RouteProfile": ("step-before-init",), "FocEkf5": ("non-finite",)}
 _RUNS: dict = {}  # {(FMU, case): its result}, of the sequences run so far
 
@@ -258,6 +272,27 @@ def test_non_finite_inputs_are_refused_naming_the_variable(fmus, name, first):
     assert log[0] == f"[ERROR] fmi2SetReal: input {first!r} = inf is not finite; not set"
     assert log[1].startswith("[ERROR] fmi2SetReal: input '") and log[1].endswith("' = nan is not finite; not set")
     assert len(log) == 2
+    assert all(isinstance(v, float) and math.isfinite(v) for v in values["after"])
+
+
+@pytest.mark.parametrize("name", ["PmsmEvPlant", "FocSensorless"])
+def test_a_value_reference_of_no_variable_or_of_another_type_is_an_error(fmus, name):
+    """fmi2Error and a line naming the reference (pythonfmu alone raises and answers fmi2Fatal, after which a host
+    may not call the FMU again: an FMI 3.0 host that took the controller's clock for a Float64 met that); nothing
+    read or set, and the FMU steps on."""
+    calls, log, values = run(fmus[name], "wrong-reference")
+    nowhere, text, real = values["names"]
+    assert calls[3:] == [["getReal", ERROR], ["getReal", ERROR], ["setReal", ERROR], ["getInteger", ERROR],
+                         ["setBoolean", ERROR], ["getString", ERROR], ["doStep", 0]]
+    assert [line.split(":")[0] for line in log] == ["[ERROR] fmi2GetReal", "[ERROR] fmi2GetReal", "[ERROR] fmi2SetReal",
+                                                    "[ERROR] fmi2GetInteger", "[ERROR] fmi2SetBoolean",
+                                                    "[ERROR] fmi2GetString"]
+    assert log[0] == f"[ERROR] fmi2GetReal: no variable has the value reference {nowhere}; nothing read"
+    assert log[1].endswith(f" is {text!r}, a String, not a Real; nothing read")
+    assert log[2] == f"[ERROR] fmi2SetReal: no variable has the value reference {nowhere}; nothing set"
+    assert log[3] == f"[ERROR] fmi2GetInteger: no variable has the value reference {nowhere}; nothing read"
+    assert log[4].endswith(f" is {real!r}, a Real, not a Boolean; nothing set")
+    assert log[5].endswith(f" is {real!r}, a Real, not a String; nothing read")
     assert all(isinstance(v, float) and math.isfinite(v) for v in values["after"])
 
 
