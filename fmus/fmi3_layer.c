@@ -168,6 +168,7 @@ typedef struct {
     /* the sample clock of a controller (resources/CLOCK_FILE; clocked = 0: none) */
     int clocked;
     fmi3ValueReference clock_reference, dt_reference;
+    fmi3ValueReference own_floor;     /* the least of the layer's own references (the time, the clock) */
     double interval;                  /* the clock's interval: the sample period */
     /* event mode (eventModeUsed): the stack steps only at the clock's ticks, one sample period each */
     int event_mode_used, in_event_mode, initialized, ticked;
@@ -266,10 +267,8 @@ static void say(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
         say(W->environment, W->log, fmi3Error, "%s: %s", __func__, why);                                     \
         return fmi3Error;                                                                                    \
     } while (0)
-/* the scalar variables of this model: one value a value reference, and none of them the sample clock (a Clock is
- * read and set by fmi3GetClock, fmi3SetClock: a host that takes it for a value is answered here, not by the FMI 2.0
- * stack, which does not know the reference) */
-#define SCALARS(nvr, nvalues, refs)                                                                          \
+/* the scalar variables of this model: one value a value reference */
+#define SCALARS(nvr, nvalues)                                                                                \
     do {                                                                                                     \
         if ((nvr) != (nvalues)) {                                                                            \
             say(W->environment, W->log, fmi3Error,                                                           \
@@ -277,6 +276,11 @@ static void say(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
                 (size_t)(nvalues), (size_t)(nvr));                                                           \
             return fmi3Error;                                                                                \
         }                                                                                                    \
+    } while (0)
+/* none of the references the sample clock: a Clock is set by fmi3SetClock, and a host that takes it for a value is
+ * answered here, not by the FMI 2.0 stack, which does not know the reference */
+#define CLOCK_REFUSED(refs, nvr)                                                                             \
+    do {                                                                                                     \
         for (size_t clock_i = 0; W->clocked && clock_i < (nvr); clock_i++)                                   \
             if ((refs)[clock_i] == W->clock_reference) {                                                     \
                 say(W->environment, W->log, fmi3Error, "%s: value reference %u is the sample clock, not a "     \
@@ -285,6 +289,16 @@ static void say(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
                 return fmi3Error;                                                                            \
             }                                                                                                \
     } while (0)
+
+/* whether any of the references is one of the layer's own (the time, the sample clock: the largest there are,
+ * own_floor and above), one compare a reference: the get and set of Float64s, called at every step, pass the others
+ * to the FMI 2.0 stack at once */
+static int own_refs(const Instance* w, const fmi3ValueReference refs[], size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (refs[i] >= w->own_floor) return 1;
+    return 0;
+}
 
 /* the resource folder (a path, ending in '/') as the file URI of FMI 2.0 (percent-encoded as fmpy's
  * pathname2url does); NULL: ../../resources/ from this library */
@@ -341,6 +355,7 @@ static void read_clock(Instance* w, const char* uri)
     if (fscanf(f, "%u %lf %u", &clock, &interval, &dt) == 3 && interval > 0) {
         w->clocked = 1;
         w->clock_reference = clock;
+        if (clock < w->own_floor) w->own_floor = clock;
         w->interval = interval;
         w->dt_reference = dt;
     }
@@ -413,6 +428,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     }
     w->environment = instanceEnvironment;
     w->log = logMessage;
+    w->own_floor = TIME_REFERENCE;
     read_clock(w, uri);
     if (eventModeUsed && !w->clocked) {
         say(instanceEnvironment, logMessage, fmi3Error,
@@ -517,7 +533,10 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           fmi3Float64 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues, valueReferences);
+    SCALARS(nValueReferences, nValues);
+    if (!own_refs(W, valueReferences, nValueReferences))
+        return status3(fmi2.get_real(W->inner, valueReferences, nValueReferences, values));
+    CLOCK_REFUSED(valueReferences, nValueReferences);
     size_t times = 0;
     for (size_t i = 0; i < nValueReferences; i++) times += valueReferences[i] == TIME_REFERENCE;
     if (times == 0) return status3(fmi2.get_real(W->inner, valueReferences, nValueReferences, values));
@@ -543,7 +562,10 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           const fmi3Float64 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues, valueReferences);
+    SCALARS(nValueReferences, nValues);
+    if (!own_refs(W, valueReferences, nValueReferences))
+        return status3(fmi2.set_real(W->inner, valueReferences, nValueReferences, values));
+    CLOCK_REFUSED(valueReferences, nValueReferences);
     for (size_t i = 0; i < nValueReferences; i++)
         if (valueReferences[i] == TIME_REFERENCE) {
             say(W->environment, W->log, fmi3Error, "fmi3SetFloat64: the independent variable time cannot be set; "
@@ -557,7 +579,8 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
                         fmi3Int32 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues, valueReferences);
+    SCALARS(nValueReferences, nValues);
+    CLOCK_REFUSED(valueReferences, nValueReferences);
     return status3(fmi2.get_int(W->inner, valueReferences, nValueReferences, (fmi2Integer*)values));
 }
 
@@ -565,7 +588,8 @@ fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
                         const fmi3Int32 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues, valueReferences);
+    SCALARS(nValueReferences, nValues);
+    CLOCK_REFUSED(valueReferences, nValueReferences);
     return status3(fmi2.set_int(W->inner, valueReferences, nValueReferences, (const fmi2Integer*)values));
 }
 
@@ -573,7 +597,8 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
                           fmi3Boolean values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues, valueReferences);
+    SCALARS(nValueReferences, nValues);
+    CLOCK_REFUSED(valueReferences, nValueReferences);
     fmi2Boolean* wide = calloc(nValueReferences ? nValueReferences : 1, sizeof(fmi2Boolean));
     if (wide == NULL) return fmi3Error;
     fmi2Status s = fmi2.get_bool(W->inner, valueReferences, nValueReferences, wide);
@@ -587,7 +612,8 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
                           const fmi3Boolean values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues, valueReferences);
+    SCALARS(nValueReferences, nValues);
+    CLOCK_REFUSED(valueReferences, nValueReferences);
     fmi2Boolean* wide = calloc(nValueReferences ? nValueReferences : 1, sizeof(fmi2Boolean));
     if (wide == NULL) return fmi3Error;
     for (size_t i = 0; i < nValueReferences; i++) wide[i] = values[i] ? 1 : 0;
@@ -600,7 +626,8 @@ fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueRe
                          fmi3String values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues, valueReferences);
+    SCALARS(nValueReferences, nValues);
+    CLOCK_REFUSED(valueReferences, nValueReferences);
     return status3(fmi2.get_str(W->inner, valueReferences, nValueReferences, values));
 }
 
@@ -608,7 +635,8 @@ fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueRe
                          const fmi3String values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues, valueReferences);
+    SCALARS(nValueReferences, nValues);
+    CLOCK_REFUSED(valueReferences, nValueReferences);
     return status3(fmi2.set_str(W->inner, valueReferences, nValueReferences, values));
 }
 
