@@ -251,6 +251,9 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                          "the drive's J_eq of eq 9 is 0.526 kg m^2)"),
     "adaptation": (None, "adaptation while driving: 'off', 'observe' (psi_est, R_s_est computed, the controller "
                          "unchanged) or 'use' (the controller's model and its EKF take them)"),
+    "model_source": (None, "the controller's model of the motor: 'given' (its L_d, L_q, R_s parameters) or "
+                           "'identified' (L_d, L_q, R_s as the injection unit measures them at enable: the EKF, the "
+                           "current loops' gains, the feed-forward and the references use them)"),
     "adapt_time": ("s", "the adaptation's memory: its least-squares sums forget with this time constant over the "
                         "periods where their parameter is observable"),
     "adapt_psi_speed": ("rad/s", "psi is observable (psi_est moves) at this |omega| or faster"),

@@ -109,7 +109,62 @@ def test_observe_changes_nothing_and_use_puts_the_estimates_into_the_model():
     ({"adapt_time": 0.0}, "adapt_time must be finite and > 0"),
     ({"adapt_rs_current": -1.0}, "adapt_rs_current must be finite and > 0"),
     ({"adapt_rs_speed": 200.0}, "adapt_rs_speed must be >= 0 rad/s and below adapt_psi_speed"),
+    ({"model_source": "measured"}, "model_source must be one of"),
 ])
 def test_bad_adaptation_settings_are_refused_by_name(changes, message):
     with pytest.raises(ParameterError, match=message):
         ControllerParams(**changes).validate()
+
+
+# -- the identified model (AD7, ``ControllerParams.model_source``) ----------------------------------------------------
+#: the constants made of L_d, L_q, R_s: the EKF's (A8-A15, A18-A19), the decoupling's, the loss detector's, the current
+#: PIs' gains
+MODEL_SLOTS = ("C_L_D", "C_L_Q", "C_A_RD", "C_A_RQ", "C_C_WQ", "C_C_WD", "C_C_WPSI", "C_C_VD", "C_C_VQ", "C_C_TDQ",
+               "C_EKF_LOS_EMF", "C_KP_ID", "C_KI_ID", "C_KP_IQ", "C_KI_IQ")
+
+
+def _injection_unit(motor=None, source="identified"):
+    from pmsm_ev.params import InjectionParams
+
+    return ControlUnit("sensorless", motor=motor, controller=ControllerParams(model_source=source),
+                       injection=InjectionParams(low_speed="injection"))
+
+
+def test_the_identified_model_is_the_model_a_unit_built_on_the_measured_motor_has():
+    """L_d = 1/y_d, L_q = 1/y_q and R_s as measured put into the controller's model give every constant made of them
+    as a unit whose motor parameters are those values computes them (its EKF's, its current PIs' gains from the same
+    bandwidth); with nothing measured, the given model; a reset goes back to the given model, a restored FMU state to
+    the measured one."""
+    l_d, l_q, r_s = 2.1e-4, 2.9e-4, 0.0131
+    unit = _injection_unit()
+    c, s = unit._c, unit._s
+    given = {name: c[getattr(k, name)] for name in MODEL_SLOTS}
+    k.model_apply(s, c)  # nothing measured: the given model
+    assert {name: c[getattr(k, name)] for name in MODEL_SLOTS} == pytest.approx(given, rel=1e-12)
+    s[k.S_ID_Y], s[k.S_ID_Y + 1], s[k.S_ID_RS] = 1.0 / l_d, 1.0 / l_q, r_s
+    k.model_apply(s, c)
+    oracle = _injection_unit(MotorParams(L_d=l_d, L_q=l_q, R_s=r_s), source="given")._c
+    for name in MODEL_SLOTS:
+        assert c[getattr(k, name)] == pytest.approx(oracle[getattr(k, name)], rel=1e-12), name
+    assert c[k.C_L_D] != given["C_L_D"] and c[k.C_KI_ID] != given["C_KI_ID"]
+    state = unit.get_state()
+    unit.reset()
+    assert {name: c[getattr(k, name)] for name in MODEL_SLOTS} == pytest.approx(given, rel=1e-12)
+    unit.set_state(state)
+    assert c[k.C_L_Q] == pytest.approx(l_q, rel=1e-12) and c[k.C_A_RQ] == pytest.approx(oracle[k.C_A_RQ], rel=1e-12)
+
+
+def test_the_given_model_stays_where_the_identification_is_not_used_or_measured_nothing():
+    """``model_source = "given"``: the identification's values change nothing of the model (the kernel's step never
+    calls ``model_apply``: its constants stay bit for bit); "identified" with R_s alone measured: the given L_d,
+    L_q and the measured R_s."""
+    unit = _injection_unit(source="given")
+    before = list(unit._c)
+    assert unit._c[k.C_MODEL_SRC] == k.MODEL_GIVEN
+    unit = _injection_unit()
+    c, s = unit._c, unit._s
+    s[k.S_ID_RS] = 2.0 * MotorParams().R_s
+    k.model_apply(s, c)
+    assert c[k.C_L_D] == MotorParams().L_d and c[k.C_L_Q] == MotorParams().L_q
+    assert c[k.C_A_RD] == pytest.approx(1.0 - 2.0 * MotorParams().R_s * unit.dt / MotorParams().L_d, rel=1e-12)
+    assert c[k.C_KI_IQ] == pytest.approx(2.0 * before[k.C_KI_IQ], rel=1e-12)

@@ -105,18 +105,31 @@ def test_an_unresolved_polarity_is_tried_again_once_then_latches_without_torque(
     assert k.detect_acquired(s, c) == k.EV_NONE
 
 
-def test_a_unit_that_cannot_see_takes_the_if_strategy_from_its_alignment_with_the_brake_released():
+def test_a_unit_that_cannot_see_takes_the_if_strategy_from_its_alignment_the_brake_let_go_after_the_ramp():
     """Row (MODE_ACQUIRE, EV_CANNOT_SEE, MODE_ALIGN, A_IF_FALLBACK): the I-f strategy for good (``S_IF_FALLBACK``),
-    its state from its start (the alignment's clock, no fault, no episode), the brake and the park let go, the
-    loops' integrators from 0; the identification kept."""
+    its state from its start (the alignment's clock, no fault, no episode), the park let go, the loops' integrators
+    from 0, the EKF at rest with an unknown start's covariance; the identification kept. The brake holds the car
+    until the alignment's vector has its current (``t_ramp``), then lets go."""
     u, s, c = _unit()
     s[k.S_ID_Y:k.S_ID_Y + 2] = [4300.0, 4220.0]
     s[k.S_CLOCK], s[k.S_EPISODE], s[k.S_PARKED] = 123.0, 1.0, 1.0
     s[k.S_INT_D], s[k.S_INT_Q], s[k.S_W_INT] = 1.5, -0.5, 7.0
+    s[k.S_X + 2], s[k.S_P + 12] = -7.5, 1e-6  # the speed the EKF made of the identification's square wave
     assert _go(s, c, k.MODE_ACQUIRE, k.EV_CANNOT_SEE) == k.MODE_ALIGN
-    assert s[k.S_IF_FALLBACK] == 1.0 and s[k.S_HOLD] == 0.0 and s[k.S_PARKED] == 0.0 and _t_brake(u, s) == 0.0
+    assert s[k.S_IF_FALLBACK] == 1.0 and s[k.S_PARKED] == 0.0
     assert [s[i] for i in (k.S_CLOCK, k.S_EPISODE, k.S_FAULT, k.S_INT_D, k.S_INT_Q, k.S_W_INT)] == [0.0] * 6
     assert s[k.S_ID_Y:k.S_ID_Y + 2] == [4300.0, 4220.0]
+    assert s[k.S_X + 2] == 0.0 and s[k.S_X + 4] == 0.0
+    assert [s[k.S_P + 6 * i] for i in range(5)] == [c[k.C_P0 + i] for i in range(5)]
+    assert _t_brake(u, s) == pytest.approx(c[k.C_HOLD_BRAKE])  # held, as it was through the acquisition
+    for n in range(10):
+        k.injection_unit_step(s, c, 0.0, 0.0, 0.0)
+        assert s[k.S_MODE] == k.MODE_ALIGN and _t_brake(u, s) > 0.0, n  # held while the vector's current ramps up
+    s[k.S_CLOCK] = round(c[k.C_T_RAMP] / c[k.C_DT]) - 1.0  # the ramp's last period
+    k.injection_unit_step(s, c, 0.0, 0.0, 0.0)
+    assert _t_brake(u, s) > 0.0
+    k.injection_unit_step(s, c, 0.0, 0.0, 0.0)
+    assert s[k.S_MODE] == k.MODE_ALIGN and s[k.S_HOLD] == 0.0 and _t_brake(u, s) == 0.0  # then let go
 
 
 @pytest.mark.parametrize(("y", "blind", "acc", "held", "sees"), [

@@ -348,6 +348,10 @@ class ControlUnit:
         c[_k.C_AD_RS0] = m.R_s
         c[_k.C_AD_NOM] = c[_k.C_C_WPSI]
         c[_k.C_AD_NOM + 1] = c[_k.C_C_TPSI]
+        # the controller's model from the identification (``model_source``, AD7): the given one kept to go back to
+        c[_k.C_MODEL_SRC] = _k.MODEL_CODES[p.model_source]
+        for i, value in enumerate((m.L_d, m.L_q, m.R_s, c[_k.C_KP_ID], c[_k.C_KI_ID], c[_k.C_KP_IQ], c[_k.C_KI_IQ])):
+            c[_k.C_MODEL0 + i] = float(value)
 
     def reset(self) -> None:
         self.observer.reset()
@@ -366,6 +370,8 @@ class ControlUnit:
                 for i in _k.UNIT_STATE_LAYOUT.span(name):
                     self._s[i] = 0.0
         self._s[_k.S_PSI_RATIO] = 1.0
+        if self._c[_k.C_MODEL_SRC] == _k.MODEL_IDENTIFIED:  # the given model until the identification (AD7)
+            self._kernels.model_apply(self._s, self._c)
         self._kernels.adapt_reset(self._s, self._c)  # psi_hat, R_s_hat on the model's (and with "use", the model)
         if self.injecting:  # enabled: the acquisition first
             self._s[_k.S_MODE] = _k.MODE_ACQUIRE
@@ -574,5 +580,7 @@ class ControlUnit:
         """Restore a ``get_state`` dict; ``LayoutError`` (naming the field) if its fields or their
         lengths are not this version's."""
         _k.UNIT_STATE_LAYOUT.restore(self._s, state)
-        if self._c[_k.C_ADAPT] == _k.ADAPT_USE:  # the model follows the restored estimates
+        if self._c[_k.C_MODEL_SRC] == _k.MODEL_IDENTIFIED:  # the model follows the restored identification (AD7)
+            self._kernels.model_apply(self._s, self._c)  # (and the estimates, with "use")
+        elif self._c[_k.C_ADAPT] == _k.ADAPT_USE:  # the model follows the restored estimates
             self._kernels.adapt_apply(self._s, self._c)

@@ -49,6 +49,8 @@ CURRENT_CONTROLS = ("paper", "high_speed")
 SPEED_FEEDFORWARDS = ("none", "inertia", "inertia+road")
 #: adaptation while driving (``ControllerParams.adaptation``)
 ADAPTATIONS = ("off", "observe", "use")
+#: the controller's model of the motor (``ControllerParams.model_source``)
+MODEL_SOURCES = ("given", "identified")
 DISCRETISATIONS = ("euler", "bilinear")
 #: the frames the plant's RK4 integrates in (``PlantParams.integrator``)
 INTEGRATORS = ("rk4_rotor", "rk6_stationary")
@@ -1183,6 +1185,13 @@ class ControllerParams:
     #: controller's model takes them (psi in the feed-forward, the reference generator and the EKF's A3-A4, R_s in
     #: the EKF's A8, A14)
     adaptation: str = "off"
+    #: the controller's model of the motor's inductances and resistance [chosen: "given", today's drive]: "given",
+    #: the controller's MotorParams (the data sheet); "identified", L_d, L_q and R_s as the injection unit's
+    #: identification measures them at enable (eqs ID1, ID2; again at a blind unit's stops) in the EKF's model, the
+    #: current PIs' gains (K_p = L omega_c, K_i = R_s omega_c at the given model's bandwidth), the decoupling and
+    #: feed-forward, the reference generator and the I-f sizing (eq AD7, ``pmsm_ev.kernels.model_apply``); a unit that
+    #: does not identify (no injection) keeps the given model
+    model_source: str = "given"
     #: the estimators' memory [s] [chosen]: the least-squares sums forget with this time constant over the periods
     #: where their parameter is observable. Far below the motor's thermal time constants (the winding's fastest
     #: 15.9 s, the magnet's 65 min: docs/speed-range.md, "A motor that warms"), so the estimate lags the warming by
@@ -1281,6 +1290,8 @@ class ControllerParams:
         """The adaptation's settings (``adaptation``, ``adapt_*``)."""
         _require(self.adaptation in ADAPTATIONS,
                  f"adaptation must be one of {ADAPTATIONS} (got {self.adaptation!r})")
+        _require(self.model_source in MODEL_SOURCES,
+                 f"model_source must be one of {MODEL_SOURCES} (got {self.model_source!r})")
         for name in ("adapt_time", "adapt_psi_speed", "adapt_rs_current", "adapt_current_rate"):
             value = getattr(self, name)
             _require(math.isfinite(value) and value > 0, f"{name} must be finite and > 0 (got {value})")

@@ -54,6 +54,15 @@ identification's R_s_id where the unit has one (the R_s test at enable, ``S_ID_R
 decoupling and back-EMF feed-forward, the reference generator, the I-f sizing) and in the EKF's model (A3, A4:
 ``C_C_WPSI``, ``C_C_TPSI``), R_s_hat in the EKF's (A8, A14: ``C_A_RD``, ``C_A_RQ``); the speed loop's k_t, a design
 constant of its gains, stays. ``ADAPT_OBSERVE`` computes them and changes nothing; ``ADAPT_OFF`` does not run.
+
+**The identified model** (``MODEL_IDENTIFIED``, AD7; ``ControllerParams.model_source``): the injection unit's
+identification at a stop (eqs ID1, ID2 in ``kernels.modes``) measures L_d = 1 / y_d and L_q = 1 / y_q, the incremental
+inductances at zero current, and R_s; ``model_apply`` puts them in the controller's model in place of the given
+ones (``C_MODEL0``), where it reads them: the EKF's A8-A15 and A18-A19 (``C_A_RD`` .. ``C_C_TDQ``), the
+decoupling, the back-EMF feed-forward, the reference generator and the I-f sizing (``C_L_D``, ``C_L_Q``), the EKF's
+loss detector (``C_EKF_LOS_EMF``), and the current PIs' gains, K_p = L omega_c and K_i = R_s omega_c at the given
+model's bandwidth (``C_MODEL0``'s gains scaled by the measured over the given). With ``ADAPT_USE`` the adaptation's
+psi and R_s go in after it (AD6). The given model stays wherever a value was not measured.
 """
 
 from __future__ import annotations
@@ -74,13 +83,26 @@ from .layout import (
     C_AD_RS_I,
     C_AD_RS_W,
     C_ADAPT,
+    C_C_TDQ,
     C_C_TPSI,
+    C_C_VD,
+    C_C_VQ,
+    C_C_WD,
     C_C_WPSI,
+    C_C_WQ,
     C_DT,
+    C_EKF_LOS_EMF,
+    C_KI_ID,
+    C_KI_IQ,
+    C_KP_ID,
+    C_KP_IQ,
     C_L_D,
     C_L_Q,
+    C_MODEL0,
+    C_MODEL_SRC,
     C_N,
     C_PSI,
+    MODEL_IDENTIFIED,
     S_AD_PREV,
     S_AD_PRIMED,
     S_AD_PSI,
@@ -90,6 +112,7 @@ from .layout import (
     S_AD_SUM,
     S_AD_V,
     S_ID_RS,
+    S_ID_Y,
     S_V_ALPHA,
     S_V_BETA,
 )
@@ -129,6 +152,45 @@ def adapt_reset(s, c):
         s[S_AD_RATE + j] = 0.0
         s[S_AD_SEEN + j] = 0.0
         s[S_AD_PRIMED + j] = 0.0
+    if c[C_ADAPT] == ADAPT_USE:
+        adapt_apply(s, c)
+
+
+@kernel()
+def model_apply(s, c):
+    """(AD7) The controller's model of the motor from what the identification measured (``C_MODEL_SRC`` =
+    ``MODEL_IDENTIFIED``; the module's doc): L_d = 1 / y_d, L_q = 1 / y_q (``S_ID_Y``, eq ID1) and R_s (``S_ID_RS``,
+    eq ID2) where measured, else the given (``C_MODEL0``), into every constant made of them, psi where it is
+    (``C_PSI``); with ``ADAPT_USE`` the adaptation's psi and R_s on top (``adapt_apply``). Idempotent: the state
+    says what the model is, so that a restored FMU state and a reset put it back."""
+    l_d = c[C_MODEL0]
+    l_q = c[C_MODEL0 + 1]
+    r_s = c[C_MODEL0 + 2]
+    if c[C_MODEL_SRC] == MODEL_IDENTIFIED:
+        if s[S_ID_Y] > 0.0 and s[S_ID_Y + 1] > 0.0:
+            l_d = 1.0 / s[S_ID_Y]
+            l_q = 1.0 / s[S_ID_Y + 1]
+        if s[S_ID_RS] > 0.0:
+            r_s = s[S_ID_RS]
+    dt = c[C_DT]
+    n = c[C_N]
+    kt_j = c[C_C_TPSI] / c[C_PSI]  # k_dq N dt / J (A19 over psi)
+    c[C_L_D] = l_d
+    c[C_L_Q] = l_q
+    c[C_A_RD] = 1.0 - r_s * dt / l_d  # (A8)
+    c[C_A_RQ] = 1.0 - r_s * dt / l_q  # (A14)
+    c[C_C_WQ] = n * l_q * dt / l_d  # (A9, A10)
+    c[C_C_WD] = n * l_d * dt / l_q  # (A13)
+    c[C_C_WPSI] = n * c[C_PSI] * dt / l_q  # (A15)
+    c[C_C_VD] = dt / l_d
+    c[C_C_VQ] = dt / l_q
+    c[C_C_TDQ] = kt_j * (l_d - l_q)  # (A18, A19)
+    c[C_EKF_LOS_EMF] = dt * n * c[C_PSI] / l_q
+    c[C_AD_NOM] = n * c[C_AD_PSI0] * dt / l_q
+    c[C_KP_ID] = c[C_MODEL0 + 3] * l_d / c[C_MODEL0]
+    c[C_KI_ID] = c[C_MODEL0 + 4] * r_s / c[C_MODEL0 + 2]
+    c[C_KP_IQ] = c[C_MODEL0 + 5] * l_q / c[C_MODEL0 + 1]
+    c[C_KI_IQ] = c[C_MODEL0 + 6] * r_s / c[C_MODEL0 + 2]
     if c[C_ADAPT] == ADAPT_USE:
         adapt_apply(s, c)
 

@@ -521,6 +521,11 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_AD_PSI0", 1, "the model's psi: where psi_hat starts [Wb]"),
     ("C_AD_RS0", 1, "the model's R_s: where R_s_hat starts (until the identification's R_s_id) [Ohm]"),
     ("C_AD_NOM", 2, "the EKF model's psi-proportional constants at C_AD_PSI0: C_C_WPSI, C_C_TPSI"),
+    # the controller's model from the identification (``ControllerParams.model_source``; ``kernels.adaptation``, AD7)
+    ("C_MODEL_SRC", 1, "MODEL_GIVEN (the motor's parameters as given) or MODEL_IDENTIFIED (L_d, L_q, R_s as the "
+                       "identification measures them)"),
+    ("C_MODEL0", 7, "the given model: L_d [H], L_q [H], R_s [Ohm] and the current PIs' gains at them: K_p,d [V/A], "
+                    "K_i,d [V/(A s)], K_p,q, K_i,q"),
     # the sensorless unit's I-f sizing and synchronism (``pmsm_ev.params.StartupParams``)
     ("C_J_IF", 1, "the EKF model's inertia [kg m^2]"),
     ("C_E_MAX", 1, "the design load angle [rad]"),
@@ -624,7 +629,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_EMF_SPEED", 1, "the back-EMF detector: the unexplained back-EMF's speed beyond which the frame has lost the "
                        "rotor, at a standing frame [rad/s] (eq LS2)"),
     ("C_EMF_REL", 1, "... plus this share of the rotor's speed the current loops see [-]"),
-), size=169)
+), size=177)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
@@ -757,7 +762,10 @@ OBSERVER_CODES = {"ekf5": OBS_EKF5, "ekf4": OBS_EKF4, "ekf5ab": OBS_EKF5AB, "sen
 
 #: adaptation while driving (``C_ADAPT``, ``ControllerParams.adaptation``)
 ADAPT_OFF, ADAPT_OBSERVE, ADAPT_USE = 0.0, 1.0, 2.0
+#: the controller's model of the motor (``C_MODEL_SRC``, ``ControllerParams.model_source``)
+MODEL_GIVEN, MODEL_IDENTIFIED = 0.0, 1.0
 ADAPT_CODES = {"off": ADAPT_OFF, "observe": ADAPT_OBSERVE, "use": ADAPT_USE}
+MODEL_CODES = {"given": MODEL_GIVEN, "identified": MODEL_IDENTIFIED}
 
 #: the reference generator's modes (``C_REF_MODE``, ``ControllerParams.reference``)
 REF_PAPER, REF_MTPA, REF_FW = 0.0, 1.0, 2.0

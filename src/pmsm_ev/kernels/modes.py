@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 
-from .adaptation import adapt_period
+from .adaptation import adapt_period, model_apply
 from .control import (
     current_step,
     modulate,
@@ -113,6 +113,7 @@ from .layout import (
     C_L_D,
     C_L_Q,
     C_LOS_FILTER,
+    C_MODEL_SRC,
     C_N,
     C_OFS_TIME,
     C_P0,
@@ -129,6 +130,7 @@ from .layout import (
     C_SALIENCY_MIN,
     C_SALIENCY_TRUST,
     C_T_MAX,
+    C_T_RAMP,
     C_TRK_L,
     FAULT_LATCHED,
     FAULT_NONE,
@@ -136,9 +138,11 @@ from .layout import (
     MODE_EKF,
     MODE_INJECTION,
     MODE_POLARITY,
+    MODEL_IDENTIFIED,
     S_ACQ,
     S_AXIS_F,
     S_BLEND,
+    S_CLOCK,
     S_CROSS,
     S_DISAGREE_F,
     S_DISAGREE_V,
@@ -226,6 +230,7 @@ from .machine import (
     EV_POLARITY_UNRESOLVED,
     EV_SLOW,
     EV_STILL_PARKED,
+    MODE_ALIGN,
     next_mode,
 )
 from .observers import ekf5ab_period
@@ -845,13 +850,18 @@ def park_car(s, c, i_alpha, i_beta):
 
 
 @kernel()
-def fall_back_to_if(s):
+def fall_back_to_if(s, c):
     """A unit that cannot see its motor's axis (``cannot_see``) takes the I-f strategy for good (``S_IF_FALLBACK``:
     ``injection_unit_step`` runs ``sensorless_step`` from the next period): the alignment from its start, the brake
-    released (the alignment turns the rotor onto the vector; the I-f strategy holds the car on its vector, its
-    stand), the current loops' and the speed loop's integrators from 0; the identification's outputs stay."""
+    held until the alignment's vector has its current (``C_T_RAMP``: let go at once, a car on a slope rolled back
+    under the ramping vector, 110 mm at the wide design's corner, and turned the rotor past it), then released (the
+    alignment turns the rotor onto the vector; the I-f strategy holds the car on its vector, its stand), the
+    current loops' and the speed loop's integrators from 0, the EKF at rest with an unknown start's
+    covariance (``C_P0``) as at enable: the speed it made of the identification's square wave (up to 7.5 rad/s on
+    the wide design's corner) would read to the alignment as a rotor pushed off its vector (``align_slip``) and
+    put the I-f vector at the current limit; the identification's outputs stay."""
+    restart_ekf_on(s, c, s[S_X + 3], 0.0, 0.0, C_P0)
     s[S_IF_FALLBACK] = 1.0
-    s[S_HOLD] = 0.0
     s[S_PARKED] = 0.0
     s[S_INT_D] = 0.0
     s[S_INT_Q] = 0.0
@@ -901,7 +911,7 @@ def enter(s, c, action, i_alpha, i_beta):
         begin_episode_now(s, c)
         park_car(s, c, i_alpha, i_beta)
     elif action == A_IF_FALLBACK:
-        fall_back_to_if(s)
+        fall_back_to_if(s, c)
     elif action == A_REPOLARIZE:
         begin_episode_now(s, c)
         flip_frame(s)
@@ -956,6 +966,8 @@ def collect(s, c, mode, t, phase, answer, i_d):
             if s[S_ID_DONE] == 0.0:
                 identify_rs(s, c)
             s[S_ID_DONE] = 1.0
+            if c[C_MODEL_SRC] == MODEL_IDENTIFIED:  # the controller's model from what was measured (AD7)
+                model_apply(s, c)
         if starts and phase == PHASE_AXIS0:  # the square wave begins after the offset window
             s[S_INJ_SKIP] = SKIP_HALF_WAVES
         elif starts and phase == PHASE_AXIS45:  # the axis jumps by 45 deg: two answers straddle it
@@ -1013,6 +1025,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     i_alpha -= s[S_ID_OFS]  # the sensors' offsets measured at enable (0 before)
     i_beta -= s[S_ID_OFS + 1]
     if s[S_IF_FALLBACK] != 0.0:  # a unit that cannot see its motor's axis: the I-f strategy (``fall_back_to_if``)
+        if s[S_HOLD] > 0.0 and (s[S_MODE] != MODE_ALIGN or s[S_CLOCK] * dt >= c[C_T_RAMP]):
+            s[S_HOLD] = 0.0  # the brake let go once the alignment's vector has its current
         return sensorless_step(s, c, i_alpha, i_beta, omega_ref)
     innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
     s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
