@@ -521,11 +521,6 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_AD_PSI0", 1, "the model's psi: where psi_hat starts [Wb]"),
     ("C_AD_RS0", 1, "the model's R_s: where R_s_hat starts (until the identification's R_s_id) [Ohm]"),
     ("C_AD_NOM", 2, "the EKF model's psi-proportional constants at C_AD_PSI0: C_C_WPSI, C_C_TPSI"),
-    # the controller's model from the identification (``ControllerParams.model_source``; ``kernels.adaptation``, AD7)
-    ("C_MODEL_SRC", 1, "MODEL_GIVEN (the motor's parameters as given) or MODEL_IDENTIFIED (L_d, L_q, R_s as the "
-                       "identification measures them)"),
-    ("C_MODEL0", 7, "the given model: L_d [H], L_q [H], R_s [Ohm] and the current PIs' gains at them: K_p,d [V/A], "
-                    "K_i,d [V/(A s)], K_p,q, K_i,q"),
     # the sensorless unit's I-f sizing and synchronism (``pmsm_ev.params.StartupParams``)
     ("C_J_IF", 1, "the EKF model's inertia [kg m^2]"),
     ("C_E_MAX", 1, "the design load angle [rad]"),
@@ -629,6 +624,11 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_EMF_SPEED", 1, "the back-EMF detector: the unexplained back-EMF's speed beyond which the frame has lost the "
                        "rotor, at a standing frame [rad/s] (eq LS2)"),
     ("C_EMF_REL", 1, "... plus this share of the rotor's speed the current loops see [-]"),
+    # the controller's model from the identification (``ControllerParams.model_source``; ``kernels.adaptation``, AD7)
+    ("C_MODEL_SRC", 1, "MODEL_GIVEN (the motor's parameters as given) or MODEL_IDENTIFIED (L_d, L_q, R_s as the "
+                       "identification measures them)"),
+    ("C_MODEL0", 7, "the given model: L_d [H], L_q [H], R_s [Ohm] and the current PIs' gains at them: K_p,d [V/A], "
+                    "K_i,d [V/(A s)], K_p,q, K_i,q"),
 ), size=177)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
