@@ -132,6 +132,18 @@ def test_a_unit_that_cannot_see_takes_the_if_strategy_from_its_alignment_the_bra
     assert s[k.S_MODE] == k.MODE_ALIGN and s[k.S_HOLD] == 0.0 and _t_brake(u, s) == 0.0  # then let go
 
 
+def test_a_latched_unit_that_cannot_see_stays_latched_in_the_if_strategy():
+    """Two unresolved polarity tests latch the safe state; a fallback to the I-f strategy after them keeps it
+    latched (the I-f strategy's safe state: stop and hold at the current limit), never a fresh start."""
+    _, s, c = _unit()
+    for _ in range(2):
+        assert _go(s, c, k.MODE_ACQUIRE, k.EV_ACQUIRED) == k.MODE_POLARITY
+        assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_UNRESOLVED) == k.MODE_ACQUIRE
+    assert s[k.S_FAULT] == k.FAULT_LATCHED
+    assert _go(s, c, k.MODE_ACQUIRE, k.EV_CANNOT_SEE) == k.MODE_ALIGN
+    assert s[k.S_IF_FALLBACK] == 1.0 and s[k.S_FAULT] == k.FAULT_LATCHED
+
+
 @pytest.mark.parametrize(("y", "blind", "acc", "held", "sees"), [
     ((4300.0, 4220.0), 1.0, 0.77, True, False),  # the design's corner motor: blind, its angle 0.77 rad rms
     ((4300.0, 4300.0), 1.0, 0.0, True, False),  # no saliency at all: no error signal

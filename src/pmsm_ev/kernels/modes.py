@@ -859,7 +859,8 @@ def fall_back_to_if(s, c):
     current loops' and the speed loop's integrators from 0, the EKF at rest with an unknown start's
     covariance (``C_P0``) as at enable: the speed it made of the identification's square wave (up to 7.5 rad/s on
     the wide design's corner) would read to the alignment as a rotor pushed off its vector (``align_slip``) and
-    put the I-f vector at the current limit; the identification's outputs stay."""
+    put the I-f vector at the current limit; the identification's outputs stay, and a latched fault stays latched."""
+    latched = s[S_FAULT] == FAULT_LATCHED
     restart_ekf_on(s, c, s[S_X + 3], 0.0, 0.0, C_P0)
     s[S_IF_FALLBACK] = 1.0
     s[S_PARKED] = 0.0
@@ -867,6 +868,8 @@ def fall_back_to_if(s, c):
     s[S_INT_Q] = 0.0
     s[S_W_INT] = 0.0
     enter_if_strategy(s)
+    if latched:  # the safe state is for good: the I-f strategy's holds the car at the current limit
+        s[S_FAULT] = FAULT_LATCHED
 
 
 @kernel()
