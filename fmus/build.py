@@ -235,7 +235,7 @@ def fmi3_layer_library() -> tuple[Path | None, str]:
     if missing:
         return None, f"no FMI 3.0 header {missing[0]} (FMPy's c-code/)"
     defines = {"FMI2_LOADER": f'"{FMI3_INNER_LOADER}"', "TIME_REFERENCE": f"{FMI3_TIME_REFERENCE}U",
-               "CLOCK_FILE": f'"{FMI3_CLOCK_FILE}"'}
+               "CLOCK_FILE": f'"{FMI3_CLOCK_FILE}"', "CONTINUITY_TOLERANCE": BINDING_CONSTANTS["CONTINUITY_TOLERANCE"]}
     return _compiled(FMI3_SOURCE, "fmi3", False, defines, headers)
 
 

@@ -67,6 +67,14 @@
 #ifndef TIME_REFERENCE
 #error "compile with -DTIME_REFERENCE=<value reference> (pmsm_ev_fmus.build does)"
 #endif
+/* a communication point continues the last step within this share of its size: the slaves' and the lean binding's
+ * (pmsm_ev_fmus.slave_support.CONTINUITY_TOLERANCE, given by the build) */
+#ifndef CONTINUITY_TOLERANCE
+#error "compile with -DCONTINUITY_TOLERANCE=<share> (pmsm_ev_fmus.build does)"
+#endif
+/* in event mode a step may end past the next tick by this share of the sample period (the rounding of t + h: an ulp
+ * of 350 s is 6e-10 of a 100 us period), no more: a step past a tick that was not set is refused */
+#define TICK_SLACK 1e-6
 
 /* -- the FMI 2.0 stack ------------------------------------------------------------------------------------ */
 typedef struct {
@@ -967,7 +975,7 @@ static fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eve
                                fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
                                fmi3Float64* lastSuccessfulTime)
 {
-    double end = t + h, slack = 1e-6 * w->interval;
+    double end = t + h, slack = TICK_SLACK * w->interval;
     fmi3Status s = fmi3OK;
     if (eventHandlingNeeded != NULL) *eventHandlingNeeded = false;
     if (terminateSimulation != NULL) *terminateSimulation = false;
@@ -979,7 +987,7 @@ static fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eve
     } else if (!(h > 0.0)) {
         say(w->environment, w->log, fmi3Error, "fmi3DoStep of %.9g s: a step size > 0", h);
         s = fmi3Error;
-    } else if (fabs(t - w->time) > 1e-3 * h) {
+    } else if (fabs(t - w->time) > CONTINUITY_TOLERANCE * h) {
         say(w->environment, w->log, fmi3Error, "fmi3DoStep at t = %.9g s does not continue the last step, which "
             "ended at %.9g s", t, w->time);
         s = fmi3Error;
