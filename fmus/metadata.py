@@ -369,6 +369,8 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                       "from then on; 0: not measured"),
     "inj_angle_max": ("rad", "the largest angle accuracy at a stop (eq ID3, from the measured saliency and noise "
                              "floor) at which the injection is trusted; beyond it the unit is blind"),
+    "inj_see_max": ("rad", "the largest angle accuracy at a stop (eq ID3) at which a blind unit still finds the axis "
+                           "at every stop (the parked fallback); beyond it the unit takes the I-f strategy for good"),
     "emf_slip_speed": ("rad/s", "loss of synchronism under injection and in the blend: the back-EMF the current PIs' "
                                 "integrators carry beyond what the frame's speed explains, as a speed (eq LS1), "
                                 "beyond this plus emf_slip_rel times the rotor's speed the loops see for inj_los_time"),

@@ -134,7 +134,8 @@ def test_a_unit_that_cannot_see_takes_the_if_strategy_from_its_alignment_the_bra
 
 def test_a_latched_unit_that_cannot_see_stays_latched_in_the_if_strategy():
     """Two unresolved polarity tests latch the safe state; a fallback to the I-f strategy after them keeps it
-    latched (the I-f strategy's safe state: stop and hold at the current limit), never a fresh start."""
+    latched (the I-f strategy's safe state, the vector at the current limit) with the friction brake held, never a
+    fresh start."""
     _, s, c = _unit()
     for _ in range(2):
         assert _go(s, c, k.MODE_ACQUIRE, k.EV_ACQUIRED) == k.MODE_POLARITY
@@ -142,6 +143,10 @@ def test_a_latched_unit_that_cannot_see_stays_latched_in_the_if_strategy():
     assert s[k.S_FAULT] == k.FAULT_LATCHED
     assert _go(s, c, k.MODE_ACQUIRE, k.EV_CANNOT_SEE) == k.MODE_ALIGN
     assert s[k.S_IF_FALLBACK] == 1.0 and s[k.S_FAULT] == k.FAULT_LATCHED
+    u = ControlUnit("sensorless", injection=InjectionParams(low_speed="injection"))
+    for _ in range(3):  # the safe state asks the friction brake at every period (a car on a slope is held)
+        k.injection_unit_step(s, c, 0.0, 0.0, 50.0)
+        assert s[k.S_FAULT] == k.FAULT_LATCHED and _t_brake(u, s) == pytest.approx(c[k.C_HOLD_BRAKE])
 
 
 @pytest.mark.parametrize(("y", "blind", "acc", "held", "sees"), [

@@ -88,7 +88,8 @@ _INJECTION_SLOTS = (
     ("saliency_min", _k.C_SALIENCY_MIN), ("saliency_trust", _k.C_SALIENCY_TRUST), ("inj_axis_cos", _k.C_AXIS_COS),
     ("inj_voltage_max", _k.C_INJ_V_MAX),
     ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME), ("ofs_time", _k.C_OFS_TIME),
-    ("inj_angle_max", _k.C_ANGLE_MAX), ("emf_slip_speed", _k.C_EMF_SPEED), ("emf_slip_rel", _k.C_EMF_REL))
+    ("inj_angle_max", _k.C_ANGLE_MAX), ("emf_slip_speed", _k.C_EMF_SPEED), ("emf_slip_rel", _k.C_EMF_REL),
+    ("inj_see_max", _k.C_SEE_MAX))
 #: state slots of the sensorless start-up, zeroed by ``reset``
 _STARTUP_STATE = _k.IF_STATE
 #: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``

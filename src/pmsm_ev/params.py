@@ -1789,6 +1789,10 @@ class InjectionParams:
     #: amplitude at ``inj_voltage_max``: 0.06 rad at 1 A, 0.15 rad at 2.6 A: below 2.6 A of noise the saliency
     #: limit is the stricter, beyond it this one
     inj_angle_max: float = 0.15
+    #: the largest angle accuracy at a stop (eq ID3) at which a blind unit still finds the axis at every stop for its
+    #: parked fallback (``pmsm_ev.kernels.cannot_see``); beyond it the unit cannot see and takes the I-f strategy for
+    #: good [rad] [chosen: 0.15, ``inj_angle_max``: the polarity test's frame band]
+    inj_see_max: float = 0.15
     #: the back-EMF detector (``pmsm_ev.kernels.detect_emf_lost``, eqs LS1-LS2), in FOC on the injection and the
     #: blend: the back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed
     #: [rad/s], beyond this (plus ``emf_slip_rel`` of the rotor's speed the loops see) for ``inj_los_time`` is a
@@ -1839,6 +1843,8 @@ class InjectionParams:
         _require(0.0 < self.inj_angle_max < 0.25 * math.pi,
                  f"inj_angle_max must be within (0, pi/4) rad: beyond pi/4 the error signal sin 2e no longer points "
                  f"back to the axis (got {self.inj_angle_max})")
+        _require(self.inj_angle_max <= self.inj_see_max < 0.25 * math.pi,
+                 f"inj_see_max must be within [inj_angle_max, pi/4) rad (got {self.inj_see_max})")
         _require(self.id_time == 0.0 or self.id_time >= 0.005,
                  f"id_time must be 0 (not measured) or >= 0.005 s, 50 answers an axis (got {self.id_time})")
         _require(self.inj_blend_low < self.inj_blend_high,

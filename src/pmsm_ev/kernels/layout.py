@@ -629,7 +629,9 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                        "identification measures them)"),
     ("C_MODEL0", 7, "the given model: L_d [H], L_q [H], R_s [Ohm] and the current PIs' gains at them: K_p,d [V/A], "
                     "K_i,d [V/(A s)], K_p,q, K_i,q"),
-), size=177)
+    ("C_SEE_MAX", 1, "the largest angle accuracy (eq ID3) at which a blind unit finds the axis at its stops [rad] "
+                     "(``cannot_see``)"),
+), size=178)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24

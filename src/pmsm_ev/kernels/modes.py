@@ -129,6 +129,7 @@ from .layout import (
     C_RS_TIME,
     C_SALIENCY_MIN,
     C_SALIENCY_TRUST,
+    C_SEE_MAX,
     C_T_MAX,
     C_T_RAMP,
     C_TRK_L,
@@ -542,7 +543,7 @@ def detect_acquired(s, c):
 @kernel()
 def cannot_see(s, c):
     """True where the identification found the motor (both admittances) but its angle accuracy at a stop (eq ID3,
-    ``S_ID_ACC``) is beyond ``C_ANGLE_MAX``, or there is no error signal at all (no saliency: ``S_ID_ACC`` 0): the
+    ``S_ID_ACC``) is beyond ``C_SEE_MAX``, or there is no error signal at all (no saliency: ``S_ID_ACC`` 0): the
     injection cannot find the axis the acquisition and the polarity test need (the design's corner motor, saliency
     1.06 at 1.5 A: 0.77 rad, its polarity test unresolved twice, the fault latched at enable), where a motor blind
     by its saliency alone (``C_SALIENCY_MIN``) with an accurate angle is still found at every stop (``park_car``).
@@ -550,7 +551,7 @@ def cannot_see(s, c):
     a rotor rolling under it turns the axes it measures on and reads no saliency whatever the motor's."""
     if not (s[S_ID_Y] > 0.0 and s[S_ID_Y + 1] > 0.0 and s[S_ID_BLIND] != 0.0 and s[S_HOLD] > 0.0):
         return False
-    return not (0.0 < s[S_ID_ACC] <= c[C_ANGLE_MAX])
+    return not (0.0 < s[S_ID_ACC] <= c[C_SEE_MAX])
 
 
 @kernel()
@@ -1028,7 +1029,9 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     i_alpha -= s[S_ID_OFS]  # the sensors' offsets measured at enable (0 before)
     i_beta -= s[S_ID_OFS + 1]
     if s[S_IF_FALLBACK] != 0.0:  # a unit that cannot see its motor's axis: the I-f strategy (``fall_back_to_if``)
-        if s[S_HOLD] > 0.0 and (s[S_MODE] != MODE_ALIGN or s[S_CLOCK] * dt >= c[C_T_RAMP]):
+        if s[S_FAULT] == FAULT_LATCHED:  # the safe state: the friction brake holds the car, as at enable
+            s[S_HOLD] = c[C_HOLD_BRAKE]
+        elif s[S_HOLD] > 0.0 and (s[S_MODE] != MODE_ALIGN or s[S_CLOCK] * dt >= c[C_T_RAMP]):
             s[S_HOLD] = 0.0  # the brake let go once the alignment's vector has its current
         return sensorless_step(s, c, i_alpha, i_beta, omega_ref)
     innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
