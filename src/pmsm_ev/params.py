@@ -1791,8 +1791,11 @@ class InjectionParams:
     inj_angle_max: float = 0.15
     #: the largest angle accuracy at a stop (eq ID3) at which a blind unit still finds the axis at every stop for its
     #: parked fallback (``pmsm_ev.kernels.cannot_see``); beyond it the unit cannot see and takes the I-f strategy for
-    #: good [rad] [chosen: 0.15, ``inj_angle_max``: the polarity test's frame band]
-    inj_see_max: float = 0.15
+    #: good [rad] [chosen: pi/12, 0.26 rad: three of its rms within pi/4, where the error signal sin 2e stops pointing
+    #: back to the axis. The Monte-Carlo of the wide design's low-saliency corner (docs/robustness.md): at
+    #: ``inj_angle_max`` (0.15) 9 motors of 30 fell back to the I-f strategy and 8 of them failed; 4 of the 6 with an
+    #: accuracy of 0.16 to 0.25 rad passed on the parked fallback instead (model_source "identified", adaptation "use")]
+    inj_see_max: float = math.pi / 12.0
     #: the back-EMF detector (``pmsm_ev.kernels.detect_emf_lost``, eqs LS1-LS2), in FOC on the injection and the
     #: blend: the back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed
     #: [rad/s], beyond this (plus ``emf_slip_rel`` of the rotor's speed the loops see) for ``inj_los_time`` is a
