@@ -134,8 +134,7 @@ def test_a_unit_that_cannot_see_takes_the_if_strategy_from_its_alignment_the_bra
 
 def test_a_latched_unit_that_cannot_see_stays_latched_in_the_if_strategy():
     """Two unresolved polarity tests latch the safe state; a fallback to the I-f strategy after them keeps it
-    latched (the I-f strategy's safe state, the vector at the current limit) with the friction brake held, never a
-    fresh start."""
+    latched with the friction brake held and no voltage out, never a fresh start."""
     _, s, c = _unit()
     for _ in range(2):
         assert _go(s, c, k.MODE_ACQUIRE, k.EV_ACQUIRED) == k.MODE_POLARITY
@@ -144,9 +143,10 @@ def test_a_latched_unit_that_cannot_see_stays_latched_in_the_if_strategy():
     assert _go(s, c, k.MODE_ACQUIRE, k.EV_CANNOT_SEE) == k.MODE_ALIGN
     assert s[k.S_IF_FALLBACK] == 1.0 and s[k.S_FAULT] == k.FAULT_LATCHED
     u = ControlUnit("sensorless", injection=InjectionParams(low_speed="injection"))
-    for _ in range(3):  # the safe state asks the friction brake at every period (a car on a slope is held)
-        k.injection_unit_step(s, c, 0.0, 0.0, 50.0)
+    for _ in range(3):  # the safe state asks the friction brake at every period (a car on a slope is held) and
+        out = k.injection_unit_step(s, c, 5.0, -3.0, 50.0)  # puts no voltage out (the inverter's short circuit)
         assert s[k.S_FAULT] == k.FAULT_LATCHED and _t_brake(u, s) == pytest.approx(c[k.C_HOLD_BRAKE])
+        assert out[:4] == (0.0, 0.0, 0.0, 0.0) and out[13] == k.FAULT_LATCHED
 
 
 @pytest.mark.parametrize(("y", "blind", "acc", "held", "sees"), [

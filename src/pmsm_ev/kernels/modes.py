@@ -1033,7 +1033,13 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             s[S_HOLD] = c[C_HOLD_BRAKE]
         elif s[S_HOLD] > 0.0 and (s[S_MODE] != MODE_ALIGN or s[S_CLOCK] * dt >= c[C_T_RAMP]):
             s[S_HOLD] = 0.0  # the brake let go once the alignment's vector has its current
-        return sensorless_step(s, c, i_alpha, i_beta, omega_ref)
+        out = sensorless_step(s, c, i_alpha, i_beta, omega_ref)
+        if s[S_FAULT] != FAULT_LATCHED:
+            return out
+        # latched, the brake holding: no voltage (the windings shorted through the inverter, its active short
+        # circuit), where the I-f strategy's own safe state turns its vector at the current limit over the held rotor
+        return (0.0, 0.0, 0.0, 0.0, out[4], out[5], out[6], out[7], out[8], out[9], out[10], out[11], out[12],
+                out[13], out[14], out[15])
     innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
     s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
     mode = s[S_MODE]
