@@ -722,6 +722,8 @@ def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
     ({"low_speed": "injection", "rs_current": 0.0}, "rs_current"),
     ({"low_speed": "injection", "emf_slip_speed": 0.0}, "emf_slip_speed"),
     ({"low_speed": "injection", "emf_slip_rel": -0.1}, "emf_slip_rel"),
+    ({"low_speed": "injection", "inj_see_max": 0.1}, "inj_see_max"),
+    ({"low_speed": "injection", "inj_see_max": 1.0}, "inj_see_max"),
 ])
 def test_bad_injection_parameters_are_refused_by_name(kw, names):
     with pytest.raises(ParameterError, match=names) as err:
