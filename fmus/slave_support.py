@@ -219,7 +219,6 @@ FMI2_DISCARD, FMI2_ERROR = 2, 3
 #: raise and answer fmi2Fatal)
 _TYPED_ACCESS = {f"fmi2{op}{name}": kind for op in ("Get", "Set")
                  for name, kind in (("Real", Real), ("Integer", Integer), ("Boolean", Boolean), ("String", String))}
-_DONE = {"Get": "read", "Set": "set"}
 #: a communication point continues the last step when within this share of the last step size of where it ended
 #: (plus a few ulps of the time): a master's own rounding of t + h, never a step back or forward
 CONTINUITY_TOLERANCE = 1e-3
@@ -529,13 +528,14 @@ class DriveSlave(Fmi2Slave):
         """The log line for the first of ``vrs`` that names no variable, or one not of the type ``call`` reads or
         writes (``_TYPED_ACCESS``); None when all are right."""
         kind = _TYPED_ACCESS[call]
+        done = "read" if call.startswith("fmi2Get") else "set"
         for vr in vrs:
             var = self.vars.get(vr)
             if var is None:
-                return f"{call}: no variable has the value reference {vr}; nothing {_DONE[call[4:7]]}"
+                return f"{call}: no variable has the value reference {vr}; nothing {done}"
             if not isinstance(var, kind):
                 return (f"{call}: value reference {vr} is {var.name!r}, a {type(var).__name__}, not a {kind.__name__}; "
-                        f"nothing {_DONE[call[4:7]]}")
+                        f"nothing {done}")
         return None
 
     def _refuse(self, call: str, *args) -> None:
