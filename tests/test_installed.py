@@ -7,6 +7,7 @@ finds any subpackage the distribution's package list leaves out (the failure thi
 import json
 import os
 import shutil
+import site
 import subprocess
 import sys
 import tarfile
@@ -47,7 +48,7 @@ pytestmark = pytest.mark.skipif(not (ROOT / ".git").exists(), reason="needs the 
 def installed(tmp_path_factory):
     """(venv's bin folder, a work folder outside the checkout, the built sdist) with the package installed
     from an sdist of this checkout. The venv sees the test environment's site-packages for the dependencies
-    (--system-site-packages: no download); the package itself is the venv's own (checked below)."""
+    (no download); the package itself is the venv's own (checked below)."""
     tmp = tmp_path_factory.mktemp("installed")
     # the checkout's files as a clean clone has them (tracked, or new and not ignored): no egg-info, build/ or
     # caches of this checkout's own installs, whose file lists would hide a package the configuration misses
@@ -65,6 +66,12 @@ def installed(tmp_path_factory):
     venv = tmp / "venv"
     _run([sys.executable, "-m", "venv", "--system-site-packages", venv], cwd=tmp)
     bin_dir = venv / "bin"
+    # where the tests run in a virtual environment, --system-site-packages gives its base interpreter's packages,
+    # not its own: its site-packages as plain paths after the venv's own (a path line of a .pth file; the .pth
+    # files there, the checkout's editable install among them, are not run)
+    purelib = _run([bin_dir / "python", "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                   cwd=tmp).strip()
+    (Path(purelib) / "test-environment.pth").write_text("".join(f"{p}\n" for p in site.getsitepackages()))
     # pip builds a wheel from the sdist (the wheel a user would get), then installs it: not editable
     _run([bin_dir / "python", "-m", "pip", "install", "--no-deps", "--no-input", "-q", sdist], cwd=tmp)
     work = tmp / "work"
