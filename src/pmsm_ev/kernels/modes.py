@@ -402,8 +402,19 @@ def identify(s, c):
     a_q = s[S_ID_SUM + 2] / s[S_ID_SUM + 6]
     y_d = 2.0 * s[S_ID_SUM + 1] / s[S_ID_SUM + 5] - a_d  # (ID1)
     y_q = 2.0 * s[S_ID_SUM + 3] / s[S_ID_SUM + 7] - a_q
+    # the found axis off the d axis by e: the d admittances read Y_s +- Y_x cos 2e and the cross ones +-Y_x sin 2e (I1);
+    # the saliency from both, whatever e (ID5)
+    b_v, var_v = cross_admittance(s, c, 0)
+    b_y, var_y = cross_admittance(s, c, 1)
+    e = 0.5 * math.atan2(b_y, 0.5 * (y_d - y_q))  # the found axis's error, from the answers of the whole identification
+    a_d, a_q = on_axis_admittances(a_d, a_q, b_v, var_v)
+    y_d, y_q = on_axis_admittances(y_d, y_q, b_y, var_y)
     if not (y_d > 0.0 and y_q > 0.0 and a_d > 0.0 and a_q > 0.0):
         return
+    if s[S_ID_DONE] == 0.0:  # the enable's answers, all on this acquisition's axis: the tracking observer put on the
+        # axis they give (their 240 ms against the acquisition's 80), and the polarity test's frame with it (ID5)
+        seat_tracker(s, wrap_angle(s[S_TRK] + e), 0.0, 0.0)
+        s[S_POL_AXIS] = s[S_TRK]
     s[S_ID_Y] = y_d
     s[S_ID_Y + 1] = y_q
     identify_noise(s)
@@ -424,6 +435,44 @@ def identify(s, c):
                 s[S_ID_BLIND] = 1.0
         else:  # no error signal at the amplitude the square wave will have
             s[S_ID_BLIND] = 1.0
+
+
+@kernel()
+def cross_admittance(s, c, y):
+    """Y_x sin 2e from the identification's cross answers (the q part of the second differences on the found d axis
+    and on the q axis, ``S_ID_NOISE``) [1/H], with its variance [1/H^2]: at the lower amplitude (``y`` = 0) or by
+    (ID1) (``y`` = 1). On the q axis (90 deg on) the cross answer is -Y_x sin 2e, so (b_d - b_q) / 2."""
+    b_v = b_y = var_v = var_y = 0.0
+    for j in range(4):
+        n = s[S_ID_SUM + 4 + j]
+        scale = 2.0 * c[C_INJ_M] * c[C_DT] * identification_amplitude(c, j)  # 2 m dt V: the answer's [A] per [1/H]
+        b = s[S_ID_NOISE + j] / n / scale
+        var = 0.0
+        if n > 1.0:
+            var = max(s[S_ID_NOISE + 4 + j] - s[S_ID_NOISE + j] * s[S_ID_NOISE + j] / n, 0.0) / ((n - 1.0) * n)
+            var /= scale * scale
+        sign = 1.0 if j < 2 else -1.0  # (b_d - b_q) / 2
+        if j % 2 == 0:  # the lower amplitude: its own, and -1 of it in (ID1)
+            b_v += 0.5 * sign * b
+            var_v += 0.25 * var
+            b_y -= 0.5 * sign * b
+            var_y += 0.25 * var
+        else:  # the higher: 2 of it in (ID1)
+            b_y += sign * b
+            var_y += var
+    return (b_y, var_y) if y == 1 else (b_v, var_v)
+
+
+@kernel()
+def on_axis_admittances(a_d, a_q, b, var):
+    """The admittances on the d and q axes from those read on an axis off by e, a_d, a_q = Y_s +- Y_x cos 2e, and the
+    cross one b = Y_x sin 2e (variance ``var``): Y_s +- Y_x, Y_x^2 = ((a_d - a_q) / 2)^2 + b^2 - var (the noise's
+    share of b^2 taken out; at least 0)                                                              (ID5)
+    [1/H]."""
+    y_s = 0.5 * (a_d + a_q)
+    x = 0.5 * (a_d - a_q)
+    y_x = math.sqrt(max(x * x + b * b - var, 0.0))
+    return y_s + y_x, y_s - y_x
 
 
 @kernel()
@@ -1058,6 +1107,10 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     # axes measured are the found ones (an observer left to run on a speed the settling had not yet taken out, or
     # corrected by the weak error signal of a motor with little saliency, drifted 0.5 rad on motor A of issue 47)
     held = mode == MODE_ACQUIRE and (PHASE_ID_D <= phase <= PHASE_RS2 or phase == PHASE_OFFSET)
+    # a blind unit's polarity test on a car the brake holds: the rotor stands, and the error signal of a motor with
+    # little saliency, with the test's d current saturating the d axis, drifted the observer 0.9 rad off the axis
+    # the acquisition found (a restart 80 deg off, the torque on the d axis)
+    held = held or (mode == MODE_POLARITY and s[S_ID_BLIND] != 0.0 and s[S_HOLD] > 0.0)
     on_axis = answer and phase >= PHASE_SETTLE and not held
     if held:
         seat_tracker(s, s[S_TRK], 0.0, 0.0)
