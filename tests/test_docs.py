@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from pmsm_cosim.app import reference
+from pmsm_cosim.app import bench, reference
 from pmsm_cosim.app.cli import build_parser
 from pmsm_cosim.app.drive import PACKAGED_SCENARIOS, packaged_scenario
 from pmsm_cosim.app.report.configs import all_configs
@@ -232,6 +232,22 @@ def test_the_python_m_commands_shown_take_the_options_they_show(module, main, ca
     if module == "pmsm_ev_fmus":
         (versions,) = re.findall(r"python -m pmsm_ev_fmus .*\[--fmi ([\d|]+)\]", FMU_README)
         assert tuple(int(v) for v in versions.split("|")) == tuple(fmu_build.FMI_VERSIONS)
+
+
+def test_the_benchmarks_settings_stated_are_its_own():
+    """docs/performance.md: the slices' defaults and least, the scenarios of the memory runs."""
+    block = "\n".join(_bash_blocks(PERFORMANCE))
+    ((slice_, least),) = re.findall(r"--slice 35 +# simulated seconds per case \(default (\d+), at least (\d+)\)",
+                                    block)
+    (cycle_slice,) = re.findall(r"--cycle-slice 120 # seconds of WLTC 3b in cases \(e\)-\(h\) \(default (\d+)\)",
+                                block)
+    assert (float(slice_), float(cycle_slice)) == (bench.DEFAULT_SLICE, bench.DEFAULT_CYCLE_SLICE)
+    with pytest.raises(bench.CosimError):
+        bench._check_slice(float(least) - 1e-4, "--slice")
+    bench._check_slice(float(least), "--slice")
+    (memory,) = _one(r"Then it runs `pmsm-cosim run (\S+) --stop-time T`", PERFORMANCE)
+    (cycle_memory,) = _one(r"With `--cycle-memory` it runs `pmsm-cosim run (\S+) --cycle wltc3b", PERFORMANCE)
+    assert (memory, cycle_memory) == (bench.SCENARIO, bench.CYCLE_MEMORY_SYSTEM)
 
 
 def test_the_benchmark_scripts_shown_exist_and_take_the_options_shown():
