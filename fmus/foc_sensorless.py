@@ -1,5 +1,6 @@
 """Slave of FocSensorless.fmu: the truly sensorless unit from standstill (observer
-"sensorless"): the stationary-frame EKF5 with alignment, I-f start-up and handover."""
+"sensorless"): FOC on the stationary-frame EKF5 at speed and, at and near zero speed (``low_speed``),
+either alignment, an I-f start-up and handover (the default) or high-frequency injection."""
 
 from __future__ import annotations
 
@@ -13,7 +14,11 @@ class FocSensorless(FocSlave):
         super().__init__(
             "sensorless",
             "the stationary-frame fifth-order EKF (state i_d, i_q, omega_m, theta_e, T_L; mechanical model "
-            "on J_model, by default the drive's whole inertia J_eq) and a low-speed range of its own: at "
+            "on J_model, by default the drive's whole inertia J_eq) and a low-speed range of its own, one of two "
+            "strategies (low_speed). \"injection\" (the shipped sensorless drives' on a saturating motor): at a stop "
+            "the angle from the rotor's saliency (a square wave on the estimated d axis, acquisition), the "
+            "magnet's polarity from the d axis's saturation (polarity test), FOC on the injection at zero speed, "
+            "the EKF blended in from inj_blend_low and alone above inj_blend_high. \"if\" (the default): at "
             "standstill a two-step alignment of the rotor (current vector ramped up on +90 deg, swept to 0 deg), "
             "then an I-f (current-frequency) start following omega_ref, handover to FOC on the EKF's angle and "
             "speed once omega_hat agrees with the I-f speed above omega_up, and back to I-f below omega_down "
