@@ -440,7 +440,9 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
                       "low-pass filtered [rad/s]"),
     ("S_IF_FALLBACK", 1, "1.0 once a unit that cannot see its motor's axis (``kernels.modes.cannot_see``) runs the I-f "
                          "strategy (``sensorless_step``) for good"),
-), size=262)
+    ("S_V_FUND", 2, "the last period's command without the square wave, alpha and beta [V]: the EKF's input while the "
+                    "unit injects (``kernels.modes.injection_unit_step``)"),
+), size=264)
 
 #: the control unit's parameter vector
 #: the points of the cross-saturation table ``C_CROSS``, at i_q = 0, ``CROSS_STEP``, .. (CROSS_POINTS - 1)

@@ -196,6 +196,7 @@ from .layout import (
     S_THETA_CTRL,
     S_TRK,
     S_V_D,
+    S_V_FUND,
     S_V_OUT_ALPHA,
     S_V_OUT_BETA,
     S_W_INT,
@@ -234,7 +235,7 @@ from .machine import (
     MODE_ALIGN,
     next_mode,
 )
-from .observers import ekf5ab_period
+from .observers import ekf5ab_period, ekf5ab_period_on
 from .startup import age_episode, enter_if_strategy, fault_output, sensorless_step
 from .transforms import park, wrap_angle
 
@@ -1089,13 +1090,16 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         # circuit), where the I-f strategy's own safe state turns its vector at the current limit over the held rotor
         return (0.0, 0.0, 0.0, 0.0, out[4], out[5], out[6], out[7], out[8], out[9], out[10], out[11], out[12],
                 out[13], out[14], out[15])
-    innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
-    s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
     mode = s[S_MODE]
     t = s[S_MODE_TIME]
-    # the injection's answer on the axis of the last period, the fundamental, the tracking observer
-    demodulate(s, c, i_alpha, i_beta, s[S_INJ_AXIS])
     f_alpha, f_beta = fundamental(s, c, i_alpha, i_beta)
+    if mode == MODE_EKF:
+        innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
+    else:  # the last period had the square wave: the EKF on the fundamental, as a back-EMF observer (INJ5)
+        innovation = ekf5ab_period_on(s, c, f_alpha, f_beta, s[S_V_FUND], s[S_V_FUND + 1])
+    s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
+    # the injection's answer on the axis of the last period, the tracking observer
+    demodulate(s, c, i_alpha, i_beta, s[S_INJ_AXIS])
     f_d, f_q = park(f_alpha, f_beta, s[S_TRK])
     injecting = mode != MODE_EKF
     phase = acquisition_phase(s, c, t) if mode == MODE_ACQUIRE else PHASE_OVER
@@ -1211,6 +1215,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl, 0.0)
         v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
     v_alpha, v_beta = modulate(c, v_d, v_q, theta, omega_ctrl, False)
+    s[S_V_FUND] = v_alpha  # without the square wave: the EKF's input in the next period while injecting
+    s[S_V_FUND + 1] = v_beta
     axis = theta + offset + c[C_ADVANCE] * omega_ctrl
     s[S_INJ_AXIS] = axis
     if mode != MODE_EKF:  # the square wave on its axis

@@ -364,12 +364,19 @@ def ekf5ab_period(s, c, i_alpha, i_beta):
     the vector held over the last period (with ``C_DELAYED``, the one of a period earlier, the held one
     kept for the next), the measurement update (eqs 25-27) with the measured currents. Returns the
     magnitude of the innovation, the currents less the predicted ones before the update [A]."""
+    return ekf5ab_period_on(s, c, i_alpha, i_beta, s[S_V_ALPHA], s[S_V_BETA])
+
+
+@kernel()
+def ekf5ab_period_on(s, c, i_alpha, i_beta, u_alpha, u_beta):
+    """``ekf5ab_period`` with the vector held over the last period given, ``u_alpha``, ``u_beta`` [V] (with
+    ``C_DELAYED`` kept for the next period, the one of a period earlier used)."""
     if c[C_DELAYED] != 0.0:
         ekf5ab_predict(s, c, s[S_U_PREV_0], s[S_U_PREV_1])
-        s[S_U_PREV_0] = s[S_V_ALPHA]
-        s[S_U_PREV_1] = s[S_V_BETA]
+        s[S_U_PREV_0] = u_alpha
+        s[S_U_PREV_1] = u_beta
     else:
-        ekf5ab_predict(s, c, s[S_V_ALPHA], s[S_V_BETA])
+        ekf5ab_predict(s, c, u_alpha, u_beta)
     th = s[S_X + 3]
     cs, sn = math.cos(th), math.sin(th)
     y0 = i_alpha - (cs * s[S_X] - sn * s[S_X + 1])
