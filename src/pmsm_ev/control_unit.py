@@ -45,7 +45,7 @@ import math
 
 from . import accel
 from . import kernels as _k
-from .controller import CurrentController, SpeedController, controller_gains
+from .controller import CurrentController, SpeedController, controller_gains, state_slot
 from .observers import make_observer
 from .params import (
     ANGLE_SOURCES,
@@ -125,14 +125,10 @@ def parameter_groups(observer: str) -> tuple:
     return (ControllerParams, EkfParams, MotorParams)
 
 
-def _slot(index: int, doc: str) -> property:
-    def get(self) -> float:
-        return float(self._s[index])
-
-    def set_(self, value: float) -> None:
-        self._s[index] = float(value)
-
-    return property(get, set_, doc=doc)
+def _status(j: int, doc: str) -> property:
+    """A read-only attribute of ``ControlUnit``: the output ``UNIT_STATUS_OUTPUTS[j]`` of its state
+    (``ControlUnit._status_output``)."""
+    return property(lambda self: self._status_output(j), doc=doc)
 
 
 def cross_saturation_offsets(motor: MotorParams, step: float = _k.CROSS_STEP, n: int = _k.CROSS_POINTS) -> list[float]:
@@ -152,15 +148,15 @@ def cross_saturation_offsets(motor: MotorParams, step: float = _k.CROSS_STEP, n:
 
 
 class ControlUnit:
-    v_d = _slot(_k.S_V_D, "commanded d voltage (eq 19, limited) [V]")
-    v_q = _slot(_k.S_V_Q, "commanded q voltage (eq 20, limited) [V]")
-    u_prev0 = _slot(_k.S_U_PREV_0, "the observer's voltage input of one period earlier, d or alpha [V]")
-    u_prev1 = _slot(_k.S_U_PREV_1, "the observer's voltage input of one period earlier, q or beta [V]")
-    v_alpha = _slot(_k.S_V_ALPHA, "voltage held until the next step, alpha axis [V]")
-    v_beta = _slot(_k.S_V_BETA, "voltage held until the next step, beta axis [V]")
-    i_d = _slot(_k.S_I_D, "d current in the control frame [A]")
-    i_q = _slot(_k.S_I_Q, "q current in the control frame [A]")
-    i_qref = _slot(_k.S_I_QREF, "q current reference (eq 14) [A]")
+    v_d = state_slot(_k.S_V_D, "commanded d voltage (eq 19, limited) [V]")
+    v_q = state_slot(_k.S_V_Q, "commanded q voltage (eq 20, limited) [V]")
+    u_prev0 = state_slot(_k.S_U_PREV_0, "the observer's voltage input of one period earlier, d or alpha [V]")
+    u_prev1 = state_slot(_k.S_U_PREV_1, "the observer's voltage input of one period earlier, q or beta [V]")
+    v_alpha = state_slot(_k.S_V_ALPHA, "voltage held until the next step, alpha axis [V]")
+    v_beta = state_slot(_k.S_V_BETA, "voltage held until the next step, beta axis [V]")
+    i_d = state_slot(_k.S_I_D, "d current in the control frame [A]")
+    i_q = state_slot(_k.S_I_Q, "q current in the control frame [A]")
+    i_qref = state_slot(_k.S_I_QREF, "q current reference (eq 14) [A]")
 
     def __init__(self, observer: str = "ekf5", angle_source: str = "measured",
                  motor: MotorParams | None = None, controller: ControllerParams | None = None,
@@ -399,27 +395,14 @@ class ControlUnit:
         return float(self.io[_k.UIO_STATUS + j])
 
     # adaptation while driving (``pmsm_ev.kernels.adaptation``)
-    @property
-    def psi_est(self) -> float:
-        """The estimated magnet flux [Wb] (eq AD3): the model's psi until psi is observable; 0 with adaptation
-        "off"."""
-        return self._status_output(0)
-
-    @property
-    def R_s_est(self) -> float:
-        """The estimated stator resistance [Ohm] (eq AD4): the identification's R_s_id or the model's R_s until R_s
-        is observable; 0 with adaptation "off"."""
-        return self._status_output(1)
-
-    @property
-    def psi_observable(self) -> float:
-        """1.0 where the last period let psi_hat move (AD5: fast enough, the currents quasi-steady), else 0."""
-        return self._status_output(2)
-
-    @property
-    def R_s_observable(self) -> float:
-        """1.0 where the last period let R_s_hat move (AD5: slow enough, current enough, quasi-steady), else 0."""
-        return self._status_output(3)
+    psi_est = _status(0, "The estimated magnet flux [Wb] (eq AD3): the model's psi until psi is observable; 0 with "
+                         'adaptation "off".')
+    R_s_est = _status(1, "The estimated stator resistance [Ohm] (eq AD4): the identification's R_s_id or the model's "
+                         'R_s until R_s is observable; 0 with adaptation "off".')
+    psi_observable = _status(2, "1.0 where the last period let psi_hat move (AD5: fast enough, the currents "
+                                "quasi-steady), else 0.")
+    R_s_observable = _status(3, "1.0 where the last period let R_s_hat move (AD5: slow enough, current enough, "
+                                "quasi-steady), else 0.")
 
     @property
     def fault(self) -> float:
@@ -432,63 +415,28 @@ class ControlUnit:
             _k.FAULT_RECOVERING if s[_k.S_EPISODE] > 0.0 else _k.FAULT_NONE)
 
     # the injection strategy's identification at enable (``pmsm_ev.kernels.identify``)
-    @property
-    def L_d_id(self) -> float:
-        """The identified incremental d inductance at zero current [H] (1 / the d admittance the injection measured
-        on the found d axis); 0 until identified, and for a unit without injection."""
-        return self._status_output(4)
-
-    @property
-    def L_q_id(self) -> float:
-        """The identified incremental q inductance at zero current [H]; 0 until identified."""
-        return self._status_output(5)
-
-    @property
-    def saliency_id(self) -> float:
-        """The identified saliency L_q / L_d [-]; 0 until identified."""
-        return self._status_output(6)
-
-    @property
-    def R_s_id(self) -> float:
-        """The identified stator resistance [Ohm] (the R_s test at enable, ``pmsm_ev.kernels.identify_rs``); 0 until
-        identified, and for a unit without injection."""
-        return self._status_output(7)
-
-    @property
-    def noise_id(self) -> float:
-        """The current measurement's noise floor from the identification's answers: a phase sensor's sigma [A]
-        (``pmsm_ev.kernels.identify_noise``); 0 until identified, and for a unit without injection."""
-        return self._status_output(8)
-
-    @property
-    def offset_a_id(self) -> float:
-        """Current sensor a's offset measured at enable with no voltage [A] (``InjectionParams.ofs_time``), subtracted
-        from the measurements from then on; 0 until measured, and for a unit without injection."""
-        return self._status_output(9)
-
-    @property
-    def offset_b_id(self) -> float:
-        """Current sensor b's offset measured at enable [A]: i_alpha = i_a, i_beta = (i_a + 2 i_b) / sqrt 3."""
-        return self._status_output(10)
-
-    @property
-    def angle_accuracy(self) -> float:
-        """The rms angle error injection gives at a stop from the measured saliency and noise floor [rad]
-        (``pmsm_ev.kernels.angle_accuracy``, eq ID3); 0 until identified."""
-        return self._status_output(11)
-
-    @property
-    def blind(self) -> float:
-        """1.0 where the identified saliency is below ``InjectionParams.saliency_min`` or the angle accuracy
-        (``angle_accuracy``) beyond ``InjectionParams.inj_angle_max``: the injection cannot see the rotor's axis well
-        enough; else 0."""
-        return self._status_output(12)
-
-    @property
-    def axis_cos(self) -> float:
-        """cos 2e of the tracking observer's axis error from the d admittance, filtered (``S_AXIS_F``) in
-        FOC on the injection; 0 there and for a unit without injection)."""
-        return self._status_output(13)
+    L_d_id = _status(4, "The identified incremental d inductance at zero current [H] (1 / the d admittance the "
+                        "injection measured on the found d axis); 0 until identified, and for a unit without "
+                        "injection.")
+    L_q_id = _status(5, "The identified incremental q inductance at zero current [H]; 0 until identified.")
+    saliency_id = _status(6, "The identified saliency L_q / L_d [-]; 0 until identified.")
+    R_s_id = _status(7, "The identified stator resistance [Ohm] (the R_s test at enable, "
+                        "``pmsm_ev.kernels.identify_rs``); 0 until identified, and for a unit without injection.")
+    noise_id = _status(8, "The current measurement's noise floor from the identification's answers: a phase sensor's "
+                          "sigma [A] (``pmsm_ev.kernels.identify_noise``); 0 until identified, and for a unit without "
+                          "injection.")
+    offset_a_id = _status(9, "Current sensor a's offset measured at enable with no voltage [A] "
+                             "(``InjectionParams.ofs_time``), subtracted from the measurements from then on; 0 until "
+                             "measured, and for a unit without injection.")
+    offset_b_id = _status(10, "Current sensor b's offset measured at enable [A]: i_alpha = i_a, "
+                              "i_beta = (i_a + 2 i_b) / sqrt 3.")
+    angle_accuracy = _status(11, "The rms angle error injection gives at a stop from the measured saliency and noise "
+                                 "floor [rad] (``pmsm_ev.kernels.angle_accuracy``, eq ID3); 0 until identified.")
+    blind = _status(12, "1.0 where the identified saliency is below ``InjectionParams.saliency_min`` or the angle "
+                        "accuracy (``angle_accuracy``) beyond ``InjectionParams.inj_angle_max``: the injection cannot "
+                        "see the rotor's axis well enough; else 0.")
+    axis_cos = _status(13, "cos 2e of the tracking observer's axis error from the d admittance, filtered "
+                           "(``S_AXIS_F``) in FOC on the injection; 0 there and for a unit without injection).")
 
     @property
     def theta_ctrl(self) -> float:

@@ -88,21 +88,23 @@ class _Slots:
         self._c = params if params is not None else accel.vector(_k.UNIT_PARAMS)
 
 
-def _slot(index: int, doc: str) -> property:
+def state_slot(index: int, doc: str | None = None, settable: bool = True) -> property:
+    """An attribute held, as a float, in a control unit's state vector ``self._s`` at ``index`` (read-only unless
+    ``settable``)."""
     def get(self) -> float:
         return float(self._s[index])
 
     def set_(self, value: float) -> None:
         self._s[index] = float(value)
 
-    return property(get, set_, doc=doc)
+    return property(get, set_ if settable else None, doc=doc)
 
 
 class SpeedController(_Slots):
     """Speed PI, eq 14: i_qref = K_pw e + K_iw int e dt, e = omega_ref - omega_est (gains:
     ``gains``, by default ``controller_gains(p, motor)``)."""
 
-    integral = _slot(_k.S_W_INT, "integral term K_iw int e dt [A]")
+    integral = state_slot(_k.S_W_INT, "integral term K_iw int e dt [A]")
 
     def __init__(self, p: ControllerParams, motor: MotorParams, dt: float, state=None, params=None,
                  gains: ControllerGains | None = None):
@@ -127,10 +129,10 @@ class CurrentController(_Slots):
     (``ControllerParams.u_limit``; integrators held while it is limited).
     """
 
-    int_d = _slot(_k.S_INT_D, "integral term of (15) [V]")
-    int_q = _slot(_k.S_INT_Q, "integral term of (16) [V]")
-    i_dl = _slot(_k.S_I_DL, "low-pass filtered d reference of (17) [A]")
-    i_ql = _slot(_k.S_I_QL, "low-pass filtered q reference of (18) [A]")
+    int_d = state_slot(_k.S_INT_D, "integral term of (15) [V]")
+    int_q = state_slot(_k.S_INT_Q, "integral term of (16) [V]")
+    i_dl = state_slot(_k.S_I_DL, "low-pass filtered d reference of (17) [A]")
+    i_ql = state_slot(_k.S_I_QL, "low-pass filtered q reference of (18) [A]")
 
     def __init__(self, p: ControllerParams, motor: MotorParams, dt: float, state=None, params=None,
                  gains: ControllerGains | None = None):

@@ -37,6 +37,7 @@ import numpy as np
 
 from . import accel
 from . import kernels as _k
+from .controller import state_slot
 from .params import EkfParams, MotorParams
 
 ID, IQ, W, TH, TL = range(5)
@@ -65,29 +66,13 @@ class _Observer:
         """Measurement update (25)-(27)."""
         self._kernels.observer_correct(self._s, self._c, i_alpha, i_beta, i_d, i_q, theta_meas, omega_meas)
 
-    @property
-    def i_d_hat(self) -> float:
-        return float(self._s[_k.S_X + ID])
-
-    @property
-    def i_q_hat(self) -> float:
-        return float(self._s[_k.S_X + IQ])
-
-    @property
-    def omega_hat(self) -> float:
-        return float(self._s[_k.S_X + W])
-
-    @property
-    def theta_hat(self) -> float:
-        return float(self._s[_k.S_X + TH])
-
-    @property
-    def T_L_hat(self) -> float:
-        return float(self._s[_k.S_X + TL])  # stays 0.0 for observers without a load state
-
-    @property
-    def theta_prior(self) -> float:
-        return float(self._s[_k.S_THETA_PRIOR])
+    #: the estimates, read from the state (x of eqs 23-27)
+    i_d_hat = state_slot(_k.S_X + ID, settable=False)
+    i_q_hat = state_slot(_k.S_X + IQ, settable=False)
+    omega_hat = state_slot(_k.S_X + W, settable=False)
+    theta_hat = state_slot(_k.S_X + TH, settable=False)
+    T_L_hat = state_slot(_k.S_X + TL, settable=False)  # stays 0.0 for observers without a load state
+    theta_prior = state_slot(_k.S_THETA_PRIOR, settable=False)
 
 
 class ExtendedKalmanFilter(_Observer):

@@ -156,29 +156,6 @@ def write_csv(rows: list[dict], path: Path, columns=COLUMNS) -> Path:
 
 # --- figures -------------------------------------------------------------------------
 
-def _envelope(t, y, buckets: int = BUCKETS):
-    from .figures import envelope  # noqa: PLC0415 - matplotlib: heavy, only when drawing
-
-    return envelope(t, y, buckets)
-
-
-def _figure(size=FIGSIZE):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: PLC0415 - matplotlib: heavy, only when drawing
-    from matplotlib.figure import Figure  # noqa: PLC0415 - matplotlib: heavy, only when drawing
-
-    fig = Figure(figsize=size, dpi=DPI, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig, fig.subplots()
-
-
-def _save(fig, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    fig.savefig(tmp, format="png", dpi=DPI, metadata={"Software": None})
-    tmp.replace(path)
-    return path
-
-
 #: what each overlay shows: (y label, run's column or function, reference column, title)
 PLOTS = {
     "speed": ("speed ω_m [rad/s]", "omega_m", "omega_ref", "rotor speed (dashed: reference)"),
@@ -206,10 +183,13 @@ def plot_overlay(runs: list[Run], kind: str, path: Path, window: tuple[float, fl
     y axis spans the median of the runs' ranges (padded) when a run goes far beyond it (a
     diverged estimate would flatten every other line); that run is labelled "off scale".
     Default: robust, except for the angle error, whose slips of whole turns are the point."""
+    from .figures import envelope, new_figure, save_png  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+
     if robust is None:
         robust = kind != "angle_error"
     ylabel, _, ref_col, default_title = PLOTS[kind]
-    fig, ax = _figure(size)
+    fig, axes = new_figure(size=size, dpi=DPI)
+    ax = axes[0, 0]
     refs_drawn: set[str] = set()
     lines = []
     for i, run in enumerate(runs):
@@ -232,7 +212,7 @@ def plot_overlay(runs: list[Run], kind: str, path: Path, window: tuple[float, fl
     for i, run, t, y, sel in lines:
         ts, ys = t[sel], y[sel]
         if window is None:
-            ts, ys = _envelope(ts, ys)
+            ts, ys = envelope(ts, ys, BUCKETS)
         off = limits is not None and (np.nanmin(ys) < limits[0] or np.nanmax(ys) > limits[1])
         # the first runs on top: a hunting or diverged run drawn later does not hide them
         ax.plot(ts, ys, lw=1.0, color=f"C{i % 10}", label=run.label + (" (off scale)" if off else ""),
@@ -241,7 +221,7 @@ def plot_overlay(runs: list[Run], kind: str, path: Path, window: tuple[float, fl
             refs_drawn.add(run.scenario)
             tr, yr = t[sel], run.r[ref_col][sel]
             if window is None:
-                tr, yr = _envelope(tr, yr)
+                tr, yr = envelope(tr, yr, BUCKETS)
             ax.plot(tr, yr, lw=1.0, ls="--", color="k", alpha=0.7, zorder=3 + len(lines))
     if window is not None:
         ax.set_xlim(*window)
@@ -253,7 +233,7 @@ def plot_overlay(runs: list[Run], kind: str, path: Path, window: tuple[float, fl
     ax.grid(True, alpha=0.4)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize=7, ncol=2)
-    return _save(fig, path)
+    return save_png(fig, path, DPI)
 
 
 # --- the command ---------------------------------------------------------------------

@@ -179,8 +179,9 @@ def unwrap_with_speed(t, theta, omega_e):
 
 # --- drawing ------------------------------------------------------------------------
 
-def _figure(nrows=1, ncols=1, size=FIGSIZE, **kw):
-    fig = Figure(figsize=size, dpi=DPI, layout="constrained")
+def new_figure(nrows=1, ncols=1, size=FIGSIZE, dpi=DPI, **kw):
+    """A figure (no pyplot: freed with its last reference) and its grid of axes, ``axes[row, column]``."""
+    fig = Figure(figsize=size, dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False, **kw)
     return fig, axes
@@ -195,12 +196,30 @@ def _finish(ax, xlabel="time [s]", ylabel=None, legend=True):
         ax.legend(loc="best", fontsize=8)
 
 
-def _save(fig, path: Path) -> Path:
+def save_png(fig, path: Path, dpi=DPI) -> Path:
+    """Write ``fig`` to ``path`` whole or not at all (a temporary file renamed); its folder made if need be."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
     # no "Software" entry: the same data give the same bytes, whatever the version
-    fig.savefig(tmp, format="png", dpi=DPI, metadata={"Software": None})
+    fig.savefig(tmp, format="png", dpi=dpi, metadata={"Software": None})
     os.replace(tmp, path)
     return path
+
+
+def _panel():
+    """A figure of one panel: (figure, its axes)."""
+    fig, axes = new_figure()
+    return fig, axes[0, 0]
+
+
+def _over_the_run(fig, ax, t, title, ylabel, legend=None):
+    """Finish a panel drawn against the run's time ``t``: its span, title, labels (and the legend at ``legend``)."""
+    ax.set_xlim(t[0], t[-1])
+    ax.set_title(title)
+    _finish(ax, ylabel=ylabel)
+    if legend:
+        ax.legend(loc=legend, fontsize=8)
+    return fig
 
 
 def _line(ax, t, y, thin, **kw):
@@ -210,41 +229,28 @@ def _line(ax, t, y, thin, **kw):
 
 
 def plot_elevation(r, title):
-    fig, ax = _figure()
-    ax = ax[0, 0]
+    fig, ax = _panel()
     ax.plot(r["time"], r["delta_deg"], color="tab:blue", lw=1.5, drawstyle="steps-post",
             label="elevation angle δ")
     lo, hi = float(np.min(r["delta_deg"])), float(np.max(r["delta_deg"]))
     pad = max(1.0, 0.1 * (hi - lo))
     ax.set_ylim(lo - pad, hi + pad)
-    ax.set_xlim(r["time"][0], r["time"][-1])
-    ax.set_title(title)
-    _finish(ax, ylabel="δ [deg]")
-    return fig
+    return _over_the_run(fig, ax, r["time"], title, "δ [deg]")
 
 
 def plot_speed_reference(r, title):
-    fig, ax = _figure()
-    ax = ax[0, 0]
+    fig, ax = _panel()
     _line(ax, r["time"], r["omega_ref"], True, color=C_REF, lw=1.5, label="reference ω_ref")
-    ax.set_xlim(r["time"][0], r["time"][-1])
-    ax.set_title(title)
-    _finish(ax, ylabel="speed [rad/s]")
-    return fig
+    return _over_the_run(fig, ax, r["time"], title, "speed [rad/s]")
 
 
 def plot_speed(r, title):
-    fig, ax = _figure()
-    ax = ax[0, 0]
+    fig, ax = _panel()
     t = r["time"]
     _line(ax, t, r["omega_ref"], True, color=C_REF, lw=1.4, label="reference ω_ref")
     _line(ax, t, r["omega_m"], True, color=C_ACT, lw=1.6, label="actual ω_m")
     _line(ax, t, r["omega_hat"], True, color=C_EST, lw=0.9, ls="--", label="estimated ω̂ (EKF)")
-    ax.set_xlim(t[0], t[-1])
-    ax.set_title(title)
-    _finish(ax, ylabel="speed [rad/s]")
-    ax.legend(loc="lower right", fontsize=8)
-    return fig
+    return _over_the_run(fig, ax, t, title, "speed [rad/s]", legend="lower right")
 
 
 def plot_speed_zoom(r, title):
@@ -272,7 +278,7 @@ def plot_speed_zoom(r, title):
     span = max(5.0, 1.15 * dev)
     span = float(np.ceil(span / 5.0) * 5.0) if span < 100 else float(np.ceil(span / 20.0) * 20.0)
     same_ref = max(refs) - min(refs) < 1e-9
-    fig, axes = _figure(nrows, ncols, size=(FIGSIZE[0], max(FIGSIZE[1], 0.4 + 2.3 * nrows)),
+    fig, axes = new_figure(nrows, ncols, size=(FIGSIZE[0], max(FIGSIZE[1], 0.4 + 2.3 * nrows)),
                         sharex=True, sharey=same_ref)
     for i, ((tc, d0, d1), w, ref) in enumerate(zip(shown, windows, refs)):
         ax = axes[i // ncols, i % ncols]
@@ -303,7 +309,7 @@ def plot_angle(r, title, pole_pairs: int):
     """Top: theta_e and theta_hat over the last ANGLE_PERIODS electrical periods. Bottom:
     the wrapped error theta_hat - theta_e over the whole run."""
     t = r["time"]
-    fig, axes = _figure(2, 1, size=(FIGSIZE[0], 6.0))
+    fig, axes = new_figure(2, 1, size=(FIGSIZE[0], 6.0))
     ax, ax_err = axes[0, 0], axes[1, 0]
     dt = float(np.median(np.diff(t)))
     omega_e = pole_pairs * r["omega_m"]
@@ -358,7 +364,7 @@ def plot_angle(r, title, pole_pairs: int):
 def plot_currents(r, title):
     """Top: i_d and i_q on one axis as in the paper. Bottom: i_d on its own scale."""
     t = r["time"]
-    fig, axes = _figure(2, 1, size=(FIGSIZE[0], 5.5), sharex=True, height_ratios=(3, 2))
+    fig, axes = new_figure(2, 1, size=(FIGSIZE[0], 5.5), sharex=True, height_ratios=(3, 2))
     ax, ax_d = axes[0, 0], axes[1, 0]
     _line(ax, t, r["i_q"], True, color=C_IQ, lw=1.0, label="i_q")
     _line(ax, t, r["i_d"], True, color=C_ID, lw=1.0, label="i_d")
@@ -371,16 +377,11 @@ def plot_currents(r, title):
 
 
 def plot_load_torque(r, title):
-    fig, ax = _figure()
-    ax = ax[0, 0]
+    fig, ax = _panel()
     t = r["time"]
     _line(ax, t, r["T_L_mech"], True, color=C_TL_MECH, lw=1.4, label="T_L_mech, mechanical part (eq 29)")
     _line(ax, t, r["T_L_hat"], True, color=C_TL_HAT, lw=1.0, label="T̂_L, fifth-order EKF (eq 31)")
-    ax.set_xlim(t[0], t[-1])
-    ax.set_title(title)
-    _finish(ax, ylabel="torque [N m]")
-    ax.legend(loc="upper left", fontsize=8)
-    return fig
+    return _over_the_run(fig, ax, t, title, "torque [N m]", legend="upper left")
 
 
 def make_figures(run_dir, out_dir=None, scenario_label=None, pole_pairs: int | None = None) -> list[Path]:
@@ -417,7 +418,7 @@ def make_figures(run_dir, out_dir=None, scenario_label=None, pole_pairs: int | N
         for key, (name, title) in plan.items():
             fig = drawers[key](title)
             if fig is not None:
-                written.append(_save(fig, out / name))
+                written.append(save_png(fig, out / name))
                 fig.clear()
                 del fig
                 gc.collect()

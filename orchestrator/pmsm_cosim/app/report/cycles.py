@@ -22,6 +22,7 @@ from ..metrics.rows import KMH
 from ..metrics.trace import TRACE_BAND_KMH, TRACE_WINDOW_S, trace_band
 from ..metrics.windows import run_timing
 from .configs import CYCLE_RUNS as RUNS
+from .drawing import figure_links, pyplot, save_figure
 from .speed_range import SCENARIO_SETS
 
 #: the least share of a cycle inside the band (issue 24)
@@ -382,9 +383,7 @@ def render(data, fig_names) -> list[str]:
             + (f" against {_num(lv['energy'].get('dc_Wh_per_km'))} on the level road" if lv.get("energy") else "")
             + f", {_pct(hilly['whole'].get('regen_share'), '.1f')} of the drawn energy regenerated"
             + (f" ({_pct(lv.get('regen_share'), '.1f')} level)" if lv else "") + ".\n")
-    for name in ("cyc_wltc3b_trace", "cyc_envelope"):
-        if name in fig_names:
-            L.append(f"![{name}](results/{name}.png)\n")
+    L += figure_links(("cyc_wltc3b_trace", "cyc_envelope"), fig_names)
     # per WLTC phase, sensored against sensorless
     fs, fl = rows.get(WLTC_PAIR[0]), rows.get(WLTC_PAIR[1])
     if fs and fl and fs["phases"] and fl["phases"]:
@@ -415,9 +414,7 @@ def render(data, fig_names) -> list[str]:
                  f"exceeded the sensored drive's by {extra:.2f} and {extra_inv:.2f} Wh, of a DC energy difference of "
                  f"{d_dc:+.2f} Wh "
                  f"({d_dc / dist if dist > 0 else float('nan'):+.2f} Wh/km).\n")
-    for name in ("cyc_energy_phases", "cyc_wltc3b_angle_mode", "cyc_wltc3b_stop_zoom"):
-        if name in fig_names:
-            L.append(f"![{name}](results/{name}.png)\n")
+    L += figure_links(("cyc_energy_phases", "cyc_wltc3b_angle_mode", "cyc_wltc3b_stop_zoom"), fig_names)
     return L
 
 
@@ -441,18 +438,12 @@ def zoom_window(cycle, t_end: float) -> tuple[float, float, tuple[float, float]]
 def figures(data, fig_dir: Path) -> list[Path]:
     """The section's figures into ``fig_dir``: the WLTC trace, band and speeds; the operating points on the
     envelope; the energy by phase and kind; the sensorless run's angle error and mode; a stop and restart."""
-    import matplotlib  # noqa: PLC0415 - matplotlib: heavy (~0.5 s), only when drawing
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+    plt = pyplot()
 
     made = []
 
     def save(fig, name):
-        fig.tight_layout()
-        made.append(fig_dir / f"{name}.png")
-        fig.savefig(made[-1], dpi=90)
-        plt.close(fig)
+        made.append(save_figure(fig, fig_dir / f"{name}.png"))
 
     pair = [(cid, data.runs[cid]) for cid in WLTC_PAIR if cid in data.runs]
     fig_dir.mkdir(parents=True, exist_ok=True)

@@ -24,6 +24,7 @@ from ..metrics.run import PLATEAU_WINDOW, SETTLING_BAND
 from ..metrics.windows import angle_recovery, plateau_split, run_timing
 from . import cycles, sensorless, speed_range, synchronism
 from .configs import FIG_NAMES, FLYING_SPEED, REALISM_SCENARIOS, REALISM_SETUPS, SETUPS, T_FROM, Config
+from .drawing import figure_links
 
 # --- the document ------------------------------------------------------------------------
 
@@ -344,10 +345,8 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
     L.append(d.table([f"s2-{k}" for k in SETUPS]))
     L.append("Per step:\n")
     L.append(_step_table(d, "s2"))
-    for name in ("s1_speed", "s1_step_zoom", "s1_angle_error", "s1_torque", "s2_speed", "s2_step_zoom",
-                 "s2_angle_error", "s2_torque"):
-        if name in fig_names:
-            L.append(f"![{name}](results/{name}.png)\n")
+    L += figure_links(("s1_speed", "s1_step_zoom", "s1_angle_error", "s1_torque", "s2_speed", "s2_step_zoom",
+                       "s2_angle_error", "s2_torque"), fig_names)
 
     # --- the questions -----------------------------------------------------------------
 
@@ -541,11 +540,8 @@ def render(data: Data, fig_names: list[str], stop_time, command: str) -> str:
                  f"first falls below {RECOVERED:g} rad for at least {RECOVERED_HOLD:g} s:\n")
         L.append("| run | error at 0 s [rad] | at 1 s [rad] | below " + f"{RECOVERED:g}" + " rad from [s] | "
                  "at the end [rad] |\n|---|---:|---:|---:|---:|\n" + "\n".join(rec_lines) + "\n")
-    for short, _, _ in REALISM_SCENARIOS:
-        for kind in ("angle_error", "angle_error_start", "speed_error", "torque"):
-            name = f"s2_{FIG_NAMES[short]}_{kind}"
-            if name in fig_names:
-                L.append(f"![{name}](results/{name}.png)\n")
+    L += figure_links([f"s2_{FIG_NAMES[short]}_{kind}" for short, _, _ in REALISM_SCENARIOS
+                       for kind in ("angle_error", "angle_error_start", "speed_error", "torque")], fig_names)
 
     # --- errata and what would change ------------------------------------------------------
     L += sensorless.render(d, fig_names)

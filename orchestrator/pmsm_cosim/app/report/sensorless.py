@@ -24,6 +24,7 @@ from pmsm_ev.scenarios import SENSORLESS_START_DELAY
 
 from ..metrics.sensorless import STARTUP_BAND, STARTUP_FROM, handovers, sensorless_metrics
 from ..metrics.windows import figures_where, run_timing
+from .drawing import figure_links, pyplot, save_figure
 
 #: the runs: (short name, shipped scenario, title)
 SCENARIOS = (("s1", "scenario1-sensorless", "Scenario 1"), ("s2", "scenario2-sensorless", "Scenario 2"),
@@ -63,26 +64,20 @@ def config_specs():
     return specs
 
 
-def _finish(plt, fig, axes, path: Path, mode_axis=None) -> Path:
-    """Grid, mode ticks, layout; save and close."""
+def _finish(fig, axes, path: Path, mode_axis=None) -> Path:
+    """Grid, mode ticks; save and close."""
     if mode_axis is not None:
         mode_axis.set_ylabel("mode")
         mode_axis.set_yticks([0, 1, 2], ["align", "I-f", "EKF"])
     for ax in axes:
         ax.grid(True, lw=0.3)
     axes[-1].set_xlabel("time [s]")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def figures(data, fig_dir: Path) -> list[Path]:
     """The first 15 s of the start-up from the 8 angles, and the hill stop and restart."""
-    import matplotlib  # noqa: PLC0415 - matplotlib: heavy (~0.5 s), only when drawing
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+    plt = pyplot()
 
     made = []
     runs = [(k, data.runs.get(f"sl-start{k}-exact-sensorless")) for k in range(len(ANGLES))]
@@ -104,7 +99,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
         axes[0].legend(fontsize=6, ncol=3)
         axes[1].set_ylabel("θ̂ − θ [rad]\n(row timing removed)")
         axes[0].set_title("Sensorless start-up from standstill, scenario 1, exact sensors: the first 15 s")
-        made.append(_finish(plt, fig, axes, fig_dir / "sensorless_startup.png", axes[2]))
+        made.append(_finish(fig, axes, fig_dir / "sensorless_startup.png", axes[2]))
     # sensored (dashed) first, the sensorless unit on top
     hill = [(data.runs.get(f"sl-hill-{c}-{k}"), f"{k}, {d}", "--" if k == "sensored" else "-")
             for k in ("sensored", "sensorless") for c, _, d in CONDITIONS[:2]]
@@ -131,7 +126,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
         axes[2].set_ylabel("T_e [N m]")
         axes[2].legend(fontsize=7)
         axes[0].set_title("hill-start-if on 22°: stop (30-40 s), stand (40-50 s), restart (50-60 s)")
-        made.append(_finish(plt, fig, axes, fig_dir / "sensorless_hill.png", axes[3]))
+        made.append(_finish(fig, axes, fig_dir / "sensorless_hill.png", axes[3]))
         # the position over the stand, zoomed: the roll-back in millimetres
         fig, ax = plt.subplots(figsize=(7.5, 3.0))
         for i, (run, label, ls) in enumerate(hill):
@@ -143,7 +138,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
         ax.set_ylim(-100.0, 40.0)
         ax.set_title("hill-start-if: vehicle position around the stand (below 0: rolled back)")
         ax.legend(fontsize=7)
-        made.append(_finish(plt, fig, [ax], fig_dir / "sensorless_hill_position.png"))
+        made.append(_finish(fig, [ax], fig_dir / "sensorless_hill_position.png"))
     return made
 
 
@@ -376,7 +371,5 @@ def render(data, fig_names) -> list[str]:
         L.append("Targets not reached, by how much:\n")
         L += misses
         L.append("")
-    for name in ("sensorless_startup", "sensorless_hill", "sensorless_hill_position"):
-        if name in fig_names:
-            L.append(f"![{name}](results/{name}.png)\n")
+    L += figure_links(("sensorless_startup", "sensorless_hill", "sensorless_hill_position"), fig_names)
     return L

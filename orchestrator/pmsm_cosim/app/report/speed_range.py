@@ -24,6 +24,7 @@ from ..metrics.rows import KMH
 from ..metrics.speed_range import wheel_ratio
 from ..metrics.windows import figures_where, run_timing
 from .configs import SPEED_RANGE_RUNS as RUNS
+from .drawing import figure_links, pyplot, save_figure
 
 #: the scenario's controller settings, for its envelope (acceleration.toml's ctrl start values)
 SCENARIO_SETS = ("reference=fw", "v_dc=360", "P_regen_max=50000", "inverter_losses=true", "gear_model=power_flow")
@@ -77,10 +78,7 @@ def figures_of(data, cid: str) -> dict | None:
 
 def figures(data, fig_dir: Path) -> list[Path]:
     """Speed, torque and power along the runs; their operating points on the envelope; the angle error."""
-    import matplotlib  # noqa: PLC0415 - matplotlib: heavy (~0.5 s), only when drawing
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
+    plt = pyplot()
 
     runs = [(cid, setup.label, data.runs[cid]) for cid, _, setup in RUNS if cid in data.runs]
     if not runs:
@@ -106,10 +104,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
     axes[2].set_xlabel("time [s]")
     for ax in axes:
         ax.grid(True, lw=0.3)
-    fig.tight_layout()
-    made.append(fig_dir / "accel_speed.png")
-    fig.savefig(made[-1], dpi=90)
-    plt.close(fig)
+    made.append(save_figure(fig, fig_dir / "accel_speed.png"))
 
     p = envelope.parameters(SCENARIO_SETS)
     lim = references.limits(p["controller"], p["motor"])
@@ -119,10 +114,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     points = [(Path(label), {"omega_m": run.r["omega_m"], "T_e": run.r["T_e"]}) for _, label, run in runs]
     envelope.plot_envelope(ax, lim, speeds, w, motoring, braking, region, points)
-    fig.tight_layout()
-    made.append(fig_dir / "accel_envelope.png")
-    fig.savefig(made[-1], dpi=90)
-    plt.close(fig)
+    made.append(save_figure(fig, fig_dir / "accel_envelope.png"))
 
     est = [(cid, label, run) for cid, label, run in runs if cid != "accel-sensored"]
     if est:
@@ -144,10 +136,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
         axes[1].set_xlabel("time [s]")
         for ax in axes:
             ax.grid(True, lw=0.3)
-        fig.tight_layout()
-        made.append(fig_dir / "accel_angle.png")
-        fig.savefig(made[-1], dpi=90)
-        plt.close(fig)
+        made.append(save_figure(fig, fig_dir / "accel_angle.png"))
     return made
 
 
@@ -217,7 +206,5 @@ def render(data, fig_names) -> list[str]:
             f"top speed {_num(sl['acceleration'].get('top_speed_kmh'), '.1f')} km/h "
             f"({_num(sl['top_speed_w'], '.0f')} rad/s, {_num(sl['top_speed_w'] * lim.N / (2 * math.pi), '.0f')} Hz "
             f"electrical).\n")
-    for name in ("accel_speed", "accel_envelope", "accel_angle"):
-        if name in fig_names:
-            L.append(f"![{name}](results/{name}.png)\n")
+    L += figure_links(("accel_speed", "accel_envelope", "accel_angle"), fig_names)
     return L

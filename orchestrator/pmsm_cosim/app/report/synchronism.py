@@ -23,6 +23,7 @@ from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase
 from ...engine.recording import read_results
 from ..metrics.synchronism import RECOVERY_BAND, SYNC_BAND, SYNC_REL, synchronism_metrics
 from ..reference import run_reference
+from .drawing import pyplot, save_figure
 
 #: current-sensor noise of every run [A] and the first seed (run k of a case has seed k + 1)
 NOISE = 1.0
@@ -140,10 +141,7 @@ def verdicts(results: list[dict]) -> list[dict]:
 
 def figures(results: list[dict], runs_dir, fig_dir: Path) -> list[Path]:
     """Speed and position of the creeping and standing cases, sensorless against sensored (angle k = 0)."""
-    import matplotlib  # noqa: PLC0415 - heavy optional
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 - heavy optional
+    plt = pyplot()
 
     runs_dir = Path(runs_dir)
     names = [n for n in ("step200", "creep10", "stand") if (runs_dir / f"{n}-sensorless-0").is_dir()]
@@ -168,11 +166,7 @@ def figures(results: list[dict], runs_dir, fig_dir: Path) -> list[Path]:
         for ax in (axes[0][j], axes[1][j], axes[2][j]):
             ax.grid(True, lw=0.3)
             ax.legend(fontsize=6)
-    fig.tight_layout()
-    path = fig_dir / "sync_matrix.png"
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return [path]
+    return [save_figure(fig, fig_dir / "sync_matrix.png")]
 
 
 def _n(x, fmt=".2f") -> str:

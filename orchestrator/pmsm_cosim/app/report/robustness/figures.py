@@ -12,20 +12,12 @@ import numpy as np
 from pmsm_ev.params import MotorParams
 from pmsm_ev.results import row_timing_corrected_angle_error
 
+from ..drawing import pyplot, save_figure
 from .cycle import MASS
 from .metrics import DIVERGED_LIMIT, SPEED_LIMIT, T_FROM, DeadRun
 from .runs import CONTROLLERS, Map
 
 _M = MotorParams()
-
-
-def _plt():
-    import matplotlib  # noqa: PLC0415 - matplotlib: heavy, only when drawing
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 - matplotlib: heavy, only when drawing
-
-    return plt
 
 
 def _outline(ax, stable: np.ndarray) -> None:
@@ -49,7 +41,7 @@ def map_figure(m: Map, grids: dict, path: Path, t_from: float = T_FROM) -> Path:
     ``t_from``; cells annotated, runs that did not complete crossed, the stable region outlined."""
     from matplotlib.colors import LogNorm  # noqa: PLC0415 - matplotlib: heavy, only when drawing
 
-    plt = _plt()
+    plt = pyplot()
     keys = [k for k, _ in CONTROLLERS if k in grids]
     fig, axes = plt.subplots(2, len(keys), figsize=(4.3 * len(keys), 7.2), squeeze=False)
     for col, key in enumerate(keys):
@@ -83,14 +75,11 @@ def map_figure(m: Map, grids: dict, path: Path, t_from: float = T_FROM) -> Path:
                  f"(failed, slipping after {t_from:g} s or > {DIVERGED_LIMIT:g} rad/s); n↻ = electrical turns slipped\n"
                  "(paper mode: the control runs on the measured angle; θ̂, the integral of ω̂, may slip harmlessly)",
                  fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def monte_carlo_figure(rows: list[dict], path: Path, label: str = "sensorless unit", t_from: float = T_FROM) -> Path:
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(13.0, 4.0))
     ok = [r for r in rows if r["stable"]]
     bad = [r for r in rows if not r["stable"]]
@@ -121,10 +110,7 @@ def monte_carlo_figure(rows: list[dict], path: Path, label: str = "sensorless un
     axes[2].legend(fontsize=7)
     fig.suptitle(f"Monte-Carlo, {label}: {len(rows)} samples of every mismatch at once, σ = 1 A noise",
                  fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def dead_time_label(run: DeadRun) -> str:
@@ -133,7 +119,7 @@ def dead_time_label(run: DeadRun) -> str:
 
 
 def dead_time_figure(runs: list[DeadRun], path: Path) -> Path:
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(8.0, 7.5), sharex=True)
     for run in runs:
         r = run.r
@@ -153,10 +139,7 @@ def dead_time_figure(runs: list[DeadRun], path: Path) -> Path:
                       + (f", {v_dc.pop():g} V DC link" if len(v_dc) == 1 else ""))
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 # --- the Monte-Carlo on a drive cycle ------------------------------------------------------------
@@ -164,7 +147,7 @@ def dead_time_figure(runs: list[DeadRun], path: Path) -> Path:
 def cycle_figure(rows: list[dict], path: Path, label: str) -> Path:
     """The Wh/km histogram (passed and failed samples stacked) and Wh/km against the vehicle mass (colour:
     the grade offset; failures crossed, a sample without a Wh/km figure on the axis)."""
-    plt = _plt()
+    plt = pyplot()
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11.0, 4.0))
     ok = [r["dc_Wh_per_km"] for r in rows if not r["failed"] and math.isfinite(r["dc_Wh_per_km"])]
     bad = [r["dc_Wh_per_km"] for r in rows if r["failed"] and math.isfinite(r["dc_Wh_per_km"])]
@@ -205,7 +188,4 @@ def cycle_figure(rows: list[dict], path: Path, label: str) -> Path:
         ax1.legend(fontsize=7)
     ax1.grid(alpha=0.3)
     fig.suptitle(label, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
