@@ -40,8 +40,8 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     fmi3EnterStepMode, then fmi3DoStep);
 (l) the same without event mode (``--no-event-mode``: the controller samples in fmi3DoStep, as its FMI 2.0 unit);
     (k) and (l) are run once each after the other cases (their rows); then their ratios to (a): (a), (k) and (l)
-    stepped in lock step, one thread each, ``FMI3_ROUNDS`` rounds (``--fmi3-rounds``): each one's runs of steps
-    of 10 rows (1000 steps) taken in turn, a's, k's, l's, a's, ... (``LockStep``: the next round l's, k's, a's, ...),
+    stepped in lock step, one thread each, ``FMI3_ROUNDS`` rounds (``--fmi3-rounds``): each one's turns of 10 rows
+    (1000 steps) taken in turn, a's, k's, l's, a's, ... (``LockStep``: the next round l's, k's, a's, ...),
     each timed alone, wall and its thread's CPU time. The j-th turns of the three cover the same steps, a few
     milliseconds apart, so that a drift of the machine's speed (up to 3.5x over a day here; runs taken seconds apart
     saw k/a from 0.3 to 2.3) cancels in their ratio; a round's k/a and l/a are the median of those ratios over its
@@ -58,7 +58,7 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     standstill;
 
 and prints one table with the ratios a/b, d/a, j/a, e/f, e/h, a/i, k/a and l/a (the FMI 3.0 units' cost a step
-against the FMI 2.0 units': the median of the paired rounds above), in wall time (what a user waits) and in
+against the FMI 2.0 units': in lock step, above), in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
 includes its worker threads). (a)-(c) include the recording of a row every 10 ms, (e), (f) every
 50 ms, as in a normal run of their scenario. With ``memory`` it also runs ``pmsm-cosim run scenario1``
@@ -408,7 +408,7 @@ CASES = {
 }
 #: the rounds of (a), (k), (l) in lock step whose ratios k/a, l/a are taken (the module's doc); odd: the median is a
 #: round's
-FMI3_ROUNDS = 3
+FMI3_ROUNDS = 5
 #: the ratios printed below the table: (numerator, denominator)
 RATIOS = (("a", "b"), ("d", "a"), ("j", "a"), ("e", "f"), ("e", "h"), ("a", "i"), ("k", "a"), ("l", "a"))
 
