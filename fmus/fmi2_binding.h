@@ -73,4 +73,7 @@ typedef fmi2Status (*str_status_t)(fmi2Component, const fmi2StatusKind, fmi2Stri
 /* pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls (lean_binding.c) */
 typedef unsigned long long (*calls_t)(fmi2Component);
 
+/* pmsm_fmu_forwarded (fmu_loader.c) */
+typedef void* (*forwarded_t)(const char*);
+
 #endif

@@ -5,7 +5,10 @@
  * "FMI 3.0".
  *
  * Every fmi3 function of co-simulation is one or two fmi2 calls of the loader (dlopen'ed RTLD_LOCAL, once per
- * process, at the first fmi3InstantiateCoSimulation):
+ * process, at the first fmi3InstantiateCoSimulation). fmi2GetReal, fmi2SetReal and fmi2DoStep, the calls of every
+ * step, which the loader only forwards to the binding, are the binding's own, called directly: the loader gives
+ * their addresses once the binding is loaded (pmsm_fmu_forwarded), and each instance keeps them beside its FMI 2.0
+ * instance (direct_calls), one hop less a call than through the loader, with the same arguments and answers:
  *
  *   fmi3InstantiateCoSimulation  fmi2Instantiate (fmi2CoSimulation; the instantiation token as the GUID; the
  *                                resource folder as a file URI), with an fmi2 logger that formats the message and
@@ -169,6 +172,11 @@ static int load_stack(char* why, size_t size)
 /* -- an instance ------------------------------------------------------------------------------------------ */
 typedef struct {
     fmi2Component inner;              /* the FMI 2.0 stack's instance */
+    /* the calls of every step: the binding's own functions, which the loader's only forward (pmsm_fmu_forwarded),
+     * else the loader's: one hop less a call, the same answer (direct_calls) */
+    get_real_t get_real;
+    set_real_t set_real;
+    do_step_t do_step;
     fmi3InstanceEnvironment environment;
     fmi3LogMessageCallback log;       /* the host's (may be NULL) */
     fmi2CallbackFunctions callbacks;  /* given to fmi2Instantiate: relay, calloc, free; environment = this */
@@ -370,6 +378,19 @@ static void read_clock(Instance* w, const char* uri)
     fclose(f);
 }
 
+/* the instance's calls of every step (fmi2GetReal, fmi2SetReal, fmi2DoStep): the binding's own, which the loader's
+ * forward unchanged, where the loader gives them (pmsm_fmu_forwarded, once the binding is loaded), else the loader's */
+static void direct_calls(Instance* w)
+{
+    forwarded_t forwarded = (forwarded_t)dlsym(loader, "pmsm_fmu_forwarded");
+    get_real_t get_real = forwarded ? (get_real_t)forwarded("fmi2GetReal") : NULL;
+    set_real_t set_real = forwarded ? (set_real_t)forwarded("fmi2SetReal") : NULL;
+    do_step_t do_step = forwarded ? (do_step_t)forwarded("fmi2DoStep") : NULL;
+    w->get_real = get_real ? get_real : fmi2.get_real;
+    w->set_real = set_real ? set_real : fmi2.set_real;
+    w->do_step = do_step ? do_step : fmi2.do_step;
+}
+
 /* -- common functions ------------------------------------------------------------------------------------ */
 const char* fmi3GetVersion(void) { return fmi3Version; }
 
@@ -459,6 +480,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
         free(w);
         return NULL;
     }
+    direct_calls(w);
     if (!enlist(w)) {
         say(instanceEnvironment, logMessage, fmi3Error, "fmi3InstantiateCoSimulation: more than %d instances at once",
             LIVE_INSTANCES);
@@ -494,7 +516,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
     if (W->event_mode_used) { /* the stack samples once a tick: its sample period must be the clock's */
         fmi2ValueReference ref = W->dt_reference;
         fmi2Real dt = 0.0;
-        if (fmi2.get_real(W->inner, &ref, 1, &dt) <= fmi2Warning && dt != 0.0 && dt != W->interval) {
+        if (W->get_real(W->inner, &ref, 1, &dt) <= fmi2Warning && dt != 0.0 && dt != W->interval) {
             say(W->environment, W->log, fmi3Error,
                 "fmi3ExitInitializationMode: dt = %.9g s, but the sample clock ticks every %.9g s in event mode "
                 "(set dt to 0 or to the clock's interval)", dt, W->interval);
@@ -543,11 +565,11 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
     if (!live(instance)) return fmi3Error;
     SCALARS(nValueReferences, nValues);
     if (!own_refs(W, valueReferences, nValueReferences))
-        return status3(fmi2.get_real(W->inner, valueReferences, nValueReferences, values));
+        return status3(W->get_real(W->inner, valueReferences, nValueReferences, values));
     CLOCK_REFUSED(valueReferences, nValueReferences);
     size_t times = 0;
     for (size_t i = 0; i < nValueReferences; i++) times += valueReferences[i] == TIME_REFERENCE;
-    if (times == 0) return status3(fmi2.get_real(W->inner, valueReferences, nValueReferences, values));
+    if (times == 0) return status3(W->get_real(W->inner, valueReferences, nValueReferences, values));
     /* the time among them: the others from the stack */
     size_t n = nValueReferences - times, k = 0;
     fmi2ValueReference* refs = malloc((n ? n : 1) * sizeof(fmi2ValueReference));
@@ -556,7 +578,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
     if (refs != NULL && got != NULL) {
         for (size_t i = 0; i < nValueReferences; i++)
             if (valueReferences[i] != TIME_REFERENCE) refs[k++] = valueReferences[i];
-        s = n ? fmi2.get_real(W->inner, refs, n, got) : fmi2OK;
+        s = n ? W->get_real(W->inner, refs, n, got) : fmi2OK;
         if (s <= fmi2Warning)
             for (size_t i = 0, j = 0; i < nValueReferences; i++)
                 values[i] = valueReferences[i] == TIME_REFERENCE ? W->time : got[j++];
@@ -572,7 +594,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
     if (!live(instance)) return fmi3Error;
     SCALARS(nValueReferences, nValues);
     if (!own_refs(W, valueReferences, nValueReferences))
-        return status3(fmi2.set_real(W->inner, valueReferences, nValueReferences, values));
+        return status3(W->set_real(W->inner, valueReferences, nValueReferences, values));
     CLOCK_REFUSED(valueReferences, nValueReferences);
     for (size_t i = 0; i < nValueReferences; i++)
         if (valueReferences[i] == TIME_REFERENCE) {
@@ -580,7 +602,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                 "nothing set");
             return fmi3Error;
         }
-    return status3(fmi2.set_real(W->inner, valueReferences, nValueReferences, values));
+    return status3(W->set_real(W->inner, valueReferences, nValueReferences, values));
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
@@ -873,7 +895,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean* discrete
     if (!W->in_event_mode) NOT_HERE("outside event mode (fmi3EnterEventMode first)");
     fmi2Status s = fmi2OK;
     if (W->ticked) { /* the tick: one sample period of the stack from now, its sample at this instant */
-        s = fmi2.do_step(W->inner, W->time, W->interval, 1);
+        s = W->do_step(W->inner, W->time, W->interval, 1);
         if (s <= fmi2Warning) {
             W->stack_time = W->time + W->interval;
             W->ticked = 0;
@@ -1012,8 +1034,8 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     if (W->event_mode_used && W->initialized) return clocked_step(W, currentCommunicationPoint, communicationStepSize,
                                                                    eventHandlingNeeded, terminateSimulation,
                                                                    earlyReturn, lastSuccessfulTime);
-    fmi2Status s = fmi2.do_step(W->inner, currentCommunicationPoint, communicationStepSize,
-                                noSetFMUStatePriorToCurrentPoint ? 1 : 0);
+    fmi2Status s = W->do_step(W->inner, currentCommunicationPoint, communicationStepSize,
+                              noSetFMUStatePriorToCurrentPoint ? 1 : 0);
     fmi3Boolean terminate = s == fmi2Fatal;
     fmi3Float64 last = s <= fmi2Warning ? currentCommunicationPoint + communicationStepSize : currentCommunicationPoint;
     if (s == fmi2Discard) { /* where the stack says it got to, and whether it ended the run */

@@ -26,8 +26,9 @@
  * as in a Python program.
  *
  * Every other fmi2 function, and pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls and pmsm_fmu_pulls, are the
- * binding's, called with the same arguments: the instance is the binding's own. Python's C API is reached through
- * dlsym only.
+ * binding's, called with the same arguments: the instance is the binding's own. pmsm_fmu_forwarded gives the FMI 3.0
+ * layer the binding's own fmi2GetReal, fmi2SetReal and fmi2DoStep, which the loader's only forward. Python's C API
+ * is reached through dlsym only.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -577,6 +578,18 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
     free_t f = (free_t)fn("fmi2FreeInstance");
     if (f != NULL && c != NULL) f(c);
     if (c != NULL) plan_release();
+}
+
+/* pmsm_fmu_forwarded(name): the binding's own function `name`, where this loader's function of that name does nothing
+ * but forward the call (FORWARD, above): fmi2GetReal, fmi2SetReal and fmi2DoStep, the calls of every step. The FMI
+ * 3.0 layer in front of this loader (fmi3_layer.c) calls them so, one hop less a call, with the same arguments and
+ * the same answer. NULL for any other name, and before the binding is loaded (the first fmi2Instantiate). */
+EXPORT void* pmsm_fmu_forwarded(const char* name)
+{
+    static const char* const FORWARDED[] = {"fmi2GetReal", "fmi2SetReal", "fmi2DoStep"};
+    for (size_t i = 0; name != NULL && i < sizeof FORWARDED / sizeof FORWARDED[0]; i++)
+        if (strcmp(name, FORWARDED[i]) == 0) return fn(name);
+    return NULL;
 }
 
 /* pmsm_fmu_fast_calls(instance): the lean binding's counter (fmus/lean_binding.c), 0 without one */

@@ -125,34 +125,106 @@ def test_the_held_speed_case_starts_at_the_speed_and_holds_it():
 
 
 def test_the_fmi3_cases_are_in_the_table_and_its_ratios(monkeypatch):
-    """(k), (l): the system of (a) on the FMI 3.0 units, ticked in event mode and not; their rows and the ratios
-    k/a, l/a printed (the measurements replaced by fixed figures here: no timing)."""
+    """(k), (l): the system of (a) on the FMI 3.0 units, ticked in event mode and not, a run each (their rows), then
+    in lock step with (a), the rounds in turn; the ratios k/a, l/a, the median of the rounds', printed (the
+    measurements replaced by fixed figures here: no timing)."""
     import io
 
-    calls = []
+    calls, orders = [], []
 
-    def measured(stop_time, work, plant=None, ctrl=None, spec=None, event_mode=True):
-        calls.append((plant, ctrl, event_mode))
+    def measured(stop_time, work, plant=None, ctrl=None, spec=None, event_mode=True, clock=None):
+        calls.append((plant, ctrl, event_mode, clock is not None))
         return (3.0, 2.0) if plant is not None and plant.parent.name == "fmi3" else (2.0, 2.0)
 
+    def lock_step_costs(self, steppers):  # each run as given, one after the other (the ratios: fixed, below)
+        for stepper in steppers:
+            stepper(object())
+        return [None] * self.count
+
+    def rounds(n, lock_step):
+        for _ in range(n):
+            orders.append(lock_step(["a", "k", "l"]))
+        return {"k/a": [(1.5, 1.0)] * n, "l/a": [(1.5, 1.0)] * n}
+
     monkeypatch.setattr(bench, "cosim_us_per_step", measured)
+    monkeypatch.setattr(bench.LockStep, "run", lock_step_costs)
+    monkeypatch.setattr(bench, "fmi3_rounds", rounds)
     for name in ("reference_us_per_step", "whole_loop_us_per_step"):
         monkeypatch.setattr(bench, name, lambda *args, **kwargs: (1.0, 1.0))
     out = io.StringIO()
     results = bench.run_bench(10.0, memory=False, libcosim=False, out=out, fmpy_case=False, speed_slice=0.0)
     text = out.getvalue()
     fmi3, why = bench.fmi3_units()
+    real_plant, real_ctrl = (project_fmus()[name] for name in ("PmsmEvPlant", "FocEkf5"))
     assert [label[:3] for label in bench.CASES.values()] == [f"({c})" for c in "abcdefghijkl"]
     if fmi3 is None:
         assert results["k"] is None and f"(no FMI 3.0 units: {why})" in text
         return
-    turn = [(fmi3["PmsmEvPlant"], fmi3["FocEkf5"], True), (fmi3["PmsmEvPlant"], fmi3["FocEkf5"], False)]
-    assert [call for call in calls if call[0] == fmi3["PmsmEvPlant"]] == turn * bench.FMI3_ROUNDS
-    assert f"(a), (k), (l): the least of {bench.FMI3_ROUNDS + 1}, " in text
+    # after the other cases: (k), (l) alone, then the rounds of (a), (k), (l) in lock step
+    run_a, run_k, run_l = ((real_plant, real_ctrl, True), (fmi3["PmsmEvPlant"], fmi3["FocEkf5"], True),
+                           (fmi3["PmsmEvPlant"], fmi3["FocEkf5"], False))
+    alone, locked = calls[-2 - 3 * bench.FMI3_ROUNDS:-3 * bench.FMI3_ROUNDS], calls[-3 * bench.FMI3_ROUNDS:]
+    assert alone == [(*run_k, False), (*run_l, False)]
+    assert locked == [(*run, True) for run in (run_a, run_k, run_l)] * bench.FMI3_ROUNDS
+    assert len(orders) == bench.FMI3_ROUNDS
     assert results["k"] == results["l"] == (3.0, 2.0)
     lines = {line.split()[0]: line.split()[1:] for line in text.splitlines() if line.strip()}
-    assert lines["k/a"] == lines["l/a"] == ["1.50", "1.00"]
+    assert lines["k/a"] == lines["l/a"] == ["(in", "lock", "step,", str(bench.FMI3_ROUNDS), "rounds)", "1.500", "1.000"]
+    assert results["k/a"] == results["l/a"] == (1.5, 1.0)
+    assert "k/a, l/a: (a), (k), (l) stepped in lock step" in text
     assert any(line.startswith("(k) (a) on the FMI 3.0 units, clock ticked") for line in text.splitlines())
+
+
+def test_the_fmi3_ratios_are_the_median_over_the_turns_then_over_the_rounds():
+    """k/a, l/a of a round: the median over its turns of their ratios (the j-th of k to the j-th of a); the rounds in
+    turn, a k l, then l k a."""
+    orders = []
+    a = [(1.0, 2.0), (1.0, 2.0), (1.0, 2.0), (5.0, 2.0)]  # a turn that waited: its ratio is an outlier
+    k = [(1.1, 2.2), (1.2, 2.0), (1.05, 2.0), (1.0, 2.0)]
+    l_ = [(0.9, 2.0), (1.0, 2.0), (1.0, 1.0), (1.0, 2.0)]
+
+    def lock_step(order):
+        orders.append("".join(order))
+        return {"a": a, "k": k, "l": l_}
+
+    pairs = bench.fmi3_rounds(3, lock_step)
+    assert orders == ["akl", "lka", "akl"]
+    assert pairs["k/a"] == [(pytest.approx(1.1 * 0.5 + 1.05 * 0.5), 1.0)] * 3  # the median of 1.1, 1.2, 1.05, 0.2
+    assert pairs["l/a"] == [(pytest.approx(0.95), 1.0)] * 3  # of 0.9, 1.0, 1.0, 0.2 (wall); 1.0, 1.0, 0.5, 1.0
+    assert bench.median([3.0, 1.0]) == 2.0 and bench.median([5.0]) == 5.0
+
+
+def test_lock_step_takes_the_runs_of_steps_in_turn_and_times_each_alone(tmp_path):
+    """LockStep: the masters' turns of ``stride`` rows in turn (a, b, a, b, ...), each timed from its beginning to its
+    last row; a master that fails, before its first row or on the way, is passed over and its error raised; two real
+    runs of the system of (a) in lock step, a turn's cost for each two of their rows after the first."""
+    seen = []
+
+    def fake(name, rows, fail_at=None):
+        def stepper(hook):
+            for row in range(rows):
+                if row == fail_at:
+                    raise ValueError(f"{name} failed")
+                hook.update(row * 100 * 1e-4)
+                seen.append((name, row))
+            return name
+        return stepper
+
+    lock = bench.LockStep(2, 1e-4, stride=1)
+    assert lock.run([fake("a", 4), fake("b", 4)]) == ["a", "b"]
+    assert seen == [(name, row) for row in range(4) for name in "ab"]
+    assert [len(c) for c in lock.costs] == [3, 3] and all(w >= 0.0 for c in lock.costs for w, _c in c)
+    seen.clear()
+    with pytest.raises(ValueError, match="b failed"):
+        bench.LockStep(3, 1e-4, stride=1).run([fake("a", 3), fake("b", 3, fail_at=1), fake("c", 3)])
+    assert seen == [("a", 0), ("b", 0), ("c", 0), ("a", 1), ("c", 1), ("a", 2), ("c", 2)]
+    with pytest.raises(ValueError, match="a failed"):
+        bench.LockStep(2, 1e-4, stride=1).run([fake("a", 3, fail_at=0), fake("b", 3)])
+    plant, ctrl = (project_fmus()[name] for name in ("PmsmEvPlant", "FocEkf5"))
+    lock = bench.LockStep(2, 1e-4, stride=2)
+    lock.run([lambda hook: bench.cosim_us_per_step(0.05, tmp_path, plant, ctrl, clock=hook)] * 2)
+    assert [len(c) for c in lock.costs] == [2, 2]  # rows at 0, 10, ..., 40 ms, turns of 2 rows; after the last: none
+    assert all(w > 0.0 for c in lock.costs for w, _c in c)
 
 
 def test_the_fmi3_cases_run_the_system_of_a(tmp_path):

@@ -39,9 +39,14 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     event mode at its interval (here every step: fmi3EnterEventMode, fmi3SetClock, fmi3UpdateDiscreteStates,
     fmi3EnterStepMode, then fmi3DoStep);
 (l) the same without event mode (``--no-event-mode``: the controller samples in fmi3DoStep, as its FMI 2.0 unit);
-    (a), (k) and (l) are run in turn ``FMI3_ROUNDS`` times after the other cases, and each one's figures are the least
-    of its runs (wall and CPU apart; (a)'s first run included): the first run of a process pays for warming up, and
-    a shared machine's load varies from one run to the next;
+    (k) and (l) are run once each after the other cases (their rows); then their ratios to (a): (a), (k) and (l)
+    stepped in lock step, one thread each, ``FMI3_ROUNDS`` rounds (``--fmi3-rounds``): each one's turns of 10 rows
+    (1000 steps) taken in turn, a's, k's, l's, a's, ... (``LockStep``: the next round l's, k's, a's, ...),
+    each timed alone, wall and its thread's CPU time. The j-th turns of the three cover the same steps, a few
+    milliseconds apart, so that a drift of the machine's speed (up to 3.5x over a day here; runs taken seconds apart
+    saw k/a from 0.3 to 2.3) cancels in their ratio; a round's k/a and l/a are the median of those ratios over its
+    turns (a turn that waited for the processor moves a few of them), the printed ones the median of the rounds',
+    each round's printed beside;
 
 (m) the cost a step at 0, 50, 100 and 131 km/h held (``SPEEDS_KMH``) for the shipped sensored drive (``wltc3b``:
     ``FocSensored``, the linear flux model) and the shipped sensorless drive (``wltc3b-sensorless``: injection at
@@ -53,7 +58,7 @@ and, on the first ``cycle_slice`` s of WLTC 3b (``--cycle wltc3b``; by default 6
     standstill;
 
 and prints one table with the ratios a/b, d/a, j/a, e/f, e/h, a/i, k/a and l/a (the FMI 3.0 units' cost a step
-against the FMI 2.0 units'), in wall time (what a user waits) and in
+against the FMI 2.0 units': in lock step, above), in wall time (what a user waits) and in
 CPU time of the process (less sensitive to other load on the machine; for libcosim it
 includes its worker threads). (a)-(c) include the recording of a row every 10 ms, (e), (f) every
 50 ms, as in a normal run of their scenario. With ``memory`` it also runs ``pmsm-cosim run scenario1``
@@ -76,6 +81,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -148,13 +154,21 @@ def cycle_spec(stop_time: float, plant: Path | None = None, ctrl: Path | None = 
     return spec
 
 
+def median(values) -> float:
+    ordered = sorted(values)
+    mid = len(ordered) // 2
+    return ordered[mid] if len(ordered) % 2 else 0.5 * (ordered[mid - 1] + ordered[mid])
+
+
 def cosim_us_per_step(stop_time: float, work: Path, plant: Path | None = None,
-                      ctrl: Path | None = None, spec=None, event_mode: bool = True) -> tuple[float, float]:
+                      ctrl: Path | None = None, spec=None, event_mode: bool = True,
+                      clock=None) -> tuple[float, float]:
     """(a), (b), (k), (l) (``event_mode``: the master's, for FMI 3.0 units), or (e), (f) with the ``spec`` of
-    ``cycle_spec``: the master's loop (wall, CPU) time per macro step [us]."""
+    ``cycle_spec``: the master's loop (wall, CPU) time per macro step [us]; ``clock``: its progress hook (a
+    ``LockStep``'s)."""
     out = Path(tempfile.mkdtemp(prefix="cosim-", dir=work))
     master = Master(spec if spec is not None else _spec(stop_time, plant, ctrl), event_mode=event_mode)
-    m = master.run(out, catch_sigint=False)
+    m = master.run(out, catch_sigint=False, progress=clock)
     if m["status"] != "completed":
         raise CosimError(f"benchmark run did not complete: {m['status']}")
     LOOPS_SEEN.append(m["loop"])
@@ -392,10 +406,142 @@ CASES = {
     "k": "(k) (a) on the FMI 3.0 units, clock ticked",
     "l": "(l) (a) on the FMI 3.0 units, no event mode",
 }
-#: the rounds of (a), (k), (l) in turn (the module's doc)
-FMI3_ROUNDS = 2
+#: the rounds of (a), (k), (l) in lock step whose ratios k/a, l/a are taken (the module's doc); odd: the median is a
+#: round's
+FMI3_ROUNDS = 5
 #: the ratios printed below the table: (numerator, denominator)
 RATIOS = (("a", "b"), ("d", "a"), ("j", "a"), ("e", "f"), ("e", "h"), ("a", "i"), ("k", "a"), ("l", "a"))
+
+
+class LockStep:
+    """Masters stepped in lock step, one thread each: the progress hook of master i (``hook(i)``, given to its
+    ``Master.run(progress=...)``, which calls it at each row) lets its loop go on only in its turn, for ``stride``
+    rows, and the turns go round in the order of the masters (0, 1, ..., 0, ...; a master done is passed over). A turn
+    is timed from the moment it began to its last row (wall, and its thread's CPU time): ``costs[i]``, master i's
+    (wall, CPU) [us] a step, turn by turn. Nothing steps before every master is set up (``run``). The turns are long
+    enough (``stride`` rows; 10: 1000 steps of (a), about a millisecond) that a master's caches, which the others' turns
+    have used, weigh little in them, and short enough that the machine's speed does not change between them."""
+
+    def __init__(self, count: int, h: float, stride: int = 10):
+        self.h = h
+        self.stride = stride
+        self.count = count
+        self.turn = -1
+        self.done = [False] * count
+        self.aborted = False
+        self.ready = [threading.Event() for _ in range(count)]
+        self.costs: list[list[tuple[float, float]]] = [[] for _ in range(count)]
+        self.cond = threading.Condition()
+
+    def hook(self, i: int) -> "_Turn":
+        return _Turn(self, i)
+
+    def _pass(self, i: int) -> None:
+        """The turn to the next master after i not done (``cond`` held)."""
+        for k in range(1, self.count + 1):
+            j = (i + k) % self.count
+            if not self.done[j]:
+                self.turn = j
+                break
+        self.cond.notify_all()
+
+    def _wait(self, i: int) -> None:
+        while self.turn != i and not self.aborted:
+            self.cond.wait()
+        if self.aborted:
+            raise KeyboardInterrupt  # the master's loop ends the run "interrupted"
+
+    def run(self, steppers) -> list:
+        """``steppers[i](hook)``: master i's run (with ``hook`` as its progress hook), each in a thread of its own,
+        set up one after the other, then stepped in turn; their results, in order (an exception of one raised)."""
+        out, errors = [None] * self.count, [None] * self.count
+
+        def work(i):
+            hook = self.hook(i)
+            try:
+                out[i] = steppers[i](hook)
+            except BaseException as exc:  # noqa: BLE001 - raised again by the calling thread
+                errors[i] = exc
+            finally:
+                hook.close()
+
+        threads = [threading.Thread(target=work, args=(i,), daemon=True) for i in range(self.count)]
+        try:
+            for i, thread in enumerate(threads):  # one set-up at a time: each thread waits at its first row
+                thread.start()
+                while not self.ready[i].wait(0.2):
+                    pass
+            with self.cond:
+                self._pass(self.count - 1)
+            for thread in threads:
+                while thread.is_alive():
+                    thread.join(0.2)
+        except BaseException:
+            with self.cond:
+                self.aborted = True
+                self.cond.notify_all()
+            raise
+        for exc in errors:
+            if exc is not None:
+                raise exc
+        return out
+
+
+class _Turn:
+    """Master i's progress hook in a ``LockStep``."""
+
+    def __init__(self, lock: LockStep, i: int):
+        self.lock, self.i = lock, i
+        self.start: tuple[float, float, float] | None = None
+        self.rows = 0
+        self.closed = False
+
+    def update(self, t: float) -> None:
+        wall, cpu = time.perf_counter(), time.thread_time()
+        lock = self.lock
+        if self.start is not None:
+            self.rows += 1
+            if self.rows < lock.stride:
+                return
+            self.rows = 0
+            n = round((t - self.start[2]) / lock.h)
+            if n > 0:
+                lock.costs[self.i].append((1e6 * (wall - self.start[0]) / n, 1e6 * (cpu - self.start[1]) / n))
+        with lock.cond:
+            if self.start is None:
+                lock.ready[self.i].set()
+            else:
+                lock._pass(self.i)
+            lock._wait(self.i)
+        self.start = (time.perf_counter(), time.thread_time(), t)
+
+    def close(self) -> None:
+        lock = self.lock
+        with lock.cond:
+            if self.closed:
+                return
+            self.closed = True
+            lock.done[self.i] = True
+            lock.ready[self.i].set()  # a master that failed before its first row
+            if lock.turn == self.i:
+                lock._pass(self.i)
+            lock.cond.notify_all()
+
+
+def fmi3_rounds(rounds: int, lock_step) -> dict:
+    """k/a and l/a of ``rounds`` rounds of (a), (k), (l) in lock step: ``lock_step(order)`` -> {case: [(wall, CPU) us a
+    step, turn by turn]} of the three stepped in turn in ``order`` (a k l, then l k a, ...). Returns
+    {"k/a": pairs, "l/a": pairs}, a pair a round's (wall, CPU): the median over its turns of their ratio
+    (module doc)."""
+    pairs: dict = {"k/a": [], "l/a": []}
+    order = ["a", "k", "l"]
+    for _ in range(rounds):
+        costs = lock_step(list(order))
+        order.reverse()
+        for case in ("k", "l"):
+            ratios = list(zip(costs[case], costs["a"]))
+            pairs[f"{case}/a"].append((median(x[0] / y[0] for x, y in ratios), median(x[1] / y[1] for x, y in ratios)))
+    return pairs
 
 
 def bindings() -> str:
@@ -469,7 +615,8 @@ def memory_runs(say, stop_times, work: Path, system: str = SCENARIO, options=(),
 # -- the report ------------------------------------------------------------------------------
 def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: bool = True,
               out=sys.stdout, cycle_slice: float = DEFAULT_CYCLE_SLICE, cycle_memory: bool = False,
-              fmpy_case: bool = True, fmi3_case: bool = True, speed_slice: float = DEFAULT_SPEED_SLICE) -> dict:
+              fmpy_case: bool = True, fmi3_case: bool = True, speed_slice: float = DEFAULT_SPEED_SLICE,
+              fmi3_rounds_n: int = FMI3_ROUNDS) -> dict:
     def say(text: str = "") -> None:
         print(text, file=out, flush=True)
 
@@ -499,11 +646,25 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
         results["j"] = fmpy_us_per_step(slice_s, plant, ctrl) if fmpy_case else None
         fmi3, no_fmi3 = fmi3_units() if fmi3_case else (None, "")
         results["k"] = results["l"] = None
-        for _ in range(FMI3_ROUNDS if fmi3 is not None else 0):  # in turn; the least of each one's runs
-            for case, (units, event_mode) in (("a", (real, True)), ("k", (fmi3, True)), ("l", (fmi3, False))):
-                run = cosim_us_per_step(slice_s, work, units["PmsmEvPlant"], units["FocEkf5"], event_mode=event_mode)
-                best = results[case] or run
-                results[case] = (min(best[0], run[0]), min(best[1], run[1]))
+        paired: dict = {}
+        if fmi3 is not None:
+            runs = {"a": (real, True), "k": (fmi3, True), "l": (fmi3, False)}
+
+            def run(case, clock=None):
+                units, event_mode = runs[case]
+                return cosim_us_per_step(slice_s, work, units["PmsmEvPlant"], units["FocEkf5"], event_mode=event_mode,
+                                         clock=clock)
+
+            results["k"], results["l"] = run("k"), run("l")
+
+            def lock_step(order):
+                lock = LockStep(len(order), 1e-4)
+                lock.run([lambda hook, case=case: run(case, hook) for case in order])
+                return dict(zip(order, lock.costs))
+
+            paired = fmi3_rounds(fmi3_rounds_n, lock_step)
+            for ratio, pairs in paired.items():
+                results[ratio] = (median(w for w, _c in pairs), median(c for _w, c in pairs))
         say(f"{'case':<50}{'us/step wall':>14}{'us/step CPU':>13}")
         for case, label in CASES.items():
             value = results[case]
@@ -517,14 +678,23 @@ def run_bench(slice_s: float = DEFAULT_SLICE, memory: bool = True, libcosim: boo
             else:
                 say(f"{label:<50}{value[0]:>14.2f}{value[1]:>13.2f}")
         for x, y in RATIOS:
-            if results[x] is not None and results[y] is not None:
-                say(f"{x + '/' + y:<50}{results[x][0] / results[y][0]:>14.2f}{results[x][1] / results[y][1]:>13.2f}")
+            ratio = f"{x}/{y}"
+            if ratio in paired:
+                say(f"{ratio + ' (in lock step, ' + str(len(paired[ratio])) + ' rounds)':<50}{results[ratio][0]:>14.3f}"
+                    f"{results[ratio][1]:>13.3f}")
+            elif results[x] is not None and results[y] is not None:
+                say(f"{ratio:<50}{results[x][0] / results[y][0]:>14.2f}{results[x][1] / results[y][1]:>13.2f}")
         whole = round(pcycles.load(CYCLE).duration / 1e-4)
         for case in ("e", "g"):
             say(f"{f'({case}) x the whole ' + CYCLE + f' ({whole} steps) [s]':<50}"
                 f"{results[case][0] * whole * 1e-6:>14.1f}{results[case][1] * whole * 1e-6:>13.1f}")
         if fmi3 is not None:
-            say(f"(a), (k), (l): the least of {FMI3_ROUNDS + 1}, {FMI3_ROUNDS}, {FMI3_ROUNDS} runs, in turn")
+            say(f"k/a, l/a: (a), (k), (l) stepped in lock step, 10 rows (1000 steps) a turn, in turn (a k l, then "
+                f"l k a, ...); a round's ratio the median over its turns, the ratio the median of "
+                f"{fmi3_rounds_n} rounds'")
+            for ratio, pairs in paired.items():
+                say(f"  the rounds' {ratio}, wall: {' '.join(f'{w:.3f}' for w, _c in pairs)}")
+                say(f"  the rounds' {ratio}, CPU:  {' '.join(f'{c:.3f}' for _w, c in pairs)}")
         if speed_slice:
             say()
             results["m"] = speed_cases(say, work, speed_slice)
@@ -554,6 +724,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--no-libcosim", action="store_true", help="skip case (d)")
     ap.add_argument("--no-fmpy", action="store_true", help="skip case (j), the plain fmpy master")
     ap.add_argument("--no-fmi3", action="store_true", help="skip cases (k), (l), the FMI 3.0 units")
+    ap.add_argument("--fmi3-rounds", type=int, default=FMI3_ROUNDS, metavar="N",
+                    help=f"rounds of (a), (k), (l) in lock step whose ratios k/a, l/a are taken (default "
+                         f"{FMI3_ROUNDS}; at least 1)")
     ap.add_argument("--cycle-slice", type=float, default=DEFAULT_CYCLE_SLICE, metavar="S",
                     help=f"simulated seconds of {CYCLE} in cases (e), (f), from t = 0 (default "
                          f"{DEFAULT_CYCLE_SLICE:g}; at least 10)")
@@ -573,12 +746,14 @@ def _check_slice(value: float, option: str) -> None:
 def run_from_args(a) -> int:
     _check_slice(a.slice, "--slice")
     _check_slice(a.cycle_slice, "--cycle-slice")
+    if a.fmi3_rounds < 1:
+        raise CosimError(f"--fmi3-rounds must be at least 1 (got {a.fmi3_rounds})")
     if a.cycle_slice > pcycles.load(CYCLE).duration:
         raise CosimError(f"--cycle-slice must be at most {CYCLE}'s {pcycles.load(CYCLE).duration:g} s "
                          f"(got {a.cycle_slice:g})")
     run_bench(a.slice, memory=not a.no_memory, libcosim=not a.no_libcosim, fmpy_case=not a.no_fmpy,
               fmi3_case=not a.no_fmi3, cycle_slice=a.cycle_slice, speed_slice=a.speed_slice,
-              cycle_memory=a.cycle_memory)
+              cycle_memory=a.cycle_memory, fmi3_rounds_n=a.fmi3_rounds)
     return 0
 
 

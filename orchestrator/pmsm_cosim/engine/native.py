@@ -190,7 +190,8 @@ def _step(c, n, t, step_fn, comp, step_size, outs, flags, ticks):
     """fmi2DoStep of component c (FMI 3.0: fmi3DoStep into its row of ``outs``; terminateSimulation with
     fmi3OK or fmi3Warning is fmi2Discard), after its tick where one is due: (STEP_FAILED or OK, status), or
     (TICK_FAILED, status) with the call that failed in ``flags[c, 15]``."""
-    if ticks[c, _EVERY] != 0 and n % ticks[c, _EVERY] == 0:
+    every = ticks[c, _EVERY]
+    if every != 0 and (every == 1 or n % every == 0):  # a tick every step (the usual clock): no division a step
         which, s = _tick(c, comp, ticks)
         if s > 1:
             flags[c, 15] = which
