@@ -90,6 +90,7 @@ from .layout import (
     C_BLEND_HI,
     C_BLEND_HYST,
     C_BLEND_LO,
+    C_DELAYED,
     C_DT,
     C_EKF_LOS_EMF,
     C_EKF_LOS_I,
@@ -195,6 +196,10 @@ from .layout import (
     S_RS_SUM,
     S_THETA_CTRL,
     S_TRK,
+    S_U_PREV_0,
+    S_U_PREV_1,
+    S_V_ALPHA,
+    S_V_BETA,
     S_V_D,
     S_V_FUND,
     S_V_OUT_ALPHA,
@@ -1148,8 +1153,18 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     if s[S_IF_FALLBACK] != 0.0:  # taken this period: no voltage in it, the I-f strategy's alignment from the next
         s[S_MODE] = mode
         s[S_MODE_TIME] = 0.0
-        s[S_V_OUT_ALPHA] = 0.0
-        s[S_V_OUT_BETA] = 0.0
+        # the EKF from here on the measured currents, the square wave's ripple in them: its currents put on them, and
+        # the vector it takes as applied the one the inverter applies (with the actuation delay the last command,
+        # the square wave in it; then this period's, none): fed the square wave's 90 V that never came, or the
+        # fundamental against the ripple, its speed ran to 2000 rad/s from the unknown start's covariance
+        s[S_X], s[S_X + 1] = park(i_alpha, i_beta, s[S_X + 3])
+        if c[C_DELAYED] != 0.0:
+            s[S_U_PREV_0] = s[S_V_ALPHA]
+            s[S_U_PREV_1] = s[S_V_BETA]
+        for k in range(2):
+            s[S_V_OUT_ALPHA + k] = 0.0
+            s[S_V_ALPHA + k] = 0.0
+            s[S_V_FUND + k] = 0.0
         return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode,
                 FAULT_NONE, 0.0, 0.0)
     age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0 or s[S_EMF_T] > 0.0)
