@@ -1800,13 +1800,15 @@ class InjectionParams:
     #: blend: the back-EMF the current PIs' integrators carry beyond what the frame's speed explains, as a speed
     #: [rad/s], beyond this (plus ``emf_slip_rel`` of the rotor's speed the loops see) for ``inj_los_time`` is a
     #: rotor that turns under a frame that does not follow it, or a frame that spins over a standing rotor
-    #: [chosen: 15 rad/s, 5.4 V with Table I's psi, the blend's lower speed ``inj_blend_low``: above the voltages a
-    #: healthy drive leaves unexplained at low speed, the dead-time compensation 30 % below the inverter's (2.2 V a
-    #: phase) with a magnet 15 % weak (its EKF's speed 15 % low at the handover down) and the sensors' noise.
-    #: Measured on udds-sensorless, sigma = 1.5 A: issue 47's motors A and B 0 episodes at 10 and 15 rad/s, motor A
-    #: 17 at 5 rad/s; a motor with the compensation 30 % low, psi -15 %, R_s +60 %: at 10 rad/s 2 episodes that were
-    #: not slips beyond the 3 its other detectors give, at 15 none]
-    emf_slip_speed: float = 15.0
+    #: [chosen: 12 rad/s, 4.3 V with Table I's psi: above the voltages a healthy drive leaves unexplained at low
+    #: speed, the dead-time compensation 30 % below the inverter's (2.2 V a phase) with a magnet 15 % weak (its EKF's
+    #: speed 15 % low at the handover down) and the sensors' noise; below the blend's lower speed ``inj_blend_low``
+    #: (15), where a frame that spins over a standing rotor is held by the EKF's pull as it enters the blend (issue 47's
+    #: motor A with the identification off: 3 turns in 0.45 s at 14.9-16.8 rad/s, unseen at 15, an episode at 12).
+    #: Measured on udds-sensorless, sigma = 1.5 A: issue 47's motors A and B 0 episodes at 10, 12 and 15 rad/s, motor
+    #: A 17 at 5 rad/s; a motor with the compensation 30 % low, psi -15 %, R_s +60 %: at 12 and 15 rad/s the same 2
+    #: episodes (its other detectors'), at 10 rad/s (before the identification's ID5) 2 more that were not slips]
+    emf_slip_speed: float = 12.0
     #: ... plus this share of the rotor's speed the current loops see (all the back-EMF they carry, as a speed) [-]
     #: [chosen: 0.25: the magnet's psi up to 15 % below the model's (cold data sheet, warm magnet) and the
     #: decoupling's inductances (L_d, L_q +-15 %) at the injection's current; a frame at the rotor's speed but 0.5
