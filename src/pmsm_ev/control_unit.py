@@ -415,9 +415,9 @@ class ControlUnit:
             _k.FAULT_RECOVERING if s[_k.S_EPISODE] > 0.0 else _k.FAULT_NONE)
 
     # the injection strategy's identification at enable (``pmsm_ev.kernels.identify``)
-    L_d_id = _status(4, "The identified incremental d inductance at zero current [H] (1 / the d admittance the "
-                        "injection measured on the found d axis); 0 until identified, and for a unit without "
-                        "injection.")
+    L_d_id = _status(4, "The identified incremental d inductance at zero current [H] (1 / (Y_s + Y_x) from the d "
+                        "admittances the injection measured on the found axes and its cross answers, eq ID5); 0 "
+                        "until identified, and for a unit without injection.")
     L_q_id = _status(5, "The identified incremental q inductance at zero current [H]; 0 until identified.")
     saliency_id = _status(6, "The identified saliency L_q / L_d [-]; 0 until identified.")
     R_s_id = _status(7, "The identified stator resistance [Ohm] (the R_s test at enable, "
