@@ -159,10 +159,11 @@ class FocSlave(DriveSlave):
         # the injection strategy's identification at enable (``pmsm_ev.kernels.identify``): properties reading the
         # unit, no work per step
         ident = " (low_speed = 'injection'; 0 until identified and for the other units)"
-        self.add_output("L_d_id", "H", "the identified incremental d inductance at zero current: 1 / the d admittance "
-                                       "of the injection's answers on the found d axis" + ident, discrete=True)
-        self.add_output("L_q_id", "H", "the identified incremental q inductance at zero current: 1 / the d admittance "
-                                       "of the injection's answers on the q axis" + ident, discrete=True)
+        self.add_output("L_d_id", "H", "the identified incremental d inductance at zero current: 1 / (Y_s + Y_x) "
+                                       "from the injection's answers on the found d and q axes, in-axis and cross "
+                                       "(eq ID5)" + ident, discrete=True)
+        self.add_output("L_q_id", "H", "the identified incremental q inductance at zero current: 1 / (Y_s - Y_x) "
+                                       "from the same answers (eq ID5)" + ident, discrete=True)
         self.add_output("saliency_id", None, "the identified saliency L_q_id / L_d_id" + ident, discrete=True)
         self.add_output("R_s_id", "Ohm", "the identified stator resistance: the d PI's voltage difference over the "
                                          "current difference of two d current levels at standstill" + ident,
