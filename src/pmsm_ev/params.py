@@ -1720,7 +1720,8 @@ class InjectionParams:
     #: the identification at enable, on each axis [s] [chosen: 50 ms, 500 answers a side]: after the axis is
     #: found, the d admittance of the square wave's answers on the found d axis and then on the q axis is the
     #: motor's incremental 1/L_d and 1/L_q at zero current ((I1) at e = 0 and 90 deg, with the answers' cross parts
-    #: whatever the found axis's error e, (ID5), ``pmsm_ev.kernels.identify``), and Y_x = (1/L_d - 1/L_q) / 2 the error signal's gain: the tracking
+    #: whatever the found axis's error e, (ID5), ``pmsm_ev.kernels.identify``), and Y_x = (1/L_d - 1/L_q) / 2 the
+    #: error signal's gain: the tracking
     #: observer then keeps the bandwidth its poles say on a motor that is not its data sheet (a saliency a third
     #: of the model's leaves it a third of the gain, and an error signal that never reaches the loss detector's
     #: angle). The second difference's noise at the square wave's frequency is 4 sigma an answer, over 500
