@@ -410,8 +410,7 @@ def identify(s, c):
     y_q = 2.0 * s[S_ID_SUM + 3] / s[S_ID_SUM + 7] - a_q
     # the found axis off the d axis by e: the d admittances read Y_s +- Y_x cos 2e and the cross ones +-Y_x sin 2e (I1);
     # the saliency from both, whatever e (ID5)
-    b_v, var_v = cross_admittance(s, c, 0)
-    b_y, var_y = cross_admittance(s, c, 1)
+    b_v, var_v, b_y, var_y = cross_admittance(s, c)
     e = 0.5 * math.atan2(b_y, 0.5 * (y_d - y_q))  # the found axis's error, from the answers of the whole identification
     a_d, a_q = on_axis_admittances(a_d, a_q, b_v, var_v)
     y_d, y_q = on_axis_admittances(y_d, y_q, b_y, var_y)
@@ -444,10 +443,10 @@ def identify(s, c):
 
 
 @kernel()
-def cross_admittance(s, c, y):
+def cross_admittance(s, c):
     """Y_x sin 2e from the identification's cross answers (the q part of the second differences on the found d axis
-    and on the q axis, ``S_ID_NOISE``) [1/H], with its variance [1/H^2]: at the lower amplitude (``y`` = 0) or by
-    (ID1) (``y`` = 1). On the q axis (90 deg on) the cross answer is -Y_x sin 2e, so (b_d - b_q) / 2."""
+    and on the q axis, ``S_ID_NOISE``) [1/H], with its variance [1/H^2]: at the lower amplitude, then by (ID1). On the
+    q axis (90 deg on) the cross answer is -Y_x sin 2e, so (b_d - b_q) / 2."""
     b_v = b_y = var_v = var_y = 0.0
     for j in range(4):
         n = s[S_ID_SUM + 4 + j]
@@ -466,7 +465,7 @@ def cross_admittance(s, c, y):
         else:  # the higher: 2 of it in (ID1)
             b_y += sign * b
             var_y += var
-    return (b_y, var_y) if y == 1 else (b_v, var_v)
+    return b_v, var_v, b_y, var_y
 
 
 @kernel()
