@@ -442,7 +442,10 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
                          "strategy (``sensorless_step``) for good"),
     ("S_V_FUND", 2, "the last period's command without the square wave, alpha and beta [V]: the EKF's input while the "
                     "unit injects (``kernels.modes.injection_unit_step``)"),
-), size=264)
+    ("S_GAIN", 4, "the phase sensors' relative gain (``kernels.modes.balance_sensors``, eqs SG1-SG2): sums of the "
+                  "measured phase a and phase b currents' squares on the EKF [A^2 periods], the electrical turns "
+                  "they span [-], and g_a / g_b from them once they span ``C_GAIN_TURNS`` (0: not yet measured)"),
+), size=268)
 
 #: the control unit's parameter vector
 #: the points of the cross-saturation table ``C_CROSS``, at i_q = 0, ``CROSS_STEP``, .. (CROSS_POINTS - 1)
@@ -633,7 +636,11 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                     "K_i,d [V/(A s)], K_p,q, K_i,q"),
     ("C_SEE_MAX", 1, "the largest angle accuracy (eq ID3) at which a blind unit finds the axis at its stops [rad] "
                      "(``cannot_see``)"),
-), size=178)
+    ("C_GAIN_TURNS", 1, "the electrical turns on the EKF over which the phase sensors' relative gain is measured "
+                        "before it is used (eq SG2) [-] (0: not measured)"),
+    ("C_SALIENCY_CAL", 1, "the least identified saliency at which a seeing unit holds the car on the injection at "
+                          "its stops before it has measured its phase sensors' relative gain [-]"),
+), size=180)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
