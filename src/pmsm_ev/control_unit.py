@@ -437,6 +437,9 @@ class ControlUnit:
                         "see the rotor's axis well enough; else 0.")
     axis_cos = _status(13, "cos 2e of the tracking observer's axis error from the d admittance, filtered "
                            "(``S_AXIS_F``) in FOC on the injection; 0 there and for a unit without injection).")
+    gain_ratio_id = _status(14, "The phase sensors' relative gain g_a / g_b [-] measured on the EKF (eqs SG1-SG2, "
+                                "``pmsm_ev.kernels.balance_sensors``), taken out of the measurements from then on; 0 "
+                                "until measured, and for a unit without injection.")
 
     @property
     def theta_ctrl(self) -> float:

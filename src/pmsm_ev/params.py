@@ -1829,12 +1829,13 @@ class InjectionParams:
     #: asin(0.023 (s + 1) / (s - 1)) / 2: 0.13 rad at s = 1.20, 0.25 rad at 1.10; with the sensors' noise at 1.5 A
     #: (0.15-0.2 rad at a stop) the sum slipped turns at stops (the wide design's low-saliency corner, seed 5151:
     #: a motor of saliency 1.10, gains 1.020 / 0.993, 8 turns on UDDS; with equal gains, or parked until measured,
-    #: 0). The threshold is on the saliency as identified, which the same mismatch reads up to 0.05 high, the
-    #: sensors' noise (sigma = 1.5 A) 0.03 high and 0.04 rms apart (that motor read 1.25): 1.20 and those. The
-    #: antisymmetric part of the identification's answers carries g_a - g_b too, but 0.03 rms apart in the enable's
-    #: 0.5 s at 1.5 A (the mismatch's own spread: +-0.04). Below it the unit parks at its stops (``park_car``, as a
-    #: blind one does) until ``gain_turns`` are measured; Table I's motor (1.44) holds on the injection. 0: off
-    saliency_calibrated: float = 1.35
+    #: 0). The threshold is on the saliency as identified, which the same mismatch reads up to 0.05 high and the
+    #: sensors' noise (sigma = 1.5 A) 0.03 high and 0.04 rms apart (that motor read 1.25): 1.20 and those, where
+    #: Table I's motor (1.44) reads 1.36 on ``udds-sensorless`` and keeps holding on the injection. The antisymmetric
+    #: part of the identification's answers carries g_a - g_b too, but 0.03 rms apart in the enable's 0.5 s at 1.5 A
+    #: (the mismatch's own spread: +-0.04). Below it the unit parks at its stops (``park_car``, as a blind one does)
+    #: until ``gain_turns`` are measured. 0: off
+    saliency_calibrated: float = 1.30
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""

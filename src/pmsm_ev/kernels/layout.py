@@ -744,14 +744,15 @@ UNIT_IO_LAYOUT = Layout("controller FMU buffer", "UIO_", (
     ("UIO_REF_REGION", 1, "output ref_region: ControlUnit.ref_region of the state"),
     # the identification's and the adaptation's outputs of the state (``unit_status_outputs``, UNIT_STATUS_OUTPUTS),
     # written after each step likewise: read from here with no Python
-    ("UIO_STATUS", 14, "outputs psi_est ... axis_cos (UNIT_STATUS_OUTPUTS, in that order) of the state"),
+    ("UIO_STATUS", 15, "outputs psi_est ... gain_ratio_id (UNIT_STATUS_OUTPUTS, in that order) of the state"),
     # scratch
     ("UIO_SAVE", UNIT_STATE, "the state vector before the step (restored when a kernel raises)"),
-), size=51 + UNIT_STATE)
+), size=52 + UNIT_STATE)
 #: the controller FMUs' outputs of the identification at enable and the adaptation while driving, in the order of
 #: their slots from ``UIO_STATUS`` (``pmsm_ev.kernels.unit_status_outputs``)
 UNIT_STATUS_OUTPUTS = ("psi_est", "R_s_est", "psi_observable", "R_s_observable", "L_d_id", "L_q_id", "saliency_id",
-                       "R_s_id", "noise_id", "offset_a_id", "offset_b_id", "angle_accuracy", "blind", "axis_cos")
+                       "R_s_id", "noise_id", "offset_a_id", "offset_b_id", "angle_accuracy", "blind", "axis_cos",
+                       "gain_ratio_id")
 PLANT_IO_LAYOUT.export(globals())
 UNIT_IO_LAYOUT.export(globals())
 PLANT_IO = PLANT_IO_LAYOUT.size  #: length of the plant FMU's buffer
