@@ -284,7 +284,8 @@ def refining(s):
     """True where a blind unit (``S_ID_BLIND``) holds the car at a stop (``S_PARKED``): its acquisitions measure the
     motor again and pool their answers with the enable's (``enter_acquire`` keeps a blind unit's sums), so that the
     saliency it judged itself blind by is measured from more answers at every stop, at the rotor angles the stops
-    give: the sensors' noise (about 2 % of the saliency at 1.5 A in the enable's 0.5 s) falls as one over the root
+    give: the sensors' noise (at 1.5 A the enable's 0.5 s read a motor of saliency 1.10 from 4.5 % low to 12.9 %
+    high over 16 rotor angles, ``pmsm_cosim.app.identification_study``) falls as one over the root
     of the stops' time and the phase sensors' gain mismatch (up to 2 |g_a - g_b| / sqrt 3 of it, as cos 2 theta)
     averages out over their angles. A unit the pooled answers find above ``C_SALIENCY_TRUST`` is no longer blind and
     drives on the injection from its next restart; a seeing unit is not measured again (its detectors watch it)."""
