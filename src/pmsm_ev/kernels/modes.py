@@ -109,10 +109,7 @@ from .layout import (
     C_INJ_V,
     C_INJ_V_MAX,
     C_INJ_Y,
-    C_K_DQN,
     C_K_T,
-    C_L_D,
-    C_L_Q,
     C_LOS_FILTER,
     C_MODEL_SRC,
     C_N,
@@ -209,7 +206,6 @@ from .layout import (
     S_OFS_SUM,
     S_OMEGA_CTRL,
     S_OMEGA_HAT,
-    S_P,
     S_PARKED,
     S_POL,
     S_POL_AXIS,
@@ -277,7 +273,15 @@ from .machine import (
     next_mode,
 )
 from .observers import ekf5ab_period, ekf5ab_period_on
-from .startup import age_episode, begin_episode, enter_if_strategy, fault_output, sensorless_step
+from .startup import (
+    age_episode,
+    begin_episode,
+    enter_if_strategy,
+    fault_output,
+    model_torque,
+    restart_ekf_on,
+    sensorless_step,
+)
 from .transforms import park, wrap_angle
 
 # -- the schedules of the acquisition and the polarity test ----------------------------------------
@@ -307,6 +311,12 @@ POL_SETTLE_SHARE = 0.25
 #: (``detect_injection_lost``): its first quarter, where the square wave is at half its amplitude or more
 #: (``injection_share``) and the injection's angle still worth the EKF's
 DISAGREE_BLEND = 0.25
+#: a loss detector's timer has run its time once within this share of a period of it (``timed_out``): the sum of the
+#: periods' dt rounds, and a timer must not miss its time by one period for it
+TIMER_SLACK = 0.5
+#: the identification's lower amplitude: this share of ``C_INJ_V_MAX``, the higher all of it (ID1: the two amplitudes
+#: V and 2 V cancel the dead time's voltage)
+ID_LOWER_SHARE = 0.5
 #: the R_s test gives nothing where the current rose by less than half the levels' difference (``C_RS_I`` / 2):
 #: this share of ``C_RS_I`` (a current that does not follow its reference: an open phase, no DC link)
 RS_RISE_MIN = 0.25
@@ -439,7 +449,7 @@ def identify(s, c):
     for j in range(4):
         if s[S_ID_N_D + j] < 1.0:
             return
-    v = 0.5 * c[C_INJ_V_MAX]  # the lower amplitude (``identification_amplitude``)
+    v = identification_amplitude(c, 0)  # the lower amplitude
     a_d = s[S_ID_A_D] / s[S_ID_N_D]
     a_q = s[S_ID_A_Q] / s[S_ID_N_Q]
     y_d = 2.0 * s[S_ID_A_D2] / s[S_ID_N_D2] - a_d  # (ID1)
@@ -561,7 +571,7 @@ def identification_amplitude(c, j):
     """The square wave's amplitude [V] in the identification's phase ``PHASE_ID_D + j``: half ``C_INJ_V_MAX`` and all
     of it on the found d axis, then on the q axis (ID1: the largest the voltage limit leaves, so that the dead
     time's voltage and the sensors' noise take the least share)."""
-    return c[C_INJ_V_MAX] * (1.0 if j % 2 == 1 else 0.5)
+    return c[C_INJ_V_MAX] * (1.0 if j % 2 == 1 else ID_LOWER_SHARE)
 
 
 @kernel()
@@ -674,6 +684,18 @@ def axis_lost(s, c):
 
 
 @kernel()
+def timed_out(s, c, timer, trouble, time):
+    """A loss detector's timer (the slot ``timer``): it counts the time ``trouble`` has held (0 where it does not);
+    True, the timer back at 0, once it has counted ``time`` [s] less ``TIMER_SLACK`` of a period (the rounding of
+    the sum of dt's)."""
+    s[timer] = s[timer] + c[C_DT] if trouble else 0.0
+    if s[timer] < time - TIMER_SLACK * c[C_DT]:
+        return False
+    s[timer] = 0.0
+    return True
+
+
+@kernel()
 def detect_injection_lost(s, c):
     """EV_INJECTION_LOST when the tracking observer's filtered angle error has stayed beyond
     ``C_INJ_LOS_ANGLE`` for ``C_INJ_LOS_TIME`` (its timer ``S_INJ_LOS_T``), or the d admittance has shown its
@@ -686,10 +708,8 @@ def detect_injection_lost(s, c):
     w = s[S_BLEND]
     far = abs(s[S_INJ_ERR_F]) > c[C_INJ_LOS_ANGLE] or axis_lost(s, c)
     apart = 0.0 < w <= DISAGREE_BLEND and abs(s[S_DISAGREE_F]) > c[C_INJ_LOS_ANGLE]
-    s[S_INJ_LOS_T] = s[S_INJ_LOS_T] + c[C_DT] if (far or apart) else 0.0
-    if s[S_INJ_LOS_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
+    if not timed_out(s, c, S_INJ_LOS_T, far or apart, c[C_INJ_LOS_TIME]):
         return EV_NONE
-    s[S_INJ_LOS_T] = 0.0
     if far:
         return EV_INJECTION_LOST
     return EV_FLIPPED if abs(s[S_DISAGREE_F]) > FLIP_ANGLE else EV_DISAGREE
@@ -703,11 +723,7 @@ def detect_ekf_lost(s, c):
     psi down) leaves a share of the back-EMF unexplained that grows with the speed; an EKF that has lost the
     angle leaves more than all of it."""
     bound = c[C_EKF_LOS_I] + c[C_EKF_LOS_EMF] * abs(s[S_OMEGA_HAT])
-    s[S_EKF_LOS_T] = s[S_EKF_LOS_T] + c[C_DT] if s[S_RESID_F] > bound else 0.0
-    if s[S_EKF_LOS_T] < c[C_EKF_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
-        return EV_NONE
-    s[S_EKF_LOS_T] = 0.0
-    return EV_EKF_LOST
+    return EV_EKF_LOST if timed_out(s, c, S_EKF_LOS_T, s[S_RESID_F] > bound, c[C_EKF_LOS_TIME]) else EV_NONE
 
 
 @kernel()
@@ -739,11 +755,7 @@ def detect_emf_lost(s, c):
         s[S_EMF_T] = 0.0
         return EV_NONE
     bound = c[C_EMF_SPEED] + c[C_EMF_REL] * s[S_EMF_SEEN]
-    s[S_EMF_T] = s[S_EMF_T] + c[C_DT] if s[S_EMF_F] > bound else 0.0
-    if s[S_EMF_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
-        return EV_NONE
-    s[S_EMF_T] = 0.0
-    return EV_EMF_LOST
+    return EV_EMF_LOST if timed_out(s, c, S_EMF_T, s[S_EMF_F] > bound, c[C_INJ_LOS_TIME]) else EV_NONE
 
 
 @kernel()
@@ -878,19 +890,6 @@ def flip_frame(s):
     s[S_INT_Q] = -s[S_INT_Q]
     s[S_I_DL] = -s[S_I_DL]
     s[S_I_QL] = -s[S_I_QL]
-
-
-@kernel()
-def restart_ekf_on(s, c, theta, omega, t_l, p0):
-    """The EKF put on an angle, speed and load, its covariance diagonal from ``p0`` (a ``C_*`` slot of 5
-    entries); its currents kept."""
-    s[S_OMEGA_HAT] = omega
-    s[S_THETA_HAT] = theta
-    s[S_TL_HAT] = t_l
-    for k in range(25):
-        s[S_P + k] = 0.0
-    for k in range(5):
-        s[S_P + 6 * k] = c[p0 + k]
 
 
 @kernel()
@@ -1084,12 +1083,6 @@ def collect(s, c, mode, t, phase, answer, i_d):
         elif sign < 0.0:
             s[S_POL_Y_NEG] += s[S_INJ_ADM]
             s[S_POL_N_NEG] += 1.0
-
-
-@kernel()
-def model_torque(c, i_d, i_q):
-    """Eq 12 with the controller's motor model, times k_dq [N m]."""
-    return c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
 
 
 @kernel()

@@ -247,19 +247,32 @@ def trust_rotor(s):
 
 
 @kernel()
+def restart_ekf_on(s, c, theta, omega, t_l, p0):
+    """The EKF put on an angle, speed and load, its covariance diagonal from ``p0`` (a ``C_*`` slot of 5
+    entries); its currents kept."""
+    s[S_OMEGA_HAT] = omega
+    s[S_THETA_HAT] = theta
+    s[S_TL_HAT] = t_l
+    for k in range(25):
+        s[S_P + k] = 0.0
+    for k in range(5):
+        s[S_P + 6 * k] = c[p0 + k]
+
+
+@kernel()
+def model_torque(c, i_d, i_q):
+    """Eq 12 with the controller's motor model, times k_dq [N m]."""
+    return c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
+
+
+@kernel()
 def restart_ekf(s, c, theta, i_d, i_q):
     """The EKF restarted at a known angle from standstill: x = [i_d, i_q, 0, theta, 0], P = the
     restart's P0 (``C_P0_ALIGNED``); the rotor's place on the I-f vector (``S_TRUST_OFF``) is where
     it was restarted, its load 0 (``trust_rotor``)."""
     s[S_I_D_HAT] = i_d
     s[S_I_Q_HAT] = i_q
-    s[S_OMEGA_HAT] = 0.0
-    s[S_THETA_HAT] = theta
-    s[S_TL_HAT] = 0.0
-    for i in range(25):
-        s[S_P + i] = 0.0
-    for i in range(5):
-        s[S_P + 6 * i] = c[C_P0_ALIGNED + i]
+    restart_ekf_on(s, c, theta, 0.0, 0.0, C_P0_ALIGNED)
     s[S_THETA_PRIOR] = theta
     trust_rotor(s)
 
@@ -278,7 +291,7 @@ def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
     i_d, i_q = park(i_alpha, i_beta, theta)
     if c[C_REF_MODE] != 0.0:  # the reference generator's modes: (14) returns the present torque / k_t,
         # which the generator turns into its references (the current PIs seated on them)
-        t_seat = s[S_TL_HAT] if on_load else c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
+        t_seat = s[S_TL_HAT] if on_load else model_torque(c, i_d, i_q)
         t_pi = t_seat - s[S_T_FF] if c[C_FF] != 0.0 else t_seat  # the feedforward's share is its own
         s[S_W_INT] = t_pi / c[C_K_T] - c[C_KP_W] * (omega_ref - omega_hat)
         i_dref, i_seat = generate_references(s, c, t_seat, omega_hat)
