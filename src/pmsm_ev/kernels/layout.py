@@ -813,7 +813,8 @@ PLANT_IO = PLANT_IO_LAYOUT.size  #: length of the plant FMU's buffer
 UNIT_IO = UNIT_IO_LAYOUT.size  #: length of a controller FMU's buffer
 
 #: modes of the sensorless unit (``S_MODE``): the I-f strategy's alignment and I-f, FOC on the EKF (both
-#: strategies), and the injection strategy's angle acquisition, polarity test and FOC on the injection
+#: strategies), and the injection strategy's angle acquisition, polarity test and FOC on the injection: named integers,
+#: which the state holds as floats (``kernels.machine`` declares the events and the entry actions)
 MODE_ALIGN, MODE_IF, MODE_EKF, MODE_ACQUIRE, MODE_POLARITY, MODE_INJECTION = range(6)
 #: the strategies at and near zero speed (``C_LOW_SPEED``, ``InjectionParams.low_speed``)
 LOW_SPEED_IF, LOW_SPEED_INJECTION = 0.0, 1.0

@@ -11,7 +11,8 @@ injection) is written the same way:
   action), looked up by ``lookup``, the first match taken; a pair not in the table changes nothing (the I-f
   strategy's stand, a second machine beside its modes, has its own three rows, ``STAND_TRANSITIONS``);
 * **entry actions** (``A_*``): what a transition does to the state, each a small function, run by the
-  strategy's ``enter``.
+  strategy's ``enter`` (``modes.enter``, ``startup.enter_if``; the stand's in
+  ``startup.stand_transition``).
 
 Event and action codes are distinct across the strategies, so that a row says which strategy it is of. Modes,
 events, actions and the stand's states are named integers, each declared once (the modes in ``kernels.layout``, the
