@@ -555,7 +555,7 @@ def test_outputs_before_the_first_step(unzipped):
     p.fmu.exitInitializationMode()
     assert p.get(["omega_m", "i_alpha"]) == [60.0, Plant(plant=PlantParams(**{**start, "omega_m0": 60.0})).i_alpha]
     c = Instance(unzipped, "FocEkf5", start={"u_max": 100.0})
-    assert c.get(CTRL_OUTPUTS) == [0.0] * 12 + [2.0, 0.0, 0.0, 0.0] + [0.0] * 18  # mode 2: closed loop; no fault
+    assert c.get(CTRL_OUTPUTS) == [0.0] * 12 + [2.0, 0.0, 0.0, 0.0] + [0.0] * 19  # mode 2: closed loop; no fault
 
 
 # -- the FMUs in co-simulation -------------------------------------------------------------

@@ -268,7 +268,7 @@ def test_sensorless_unit_holds_the_angle_at_top_speed():
         unit = ControlUnit("sensorless", controller=ctrl, ekf=replace(SENSORLESS_EKF, discretisation=disc), dt=DT)
         s = unit._s
         s[_k.S_MODE] = _k.MODE_EKF
-        s[_k.S_CLOCK] = 1e6
+        s[_k.S_ALIGN_CLOCK] = 1e6
         for i, x in enumerate((-380.0, 35.0, omega, 0.3, 0.0)):
             s[_k.S_X + i] = x
         s[_k.S_THETA_PRIOR] = 0.3

@@ -103,7 +103,7 @@ def test_the_unit_starts_aligning_with_no_stand_and_no_fault():
 # -- each transition on its own ----------------------------------------------------------------------------
 def test_runaway_hands_the_rotor_to_i_f_on_the_ekf_at_the_limit_as_a_new_episode():
     _, s, c = _unit()
-    s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4] = 8.0, 1.0, 40.0  # rolling forwards under a load
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT], s[k.S_TL_HAT] = 8.0, 1.0, 40.0  # rolling forwards under a load
     s[k.S_RUNAWAY_T] = 0.02
     s[k.S_EPISODE] = 0.5  # an episode running (a realignment's): its age starts again
     assert _go(s, c, k.MODE_ALIGN, k.EV_RUNAWAY) == k.MODE_IF
@@ -122,7 +122,7 @@ def test_relock_leads_the_rotor_in_the_direction_of_the_torque_needed(load, omeg
     """The torque needed: the load plus J (omega_ref - omega_hat) / relock_time (10 N m against
     0.526 * 20 / 0.5 = 21 N m in the last case)."""
     _, s, c = _unit()
-    s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4] = omega_hat, -0.4, load
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT], s[k.S_TL_HAT] = omega_hat, -0.4, load
     k.relock(s, c, omega_hat, omega_ref)
     assert k.wrap_angle(s[k.S_PHI] + 0.4) == pytest.approx(sign * c[k.C_E_MAX])
 
@@ -130,9 +130,9 @@ def test_relock_leads_the_rotor_in_the_direction_of_the_torque_needed(load, omeg
 def test_aligned_restarts_the_ekf_on_the_vector_at_rest():
     _, s, c = _unit()
     s[k.S_PHI], s[k.S_I_MAG] = 0.02, 60.0
-    s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4] = 3.0, 2.0, 17.0
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT], s[k.S_TL_HAT] = 3.0, 2.0, 17.0
     assert _go(s, c, k.MODE_ALIGN, k.EV_ALIGNED, i_alpha=60.0) == k.MODE_IF
-    assert (s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4]) == (0.0, 0.02, 0.0)
+    assert (s[k.S_OMEGA_HAT], s[k.S_THETA_HAT], s[k.S_TL_HAT]) == (0.0, 0.02, 0.0)
     assert [s[k.S_P + 6 * i] for i in range(5)] == [c[k.C_P0_ALIGNED + i] for i in range(5)]
     assert s[k.S_OMEGA_IF] == 0.0 and s[k.S_I_TGT] == max(c[k.C_I_IF], 60.0)
     assert s[k.S_TRUST_OFF] == 0.0  # the rotor's place on the vector: on it
@@ -143,7 +143,7 @@ def test_slowed_leaves_the_vector_where_the_current_is():
     """Handover down: the torque continuous (the vector on the present current), the current rising to the
     margin over it, the I-f speed from the EKF's."""
     _, s, c = _unit()
-    s[k.S_X + 2] = 15.0
+    s[k.S_OMEGA_HAT] = 15.0
     assert _go(s, c, k.MODE_EKF, k.EV_SLOWED, i_alpha=30.0, i_beta=40.0) == k.MODE_IF
     assert s[k.S_PHI] == math.atan2(40.0, 30.0) and s[k.S_I_MAG] == 50.0
     assert s[k.S_I_TGT] == max(c[k.C_IF_MARGIN] * 50.0, c[k.C_I_IF])
@@ -153,7 +153,7 @@ def test_slowed_leaves_the_vector_where_the_current_is():
 
 def test_a_slip_at_speed_is_a_flying_handover_seated_on_the_load():
     _, s, c = _unit()
-    s[k.S_X + 2], s[k.S_X + 4] = 50.0, 30.0
+    s[k.S_OMEGA_HAT], s[k.S_TL_HAT] = 50.0, 30.0
     s[k.S_IF_DUE] = 0.5
     assert _go(s, c, k.MODE_IF, k.EV_SLIP_AT_SPEED, omega_ref=60.0) == k.MODE_EKF
     i_load = 30.0 / (c[k.C_N] * c[k.C_PSI])  # T_L_hat / (N psi): the present current says nothing of the load
@@ -163,7 +163,7 @@ def test_a_slip_at_speed_is_a_flying_handover_seated_on_the_load():
 
 def test_a_slip_at_low_speed_puts_the_vector_back_on_the_rotor():
     _, s, c = _unit()
-    s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4] = 5.0, 0.7, 20.0
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT], s[k.S_TL_HAT] = 5.0, 0.7, 20.0
     assert _go(s, c, k.MODE_IF, k.EV_SLIP, omega_ref=5.0) == k.MODE_IF
     assert s[k.S_PHI] == pytest.approx(0.7 + c[k.C_E_MAX]) and s[k.S_I_MAG] == c[k.C_I_Q_MAX]
     assert s[k.S_OMEGA_IF] == 5.0 and s[k.S_EPISODE] == c[k.C_DT]
@@ -182,7 +182,7 @@ def test_agreed_hands_over_bumplessly_without_an_episode():
     """FOC seated on the present torque (eq 12 with i_d at its reference), the due timer and the
     realignments cleared."""
     _, s, c = _unit()
-    s[k.S_X + 2], s[k.S_X + 3] = 40.0, 0.0
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT] = 40.0, 0.0
     s[k.S_REALIGN], s[k.S_IF_DUE], s[k.S_AGREE] = 1.0, 0.8, 0.3
     assert _go(s, c, k.MODE_IF, k.EV_AGREED, omega_ref=40.0, i_alpha=0.0, i_beta=50.0) == k.MODE_EKF
     assert s[k.S_W_INT] == pytest.approx(50.0)  # i_d = 0 already: the same q current
@@ -191,7 +191,7 @@ def test_agreed_hands_over_bumplessly_without_an_episode():
 
 def test_overdue_forces_the_handover_as_an_episode():
     _, s, c = _unit()
-    s[k.S_X + 2], s[k.S_X + 4] = 40.0, 10.0
+    s[k.S_OMEGA_HAT], s[k.S_TL_HAT] = 40.0, 10.0
     s[k.S_REALIGN], s[k.S_IF_DUE] = 1.0, 1.0
     assert _go(s, c, k.MODE_IF, k.EV_OVERDUE, omega_ref=60.0) == k.MODE_EKF
     assert s[k.S_REALIGN] == 0.0 and s[k.S_EPISODE] == c[k.C_DT]
@@ -200,7 +200,7 @@ def test_overdue_forces_the_handover_as_an_episode():
 
 def test_a_stall_with_the_rotor_turning_gets_foc_and_counts_a_realignment():
     _, s, c = _unit()
-    s[k.S_X + 2] = 25.0
+    s[k.S_OMEGA_HAT] = 25.0
     s[k.S_IF_DUE] = 3.0
     assert _go(s, c, k.MODE_IF, k.EV_STALL_TURNING, omega_ref=100.0) == k.MODE_EKF
     assert s[k.S_REALIGN] == 1.0 and s[k.S_IF_DUE] == 0.0 and s[k.S_EPISODE] == c[k.C_DT]
@@ -208,13 +208,13 @@ def test_a_stall_with_the_rotor_turning_gets_foc_and_counts_a_realignment():
 
 def test_a_stall_realigns_from_standstill_with_everything_of_i_f_cleared():
     _, s, c = _unit()
-    for slot, value in ((k.S_CLOCK, 4e4), (k.S_I_MAG, 400.0), (k.S_I_TGT, 400.0), (k.S_OMEGA_IF, 3.0),
+    for slot, value in ((k.S_ALIGN_CLOCK, 4e4), (k.S_I_MAG, 400.0), (k.S_I_TGT, 400.0), (k.S_OMEGA_IF, 3.0),
                         (k.S_SLIP, 2.0), (k.S_ALIGN_SPEED, 1.0), (k.S_AGREE, 0.1), (k.S_GUARD, k.GUARD_HARD),
                         (k.S_LOS, 0.05), (k.S_RUNAWAY_T, 0.01), (k.S_ANCHORED, k.STAND_HELD), (k.S_INT_D, 5.0),
                         (k.S_INT_Q, -5.0), (k.S_IF_DUE, 3.0)):
         s[slot] = value
     assert _go(s, c, k.MODE_IF, k.EV_STALL, omega_ref=100.0) == k.MODE_ALIGN
-    for slot in (k.S_CLOCK, k.S_I_MAG, k.S_I_TGT, k.S_OMEGA_IF, k.S_SLIP, k.S_ALIGN_SPEED, k.S_AGREE, k.S_GUARD,
+    for slot in (k.S_ALIGN_CLOCK, k.S_I_MAG, k.S_I_TGT, k.S_OMEGA_IF, k.S_SLIP, k.S_ALIGN_SPEED, k.S_AGREE, k.S_GUARD,
                  k.S_LOS, k.S_RUNAWAY_T, k.S_INT_D, k.S_INT_Q, k.S_IF_DUE):
         assert s[slot] == 0.0
     assert s[k.S_ANCHORED] == k.STAND_FREE and s[k.S_REALIGN] == 1.0 and s[k.S_EPISODE] == c[k.C_DT]
@@ -244,11 +244,11 @@ def test_a_stand_ends_with_the_ekf_on_the_vector_as_it_is_now(event):
     _, s, c = _unit()
     s[k.S_ANCHORED] = k.STAND_HELD
     s[k.S_PHI], s[k.S_ANCHOR_REL], s[k.S_ANCHOR_TL] = 1.0, -0.3, 25.0
-    s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4] = 0.7, 2.5, 60.0
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT], s[k.S_TL_HAT] = 0.7, 2.5, 60.0
     k.stand_transition(s, c, event, 0.0, 0.0)
     assert s[k.S_ANCHORED] == k.STAND_FREE
-    assert s[k.S_X + 3] == pytest.approx(0.7) and s[k.S_X + 4] == 25.0
-    assert s[k.S_X + 2] == (0.0 if event == k.EV_VECTOR_TURNS else 0.7)
+    assert s[k.S_THETA_HAT] == pytest.approx(0.7) and s[k.S_TL_HAT] == 25.0
+    assert s[k.S_OMEGA_HAT] == (0.0 if event == k.EV_VECTOR_TURNS else 0.7)
     assert s[k.S_TRUST_OFF] == pytest.approx(-0.3) and s[k.S_TRUST_TL] == 25.0
 
 
@@ -262,22 +262,22 @@ def test_the_alignment_ends_at_its_schedules_end():
 
 def test_runaway_only_after_its_time_and_never_with_align_slip_zero():
     _, s, c = _unit()
-    s[k.S_X + 2] = -1.5 * c[k.C_ALIGN_SLIP]
+    s[k.S_OMEGA_HAT] = -1.5 * c[k.C_ALIGN_SLIP]
     n = _periods(c, c[k.C_ALIGN_SLIP_TIME])
     events = [k.detect_alignment_end(s, c, 0.1) for _ in range(n + 1)]
     assert set(events[:n - 1]) == {k.EV_NONE} and events[-1] == k.EV_RUNAWAY
-    s[k.S_X + 2] = 0.5 * c[k.C_ALIGN_SLIP]  # the alignment's own swing: the timer from zero
+    s[k.S_OMEGA_HAT] = 0.5 * c[k.C_ALIGN_SLIP]  # the alignment's own swing: the timer from zero
     assert k.detect_alignment_end(s, c, 0.1) == k.EV_NONE and s[k.S_RUNAWAY_T] == 0.0
     _, s, c = _unit(align_slip=0.0)
-    s[k.S_X + 2] = 100.0
+    s[k.S_OMEGA_HAT] = 100.0
     assert all(k.detect_alignment_end(s, c, 0.1) == k.EV_NONE for _ in range(2 * n))
 
 
 def test_slowed_below_omega_down_only():
     _, s, c = _unit()
-    s[k.S_X + 2] = -c[k.C_W_DOWN]
+    s[k.S_OMEGA_HAT] = -c[k.C_W_DOWN]
     assert k.detect_slowed(s, c) == k.EV_NONE
-    s[k.S_X + 2] = 0.99 * c[k.C_W_DOWN]
+    s[k.S_OMEGA_HAT] = 0.99 * c[k.C_W_DOWN]
     assert k.detect_slowed(s, c) == k.EV_SLOWED
 
 
@@ -349,31 +349,31 @@ def test_the_handover_due_counts_only_above_omega_up_and_zero_turns_it_off():
 def test_a_stand_begins_with_vector_and_rotor_still_and_ends_past_its_noise():
     _, s, c = _unit()
     s[k.S_MODE] = k.MODE_IF
-    s[k.S_OMEGA_IF], s[k.S_X + 2] = 0.5 * c[k.C_STILL], -0.5 * c[k.C_STILL]
+    s[k.S_OMEGA_IF], s[k.S_OMEGA_HAT] = 0.5 * c[k.C_STILL], -0.5 * c[k.C_STILL]
     assert k.detect_stand(s, c) == k.EV_STANDS
     s[k.S_MODE] = k.MODE_EKF  # only in I-f
     assert k.detect_stand(s, c) == k.EV_NONE
     s[k.S_MODE], s[k.S_ANCHORED] = k.MODE_IF, k.STAND_HELD
-    s[k.S_X + 2] = 2.0 * c[k.C_STILL]  # the EKF's speed noise: less than still_time above still_speed
+    s[k.S_OMEGA_HAT] = 2.0 * c[k.C_STILL]  # the EKF's speed noise: less than still_time above still_speed
     s[k.S_STILL_OUT] = 0.99 * c[k.C_STILL_TIME]
     assert k.detect_stand(s, c) == k.EV_NONE
     s[k.S_STILL_OUT] = c[k.C_STILL_TIME]  # a motion
     assert k.detect_stand(s, c) == k.EV_ROTOR_MOVES
-    s[k.S_X + 2], s[k.S_OMEGA_IF] = 0.0, 2.0 * c[k.C_STILL]  # the vector turns, the rotor still
+    s[k.S_OMEGA_HAT], s[k.S_OMEGA_IF] = 0.0, 2.0 * c[k.C_STILL]  # the vector turns, the rotor still
     assert k.detect_stand(s, c) == k.EV_VECTOR_TURNS
 
 
 def test_the_ekf_is_believed_where_it_has_something_to_say():
     _, s, c = _unit()
     s[k.S_PHI], s[k.S_TRUST_OFF] = 1.0, -0.2
-    s[k.S_X + 3] = 1.0 - 0.2 + 0.99 * c[k.C_TRUST_MOVE]  # at low speed, moved less than trust_move: not
+    s[k.S_THETA_HAT] = 1.0 - 0.2 + 0.99 * c[k.C_TRUST_MOVE]  # at low speed, moved less than trust_move: not
     assert not k.ekf_believed(s, c)
-    s[k.S_X + 3] = 1.0 - 0.2 + 1.01 * c[k.C_TRUST_MOVE]  # moved more: a load that changed
+    s[k.S_THETA_HAT] = 1.0 - 0.2 + 1.01 * c[k.C_TRUST_MOVE]  # moved more: a load that changed
     assert k.ekf_believed(s, c)
-    s[k.S_X + 3] = 0.8
-    s[k.S_X + 2] = c[k.C_ANCHOR_SPEED]  # turning fast enough for its back-EMF
+    s[k.S_THETA_HAT] = 0.8
+    s[k.S_OMEGA_HAT] = c[k.C_ANCHOR_SPEED]  # turning fast enough for its back-EMF
     assert k.ekf_believed(s, c)
-    s[k.S_X + 2] = 0.0
+    s[k.S_OMEGA_HAT] = 0.0
     s[k.S_GUARD] = k.GUARD_SOFT
     assert k.ekf_believed(s, c)
 
@@ -453,8 +453,8 @@ def test_the_stand_alternates_and_always_leaves_the_ekf_on_the_anchor(periods):
     for turning, omega_hat, drift in periods:
         s[k.S_OMEGA_IF] = 2.0 if turning else 0.0
         s[k.S_PHI] = k.wrap_angle(s[k.S_PHI] + 0.01 * s[k.S_OMEGA_IF])
-        s[k.S_X + 2] = omega_hat
-        s[k.S_X + 3] = k.wrap_angle(s[k.S_X + 3] + drift)
+        s[k.S_OMEGA_HAT] = omega_hat
+        s[k.S_THETA_HAT] = k.wrap_angle(s[k.S_THETA_HAT] + drift)
         s[k.S_STILL_OUT] = s[k.S_STILL_OUT] + c[k.C_DT] if omega_hat >= c[k.C_STILL] else 0.0
         ev = k.detect_stand(s, c)
         k.stand_transition(s, c, ev, 0.0, 0.0)
@@ -462,6 +462,6 @@ def test_the_stand_alternates_and_always_leaves_the_ekf_on_the_anchor(periods):
             assert last is None or (ev == k.EV_STANDS) != (last == k.EV_STANDS)
             last = ev
         if ev in (k.EV_VECTOR_TURNS, k.EV_ROTOR_MOVES):
-            assert math.cos(s[k.S_X + 3] - s[k.S_PHI] - s[k.S_ANCHOR_REL]) == pytest.approx(1.0)
-            assert s[k.S_X + 4] == s[k.S_ANCHOR_TL]
+            assert math.cos(s[k.S_THETA_HAT] - s[k.S_PHI] - s[k.S_ANCHOR_REL]) == pytest.approx(1.0)
+            assert s[k.S_TL_HAT] == s[k.S_ANCHOR_TL]
         assert s[k.S_ANCHORED] == (k.STAND_HELD if last == k.EV_STANDS else k.STAND_FREE)

@@ -292,6 +292,101 @@ def test_a_layout_saves_and_restores_named_fields_and_refuses_others():
     assert w == [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]  # a refused state changes nothing
 
 
+@pytest.mark.parametrize("table,size", LAYOUTS, ids=["plant params", "unit state", "unit params", "plant energy"])
+def test_each_named_entry_is_a_module_constant_inside_its_slot(table, size):
+    """``Slot.parts``: a slot's named entries, in its order, cover it; each is a module-level int (numba folds it as
+    it folds ``S_X + 2``) at its slot's offset plus its place there."""
+    for slot in table.slots:
+        if not slot.parts:
+            continue
+        at = table.offsets[slot.name]
+        for part in slot.parts:
+            name, length = (part, 1) if isinstance(part, str) else part
+            offset = getattr(kernels, name)
+            assert type(offset) is int and offset == at == table.parts[name], name
+            at += length
+        assert at == table.offsets[slot.name] + slot.length
+    assert (kernels.S_I_D_HAT, kernels.S_OMEGA_HAT, kernels.S_THETA_HAT, kernels.S_TL_HAT) == (
+        kernels.S_X, kernels.S_X + 2, kernels.S_X + 3, kernels.S_X + 4)
+
+
+@pytest.mark.parametrize("rows,message", [
+    ((layout.Slot("S_A", 2, "", parts=("S_A0",)),), "the parts of slot S_A take 1 floats, the slot 2"),
+    ((layout.Slot("S_A", 2, "", parts=("S_A0", "S_A0")),), "slot S_A0 declared twice"),
+    ((layout.Slot("S_A", 2, "", parts=("S_A", "S_B")),), "slot S_A declared twice"),
+    ((layout.Slot("S_A", 2, "", parts=(("S_A0", 1), ("C_B", 1))),), "slot name 'C_B'"),
+])
+def test_a_wrong_part_is_refused_at_import(rows, message):
+    with pytest.raises(layout.LayoutError, match="test vector: " + re.escape(message)):
+        layout.Layout("test vector", "S_", rows, 2)
+
+
+#: the kernels whose state is read by name: no offset arithmetic on a slot that names its entries, but a loop's
+#: (``S_ID_N_D + j``) or a slot's whole span cleared (``S_POL + k``)
+READ_BY_NAME = ("modes.py", "startup.py", "adaptation.py")
+
+
+@pytest.mark.parametrize("module", READ_BY_NAME)
+def test_the_kernels_read_named_entries_by_name(module):
+    named = [s.name for lay in (layout.UNIT_STATE_LAYOUT, layout.UNIT_PARAMS_LAYOUT) for s in lay.slots if s.parts]
+    source = (Path(kernels.__file__).parent / module).read_text()
+    found = re.findall(r"\b(%s) \+ \d+\b" % "|".join(named), source)
+    assert found == [], f"{module} indexes {sorted(set(found))} by arithmetic: use the names the layout declares"
+
+
+def test_a_layout_resets_each_slot_to_its_declared_value():
+    table = layout.Layout("test vector", "S_", (("S_A", 1, ""), layout.Slot("S_B", 2, "", reset=1.0),
+                                                ("S_TMP", 1, "", False)), 4)
+    v = [7.0] * 4
+    table.reset(v)
+    assert v == [0.0, 1.0, 1.0, 0.0]
+    assert layout.UNIT_STATE_LAYOUT._slot("S_PSI_RATIO").reset == 1.0  # the one slot of the unit not reset to 0
+
+
+@pytest.mark.parametrize("observer,low_speed", [("ekf5", "if"), ("ekf4", "if"), ("ekf5ab", "if"), ("sensored", "if"),
+                                                ("sensorless", "if"), ("sensorless", "injection")])
+def test_a_reset_unit_is_the_new_one_whatever_its_state_was(observer, low_speed):
+    """``ControlUnit.reset`` by declaration: a unit run for a while, its state then scrambled, and reset equals a new
+    unit in every saved slot (the scratch slots are written before they are read)."""
+    from pmsm_ev.control_unit import ControlUnit  # noqa: PLC0415
+    from pmsm_ev.params import InjectionParams  # noqa: PLC0415
+
+    def unit():
+        return ControlUnit(observer, angle_source="estimated", dt=1e-4,
+                           injection=InjectionParams(low_speed=low_speed))
+
+    new, used = unit(), unit()
+    for _ in range(20):
+        used.step(1.0, -0.5, 10.0, 0.3, 5.0)
+    for i in range(kernels.UNIT_STATE):
+        used._s[i] = 1e3 + i
+    used.reset()
+    assert used.get_state() == new.get_state()
+
+
+def test_modes_events_and_actions_are_named_integers_declared_once():
+    """Each a distinct int of its kind (the I-f strategy's and the injection's events and actions apart), declared in
+    one module: the modes in ``kernels.layout``, the events, actions and the stand's states in ``kernels.machine``;
+    the tables hold no other codes."""
+    from pmsm_ev.kernels import machine  # noqa: PLC0415
+
+    kinds = {"MODE_": layout, "EV_": machine, "A_": machine, "STAND_": machine}
+    for prefix, home in kinds.items():
+        names = [n for n in vars(home) if n.startswith(prefix) and n.isupper()
+                 and not n.endswith(("_NAMES", "_TRANSITIONS", "_TABLE"))]
+        values = [getattr(home, n) for n in names]
+        assert names and all(type(v) is int for v in values), prefix
+        assert len(set(values)) == len(values), prefix
+        for module in Path(kernels.__file__).parent.glob("*.py"):
+            if module.name != Path(home.__file__).name:
+                defined = re.findall(r"^(%s[A-Z_]+)\s*[,=]" % prefix, module.read_text(), re.M)
+                assert not set(defined) & set(names), (module.name, defined)
+    codes = {getattr(machine, n) for n in vars(machine) if n.startswith(("EV_", "A_"))}
+    modes = {getattr(layout, n) for n in vars(layout) if n.startswith("MODE_")}
+    for mode, event, nxt, action in machine.TRANSITIONS:
+        assert mode in modes and nxt in modes and event in codes and action in codes
+
+
 def test_the_fmus_compiled_step_declines_without_changing_anything():
     """``pmsm_ev.kernels.fmu`` (the FMUs' compiled step, here as plain Python): a step it does not take leaves the
     buffer and the vectors as they were, so that the slave's Python step runs on the same values: a plant voltage

@@ -82,7 +82,7 @@ def test_polarity_right_gives_torque_on_the_tracking_observer():
     s[k.S_W_INT] = 7.0
     assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_RIGHT) == k.MODE_INJECTION
     assert s[k.S_W_INT] == 0.0
-    assert s[k.S_X + 3] == pytest.approx(1.2)  # the EKF put on the tracking observer
+    assert s[k.S_THETA_HAT] == pytest.approx(1.2)  # the EKF put on the tracking observer
 
 
 def test_polarity_flipped_turns_the_frame_by_pi():
@@ -92,7 +92,7 @@ def test_polarity_flipped_turns_the_frame_by_pi():
     assert _go(s, c, k.MODE_POLARITY, k.EV_POLARITY_FLIPPED) == k.MODE_INJECTION
     assert math.cos(s[k.S_TRK] - (0.4 + math.pi)) == pytest.approx(1.0)
     assert (s[k.S_INT_D], s[k.S_INT_Q]) == (-1.5, 0.5)
-    assert s[k.S_X + 3] == pytest.approx(s[k.S_TRK])
+    assert s[k.S_THETA_HAT] == pytest.approx(s[k.S_TRK])
 
 
 def test_an_unresolved_polarity_is_tried_again_once_then_latches_without_torque():
@@ -112,20 +112,20 @@ def test_a_unit_that_cannot_see_takes_the_if_strategy_from_its_alignment_the_bra
     until the alignment's vector has its current (``t_ramp``), then lets go."""
     u, s, c = _unit()
     s[k.S_ID_Y:k.S_ID_Y + 2] = [4300.0, 4220.0]
-    s[k.S_CLOCK], s[k.S_EPISODE], s[k.S_PARKED] = 123.0, 1.0, 1.0
+    s[k.S_ALIGN_CLOCK], s[k.S_EPISODE], s[k.S_PARKED] = 123.0, 1.0, 1.0
     s[k.S_INT_D], s[k.S_INT_Q], s[k.S_W_INT] = 1.5, -0.5, 7.0
-    s[k.S_X + 2], s[k.S_P + 12] = -7.5, 1e-6  # the speed the EKF made of the identification's square wave
+    s[k.S_OMEGA_HAT], s[k.S_P + 12] = -7.5, 1e-6  # the speed the EKF made of the identification's square wave
     assert _go(s, c, k.MODE_ACQUIRE, k.EV_CANNOT_SEE) == k.MODE_ALIGN
     assert s[k.S_IF_FALLBACK] == 1.0 and s[k.S_PARKED] == 0.0
-    assert [s[i] for i in (k.S_CLOCK, k.S_EPISODE, k.S_FAULT, k.S_INT_D, k.S_INT_Q, k.S_W_INT)] == [0.0] * 6
+    assert [s[i] for i in (k.S_ALIGN_CLOCK, k.S_EPISODE, k.S_FAULT, k.S_INT_D, k.S_INT_Q, k.S_W_INT)] == [0.0] * 6
     assert s[k.S_ID_Y:k.S_ID_Y + 2] == [4300.0, 4220.0]
-    assert s[k.S_X + 2] == 0.0 and s[k.S_X + 4] == 0.0
+    assert s[k.S_OMEGA_HAT] == 0.0 and s[k.S_TL_HAT] == 0.0
     assert [s[k.S_P + 6 * i] for i in range(5)] == [c[k.C_P0 + i] for i in range(5)]
     assert _t_brake(u, s) == pytest.approx(c[k.C_HOLD_BRAKE])  # held, as it was through the acquisition
     for n in range(10):
         k.injection_unit_step(s, c, 0.0, 0.0, 0.0)
         assert s[k.S_MODE] == k.MODE_ALIGN and _t_brake(u, s) > 0.0, n  # held while the vector's current ramps up
-    s[k.S_CLOCK] = round(c[k.C_T_RAMP] / c[k.C_DT]) - 1.0  # the ramp's last period
+    s[k.S_ALIGN_CLOCK] = round(c[k.C_T_RAMP] / c[k.C_DT]) - 1.0  # the ramp's last period
     k.injection_unit_step(s, c, 0.0, 0.0, 0.0)
     assert _t_brake(u, s) > 0.0
     k.injection_unit_step(s, c, 0.0, 0.0, 0.0)
@@ -210,9 +210,9 @@ def test_a_lost_injection_reacquires_as_an_episode(mode):
 def test_a_disagreeing_ekf_is_put_on_the_injection_as_an_episode():
     _, s, c = _unit()
     s[k.S_TRK:k.S_TRK + 3] = [0.3, 20.0, 5.0]
-    s[k.S_X + 2], s[k.S_X + 3] = 19.0, 1.3
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT] = 19.0, 1.3
     assert _go(s, c, k.MODE_INJECTION, k.EV_DISAGREE) == k.MODE_INJECTION
-    assert (s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4]) == pytest.approx((20.0, 0.3, 5.0))
+    assert (s[k.S_OMEGA_HAT], s[k.S_THETA_HAT], s[k.S_TL_HAT]) == pytest.approx((20.0, 0.3, 5.0))
     assert s[k.S_EPISODE] > 0.0
     assert s[k.S_P + 18] == c[k.C_P0_ALIGNED + 3]  # the angle's variance of the restart
 
@@ -222,11 +222,11 @@ def test_a_flipped_tracking_observer_is_turned_onto_the_ekfs_polarity_as_an_epis
     what the current PIs hold in its frame with it; the EKF kept."""
     _, s, c = _unit()
     s[k.S_TRK:k.S_TRK + 3] = [0.3, 20.0, 5.0]
-    s[k.S_X + 2], s[k.S_X + 3] = 19.0, 0.3 - math.pi + 0.1
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT] = 19.0, 0.3 - math.pi + 0.1
     s[k.S_INT_Q] = 4.0
     assert _go(s, c, k.MODE_INJECTION, k.EV_FLIPPED) == k.MODE_INJECTION
     assert s[k.S_TRK] == pytest.approx(0.3 - math.pi) and s[k.S_INT_Q] == -4.0
-    assert s[k.S_X + 3] == pytest.approx(0.3 - math.pi + 0.1)
+    assert s[k.S_THETA_HAT] == pytest.approx(0.3 - math.pi + 0.1)
     assert s[k.S_EPISODE] > 0.0 and s[k.S_DISAGREE_V:k.S_DISAGREE_V + 2] == [1.0, 0.0]
 
 
@@ -335,7 +335,7 @@ def test_blind_stop_only_for_a_blind_unit_asked_to_stand_below_the_blend(blind, 
 def test_a_unit_parks_when_blind_or_its_low_saliency_meets_sensors_not_yet_measured(y_d, y_q, blind, ratio, cal,
                                                                                    turns, parks):
     _, s, c = _unit(saliency_calibrated=cal, gain_turns=turns)
-    s[k.S_ID_Y], s[k.S_ID_Y + 1], s[k.S_ID_BLIND], s[k.S_GAIN + 3] = y_d, y_q, blind, ratio
+    s[k.S_ID_Y_D], s[k.S_ID_Y_Q], s[k.S_ID_BLIND], s[k.S_GAIN_RATIO] = y_d, y_q, blind, ratio
     assert k.modes.parks(s, c) == parks
     s[k.S_OMEGA_CTRL], s[k.S_MODE_TIME] = 2.0, 0.1
     assert k.detect_blind_stop(s, c, 0.0) == (k.EV_BLIND_STOP if parks else k.EV_NONE)
@@ -345,7 +345,7 @@ def _balanced(s, c, g_a, g_b, periods, omega=50.0, amplitude=80.0, mode=None):
     """``periods`` control periods of balanced three-phase currents of ``amplitude`` [A] turning at the mechanical
     speed ``omega`` [rad/s] (the EKF's), read by sensors of gains g_a, g_b; the last corrected (i_a, i_b)."""
     s[k.S_MODE] = k.MODE_EKF if mode is None else mode
-    s[k.S_X + 2] = omega
+    s[k.S_OMEGA_HAT] = omega
     th = 0.0
     out = (0.0, 0.0)
     for _ in range(periods):
@@ -362,10 +362,10 @@ def test_the_sensors_relative_gain_is_measured_over_its_turns_on_the_ekf_and_tak
     _, s, c = _unit(gain_turns=20.0)
     per_turn = 2.0 * math.pi / (c[k.C_N] * 50.0 * c[k.C_DT])  # control periods an electrical turn at 50 rad/s
     _balanced(s, c, 1.02, 0.98, int(19.5 * per_turn))
-    assert s[k.S_GAIN + 3] == 0.0  # not yet its turns: nothing taken out
-    assert s[k.S_GAIN + 2] == pytest.approx(19.5, rel=1e-3)
+    assert s[k.S_GAIN_RATIO] == 0.0  # not yet its turns: nothing taken out
+    assert s[k.S_GAIN_TURNS] == pytest.approx(19.5, rel=1e-3)
     f_a, f_b, i_a, i_b = _balanced(s, c, 1.02, 0.98, int(2 * per_turn))
-    assert s[k.S_GAIN + 3] == pytest.approx(1.02 / 0.98, rel=2e-3)  # (SG1): a part turn's share of 21
+    assert s[k.S_GAIN_RATIO] == pytest.approx(1.02 / 0.98, rel=2e-3)  # (SG1): a part turn's share of 21
     assert f_b / f_a == pytest.approx(i_b / i_a, rel=3e-3)  # (SG2): the two phases read alike
 
 
@@ -373,14 +373,14 @@ def test_the_sensors_relative_gain_is_measured_over_its_turns_on_the_ekf_and_tak
 def test_the_sensors_relative_gain_is_not_measured_with_the_square_wave_on(mode):
     _, s, c = _unit(gain_turns=10.0)
     _balanced(s, c, 1.02, 0.98, 20000, mode=mode)
-    assert s[k.S_GAIN] == s[k.S_GAIN + 2] == s[k.S_GAIN + 3] == 0.0
+    assert s[k.S_GAIN_SUM_A] == s[k.S_GAIN_TURNS] == s[k.S_GAIN_RATIO] == 0.0
 
 
 def test_no_sensor_balance_where_its_turns_are_0():
     _, s, c = _unit(gain_turns=0.0)
     s[k.S_MODE] = k.MODE_EKF
     assert k.modes.balance_sensors(s, c, 3.0, 4.0) == (3.0, 4.0)
-    assert s[k.S_GAIN] == 0.0
+    assert s[k.S_GAIN_SUM_A] == 0.0
 
 
 @pytest.mark.parametrize(("parked", "omega_ref", "event"), [
@@ -400,7 +400,7 @@ def test_fast_hands_over_to_the_ekf_alone():
 
 def test_slow_turns_the_injection_on_with_the_tracking_observer_on_the_ekf():
     _, s, c = _unit()
-    s[k.S_X + 2], s[k.S_X + 3], s[k.S_X + 4] = 22.0, -2.0, 12.0
+    s[k.S_OMEGA_HAT], s[k.S_THETA_HAT], s[k.S_TL_HAT] = 22.0, -2.0, 12.0
     s[k.S_INJ_SIGN] = -1.0
     assert _go(s, c, k.MODE_EKF, k.EV_SLOW) == k.MODE_INJECTION
     assert s[k.S_TRK:k.S_TRK + 3] == [-2.0, 22.0, 12.0]
@@ -564,8 +564,8 @@ def test_a_disagreement_near_pi_is_a_flip_not_an_average_of_zero():
     for j in range(400):
         d = (math.pi - 0.1) * (1 if j % 2 else -1)
         s[k.S_DISAGREE_V] += g * (math.cos(d) - s[k.S_DISAGREE_V])
-        s[k.S_DISAGREE_V + 1] += g * (math.sin(d) - s[k.S_DISAGREE_V + 1])
-    s[k.S_DISAGREE_F] = math.atan2(s[k.S_DISAGREE_V + 1], s[k.S_DISAGREE_V])
+        s[k.S_DISAGREE_SIN] += g * (math.sin(d) - s[k.S_DISAGREE_SIN])
+    s[k.S_DISAGREE_F] = math.atan2(s[k.S_DISAGREE_SIN], s[k.S_DISAGREE_V])
     assert abs(s[k.S_DISAGREE_F]) > k.FLIP_ANGLE
     s[k.S_BLEND] = 0.2
     n = round(c[k.C_INJ_LOS_TIME] / c[k.C_DT])
@@ -610,7 +610,7 @@ def _sums(s, y_d, y_q, v_e, v, n=250):
     half-wave: a(V) = y (1 - v_e / V) at V and 2 V (the identification's: half ``C_INJ_V_MAX`` and all of it)."""
     for j, (y, amp) in enumerate(((y_d, v), (y_d, 2 * v), (y_q, v), (y_q, 2 * v))):
         s[k.S_ID_SUM + j] = n * y * (1.0 - v_e / amp)
-        s[k.S_ID_SUM + 4 + j] = n
+        s[k.S_ID_N_D + j] = n
 
 
 @pytest.mark.parametrize("v_e", [0.0, 5.0, 10.0])
@@ -675,7 +675,7 @@ def test_a_blind_unit_that_the_pooled_answers_find_salient_is_no_longer_blind(pa
     k.identify(s, c)
     pooled = (0.2 / 1.06 + 0.8 / parked) * y_d
     assert c[k.C_SALIENCY_MIN] < y_d / pooled
-    assert s[k.S_ID_BLIND] == (0.0 if trusted else 1.0) and s[k.S_ID_Y + 1] == pytest.approx(pooled, rel=1e-12)
+    assert s[k.S_ID_BLIND] == (0.0 if trusted else 1.0) and s[k.S_ID_Y_Q] == pytest.approx(pooled, rel=1e-12)
     assert s[k.S_INJ_YX] == pytest.approx(0.5 * (y_d - pooled), rel=1e-12)
 
 
@@ -707,7 +707,7 @@ def test_the_ekf_bound_grows_with_the_back_emf():
     C_EKF_LOS_I plus the current the back-EMF drives in a period."""
     _, s, c = _unit()
     n = round(c[k.C_EKF_LOS_TIME] / c[k.C_DT])
-    s[k.S_X + 2] = 1000.0
+    s[k.S_OMEGA_HAT] = 1000.0
     s[k.S_RESID_F] = 0.99 * (c[k.C_EKF_LOS_I] + c[k.C_EKF_LOS_EMF] * 1000.0)
     assert all(k.detect_ekf_lost(s, c) == k.EV_NONE for _ in range(2 * n))
     s[k.S_RESID_F] = 1.01 * (c[k.C_EKF_LOS_I] + c[k.C_EKF_LOS_EMF] * 1000.0)

@@ -90,16 +90,9 @@ _INJECTION_SLOTS = (
     ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME), ("ofs_time", _k.C_OFS_TIME),
     ("inj_angle_max", _k.C_ANGLE_MAX), ("emf_slip_speed", _k.C_EMF_SPEED), ("emf_slip_rel", _k.C_EMF_REL),
     ("inj_see_max", _k.C_SEE_MAX), ("gain_turns", _k.C_GAIN_TURNS), ("saliency_calibrated", _k.C_SALIENCY_CAL))
-#: state slots of the sensorless start-up, zeroed by ``reset``
-_STARTUP_STATE = _k.IF_STATE
-#: the vector sent to the inverter with dead-time compensation, zeroed by ``reset``
-_DTC_STATE = (_k.S_V_OUT_ALPHA, _k.S_V_OUT_BETA)
 #: the injection strategy's loss detectors low-pass filter their inputs over a third of ``inj_los_time`` (the time
 #: constant): a step then reaches 95 % (1 - e^-3) of its size within the time the detector waits [chosen]
 LOS_FILTER_CONSTANTS = 3.0
-#: the reference generator's outputs, zeroed by ``reset``
-_REFERENCE_STATE = (_k.S_I_DREF, _k.S_T_REF, _k.S_T_BRAKE, _k.S_REGION, _k.S_T_AVAIL,
-                    _k.S_W_REF_PREV, _k.S_FF_PRIMED, _k.S_T_FF)
 
 
 #: a controller FMU's sample clock (``pmsm_ev_fmus.foc_slave``): an instant within this fraction of dt of a
@@ -318,9 +311,9 @@ class ControlUnit:
         c[_k.C_INJ_Y] = 0.5 * (1.0 / m.L_d - 1.0 / m.L_q)
         a = float(p.inj_bandwidth)
         j = float(self.observer.J) if self.sensorless else m.J_m
-        c[_k.C_TRK_L] = 3.0 * a
-        c[_k.C_TRK_L + 1] = 3.0 * a * a / m.N
-        c[_k.C_TRK_L + 2] = a ** 3 * j / m.N
+        c[_k.C_TRK_L1] = 3.0 * a
+        c[_k.C_TRK_L2] = 3.0 * a * a / m.N
+        c[_k.C_TRK_L3] = a ** 3 * j / m.N
         c[_k.C_TRK_J] = j
         for name, slot in _INJECTION_SLOTS:
             c[slot] = float(getattr(p, name))
@@ -343,35 +336,24 @@ class ControlUnit:
         c[_k.C_AD_RATE] = float(p.adapt_current_rate)
         c[_k.C_AD_PSI0] = m.psi
         c[_k.C_AD_RS0] = m.R_s
-        c[_k.C_AD_NOM] = c[_k.C_C_WPSI]
-        c[_k.C_AD_NOM + 1] = c[_k.C_C_TPSI]
+        c[_k.C_AD_NOM_WPSI] = c[_k.C_C_WPSI]
+        c[_k.C_AD_NOM_TPSI] = c[_k.C_C_TPSI]
         # the controller's model from the identification (``model_source``, AD7): the given one kept to go back to
         c[_k.C_MODEL_SRC] = _k.MODEL_CODES[p.model_source]
         for i, value in enumerate((m.L_d, m.L_q, m.R_s, c[_k.C_KP_ID], c[_k.C_KI_ID], c[_k.C_KP_IQ], c[_k.C_KI_IQ])):
             c[_k.C_MODEL0 + i] = float(value)
 
     def reset(self) -> None:
+        """The unit as enabled: every slot of the state at its declared reset value (``UNIT_STATE_LAYOUT.reset``), then
+        what depends on the parameters: the observer's start (x0, P0), the model and the adaptation's estimates, and
+        with injection the acquisition."""
+        _k.UNIT_STATE_LAYOUT.reset(self._s)
         self.observer.reset()
-        self.speed.reset()
-        self.current.reset()
-        self.v_d = self.v_q = 0.0
-        # the observer's voltage input of one period earlier (dq, or alpha-beta)
-        self.u_prev0 = self.u_prev1 = 0.0
-        self.v_alpha = self.v_beta = 0.0
-        self.i_d = self.i_q = 0.0
-        self.i_qref = 0.0
-        for slot in _STARTUP_STATE + _DTC_STATE + _REFERENCE_STATE:
-            self._s[slot] = 0.0
-        for name, offset in _k.UNIT_STATE_LAYOUT.offsets.items():  # the injection strategy's slots
-            if offset >= _k.S_MODE_TIME:
-                for i in _k.UNIT_STATE_LAYOUT.span(name):
-                    self._s[i] = 0.0
-        self._s[_k.S_PSI_RATIO] = 1.0
         if self._c[_k.C_MODEL_SRC] == _k.MODEL_IDENTIFIED:  # the given model until the identification (AD7)
             self._kernels.model_apply(self._s, self._c)
         self._kernels.adapt_reset(self._s, self._c)  # psi_hat, R_s_hat on the model's (and with "use", the model)
         if self.injecting:  # enabled: the acquisition first
-            self._s[_k.S_MODE] = _k.MODE_ACQUIRE
+            self._s[_k.S_MODE] = float(_k.MODE_ACQUIRE)
             self._s[_k.S_HOLD] = self._c[_k.C_HOLD_BRAKE]  # the hill hold until the first torque
             self._kernels.enter_acquire(self._s, self._c, 0.0, 0.0)
 
@@ -408,11 +390,7 @@ class ControlUnit:
     def fault(self) -> float:
         """The sensorless unit's fault (``pmsm_ev.kernels`` FAULT_*): 0 none, 1 a loss of synchronism
         being recovered, 2 the recovery failed, the safe state latched; 0 for the others."""
-        if not self.sensorless:
-            return _k.FAULT_NONE
-        s = self._s
-        return float(s[_k.S_FAULT]) if s[_k.S_FAULT] == _k.FAULT_LATCHED else (
-            _k.FAULT_RECOVERING if s[_k.S_EPISODE] > 0.0 else _k.FAULT_NONE)
+        return float(self._kernels.fault_output(self._s)) if self.sensorless else _k.FAULT_NONE
 
     # the injection strategy's identification at enable (``pmsm_ev.kernels.identify``)
     L_d_id = _status(4, "The identified incremental d inductance at zero current [H] (1 / (Y_s + Y_x) from the d "
@@ -448,13 +426,13 @@ class ControlUnit:
         NaN for a unit on the measured angle (the caller has it: theta_meas)."""
         if self.sensorless:
             return float(self._s[_k.S_THETA_CTRL])
-        return float(self._s[_k.S_X + 3]) if self.angle_source == "estimated" else math.nan
+        return float(self._s[_k.S_THETA_HAT]) if self.angle_source == "estimated" else math.nan
 
     @property
     def omega_ctrl(self) -> float:
         """The control frame's mechanical speed of the last period [rad/s]: the I-f speed in I-f,
         else the speed the controller uses (omega_hat; the measured speed for the sensored drive)."""
-        return float(self._s[_k.S_OMEGA_CTRL]) if self.sensorless else float(self._s[_k.S_X + 2])
+        return float(self._s[_k.S_OMEGA_CTRL]) if self.sensorless else float(self._s[_k.S_OMEGA_HAT])
 
     # the reference generator's outputs (docs/speed-range.md); in the paper's mode computed here from the
     # paper's references (no work on its per-step path)
@@ -497,7 +475,7 @@ class ControlUnit:
     @property
     def mode(self) -> float:
         """The sensorless unit's mode: 0 alignment, 1 I-f, 2 EKF (``MODES``); 2 for the others."""
-        return float(self._s[_k.S_MODE]) if self.sensorless else _k.MODE_EKF
+        return float(self._s[_k.S_MODE]) if self.sensorless else float(_k.MODE_EKF)
 
     def dc_link(self, v_dc: float, p_charge: float, p_discharge: float) -> None:
         """On a measured DC link of ``v_dc`` [V] > 0: the voltage limits follow it and the torque is held within the

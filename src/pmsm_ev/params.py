@@ -1670,7 +1670,7 @@ class InjectionParams:
     #: plant's algebraic flux model: 15 deg at 233 A, 31 deg at 300 A), and the injection locks onto the axis
     #: nearest d, not onto d; the controller takes that offset from its model of the saturation (the
     #: algebraic model's defaults, ``PlantParams``, on its own motor's L_d, L_q, psi) against i_q (at
-    #: i_d = 0), as a table every 50 A (``pmsm_ev.kernels.cross_offset``). False: no compensation
+    #: i_d = 0), as a table every ``CROSS_STEP`` = 50 A (``pmsm_ev.kernels.cross_offset``). False: no compensation
     inj_cross_comp: bool = True
     #: loss of synchronism under injection: the tracking observer's angle error above this [rad] ...
     #: [chosen: 0.5 rad, four times the error at the load's saturation]
@@ -1678,10 +1678,10 @@ class InjectionParams:
     #: ... for this long [s] [chosen: 50 ms, seven time constants of the tracking observer]
     inj_los_time: float = 0.05
     #: loss of synchronism on the EKF (the injection strategy's FOC on the EKF alone): the EKF's current
-    #: innovation, low-pass filtered (``inj_los_time`` / 3), above this [A] plus the current the back-EMF
-    #: drives in a period, dt N |omega_hat| psi / L_q (25 A at 200 rad/s, 139 A at 1120 rad/s) ... [chosen:
-    #: 60 A]. Healthy, the innovation is the sensors' noise and the share of the back-EMF a motor that is not
-    #: the model's leaves unexplained: 2-8 A on the nominal motor, 25 A at 200 rad/s on a hot one (R_s +50 %,
+    #: innovation, low-pass filtered over ``inj_los_time`` / ``LOS_FILTER_CONSTANTS`` (3), above this [A] plus the
+    #: current the back-EMF drives in a period, dt N |omega_hat| psi / L_q (25 A at 200 rad/s, 139 A at 1120 rad/s)
+    #: ... [chosen: 60 A]. Healthy, the innovation is the sensors' noise and the share of the back-EMF a motor that is
+    #: not the model's leaves unexplained: 2-8 A on the nominal motor, 25 A at 200 rad/s on a hot one (R_s +50 %,
     #: psi -12 %), more than 60 A at 1120 rad/s in field weakening on R_s +44 %, psi -10 % (a fixed bound there
     #: latched the safe state on a healthy drive); an EKF whose angle has left the rotor's leaves more than the
     #: whole back-EMF's current unexplained

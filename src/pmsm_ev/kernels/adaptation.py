@@ -75,7 +75,8 @@ from .layout import (
     C_A_RD,
     C_A_RQ,
     C_AD_GAIN,
-    C_AD_NOM,
+    C_AD_NOM_TPSI,
+    C_AD_NOM_WPSI,
     C_AD_PSI0,
     C_AD_PSI_W,
     C_AD_RATE,
@@ -98,21 +99,42 @@ from .layout import (
     C_KP_IQ,
     C_L_D,
     C_L_Q,
-    C_MODEL0,
+    C_MODEL0_KI_ID,
+    C_MODEL0_KI_IQ,
+    C_MODEL0_KP_ID,
+    C_MODEL0_KP_IQ,
+    C_MODEL0_L_D,
+    C_MODEL0_L_Q,
+    C_MODEL0_R_S,
     C_MODEL_SRC,
     C_N,
     C_PSI,
     MODEL_IDENTIFIED,
+    S_AD_I2Y,
+    S_AD_I4,
+    S_AD_ID_PREV,
+    S_AD_IQ_PREV,
     S_AD_PREV,
     S_AD_PRIMED,
+    S_AD_PRIMED_RS,
+    S_AD_PRIMED_V,
     S_AD_PSI,
     S_AD_RATE,
+    S_AD_RATE_D,
+    S_AD_RATE_Q,
     S_AD_RS,
     S_AD_SEEN,
-    S_AD_SUM,
+    S_AD_SEEN_PSI,
+    S_AD_SEEN_RS,
+    S_AD_THETA_PREV,
     S_AD_V,
+    S_AD_V_ALPHA,
+    S_AD_V_BETA,
+    S_AD_W2,
+    S_AD_WY,
     S_ID_RS,
-    S_ID_Y,
+    S_ID_Y_D,
+    S_ID_Y_Q,
     S_V_ALPHA,
     S_V_BETA,
 )
@@ -141,10 +163,10 @@ def adapt_reset(s, c):
     i4 = AD_PRIOR * c[C_AD_RS_I] ** 4
     s[S_AD_PSI] = c[C_AD_PSI0]
     s[S_AD_RS] = c[C_AD_RS0]
-    s[S_AD_SUM] = w2
-    s[S_AD_SUM + 1] = w2 * c[C_AD_PSI0]
-    s[S_AD_SUM + 2] = i4
-    s[S_AD_SUM + 3] = i4 * c[C_AD_RS0]
+    s[S_AD_W2] = w2
+    s[S_AD_WY] = w2 * c[C_AD_PSI0]
+    s[S_AD_I4] = i4
+    s[S_AD_I2Y] = i4 * c[C_AD_RS0]
     for j in range(3):
         s[S_AD_PREV + j] = 0.0
     for j in range(2):
@@ -163,13 +185,13 @@ def model_apply(s, c):
     eq ID2) where measured, else the given (``C_MODEL0``), into every constant made of them, psi where it is
     (``C_PSI``); with ``ADAPT_USE`` the adaptation's psi and R_s on top (``adapt_apply``). Idempotent: the state
     says what the model is, so that a restored FMU state and a reset put it back."""
-    l_d = c[C_MODEL0]
-    l_q = c[C_MODEL0 + 1]
-    r_s = c[C_MODEL0 + 2]
+    l_d = c[C_MODEL0_L_D]
+    l_q = c[C_MODEL0_L_Q]
+    r_s = c[C_MODEL0_R_S]
     if c[C_MODEL_SRC] == MODEL_IDENTIFIED:
-        if s[S_ID_Y] > 0.0 and s[S_ID_Y + 1] > 0.0:
-            l_d = 1.0 / s[S_ID_Y]
-            l_q = 1.0 / s[S_ID_Y + 1]
+        if s[S_ID_Y_D] > 0.0 and s[S_ID_Y_Q] > 0.0:
+            l_d = 1.0 / s[S_ID_Y_D]
+            l_q = 1.0 / s[S_ID_Y_Q]
         if s[S_ID_RS] > 0.0:
             r_s = s[S_ID_RS]
     dt = c[C_DT]
@@ -186,11 +208,11 @@ def model_apply(s, c):
     c[C_C_VQ] = dt / l_q
     c[C_C_TDQ] = kt_j * (l_d - l_q)  # (A18, A19)
     c[C_EKF_LOS_EMF] = dt * n * c[C_PSI] / l_q
-    c[C_AD_NOM] = n * c[C_AD_PSI0] * dt / l_q
-    c[C_KP_ID] = c[C_MODEL0 + 3] * l_d / c[C_MODEL0]
-    c[C_KI_ID] = c[C_MODEL0 + 4] * r_s / c[C_MODEL0 + 2]
-    c[C_KP_IQ] = c[C_MODEL0 + 5] * l_q / c[C_MODEL0 + 1]
-    c[C_KI_IQ] = c[C_MODEL0 + 6] * r_s / c[C_MODEL0 + 2]
+    c[C_AD_NOM_WPSI] = n * c[C_AD_PSI0] * dt / l_q
+    c[C_KP_ID] = c[C_MODEL0_KP_ID] * l_d / c[C_MODEL0_L_D]
+    c[C_KI_ID] = c[C_MODEL0_KI_ID] * r_s / c[C_MODEL0_R_S]
+    c[C_KP_IQ] = c[C_MODEL0_KP_IQ] * l_q / c[C_MODEL0_L_Q]
+    c[C_KI_IQ] = c[C_MODEL0_KI_IQ] * r_s / c[C_MODEL0_R_S]
     if c[C_ADAPT] == ADAPT_USE:
         adapt_apply(s, c)
 
@@ -201,8 +223,8 @@ def adapt_apply(s, c):
     constants (scaled from their values at the model's psi), R_s_hat into A8, A14."""
     r = s[S_AD_PSI] / c[C_AD_PSI0]
     c[C_PSI] = s[S_AD_PSI]
-    c[C_C_WPSI] = c[C_AD_NOM] * r
-    c[C_C_TPSI] = c[C_AD_NOM + 1] * r
+    c[C_C_WPSI] = c[C_AD_NOM_WPSI] * r
+    c[C_C_TPSI] = c[C_AD_NOM_TPSI] * r
     c[C_A_RD] = 1.0 - s[S_AD_RS] * c[C_DT] / c[C_L_D]
     c[C_A_RQ] = 1.0 - s[S_AD_RS] * c[C_DT] / c[C_L_Q]
 
@@ -218,54 +240,54 @@ def adapt_period(s, c, i_alpha, i_beta, theta, omega_m, on_rotor):
     ``S_AD_SEEN``."""
     dt = c[C_DT]
     i_d, i_q = park(i_alpha, i_beta, theta)
-    if s[S_AD_PRIMED + 1] == 0.0 and s[S_ID_RS] > 0.0:  # the R_s test at enable measured it: R_s_hat starts there
+    if s[S_AD_PRIMED_RS] == 0.0 and s[S_ID_RS] > 0.0:  # the R_s test at enable measured it: R_s_hat starts there
         s[S_AD_RS] = min(max(s[S_ID_RS], AD_RS_MIN * c[C_AD_RS0]), AD_RS_MAX * c[C_AD_RS0])
-        s[S_AD_SUM + 3] = s[S_AD_SUM + 2] * s[S_AD_RS]
-        s[S_AD_PRIMED + 1] = 1.0
+        s[S_AD_I2Y] = s[S_AD_I4] * s[S_AD_RS]
+        s[S_AD_PRIMED_RS] = 1.0
     seen_psi = 0.0
     seen_rs = 0.0
-    if s[S_AD_PRIMED] != 0.0 and on_rotor != 0.0:
+    if s[S_AD_PRIMED_V] != 0.0 and on_rotor != 0.0:
         w_e = c[C_N] * omega_m
         a = 0.5 * w_e * dt
-        u_d, u_q = park(s[S_AD_V], s[S_AD_V + 1], s[S_AD_PREV] + a)  # (AD1)
+        u_d, u_q = park(s[S_AD_V_ALPHA], s[S_AD_V_BETA], s[S_AD_THETA_PREV] + a)  # (AD1)
         if abs(a) > 1e-6:
             g = math.sin(a) / a
             u_d *= g
             u_q *= g
-        i_dm = 0.5 * (i_d + s[S_AD_PREV + 1])  # (AD2)
-        i_qm = 0.5 * (i_q + s[S_AD_PREV + 2])
-        di_d = (i_d - s[S_AD_PREV + 1]) / dt
-        di_q = (i_q - s[S_AD_PREV + 2]) / dt
+        i_dm = 0.5 * (i_d + s[S_AD_ID_PREV])  # (AD2)
+        i_qm = 0.5 * (i_q + s[S_AD_IQ_PREV])
+        di_d = (i_d - s[S_AD_ID_PREV]) / dt
+        di_q = (i_q - s[S_AD_IQ_PREV]) / dt
         f = min(dt / AD_RATE_FILTER, 1.0)
-        s[S_AD_RATE] += f * (di_d - s[S_AD_RATE])
-        s[S_AD_RATE + 1] += f * (di_q - s[S_AD_RATE + 1])
-        steady = s[S_AD_RATE] * s[S_AD_RATE] + s[S_AD_RATE + 1] * s[S_AD_RATE + 1] <= c[C_AD_RATE] * c[C_AD_RATE]
+        s[S_AD_RATE_D] += f * (di_d - s[S_AD_RATE_D])
+        s[S_AD_RATE_Q] += f * (di_q - s[S_AD_RATE_Q])
+        steady = s[S_AD_RATE_D] * s[S_AD_RATE_D] + s[S_AD_RATE_Q] * s[S_AD_RATE_Q] <= c[C_AD_RATE] * c[C_AD_RATE]
         l_d = c[C_L_D]
         l_q = c[C_L_Q]
         gain = c[C_AD_GAIN]
         if steady and abs(w_e) >= c[C_AD_PSI_W]:  # (AD5) psi observable: (AD3)
             y = u_q - s[S_AD_RS] * i_qm - l_q * di_q - w_e * l_d * i_dm
-            s[S_AD_SUM] += gain * (w_e * w_e - s[S_AD_SUM])
-            s[S_AD_SUM + 1] += gain * (w_e * y - s[S_AD_SUM + 1])
+            s[S_AD_W2] += gain * (w_e * w_e - s[S_AD_W2])
+            s[S_AD_WY] += gain * (w_e * y - s[S_AD_WY])
             psi0 = c[C_AD_PSI0]
-            s[S_AD_PSI] = min(max(s[S_AD_SUM + 1] / s[S_AD_SUM], AD_PSI_MIN * psi0), AD_PSI_MAX * psi0)
+            s[S_AD_PSI] = min(max(s[S_AD_WY] / s[S_AD_W2], AD_PSI_MIN * psi0), AD_PSI_MAX * psi0)
             seen_psi = 1.0
         i2 = i_dm * i_dm + i_qm * i_qm
         if steady and abs(w_e) <= c[C_AD_RS_W] and i2 >= c[C_AD_RS_I] * c[C_AD_RS_I]:  # (AD5) R_s: (AD4)
             y = (u_d * i_dm + u_q * i_qm - l_d * di_d * i_dm - l_q * di_q * i_qm
                  - w_e * (s[S_AD_PSI] * i_qm + (l_d - l_q) * i_dm * i_qm))
-            s[S_AD_SUM + 2] += gain * (i2 * i2 - s[S_AD_SUM + 2])
-            s[S_AD_SUM + 3] += gain * (i2 * y - s[S_AD_SUM + 3])
+            s[S_AD_I4] += gain * (i2 * i2 - s[S_AD_I4])
+            s[S_AD_I2Y] += gain * (i2 * y - s[S_AD_I2Y])
             rs0 = c[C_AD_RS0]
-            s[S_AD_RS] = min(max(s[S_AD_SUM + 3] / s[S_AD_SUM + 2], AD_RS_MIN * rs0), AD_RS_MAX * rs0)
+            s[S_AD_RS] = min(max(s[S_AD_I2Y] / s[S_AD_I4], AD_RS_MIN * rs0), AD_RS_MAX * rs0)
             seen_rs = 1.0
-    s[S_AD_PRIMED] = 1.0
-    s[S_AD_SEEN] = seen_psi
-    s[S_AD_SEEN + 1] = seen_rs
-    s[S_AD_PREV] = wrap_angle(theta)
-    s[S_AD_PREV + 1] = i_d
-    s[S_AD_PREV + 2] = i_q
-    s[S_AD_V] = s[S_V_ALPHA]
-    s[S_AD_V + 1] = s[S_V_BETA]
+    s[S_AD_PRIMED_V] = 1.0
+    s[S_AD_SEEN_PSI] = seen_psi
+    s[S_AD_SEEN_RS] = seen_rs
+    s[S_AD_THETA_PREV] = wrap_angle(theta)
+    s[S_AD_ID_PREV] = i_d
+    s[S_AD_IQ_PREV] = i_q
+    s[S_AD_V_ALPHA] = s[S_V_ALPHA]
+    s[S_AD_V_BETA] = s[S_V_BETA]
     if c[C_ADAPT] == ADAPT_USE:
         adapt_apply(s, c)

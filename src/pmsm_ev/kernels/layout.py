@@ -5,8 +5,22 @@ A ``Layout`` assigns the offsets from an ordered table of ``Slot(name, length, d
 imported: names unique and upper case with the vector's prefix, lengths whole numbers >= 1, the
 total the declared size. Each slot's offset is then a module-level int named after it (``S_X``,
 ``C_Q``, ``P_R_S``, ...): numba reads such globals as compile-time constants, so the kernels
-index the vectors as fast as with literal numbers. A slot longer than 1 holds consecutive
-entries from its offset (``S_P + n * i + j``).
+index the vectors as fast as with literal numbers.
+
+**Named entries.** A slot longer than 1 whose entries mean different things names them where it is
+declared (``Slot(..., parts=(...))``): each part a name (one entry) or a (name, length) pair, in the
+slot's order, covering it. Each part's offset is exported as a module-level int too (``S_OMEGA_HAT`` is
+``S_X + 2``, ``S_ID_N_D`` is ``S_ID_SUM + 4``), so a kernel reads ``s[S_OMEGA_HAT]``, not ``s[S_X + 2]``,
+and numba compiles both to the same constant index: the mechanism is named offsets, module-level int
+globals, not a record view or generated accessors. A slot whose entries are a vector or a matrix of
+one meaning (``S_P``, ``S_AVG``) keeps its arithmetic (``S_P + n * i + j``); a part indexed by a loop
+(``S_ID_N_D + j``: the count of the identification's phase j) reads as the first of its run.
+
+**Reset by declaration.** Each slot of a state vector declares its value at a reset (``reset``, 0.0
+unless said) and whether it is part of a saved state (``saved``; False: scratch, written before it is
+read in every step). ``Layout.reset`` writes every slot's declared value; a slot whose start depends on
+the parameters (the observer's x0 and P0, the adaptation's estimates) is then set by its owner's reset,
+which its doc names.
 
 Four vectors of the physics:
 
@@ -39,6 +53,8 @@ class Slot(NamedTuple):
     length: int  #: how many consecutive floats
     doc: str  #: what it holds, with its unit
     saved: bool = True  #: part of a saved state (state vectors only; False: scratch)
+    reset: float = 0.0  #: every entry's value at a reset (state vectors: ``Layout.reset``)
+    parts: tuple = ()  #: the names of its entries, in order: a name (one entry) or (name, length)
 
 
 class Layout:
@@ -47,24 +63,39 @@ class Layout:
     def __init__(self, what: str, prefix: str, slots, size: int):
         self.what = what
         self.prefix = prefix
-        self.slots: tuple[Slot, ...] = tuple(Slot(*row) for row in slots)
+        self.slots: tuple[Slot, ...] = tuple(row if isinstance(row, Slot) else Slot(*row) for row in slots)
         self.offsets: dict[str, int] = {}
+        #: the named entries of the slots (``Slot.parts``): name -> offset
+        self.parts: dict[str, int] = {}
         offset = 0
         for slot in self.slots:
             name, length = slot.name, slot.length
-            if not (isinstance(name, str) and name.startswith(prefix) and name.isidentifier()
-                    and name == name.upper()):
-                raise LayoutError(f"{what}: slot name {name!r} is not an upper-case identifier starting "
-                                  f"with {prefix!r}")
-            if name in self.offsets:
-                raise LayoutError(f"{what}: slot {name} declared twice")
+            self._check_name(name)
             if isinstance(length, bool) or not isinstance(length, int) or length < 1:
                 raise LayoutError(f"{what}: slot {name} has length {length!r}; it must be a whole number >= 1")
             self.offsets[name] = offset
+            if slot.parts:
+                at = offset
+                for part in slot.parts:
+                    part_name, part_length = (part, 1) if isinstance(part, str) else part
+                    self._check_name(part_name)
+                    self.parts[part_name] = at
+                    at += part_length
+                if at != offset + length:
+                    raise LayoutError(f"{what}: the parts of slot {name} take {at - offset} floats, the slot {length}")
             offset += length
         if offset != size:
             raise LayoutError(f"{what}: the slots take {offset} floats, the vector is declared with {size}")
         self.size = size
+
+    def _check_name(self, name) -> None:
+        """A slot's or a part's name: an upper-case identifier with the prefix, not declared before."""
+        if not (isinstance(name, str) and name.startswith(self.prefix) and name.isidentifier()
+                and name == name.upper()):
+            raise LayoutError(f"{self.what}: slot name {name!r} is not an upper-case identifier starting "
+                              f"with {self.prefix!r}")
+        if name in self.offsets or name in self.parts:
+            raise LayoutError(f"{self.what}: slot {name} declared twice")
 
     def __len__(self) -> int:
         return self.size
@@ -81,11 +112,17 @@ class Layout:
         raise KeyError(f"{self.what} has no slot {name!r}")
 
     def export(self, namespace: dict) -> None:
-        """Put each slot's offset into ``namespace`` under its name (a module's globals)."""
-        for name, offset in self.offsets.items():
+        """Put each slot's offset and each named entry's into ``namespace`` under its name (a module's globals)."""
+        for name, offset in (self.offsets | self.parts).items():
             if name in namespace:
                 raise LayoutError(f"{self.what}: {name} is defined already in {namespace.get('__name__')}")
             namespace[name] = offset
+
+    def reset(self, vector) -> None:
+        """Every slot of ``vector`` at its declared reset value (``Slot.reset``)."""
+        for slot in self.slots:
+            for i in self.span(slot.name):
+                vector[i] = slot.reset
 
     # -- saved states -------------------------------------------------------------------------
     def field(self, name: str) -> str:
@@ -282,9 +319,10 @@ PLANT_ENERGY_LAYOUT = Layout("plant energy vector", "E_", (
 UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_V_D", 1, "the last command, d [V]"),
     ("S_V_Q", 1, "the last command, q [V]"),
-    ("S_U_PREV_0", 1, "the observer's voltage input of one period earlier, d or alpha [V] (one-period "
-                      "actuation delay)"),
-    ("S_U_PREV_1", 1, "... q or beta [V]"),
+    ("S_U_PREV_0", 1, "the observer's voltage input of one period earlier (the one-period actuation delay), first "
+                      "axis in the observer's own frame [V]: d (S_U_PREV_D) for the rotating-frame observers (ekf5, "
+                      "ekf4), alpha (S_U_PREV_ALPHA) for the stationary-frame EKF5 (ekf5ab and the sensorless unit)"),
+    ("S_U_PREV_1", 1, "... second axis: q (S_U_PREV_Q) or beta (S_U_PREV_BETA) [V]"),
     ("S_V_ALPHA", 1, "the voltage held, alpha [V]"),
     ("S_V_BETA", 1, "the voltage held, beta [V]"),
     ("S_I_D", 1, "the d current in the control frame [A]"),
@@ -296,7 +334,11 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_I_DL", 1, "decoupling filter of i_dref (eq 17) [A]"),
     ("S_I_QL", 1, "decoupling filter of i_qref (eq 18) [A]"),
     ("S_SAT", 1, "1.0 while the voltage vector is limited"),
-    ("S_X", 5, "observer estimates: i_d, i_q, omega_m, theta_e, T_L (EKF4: T_L stays 0)"),
+    Slot("S_X", 5, "the observer's estimates i_d [A], i_q [A], omega_m [rad/s], theta_e [rad], T_L [N m] (EKF4: "
+                   "T_L stays 0); the injection strategy feeds the EKF's last three from the tracking observer "
+                   "while the blend's weight is 0 (``kernels.modes.feed_ekf``: the EKF carries the injection's "
+                   "estimate, from which it takes over as the weight rises)",
+         parts=("S_I_D_HAT", "S_I_Q_HAT", "S_OMEGA_HAT", "S_THETA_HAT", "S_TL_HAT")),
     ("S_THETA_PRIOR", 1, "the observer's predicted angle [rad]"),
     ("S_P", 25, "EKF covariance, n x n row by row (n = 4 or 5)"),
     ("S_PHT", 10, "scratch: P H^T, n x 2", False),
@@ -305,7 +347,8 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_STARTED", 1, "stationary-frame EKF5: 1.0 once past its first sample (x0 is the estimate there)"),
     # sensorless start-up (``sensorless_step``)
     ("S_MODE", 1, "the sensorless unit's mode (MODE_*)"),
-    ("S_CLOCK", 1, "control periods since its first step"),
+    ("S_ALIGN_CLOCK", 1, "the alignment's clock: control periods since the alignment last began (0 at a reset, a "
+                         "realignment and the injection unit's fall-back to the I-f strategy; read in MODE_ALIGN) [-]"),
     ("S_PHI", 1, "the current vector of alignment and I-f: angle in the stationary frame [rad]"),
     ("S_I_MAG", 1, "... its magnitude [A]"),
     ("S_I_TGT", 1, "... its target magnitude [A]"),
@@ -314,21 +357,25 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_SLIP", 1, "I-f: omega_hat - omega_if, low-pass filtered (the damping's input and the slip detector's) [rad/s]"),
     ("S_V_OUT_ALPHA", 1, "with dead-time compensation: the vector sent to the inverter, alpha [V]"),
     ("S_V_OUT_BETA", 1, "... beta [V]"),
-    ("S_PSI_RATIO", 1, "with psi adaptation: the EKF's magnet flux over the nominal psi [-]"),
+    Slot("S_PSI_RATIO", 1, "with psi adaptation: the EKF's magnet flux over the nominal psi [-]", reset=1.0),
     # adaptation while driving (``C_ADAPT``; ``pmsm_ev.kernels.adaptation``): the model-reference estimates of psi
     # and R_s, their least-squares sums and the last period's frame, currents and held vector
     ("S_AD_PSI", 1, "the estimated magnet flux psi_hat [Wb] (eq AD3)"),
     ("S_AD_RS", 1, "the estimated stator resistance R_s_hat [Ohm] (eq AD4)"),
-    ("S_AD_SUM", 4, "the exponentially weighted sums of the two least-squares fits: omega_e^2, omega_e y_psi "
-                    "[V^2, V^2/Wb ...], |i|^4, |i|^2 y_R (AD3, AD4)"),
-    ("S_AD_PREV", 3, "the last period's frame angle [rad] and currents i_d, i_q in it [A]"),
-    ("S_AD_V", 2, "the vector held over the present period (alpha, beta) [V]: the command kept at the end of the "
-                  "last period"),
-    ("S_AD_RATE", 2, "d and q current rates, low-pass filtered (AD_RATE_FILTER) [A/s]: the quasi-steady test"),
-    ("S_AD_SEEN", 2, "1.0 in a period where psi (first) and R_s (second) were observable and their fits updated"),
-    ("S_AD_PRIMED", 2, "1.0 once a period has left S_AD_PREV, S_AD_V (first); 1.0 once R_s_hat was seeded on the "
-                       "identification's R_s_id (second)"),
-    # the sensorless unit's synchronism (``sync_guard``, ``slip_detector``)
+    Slot("S_AD_SUM", 4, "the exponentially weighted sums of the two least-squares fits: omega_e^2, omega_e y_psi "
+                        "[V^2, V^2/Wb ...], |i|^4, |i|^2 y_R (AD3, AD4)",
+         parts=("S_AD_W2", "S_AD_WY", "S_AD_I4", "S_AD_I2Y")),
+    Slot("S_AD_PREV", 3, "the last period's frame angle [rad] and currents i_d, i_q in it [A]",
+         parts=("S_AD_THETA_PREV", "S_AD_ID_PREV", "S_AD_IQ_PREV")),
+    Slot("S_AD_V", 2, "the vector held over the present period (alpha, beta) [V]: the command kept at the end of the "
+                      "last period", parts=("S_AD_V_ALPHA", "S_AD_V_BETA")),
+    Slot("S_AD_RATE", 2, "d and q current rates, low-pass filtered (AD_RATE_FILTER) [A/s]: the quasi-steady test",
+         parts=("S_AD_RATE_D", "S_AD_RATE_Q")),
+    Slot("S_AD_SEEN", 2, "1.0 in a period where psi (first) and R_s (second) were observable and their fits updated",
+         parts=("S_AD_SEEN_PSI", "S_AD_SEEN_RS")),
+    Slot("S_AD_PRIMED", 2, "1.0 once a period has left S_AD_PREV, S_AD_V (first); 1.0 once R_s_hat was seeded on the "
+                           "identification's R_s_id (second)", parts=("S_AD_PRIMED_V", "S_AD_PRIMED_RS")),
+    # the sensorless unit's synchronism (``sync_guard``, ``detect_trouble``)
     ("S_GUARD", 1, "the load-angle guard holding the I-f vector back (GUARD_SOFT, GUARD_HARD; 0 = not)"),
     ("S_LOS", 1, "I-f: how long the unit has been in trouble (the slip beyond its bound, or the limit reached) [s]"),
     ("S_EPISODE", 1, "the age of the present loss-of-synchronism episode [s] (0: none)"),
@@ -376,11 +423,13 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     ("S_INJ_ADM", 1, "the last answer's d-axis admittance, the inverse of the incremental inductance [1/H]"),
     ("S_AVG", 32, "the last 2 m currents, alpha (16) then beta (16) [A]: the fundamental is their mean"),
     ("S_AVG_POS", 1, "where the next current goes in S_AVG [-]"),
-    ("S_TRK", 3, "the tracking observer: electrical angle [rad], mechanical speed [rad/s], load torque [N m]"),
+    Slot("S_TRK", 3, "the tracking observer: electrical angle [rad], mechanical speed [rad/s], load torque [N m]",
+         parts=("S_TRK_THETA", "S_TRK_OMEGA", "S_TRK_TL")),
     ("S_BLEND", 1, "the EKF's weight in the control frame [-] (0: the tracking observer's, 1: the EKF's)"),
-    ("S_ACQ", 4, "the angle's acquisition: sums of sin 2e on the first axis and on the axis 45 deg ahead, "
-                 "how many answers each [-]"),
-    ("S_POL", 4, "the polarity test: sums of the d admittance at +i and at -i [1/H], how many of each [-]"),
+    Slot("S_ACQ", 4, "the angle's acquisition: sums of sin 2e on the first axis and on the axis 45 deg ahead, "
+                     "how many answers each [-]", parts=("S_ACQ_SIN0", "S_ACQ_SIN45", "S_ACQ_N0", "S_ACQ_N45")),
+    Slot("S_POL", 4, "the polarity test: sums of the d admittance at +i and at -i [1/H], how many of each [-]",
+         parts=("S_POL_Y_POS", "S_POL_Y_NEG", "S_POL_N_POS", "S_POL_N_NEG")),
     ("S_POL_TRIES", 1, "polarity tests unresolved since enable [-]"),
     ("S_INJ_ERR_F", 1, "the tracking observer's angle error, low-pass filtered [rad]"),
     ("S_DISAGREE_F", 1, "the injection's angle error less the EKF's (both against the tracking observer), low-pass "
@@ -404,31 +453,35 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     # (``kernels.modes``: ``identify``, ``detect_injection_lost``)
     ("S_INJ_YX", 1, "the error signal's gain, Y_x = (1/L_d - 1/L_q) / 2 [1/H]: C_INJ_Y until the identification "
                     "measures it (``demodulate``)"),
-    ("S_ID_SUM", 8, "the identification: sums of the d admittance on the found d axis at the square wave's amplitude "
-                    "and at twice it, on the q axis at both [1/H], how many answers each [-] (a blind unit's pooled "
-                    "over its parked acquisitions)"),
-    ("S_ID_Y", 2, "the identified incremental admittances 1/L_d, 1/L_q at zero current [1/H] (0: not identified)"),
-    ("S_ID_YE", 2, "... as the square wave at the amplitude S_INJ_VA sees them, the inverter's dead time included "
-                   "[1/H]"),
+    Slot("S_ID_SUM", 8, "the identification: sums of the d admittance on the found d axis at the square wave's "
+                        "amplitude and at twice it, on the q axis at both [1/H], how many answers each [-] (a blind "
+                        "unit's pooled over its parked acquisitions)",
+         parts=("S_ID_A_D", "S_ID_A_D2", "S_ID_A_Q", "S_ID_A_Q2", "S_ID_N_D", "S_ID_N_D2", "S_ID_N_Q", "S_ID_N_Q2")),
+    Slot("S_ID_Y", 2, "the identified incremental admittances 1/L_d, 1/L_q at zero current [1/H] (0: not identified)",
+         parts=("S_ID_Y_D", "S_ID_Y_Q")),
+    Slot("S_ID_YE", 2, "... as the square wave at the amplitude S_INJ_VA sees them, the inverter's dead time included "
+                       "[1/H]", parts=("S_ID_YE_D", "S_ID_YE_Q")),
     ("S_INJ_VA", 1, "the square wave's amplitude after the identification [V] (0: C_INJ_V)"),
     ("S_ID_DONE", 1, "1.0 once the first acquisition after enable has run its identification (a blind unit's parked "
                      "acquisitions run it again: ``refining``)"),
-    ("S_RS_SUM", 6, "the R_s test: sums of the d command [V] and of the d current [A] at the lower level, the "
-                    "same at the upper, how many samples each [-]"),
+    Slot("S_RS_SUM", 6, "the R_s test: sums of the d command [V] and of the d current [A] at the lower level, the "
+                        "same at the upper, how many samples each [-]",
+         parts=("S_RS_V1", "S_RS_I1", "S_RS_V2", "S_RS_I2", "S_RS_N1", "S_RS_N2")),
     ("S_ID_RS", 1, "the identified stator resistance [Ohm] (0: not identified)"),
     ("S_PARKED", 1, "1.0 while a blind unit (S_ID_BLIND) holds the car at a stop on the friction brake and finds the "
                     "angle afresh for the restart"),
     ("S_ID_BLIND", 1, "1.0 where the identified saliency L_q / L_d is below C_SALIENCY_MIN: the injection cannot "
                       "see the axis well enough"),
     ("S_AXIS_F", 1, "cos 2e from the d admittance and the identified admittances, low-pass filtered [-]"),
-    ("S_DISAGREE_V", 2, "cos and sin of the injection's angle less the EKF's, low-pass filtered (S_DISAGREE_F is "
-                        "their angle: no wrap at +-pi) [-]"),
-    ("S_ID_NOISE", 8, "the identification: sums of the answers' q second difference, its sign the half-wave's [A], "
-                      "on each of its four phases, then of its square [A^2]"),
-    ("S_OFS_SUM", 3, "the offset window at enable (no voltage, no current): sums of the measured i_alpha, i_beta "
-                     "[A], how many samples [-]"),
-    ("S_ID_OFS", 2, "the current sensors' offset measured at enable, alpha and beta [A] (subtracted from the "
-                    "measurements from then on)"),
+    Slot("S_DISAGREE_V", 2, "cos and sin of the injection's angle less the EKF's, low-pass filtered (S_DISAGREE_F is "
+                            "their angle: no wrap at +-pi) [-]", parts=("S_DISAGREE_COS", "S_DISAGREE_SIN")),
+    Slot("S_ID_NOISE", 8, "the identification: sums of the answers' q second difference, its sign the half-wave's [A], "
+                          "on each of its four phases, then of its square [A^2]",
+         parts=(("S_ID_D_SUM", 4), ("S_ID_D_SQ", 4))),
+    Slot("S_OFS_SUM", 3, "the offset window at enable (no voltage, no current): sums of the measured i_alpha, i_beta "
+                         "[A], how many samples [-]", parts=("S_OFS_ALPHA", "S_OFS_BETA", "S_OFS_N")),
+    Slot("S_ID_OFS", 2, "the current sensors' offset measured at enable, alpha and beta [A] (subtracted from the "
+                        "measurements from then on)", parts=("S_ID_OFS_ALPHA", "S_ID_OFS_BETA")),
     ("S_ID_NOISE_F", 1, "the current measurement's noise floor from the identification's answers: a phase sensor's "
                         "sigma [A] (0: not identified)"),
     ("S_ID_ACC", 1, "the angle accuracy injection gives at a stop, rms [rad] (eq ID3; 0: not identified)"),
@@ -440,11 +493,13 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
                       "low-pass filtered [rad/s]"),
     ("S_IF_FALLBACK", 1, "1.0 once a unit that cannot see its motor's axis (``kernels.modes.cannot_see``) runs the I-f "
                          "strategy (``sensorless_step``) for good"),
-    ("S_V_FUND", 2, "the last period's command without the square wave, alpha and beta [V]: the EKF's input while the "
-                    "unit injects (``kernels.modes.injection_unit_step``)"),
-    ("S_GAIN", 4, "the phase sensors' relative gain (``kernels.modes.balance_sensors``, eqs SG1-SG2): sums of the "
-                  "measured phase a and phase b currents' squares on the EKF [A^2 periods], the electrical turns "
-                  "they span [-], and g_a / g_b from them once they span ``C_GAIN_TURNS`` (0: not yet measured)"),
+    Slot("S_V_FUND", 2, "the last period's command without the square wave, alpha and beta [V]: the EKF's input while "
+                        "the unit injects (``kernels.modes.injection_unit_step``)",
+         parts=("S_V_FUND_ALPHA", "S_V_FUND_BETA")),
+    Slot("S_GAIN", 4, "the phase sensors' relative gain (``kernels.modes.balance_sensors``, eqs SG1-SG2): sums of the "
+                      "measured phase a and phase b currents' squares on the EKF [A^2 periods], the electrical turns "
+                      "they span [-], and g_a / g_b from them once they span ``C_GAIN_TURNS`` (0: not yet measured)",
+         parts=("S_GAIN_SUM_A", "S_GAIN_SUM_B", "S_GAIN_TURNS", "S_GAIN_RATIO")),
 ), size=268)
 
 #: the control unit's parameter vector
@@ -525,7 +580,8 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_AD_RATE", 1, "the largest filtered |di/dt| of a quasi-steady period [A/s]"),
     ("C_AD_PSI0", 1, "the model's psi: where psi_hat starts [Wb]"),
     ("C_AD_RS0", 1, "the model's R_s: where R_s_hat starts (until the identification's R_s_id) [Ohm]"),
-    ("C_AD_NOM", 2, "the EKF model's psi-proportional constants at C_AD_PSI0: C_C_WPSI, C_C_TPSI"),
+    Slot("C_AD_NOM", 2, "the EKF model's psi-proportional constants at C_AD_PSI0: C_C_WPSI, C_C_TPSI",
+         parts=("C_AD_NOM_WPSI", "C_AD_NOM_TPSI")),
     # the sensorless unit's I-f sizing and synchronism (``pmsm_ev.params.StartupParams``)
     ("C_J_IF", 1, "the EKF model's inertia [kg m^2]"),
     ("C_E_MAX", 1, "the design load angle [rad]"),
@@ -572,7 +628,8 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     ("C_INJ_V", 1, "the square wave's amplitude [V]"),
     ("C_INJ_M", 1, "its half-period in control periods, m [-]"),
     ("C_INJ_Y", 1, "the controller's model's (1/L_d - 1/L_q) / 2 [1/H]: the error signal's gain"),
-    ("C_TRK_L", 3, "the tracking observer's gains l1 [1/s], l2 [1/s^2 per electrical rad], l3 [N m/(rad s)]"),
+    Slot("C_TRK_L", 3, "the tracking observer's gains l1 [1/s], l2 [1/s^2 per electrical rad], l3 [N m/(rad s)]",
+         parts=("C_TRK_L1", "C_TRK_L2", "C_TRK_L3")),
     ("C_TRK_J", 1, "its inertia [kg m^2]"),
     ("C_BLEND_LO", 1, "the EKF's weight rises from 0 at this |omega| [rad/s] ..."),
     ("C_BLEND_HI", 1, "... to 1 at this one, where the injection is off [rad/s]"),
@@ -632,8 +689,10 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
     # the controller's model from the identification (``ControllerParams.model_source``; ``kernels.adaptation``, AD7)
     ("C_MODEL_SRC", 1, "MODEL_GIVEN (the motor's parameters as given) or MODEL_IDENTIFIED (L_d, L_q, R_s as the "
                        "identification measures them)"),
-    ("C_MODEL0", 7, "the given model: L_d [H], L_q [H], R_s [Ohm] and the current PIs' gains at them: K_p,d [V/A], "
-                    "K_i,d [V/(A s)], K_p,q, K_i,q"),
+    Slot("C_MODEL0", 7, "the given model: L_d [H], L_q [H], R_s [Ohm] and the current PIs' gains at them: K_p,d [V/A], "
+                        "K_i,d [V/(A s)], K_p,q, K_i,q",
+         parts=("C_MODEL0_L_D", "C_MODEL0_L_Q", "C_MODEL0_R_S", "C_MODEL0_KP_ID", "C_MODEL0_KI_ID", "C_MODEL0_KP_IQ",
+                "C_MODEL0_KI_IQ")),
     ("C_SEE_MAX", 1, "the largest angle accuracy (eq ID3) at which a blind unit finds the axis at its stops [rad] "
                      "(``cannot_see``)"),
     ("C_GAIN_TURNS", 1, "the electrical turns on the EKF over which the phase sensors' relative gain is measured "
@@ -657,6 +716,10 @@ PLANT_PARAMS_LAYOUT.export(globals())
 PLANT_ENERGY_LAYOUT.export(globals())
 UNIT_STATE_LAYOUT.export(globals())
 UNIT_PARAMS_LAYOUT.export(globals())
+#: the observer's voltage input of one period earlier (``S_U_PREV_0``, ``S_U_PREV_1``) by the observer's frame: dq for
+#: the rotating-frame observers, alpha-beta for the stationary-frame EKF5 (a unit has one observer, so one of the two)
+S_U_PREV_D, S_U_PREV_Q = S_U_PREV_0, S_U_PREV_1  # noqa: F821 - exported above
+S_U_PREV_ALPHA, S_U_PREV_BETA = S_U_PREV_0, S_U_PREV_1  # noqa: F821
 PLANT_PARAMS = PLANT_PARAMS_LAYOUT.size  #: length of the plant's parameter vector
 PLANT_ENERGY = PLANT_ENERGY_LAYOUT.size  #: length of the plant's energy vector
 UNIT_STATE = UNIT_STATE_LAYOUT.size  #: length of the control unit's state vector
@@ -759,8 +822,9 @@ PLANT_IO = PLANT_IO_LAYOUT.size  #: length of the plant FMU's buffer
 UNIT_IO = UNIT_IO_LAYOUT.size  #: length of a controller FMU's buffer
 
 #: modes of the sensorless unit (``S_MODE``): the I-f strategy's alignment and I-f, FOC on the EKF (both
-#: strategies), and the injection strategy's angle acquisition, polarity test and FOC on the injection
-MODE_ALIGN, MODE_IF, MODE_EKF, MODE_ACQUIRE, MODE_POLARITY, MODE_INJECTION = 0.0, 1.0, 2.0, 3.0, 4.0, 5.0
+#: strategies), and the injection strategy's angle acquisition, polarity test and FOC on the injection: named integers,
+#: which the state holds as floats (``kernels.machine`` declares the events and the entry actions)
+MODE_ALIGN, MODE_IF, MODE_EKF, MODE_ACQUIRE, MODE_POLARITY, MODE_INJECTION = range(6)
 #: the strategies at and near zero speed (``C_LOW_SPEED``, ``InjectionParams.low_speed``)
 LOW_SPEED_IF, LOW_SPEED_INJECTION = 0.0, 1.0
 LOW_SPEED_CODES = {"if": LOW_SPEED_IF, "injection": LOW_SPEED_INJECTION}

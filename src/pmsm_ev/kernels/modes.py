@@ -110,10 +110,7 @@ from .layout import (
     C_INJ_V,
     C_INJ_V_MAX,
     C_INJ_Y,
-    C_K_DQN,
     C_K_T,
-    C_L_D,
-    C_L_Q,
     C_LOS_FILTER,
     C_MODEL_SRC,
     C_N,
@@ -135,7 +132,7 @@ from .layout import (
     C_SEE_MAX,
     C_T_MAX,
     C_T_RAMP,
-    C_TRK_L,
+    C_TRK_L1,
     FAULT_LATCHED,
     FAULT_NONE,
     MODE_ACQUIRE,
@@ -144,35 +141,57 @@ from .layout import (
     MODE_POLARITY,
     MODEL_IDENTIFIED,
     S_ACQ,
+    S_ACQ_N0,
+    S_ACQ_N45,
+    S_ACQ_SIN0,
+    S_ACQ_SIN45,
+    S_ALIGN_CLOCK,
     S_AXIS_F,
     S_BLEND,
-    S_CLOCK,
     S_CROSS,
+    S_DISAGREE_COS,
     S_DISAGREE_F,
-    S_DISAGREE_V,
+    S_DISAGREE_SIN,
     S_EKF_LOS_T,
     S_EMF_F,
     S_EMF_SEEN,
     S_EMF_T,
-    S_EPISODE,
     S_EVENT,
     S_FAULT,
-    S_GAIN,
+    S_GAIN_RATIO,
+    S_GAIN_SUM_A,
+    S_GAIN_SUM_B,
+    S_GAIN_TURNS,
     S_HOLD,
     S_I_D,
+    S_I_D_HAT,
     S_I_DL,
     S_I_Q,
+    S_I_Q_HAT,
     S_I_QL,
+    S_ID_A_D,
+    S_ID_A_D2,
+    S_ID_A_Q,
+    S_ID_A_Q2,
     S_ID_ACC,
     S_ID_BLIND,
+    S_ID_D_SQ,
+    S_ID_D_SUM,
     S_ID_DONE,
+    S_ID_N_D,
+    S_ID_N_D2,
+    S_ID_N_Q,
+    S_ID_N_Q2,
     S_ID_NOISE,
     S_ID_NOISE_F,
-    S_ID_OFS,
+    S_ID_OFS_ALPHA,
+    S_ID_OFS_BETA,
     S_ID_RS,
     S_ID_SUM,
-    S_ID_Y,
-    S_ID_YE,
+    S_ID_Y_D,
+    S_ID_Y_Q,
+    S_ID_YE_D,
+    S_ID_YE_Q,
     S_IF_FALLBACK,
     S_INJ_ADM,
     S_INJ_AXIS,
@@ -183,32 +202,48 @@ from .layout import (
     S_INJ_SKIP,
     S_INJ_VA,
     S_INJ_YX,
-    S_INSYNC,
     S_INT_D,
     S_INT_Q,
     S_MODE,
     S_MODE_TIME,
+    S_OFS_ALPHA,
+    S_OFS_BETA,
+    S_OFS_N,
     S_OFS_SUM,
     S_OMEGA_CTRL,
-    S_P,
+    S_OMEGA_HAT,
     S_PARKED,
     S_POL,
     S_POL_AXIS,
+    S_POL_N_NEG,
+    S_POL_N_POS,
     S_POL_TRIES,
+    S_POL_Y_NEG,
+    S_POL_Y_POS,
     S_RESID_F,
+    S_RS_I1,
+    S_RS_I2,
+    S_RS_N1,
+    S_RS_N2,
     S_RS_SUM,
+    S_RS_V1,
+    S_RS_V2,
     S_THETA_CTRL,
-    S_TRK,
-    S_U_PREV_0,
-    S_U_PREV_1,
+    S_THETA_HAT,
+    S_TL_HAT,
+    S_TRK_OMEGA,
+    S_TRK_THETA,
+    S_TRK_TL,
+    S_U_PREV_ALPHA,
+    S_U_PREV_BETA,
     S_V_ALPHA,
     S_V_BETA,
     S_V_D,
-    S_V_FUND,
+    S_V_FUND_ALPHA,
+    S_V_FUND_BETA,
     S_V_OUT_ALPHA,
     S_V_OUT_BETA,
     S_W_INT,
-    S_X,
 )
 from .machine import (
     A_ACQUIRE,
@@ -244,7 +279,15 @@ from .machine import (
     next_mode,
 )
 from .observers import ekf5ab_period, ekf5ab_period_on
-from .startup import age_episode, enter_if_strategy, fault_output, sensorless_step
+from .startup import (
+    age_episode,
+    begin_episode,
+    enter_if_strategy,
+    fault_output,
+    model_torque,
+    restart_ekf_on,
+    sensorless_step,
+)
 from .transforms import park, wrap_angle
 
 # -- the schedules of the acquisition and the polarity test ----------------------------------------
@@ -274,6 +317,12 @@ POL_SETTLE_SHARE = 0.25
 #: (``detect_injection_lost``): its first quarter, where the square wave is at half its amplitude or more
 #: (``injection_share``) and the injection's angle still worth the EKF's
 DISAGREE_BLEND = 0.25
+#: a loss detector's timer has run its time once within this share of a period of it (``timed_out``): the sum of the
+#: periods' dt rounds, and a timer must not miss its time by one period for it
+TIMER_SLACK = 0.5
+#: the identification's lower amplitude: this share of ``C_INJ_V_MAX``, the higher all of it (ID1: the two amplitudes
+#: V and 2 V cancel the dead time's voltage)
+ID_LOWER_SHARE = 0.5
 #: the R_s test gives nothing where the current rose by less than half the levels' difference (``C_RS_I`` / 2):
 #: this share of ``C_RS_I`` (a current that does not follow its reference: an open phase, no DC link)
 RS_RISE_MIN = 0.25
@@ -301,9 +350,9 @@ def parks(s, c):
     Off where ``C_SALIENCY_CAL`` or ``C_GAIN_TURNS`` is 0."""
     if s[S_ID_BLIND] != 0.0:
         return True
-    if c[C_GAIN_TURNS] == 0.0 or s[S_GAIN + 3] != 0.0:
+    if c[C_GAIN_TURNS] == 0.0 or s[S_GAIN_RATIO] != 0.0:
         return False
-    return s[S_ID_Y + 1] > 0.0 and s[S_ID_Y] < c[C_SALIENCY_CAL] * s[S_ID_Y + 1]
+    return s[S_ID_Y_Q] > 0.0 and s[S_ID_Y_D] < c[C_SALIENCY_CAL] * s[S_ID_Y_Q]
 
 
 @kernel()
@@ -328,12 +377,12 @@ def balance_sensors(s, c, i_alpha, i_beta):
     if c[C_GAIN_TURNS] == 0.0:
         return i_alpha, i_beta
     if s[S_MODE] == MODE_EKF:
-        s[S_GAIN] += i_alpha * i_alpha
-        s[S_GAIN + 1] += i_b * i_b
-        s[S_GAIN + 2] += abs(c[C_N] * s[S_X + 2]) * c[C_DT] / (2.0 * math.pi)
-        if s[S_GAIN + 2] >= c[C_GAIN_TURNS] and s[S_GAIN + 1] > 0.0:  # (SG1)
-            s[S_GAIN + 3] = math.sqrt(s[S_GAIN] / s[S_GAIN + 1])
-    r = s[S_GAIN + 3]
+        s[S_GAIN_SUM_A] += i_alpha * i_alpha
+        s[S_GAIN_SUM_B] += i_b * i_b
+        s[S_GAIN_TURNS] += abs(c[C_N] * s[S_OMEGA_HAT]) * c[C_DT] / (2.0 * math.pi)
+        if s[S_GAIN_TURNS] >= c[C_GAIN_TURNS] and s[S_GAIN_SUM_B] > 0.0:  # (SG1)
+            s[S_GAIN_RATIO] = math.sqrt(s[S_GAIN_SUM_A] / s[S_GAIN_SUM_B])
+    r = s[S_GAIN_RATIO]
     if r == 0.0:
         return i_alpha, i_beta
     return i_alpha, (i_alpha + 2.0 * r * i_b) / math.sqrt(3.0)  # (SG2)
@@ -407,14 +456,14 @@ def identify_rs(s, c):
 
     the difference cancelling the dead-time voltage. Nothing where a level brought no sample or the current did
     not rise by half the levels' difference (``S_ID_RS`` stays 0)."""
-    n1 = s[S_RS_SUM + 4]
-    n2 = s[S_RS_SUM + 5]
+    n1 = s[S_RS_N1]
+    n2 = s[S_RS_N2]
     if n1 < 1.0 or n2 < 1.0:
         return
-    di = s[S_RS_SUM + 3] / n2 - s[S_RS_SUM + 1] / n1
+    di = s[S_RS_I2] / n2 - s[S_RS_I1] / n1
     if not di > RS_RISE_MIN * c[C_RS_I]:
         return
-    r = (s[S_RS_SUM + 2] / n2 - s[S_RS_SUM] / n1) / di  # (ID2)
+    r = (s[S_RS_V2] / n2 - s[S_RS_V1] / n1) / di  # (ID2)
     if r > 0.0:
         s[S_ID_RS] = r
 
@@ -452,13 +501,13 @@ def identify(s, c):
     brought no answer or an admittance that is not positive (no voltage reached the motor): the model's gain
     and amplitude stay."""
     for j in range(4):
-        if s[S_ID_SUM + 4 + j] < 1.0:
+        if s[S_ID_N_D + j] < 1.0:
             return
-    v = 0.5 * c[C_INJ_V_MAX]  # the lower amplitude (``identification_amplitude``)
-    a_d = s[S_ID_SUM] / s[S_ID_SUM + 4]
-    a_q = s[S_ID_SUM + 2] / s[S_ID_SUM + 6]
-    y_d = 2.0 * s[S_ID_SUM + 1] / s[S_ID_SUM + 5] - a_d  # (ID1)
-    y_q = 2.0 * s[S_ID_SUM + 3] / s[S_ID_SUM + 7] - a_q
+    v = identification_amplitude(c, 0)  # the lower amplitude
+    a_d = s[S_ID_A_D] / s[S_ID_N_D]
+    a_q = s[S_ID_A_Q] / s[S_ID_N_Q]
+    y_d = 2.0 * s[S_ID_A_D2] / s[S_ID_N_D2] - a_d  # (ID1)
+    y_q = 2.0 * s[S_ID_A_Q2] / s[S_ID_N_Q2] - a_q
     # the found axis off the d axis by e: the d admittances read Y_s +- Y_x cos 2e and the cross ones +-Y_x sin 2e (I1);
     # the saliency from both, whatever e (ID5)
     b_v, var_v, b_y, var_y = cross_admittance(s, c)
@@ -469,10 +518,10 @@ def identify(s, c):
         return
     if s[S_ID_DONE] == 0.0:  # the enable's answers, all on this acquisition's axis: the tracking observer put on the
         # axis they give (their 240 ms against the acquisition's 80), and the polarity test's frame with it (ID5)
-        seat_tracker(s, wrap_angle(s[S_TRK] + e), 0.0, 0.0)
-        s[S_POL_AXIS] = s[S_TRK]
-    s[S_ID_Y] = y_d
-    s[S_ID_Y + 1] = y_q
+        seat_tracker(s, wrap_angle(s[S_TRK_THETA] + e), 0.0, 0.0)
+        s[S_POL_AXIS] = s[S_TRK_THETA]
+    s[S_ID_Y_D] = y_d
+    s[S_ID_Y_Q] = y_q
     identify_noise(s)
     limit = c[C_SALIENCY_MIN] if s[S_ID_DONE] == 0.0 else c[C_SALIENCY_TRUST]  # a blind unit's pooled answers
     s[S_ID_BLIND] = 1.0 if y_d < limit * y_q else 0.0
@@ -482,8 +531,8 @@ def identify(s, c):
         s[S_INJ_VA] = v_a
         e_d = y_d - v * (y_d - a_d) / v_a  # a(V_a) of (ID1)
         e_q = y_q - v * (y_q - a_q) / v_a
-        s[S_ID_YE] = e_d
-        s[S_ID_YE + 1] = e_q
+        s[S_ID_YE_D] = e_d
+        s[S_ID_YE_Q] = e_q
         if e_d > e_q:
             s[S_INJ_YX] = 0.5 * (e_d - e_q)
             s[S_ID_ACC] = angle_accuracy(c, s[S_ID_NOISE_F], v_a, s[S_INJ_YX])
@@ -500,12 +549,12 @@ def cross_admittance(s, c):
     q axis (90 deg on) the cross answer is -Y_x sin 2e, so (b_d - b_q) / 2."""
     b_v = b_y = var_v = var_y = 0.0
     for j in range(4):
-        n = s[S_ID_SUM + 4 + j]
+        n = s[S_ID_N_D + j]
         scale = 2.0 * c[C_INJ_M] * c[C_DT] * identification_amplitude(c, j)  # 2 m dt V: the answer's [A] per [1/H]
-        b = s[S_ID_NOISE + j] / n / scale
+        b = s[S_ID_D_SUM + j] / n / scale
         var = 0.0
         if n > 1.0:
-            var = max(s[S_ID_NOISE + 4 + j] - s[S_ID_NOISE + j] * s[S_ID_NOISE + j] / n, 0.0) / ((n - 1.0) * n)
+            var = max(s[S_ID_D_SQ + j] - s[S_ID_D_SUM + j] * s[S_ID_D_SUM + j] / n, 0.0) / ((n - 1.0) * n)
             var /= scale * scale
         sign = 1.0 if j < 2 else -1.0  # (b_d - b_q) / 2
         if j % 2 == 0:  # the lower amplitude: its own, and -1 of it in (ID1)
@@ -542,9 +591,9 @@ def identify_noise(s):
     ss = 0.0
     dof = 0.0
     for j in range(4):
-        n = s[S_ID_SUM + 4 + j]
+        n = s[S_ID_N_D + j]
         if n > 1.0:
-            ss += s[S_ID_NOISE + 4 + j] - s[S_ID_NOISE + j] * s[S_ID_NOISE + j] / n
+            ss += s[S_ID_D_SQ + j] - s[S_ID_D_SUM + j] * s[S_ID_D_SUM + j] / n
             dof += n - 1.0
     if dof > 0.0:
         s[S_ID_NOISE_F] = math.sqrt(max(ss, 0.0) / dof / 8.0)
@@ -567,7 +616,7 @@ def angle_accuracy(c, sigma, v_a, y_x):
     if not (y_x > 0.0 and v_a > 0.0):
         return 0.0
     m_dt = c[C_INJ_M] * c[C_DT]
-    a = c[C_TRK_L] / 3.0
+    a = c[C_TRK_L1] / 3.0
     return math.sqrt(4.0 / 3.0) * sigma / (v_a * y_x) * math.sqrt(TRACK_NOISE * a / m_dt)
 
 
@@ -576,7 +625,7 @@ def identification_amplitude(c, j):
     """The square wave's amplitude [V] in the identification's phase ``PHASE_ID_D + j``: half ``C_INJ_V_MAX`` and all
     of it on the found d axis, then on the q axis (ID1: the largest the voltage limit leaves, so that the dead
     time's voltage and the sensors' noise take the least share)."""
-    return c[C_INJ_V_MAX] * (1.0 if j % 2 == 1 else 0.5)
+    return c[C_INJ_V_MAX] * (1.0 if j % 2 == 1 else ID_LOWER_SHARE)
 
 
 @kernel()
@@ -592,8 +641,8 @@ def axis_cosine(s, adm):
     amplitude and the identified admittances as it sees them (``S_ID_YE``): (I1) adm = Y_s + Y_x cos 2e, clipped
     to +-1; 1 where the motor is not identified. Independent of the error signal sin 2e: a tracking observer
     pulled 45 deg or more off the axis shows cos 2e <= 0 whatever its own error signal says."""
-    y_d = s[S_ID_YE]
-    y_q = s[S_ID_YE + 1]
+    y_d = s[S_ID_YE_D]
+    y_q = s[S_ID_YE_Q]
     if not (y_d > y_q and y_q > 0.0):
         return 1.0
     x = (adm - 0.5 * (y_d + y_q)) / (0.5 * (y_d - y_q))
@@ -654,7 +703,7 @@ def cannot_see(s, c):
     by its saliency alone (``C_SALIENCY_MIN``) with an accurate angle is still found at every stop (``park_car``).
     Only on a car the brake held through the identification (``S_HOLD``: the hill hold at enable, a parked stop):
     a rotor rolling under it turns the axes it measures on and reads no saliency whatever the motor's."""
-    if not (s[S_ID_Y] > 0.0 and s[S_ID_Y + 1] > 0.0 and s[S_ID_BLIND] != 0.0 and s[S_HOLD] > 0.0):
+    if not (s[S_ID_Y_D] > 0.0 and s[S_ID_Y_Q] > 0.0 and s[S_ID_BLIND] != 0.0 and s[S_HOLD] > 0.0):
         return False
     return not (0.0 < s[S_ID_ACC] <= c[C_SEE_MAX])
 
@@ -667,10 +716,10 @@ def detect_polarity(s, c):
     _, _, done = polarity_schedule(c, s[S_MODE_TIME])
     if done == 0.0:
         return EV_NONE
-    if s[S_POL + 2] < 1.0 or s[S_POL + 3] < 1.0:
+    if s[S_POL_N_POS] < 1.0 or s[S_POL_N_NEG] < 1.0:
         return EV_POLARITY_UNRESOLVED
-    y_pos = s[S_POL] / s[S_POL + 2]
-    y_neg = s[S_POL + 1] / s[S_POL + 3]
+    y_pos = s[S_POL_Y_POS] / s[S_POL_N_POS]
+    y_neg = s[S_POL_Y_NEG] / s[S_POL_N_NEG]
     contrast = (y_pos - y_neg) / (0.5 * (abs(y_pos) + abs(y_neg)) + 1e-300)
     if contrast >= c[C_POL_CONTRAST]:
         return EV_POLARITY_RIGHT
@@ -685,7 +734,19 @@ def axis_lost(s, c):
     ``S_AXIS_F``): cos 2e below ``C_AXIS_COS``, in FOC on the injection once the motor is identified. It does not
     judge the observer by its own error signal, whose gain a mismatched motor changes and which points back to
     the axis only within 45 deg."""
-    return s[S_MODE] == MODE_INJECTION and s[S_ID_Y] > 0.0 and s[S_AXIS_F] < c[C_AXIS_COS]
+    return s[S_MODE] == MODE_INJECTION and s[S_ID_Y_D] > 0.0 and s[S_AXIS_F] < c[C_AXIS_COS]
+
+
+@kernel()
+def timed_out(s, c, timer, trouble, time):
+    """A loss detector's timer (the slot ``timer``): it counts the time ``trouble`` has held (0 where it does not);
+    True, the timer back at 0, once it has counted ``time`` [s] less ``TIMER_SLACK`` of a period (the rounding of
+    the sum of dt's)."""
+    s[timer] = s[timer] + c[C_DT] if trouble else 0.0
+    if s[timer] < time - TIMER_SLACK * c[C_DT]:
+        return False
+    s[timer] = 0.0
+    return True
 
 
 @kernel()
@@ -701,10 +762,8 @@ def detect_injection_lost(s, c):
     w = s[S_BLEND]
     far = abs(s[S_INJ_ERR_F]) > c[C_INJ_LOS_ANGLE] or axis_lost(s, c)
     apart = 0.0 < w <= DISAGREE_BLEND and abs(s[S_DISAGREE_F]) > c[C_INJ_LOS_ANGLE]
-    s[S_INJ_LOS_T] = s[S_INJ_LOS_T] + c[C_DT] if (far or apart) else 0.0
-    if s[S_INJ_LOS_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
+    if not timed_out(s, c, S_INJ_LOS_T, far or apart, c[C_INJ_LOS_TIME]):
         return EV_NONE
-    s[S_INJ_LOS_T] = 0.0
     if far:
         return EV_INJECTION_LOST
     return EV_FLIPPED if abs(s[S_DISAGREE_F]) > FLIP_ANGLE else EV_DISAGREE
@@ -717,12 +776,8 @@ def detect_ekf_lost(s, c):
     ``S_EKF_LOS_T``): its angle or speed has left the rotor's. A motor that is not the model's (hot: R_s up,
     psi down) leaves a share of the back-EMF unexplained that grows with the speed; an EKF that has lost the
     angle leaves more than all of it."""
-    bound = c[C_EKF_LOS_I] + c[C_EKF_LOS_EMF] * abs(s[S_X + 2])
-    s[S_EKF_LOS_T] = s[S_EKF_LOS_T] + c[C_DT] if s[S_RESID_F] > bound else 0.0
-    if s[S_EKF_LOS_T] < c[C_EKF_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
-        return EV_NONE
-    s[S_EKF_LOS_T] = 0.0
-    return EV_EKF_LOST
+    bound = c[C_EKF_LOS_I] + c[C_EKF_LOS_EMF] * abs(s[S_OMEGA_HAT])
+    return EV_EKF_LOST if timed_out(s, c, S_EKF_LOS_T, s[S_RESID_F] > bound, c[C_EKF_LOS_TIME]) else EV_NONE
 
 
 @kernel()
@@ -754,11 +809,7 @@ def detect_emf_lost(s, c):
         s[S_EMF_T] = 0.0
         return EV_NONE
     bound = c[C_EMF_SPEED] + c[C_EMF_REL] * s[S_EMF_SEEN]
-    s[S_EMF_T] = s[S_EMF_T] + c[C_DT] if s[S_EMF_F] > bound else 0.0
-    if s[S_EMF_T] < c[C_INJ_LOS_TIME] - 0.5 * c[C_DT]:  # (half a period: the sum of dt's rounding)
-        return EV_NONE
-    s[S_EMF_T] = 0.0
-    return EV_EMF_LOST
+    return EV_EMF_LOST if timed_out(s, c, S_EMF_T, s[S_EMF_F] > bound, c[C_INJ_LOS_TIME]) else EV_NONE
 
 
 @kernel()
@@ -810,7 +861,7 @@ def detect(s, c, mode, omega_ref):
             ev = detect_blind_stop(s, c, omega_ref)
         return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_OMEGA_CTRL])
     ev = detect_ekf_lost(s, c)
-    return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_X + 2])
+    return ev if ev != EV_NONE else detect_speed(s, c, mode, s[S_OMEGA_HAT])
 
 
 # -- entry actions -------------------------------------------------------------------------------
@@ -819,8 +870,8 @@ def clear_detectors(s):
     """The detectors' timers and filters from zero."""
     s[S_INJ_ERR_F] = 0.0
     s[S_DISAGREE_F] = 0.0
-    s[S_DISAGREE_V] = 1.0
-    s[S_DISAGREE_V + 1] = 0.0
+    s[S_DISAGREE_COS] = 1.0
+    s[S_DISAGREE_SIN] = 0.0
     s[S_AXIS_F] = 1.0
     s[S_INJ_LOS_T] = 0.0
     s[S_EKF_LOS_T] = 0.0
@@ -849,7 +900,7 @@ def enter_acquire(s, c, i_alpha, i_beta):
     s[S_I_DL] = 0.0
     s[S_I_QL] = 0.0
     s[S_W_INT] = 0.0
-    seat_tracker(s, s[S_TRK], 0.0, 0.0)
+    seat_tracker(s, s[S_TRK_THETA], 0.0, 0.0)
     s[S_BLEND] = 0.0
     clear_detectors(s)
 
@@ -866,12 +917,12 @@ def polarity_frame(s, c):
     """The polarity test's frame [rad]: held while the tracking observer stays within ``C_POL_BAND`` of it (a
     standing rotor: the observer's noise is not followed, so the d current leaks no torque from it), else
     moved to that far behind the observer (a rotor that turns)."""
-    d = wrap_angle(s[S_TRK] - s[S_POL_AXIS])
+    d = wrap_angle(s[S_TRK_THETA] - s[S_POL_AXIS])
     band = c[C_POL_BAND]
     if d > band:
-        s[S_POL_AXIS] = wrap_angle(s[S_TRK] - band)
+        s[S_POL_AXIS] = wrap_angle(s[S_TRK_THETA] - band)
     elif d < -band:
-        s[S_POL_AXIS] = wrap_angle(s[S_TRK] + band)
+        s[S_POL_AXIS] = wrap_angle(s[S_TRK_THETA] + band)
     return s[S_POL_AXIS]
 
 
@@ -889,7 +940,7 @@ def enter_torque(s, c):
 @kernel()
 def flip_frame(s):
     """The tracking observer's angle turned by pi; what the current PIs hold in its frame changes sign."""
-    s[S_TRK] = wrap_angle(s[S_TRK] + math.pi)
+    s[S_TRK_THETA] = wrap_angle(s[S_TRK_THETA] + math.pi)
     s[S_INT_D] = -s[S_INT_D]
     s[S_INT_Q] = -s[S_INT_Q]
     s[S_I_DL] = -s[S_I_DL]
@@ -897,29 +948,27 @@ def flip_frame(s):
 
 
 @kernel()
-def restart_ekf_on(s, c, theta, omega, t_l, p0):
-    """The EKF put on an angle, speed and load, its covariance diagonal from ``p0`` (a ``C_*`` slot of 5
-    entries); its currents kept."""
-    s[S_X + 2] = omega
-    s[S_X + 3] = theta
-    s[S_X + 4] = t_l
-    for k in range(25):
-        s[S_P + k] = 0.0
-    for k in range(5):
-        s[S_P + 6 * k] = c[p0 + k]
-
-
-@kernel()
 def trust_injection(s, c):
     """The EKF put on the tracking observer (its angle less the cross-saturation's offset), with the
     restart's covariance (``C_P0_ALIGNED``)."""
-    restart_ekf_on(s, c, wrap_angle(s[S_TRK] - s[S_CROSS]), s[S_TRK + 1], s[S_TRK + 2], C_P0_ALIGNED)
+    restart_ekf_on(s, c, wrap_angle(s[S_TRK_THETA] - s[S_CROSS]), s[S_TRK_OMEGA], s[S_TRK_TL], C_P0_ALIGNED)
+
+
+@kernel()
+def feed_ekf(s, phi):
+    """Below the blend (the EKF's weight 0, ``MODE_INJECTION``) the EKF is fed by the injection: its speed, angle and
+    load put on the tracking observer's (the angle less the cross-saturation's offset ``phi`` [rad]) every period, so
+    that it carries the injection's estimate, from which its own back-EMF takes over as the weight rises (``S_X``'s
+    second job, declared with it in the layout); its currents are its own."""
+    s[S_OMEGA_HAT] = s[S_TRK_OMEGA]
+    s[S_THETA_HAT] = wrap_angle(s[S_TRK_THETA] - phi)
+    s[S_TL_HAT] = s[S_TRK_TL]
 
 
 @kernel()
 def trust_ekf(s):
     """The tracking observer put on the EKF (its angle plus the cross-saturation's offset)."""
-    seat_tracker(s, wrap_angle(s[S_X + 3] + s[S_CROSS]), s[S_X + 2], s[S_X + 4])
+    seat_tracker(s, wrap_angle(s[S_THETA_HAT] + s[S_CROSS]), s[S_OMEGA_HAT], s[S_TL_HAT])
 
 
 @kernel()
@@ -934,16 +983,8 @@ def reseat(s, c):
 def restart_ekf_search(s, c):
     """The EKF's covariance back to an unknown start's (``C_P0``): it searches the rotor again from its
     back-EMF, its estimate kept as the start."""
-    restart_ekf_on(s, c, s[S_X + 3], s[S_X + 2], s[S_X + 4], C_P0)
+    restart_ekf_on(s, c, s[S_THETA_HAT], s[S_OMEGA_HAT], s[S_TL_HAT], C_P0)
     s[S_RESID_F] = 0.0
-
-
-@kernel()
-def begin_episode_now(s, c):
-    """A loss-of-synchronism episode begins (or the one running goes on, its age kept)."""
-    s[S_INSYNC] = 0.0
-    if s[S_EPISODE] == 0.0:
-        s[S_EPISODE] = c[C_DT]
 
 
 @kernel()
@@ -968,7 +1009,7 @@ def fall_back_to_if(s, c):
     the wide design's corner) would read to the alignment as a rotor pushed off its vector (``align_slip``) and
     put the I-f vector at the current limit; the identification's outputs stay, and a latched fault stays latched."""
     latched = s[S_FAULT] == FAULT_LATCHED
-    restart_ekf_on(s, c, s[S_X + 3], 0.0, 0.0, C_P0)
+    restart_ekf_on(s, c, s[S_THETA_HAT], 0.0, 0.0, C_P0)
     s[S_IF_FALLBACK] = 1.0
     s[S_PARKED] = 0.0
     s[S_INT_D] = 0.0
@@ -1005,25 +1046,25 @@ def enter(s, c, action, i_alpha, i_beta):
         trust_ekf(s)
         clear_detectors(s)
     elif action == A_REACQUIRE:
-        begin_episode_now(s, c)
+        begin_episode(s, c)
         enter_acquire(s, c, i_alpha, i_beta)
     elif action == A_RESEAT:
-        begin_episode_now(s, c)
+        begin_episode(s, c)
         reseat(s, c)
         clear_detectors(s)
     elif action == A_RESTART_EKF:
-        begin_episode_now(s, c)
+        begin_episode(s, c)
         restart_ekf_search(s, c)
         clear_detectors(s)
     elif action == A_PARK:
         park_car(s, c, i_alpha, i_beta)
     elif action == A_REACQUIRE_PARKED:
-        begin_episode_now(s, c)
+        begin_episode(s, c)
         park_car(s, c, i_alpha, i_beta)
     elif action == A_IF_FALLBACK:
         fall_back_to_if(s, c)
     elif action == A_REPOLARIZE:
-        begin_episode_now(s, c)
+        begin_episode(s, c)
         flip_frame(s)
         clear_detectors(s)
 
@@ -1051,22 +1092,22 @@ def collect(s, c, mode, t, phase, answer, i_d):
     dt = c[C_DT]
     if mode == MODE_ACQUIRE:
         if answer and phase < 2:
-            s[S_ACQ + phase] += s[S_INJ_ERR]
-            s[S_ACQ + 2 + phase] += 1.0
+            s[S_ACQ_SIN0 + phase] += s[S_INJ_ERR]
+            s[S_ACQ_N0 + phase] += 1.0
         starts = phase_starts(s, c, t, phase)
         if (phase == PHASE_RS1 or phase == PHASE_RS2) and rs_level_time(s, c, t) >= 0.5 * c[C_RS_TIME]:
             j = phase - PHASE_RS1  # the level's second half: the current settled
-            s[S_RS_SUM + 2 * j] += s[S_V_D]  # the last period's d command and the d current it was computed on
-            s[S_RS_SUM + 2 * j + 1] += s[S_I_D]
-            s[S_RS_SUM + 4 + j] += 1.0
+            s[S_RS_V1 + 2 * j] += s[S_V_D]  # the last period's d command and the d current it was computed on
+            s[S_RS_I1 + 2 * j] += s[S_I_D]
+            s[S_RS_N1 + j] += 1.0
         if answer and PHASE_ID_D <= phase <= PHASE_ID_Q2 and not starts:
             j = phase - PHASE_ID_D
-            s[S_ID_SUM + j] += s[S_INJ_ADM]
-            s[S_ID_SUM + 4 + j] += 1.0
+            s[S_ID_A_D + j] += s[S_INJ_ADM]
+            s[S_ID_N_D + j] += 1.0
             # the answer's q second difference [A], its sign the half-wave's (``identify_noise``)
             x = s[S_INJ_ERR] * error_gain(s, c) * 2.0 * c[C_INJ_M] * dt * identification_amplitude(c, j)
-            s[S_ID_NOISE + j] += x
-            s[S_ID_NOISE + 4 + j] += x * x
+            s[S_ID_D_SUM + j] += x
+            s[S_ID_D_SQ + j] += x * x
         if starts and PHASE_ID_D2 <= phase <= PHASE_RS1 and identification_time(s, c) > 0.0:
             s[S_INJ_SKIP] = SKIP_HALF_WAVES  # the amplitude steps, the axis jumps by 90 deg (to q, back to d)
         if starts and phase == PHASE_OVER and (s[S_ID_DONE] == 0.0 or refining(s)):
@@ -1084,25 +1125,19 @@ def collect(s, c, mode, t, phase, answer, i_d):
             s[S_INJ_SKIP] = SKIP_HALF_WAVES
         elif starts and phase == PHASE_SETTLE:  # the axis found: sin 2e and -cos 2e
             e = 0.0
-            if s[S_ACQ + 2] > 0.0 and s[S_ACQ + 3] > 0.0:
-                e = 0.5 * math.atan2(s[S_ACQ] / s[S_ACQ + 2], -s[S_ACQ + 1] / s[S_ACQ + 3])
-            seat_tracker(s, wrap_angle(s[S_TRK] + e), 0.0, 0.0)
-            s[S_POL_AXIS] = s[S_TRK]  # the polarity test's frame: the acquisition's average, not the settling's
+            if s[S_ACQ_N0] > 0.0 and s[S_ACQ_N45] > 0.0:
+                e = 0.5 * math.atan2(s[S_ACQ_SIN0] / s[S_ACQ_N0], -s[S_ACQ_SIN45] / s[S_ACQ_N45])
+            seat_tracker(s, wrap_angle(s[S_TRK_THETA] + e), 0.0, 0.0)
+            s[S_POL_AXIS] = s[S_TRK_THETA]  # the polarity test's frame: the acquisition's average, not the settling's
             s[S_INJ_SKIP] = SKIP_HALF_WAVES
     elif mode == MODE_POLARITY and answer:
         _, sign, _ = polarity_schedule(c, t)
         if sign > 0.0:
-            s[S_POL] += s[S_INJ_ADM]
-            s[S_POL + 2] += 1.0
+            s[S_POL_Y_POS] += s[S_INJ_ADM]
+            s[S_POL_N_POS] += 1.0
         elif sign < 0.0:
-            s[S_POL + 1] += s[S_INJ_ADM]
-            s[S_POL + 3] += 1.0
-
-
-@kernel()
-def model_torque(c, i_d, i_q):
-    """Eq 12 with the controller's motor model, times k_dq [N m]."""
-    return c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
+            s[S_POL_Y_NEG] += s[S_INJ_ADM]
+            s[S_POL_N_NEG] += 1.0
 
 
 @kernel()
@@ -1132,13 +1167,13 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
        on the EKF FOC on its angle and speed; the square wave added on its axis.
     """
     dt = c[C_DT]
-    i_alpha -= s[S_ID_OFS]  # the sensors' offsets measured at enable (0 before)
-    i_beta -= s[S_ID_OFS + 1]
+    i_alpha -= s[S_ID_OFS_ALPHA]  # the sensors' offsets measured at enable (0 before)
+    i_beta -= s[S_ID_OFS_BETA]
     i_alpha, i_beta = balance_sensors(s, c, i_alpha, i_beta)  # (SG1-SG2)
     if s[S_IF_FALLBACK] != 0.0:  # a unit that cannot see its motor's axis: the I-f strategy (``fall_back_to_if``)
         if s[S_FAULT] == FAULT_LATCHED:  # the safe state: the friction brake holds the car, as at enable
             s[S_HOLD] = c[C_HOLD_BRAKE]
-        elif s[S_HOLD] > 0.0 and (s[S_MODE] != MODE_ALIGN or s[S_CLOCK] * dt >= c[C_T_RAMP]):
+        elif s[S_HOLD] > 0.0 and (s[S_MODE] != MODE_ALIGN or s[S_ALIGN_CLOCK] * dt >= c[C_T_RAMP]):
             s[S_HOLD] = 0.0  # the brake let go once the alignment's vector has its current
         out = sensorless_step(s, c, i_alpha, i_beta, omega_ref)
         if s[S_FAULT] != FAULT_LATCHED:
@@ -1153,16 +1188,16 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     if mode == MODE_EKF:
         innovation = ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
     else:  # the last period had the square wave: the EKF on the fundamental, as a back-EMF observer (INJ5)
-        innovation = ekf5ab_period_on(s, c, f_alpha, f_beta, s[S_V_FUND], s[S_V_FUND + 1])
+        innovation = ekf5ab_period_on(s, c, f_alpha, f_beta, s[S_V_FUND_ALPHA], s[S_V_FUND_BETA])
     s[S_RESID_F] += c[C_LOS_FILTER] * (innovation - s[S_RESID_F])
     # the injection's answer on the axis of the last period, the tracking observer
     demodulate(s, c, i_alpha, i_beta, s[S_INJ_AXIS])
-    f_d, f_q = park(f_alpha, f_beta, s[S_TRK])
+    f_d, f_q = park(f_alpha, f_beta, s[S_TRK_THETA])
     injecting = mode != MODE_EKF
     phase = acquisition_phase(s, c, t) if mode == MODE_ACQUIRE else PHASE_OVER
     answer = injecting and s[S_INJ_NEW] != 0.0
     share = injection_share(s[S_BLEND]) if mode == MODE_INJECTION else 1.0
-    e_ekf = wrap_angle(s[S_X + 3] + s[S_CROSS] - s[S_TRK]) if share < 1.0 else 0.0
+    e_ekf = wrap_angle(s[S_THETA_HAT] + s[S_CROSS] - s[S_TRK_THETA]) if share < 1.0 else 0.0
     # the answers on the found axis correct the tracking observer; through the identification and the R_s test it is
     # held where the settling left it, at rest (no torque is given, the car is held: ``hold_brake``), so that the
     # axes measured are the found ones (an observer left to run on a speed the settling had not yet taken out, or
@@ -1174,31 +1209,31 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     held = held or (mode == MODE_POLARITY and parks(s, c) and s[S_HOLD] > 0.0)
     on_axis = answer and phase >= PHASE_SETTLE and not held
     if held:
-        seat_tracker(s, s[S_TRK], 0.0, 0.0)
+        seat_tracker(s, s[S_TRK_THETA], 0.0, 0.0)
     else:
         track(s, c, model_torque(c, f_d, f_q), share, on_axis, e_ekf)
     if on_axis and share > 0.0:
         e_inj = angle_error(s[S_INJ_ERR])
         gain = c[C_LOS_FILTER] * c[C_INJ_M]
         s[S_INJ_ERR_F] += gain * (e_inj - s[S_INJ_ERR_F])
-        s[S_DISAGREE_V] += gain * (math.cos(e_inj - e_ekf) - s[S_DISAGREE_V])
-        s[S_DISAGREE_V + 1] += gain * (math.sin(e_inj - e_ekf) - s[S_DISAGREE_V + 1])
-        s[S_DISAGREE_F] = math.atan2(s[S_DISAGREE_V + 1], s[S_DISAGREE_V])
+        s[S_DISAGREE_COS] += gain * (math.cos(e_inj - e_ekf) - s[S_DISAGREE_COS])
+        s[S_DISAGREE_SIN] += gain * (math.sin(e_inj - e_ekf) - s[S_DISAGREE_SIN])
+        s[S_DISAGREE_F] = math.atan2(s[S_DISAGREE_SIN], s[S_DISAGREE_COS])
         if mode == MODE_INJECTION and share == 1.0:  # (at the full amplitude, not in the polarity test: its d
             # current saturates the d axis)
             s[S_AXIS_F] += gain * (axis_cosine(s, s[S_INJ_ADM]) - s[S_AXIS_F])
     collect(s, c, mode, t, phase, answer, f_d)
     if phase == PHASE_OFFSET:  # no voltage, no current: the sensors' mean is their offset
-        s[S_OFS_SUM] += i_alpha
-        s[S_OFS_SUM + 1] += i_beta
-        s[S_OFS_SUM + 2] += 1.0
-    elif mode == MODE_ACQUIRE and s[S_OFS_SUM + 2] > 0.0:  # the window over: subtracted from the next period on
-        s[S_ID_OFS] = s[S_OFS_SUM] / s[S_OFS_SUM + 2]
-        s[S_ID_OFS + 1] = s[S_OFS_SUM + 1] / s[S_OFS_SUM + 2]
-        s[S_OFS_SUM + 2] = 0.0
+        s[S_OFS_ALPHA] += i_alpha
+        s[S_OFS_BETA] += i_beta
+        s[S_OFS_N] += 1.0
+    elif mode == MODE_ACQUIRE and s[S_OFS_N] > 0.0:  # the window over: subtracted from the next period on
+        s[S_ID_OFS_ALPHA] = s[S_OFS_ALPHA] / s[S_OFS_N]
+        s[S_ID_OFS_BETA] = s[S_OFS_BETA] / s[S_OFS_N]
+        s[S_OFS_N] = 0.0
     # the event and the transition
     event = detect(s, c, mode, omega_ref)
-    s[S_EVENT] = event
+    s[S_EVENT] = float(event)  # (the state holds the code as its float)
     if event != EV_NONE:
         mode = transition(s, c, mode, event, i_alpha, i_beta)
         t = s[S_MODE_TIME]
@@ -1209,16 +1244,15 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         # the vector it takes as applied the one the inverter applies (with the actuation delay the last command,
         # the square wave in it; then this period's, none): fed the square wave's 90 V that never came, or the
         # fundamental against the ripple, its speed ran to 2000 rad/s from the unknown start's covariance
-        s[S_X], s[S_X + 1] = park(i_alpha, i_beta, s[S_X + 3])
+        s[S_I_D_HAT], s[S_I_Q_HAT] = park(i_alpha, i_beta, s[S_THETA_HAT])
         if c[C_DELAYED] != 0.0:
-            s[S_U_PREV_0] = s[S_V_ALPHA]
-            s[S_U_PREV_1] = s[S_V_BETA]
-        for k in range(2):
-            s[S_V_OUT_ALPHA + k] = 0.0
-            s[S_V_ALPHA + k] = 0.0
-            s[S_V_FUND + k] = 0.0
-        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode,
-                FAULT_NONE, 0.0, 0.0)
+            s[S_U_PREV_ALPHA] = s[S_V_ALPHA]
+            s[S_U_PREV_BETA] = s[S_V_BETA]
+        s[S_V_OUT_ALPHA] = s[S_V_OUT_BETA] = 0.0
+        s[S_V_ALPHA] = s[S_V_BETA] = 0.0
+        s[S_V_FUND_ALPHA] = s[S_V_FUND_BETA] = 0.0
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, s[S_I_D_HAT], s[S_I_Q_HAT], s[S_OMEGA_HAT], s[S_THETA_HAT],
+                s[S_TL_HAT], mode, FAULT_NONE, 0.0, 0.0)
     age_episode(s, c, s[S_INJ_LOS_T] > 0.0 or s[S_EKF_LOS_T] > 0.0 or s[S_EMF_T] > 0.0)
     if s[S_FAULT] == FAULT_LATCHED:  # the safe state: stop and hold
         omega_ref = 0.0
@@ -1229,7 +1263,7 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     amplitude = injection_amplitude(s, c)
     i_qref = 0.0
     if mode == MODE_ACQUIRE or mode == MODE_POLARITY:  # no torque: the current PIs alone, frame at rest
-        theta = s[S_TRK]
+        theta = s[S_TRK_THETA]
         omega_ctrl = 0.0
         i_dref = 0.0
         if mode == MODE_ACQUIRE and acquisition_phase(s, c, t) == PHASE_AXIS45:
@@ -1243,13 +1277,13 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
             # observer's noise leaks no torque)
             i_dref = c[C_RS_I] * (0.5 if acquisition_phase(s, c, t) == PHASE_RS1 else 1.0)
             theta = polarity_frame(s, c)
-            offset = wrap_angle(s[S_TRK] - theta)
+            offset = wrap_angle(s[S_TRK_THETA] - theta)
         elif mode == MODE_ACQUIRE and acquisition_phase(s, c, t) == PHASE_OFFSET:
             amplitude = 0.0  # the inverter's gates off (below: no voltage, no compensation)
         elif mode == MODE_POLARITY:
             i_dref, _, _ = polarity_schedule(c, t)
             theta = polarity_frame(s, c)
-            offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the tracking observer's axis
+            offset = wrap_angle(s[S_TRK_THETA] - theta)  # the square wave stays on the tracking observer's axis
         s[S_CROSS] = 0.0
         i_d, i_q = park(f_alpha, f_beta, theta)
         if amplitude == 0.0:
@@ -1261,20 +1295,18 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         s[S_BLEND] = w
         phi = cross_offset(c, f_q)  # the injection's axis less the d axis (f_q: in the injection's frame)
         s[S_CROSS] = phi
-        if w == 0.0:  # the EKF fed by the injection: on the tracking observer's angle, speed and load
-            s[S_X + 2] = s[S_TRK + 1]
-            s[S_X + 3] = wrap_angle(s[S_TRK] - phi)
-            s[S_X + 4] = s[S_TRK + 2]
-        theta, omega_ctrl = blended_frame(s, s[S_X + 3], s[S_X + 2], phi)
-        offset = wrap_angle(s[S_TRK] - theta)  # the square wave stays on the injection's axis
+        if w == 0.0:
+            feed_ekf(s, phi)
+        theta, omega_ctrl = blended_frame(s, s[S_THETA_HAT], s[S_OMEGA_HAT], phi)
+        offset = wrap_angle(s[S_TRK_THETA] - theta)  # the square wave stays on the injection's axis
         amplitude = injection_amplitude(s, c) * injection_share(w)
         i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl, 1.0 - w)  # within the injection's limit
         i_d, i_q = park(f_alpha, f_beta, theta)
         v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
     else:  # the EKF alone, the tracking observer kept on it
         s[S_BLEND] = 1.0
-        theta = s[S_X + 3]
-        omega_ctrl = s[S_X + 2]
+        theta = s[S_THETA_HAT]
+        omega_ctrl = s[S_OMEGA_HAT]
         i_d, i_q = park(i_alpha, i_beta, theta)
         s[S_CROSS] = cross_offset(c, i_q)
         trust_ekf(s)
@@ -1282,8 +1314,8 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
         i_dref, i_qref = foc_references(s, c, omega_ref, omega_ctrl, 0.0)
         v_d, v_q = current_step(s, c, i_dref, i_qref, i_d, i_q, omega_ctrl)  # (15)-(20)
     v_alpha, v_beta = modulate(c, v_d, v_q, theta, omega_ctrl, False)
-    s[S_V_FUND] = v_alpha  # without the square wave: the EKF's input in the next period while injecting
-    s[S_V_FUND + 1] = v_beta
+    s[S_V_FUND_ALPHA] = v_alpha  # without the square wave: the EKF's input in the next period while injecting
+    s[S_V_FUND_BETA] = v_beta
     axis = theta + offset + c[C_ADVANCE] * omega_ctrl
     s[S_INJ_AXIS] = axis
     if mode != MODE_EKF:  # the square wave on its axis
@@ -1303,4 +1335,4 @@ def injection_unit_step(s, c, i_alpha, i_beta, omega_ref):
     if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6), on the found axis in every mode
         adapt_period(s, c, i_alpha, i_beta, theta, omega_ctrl, 1.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
-            s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta, omega_ctrl)
+            s[S_I_D_HAT], s[S_I_Q_HAT], s[S_OMEGA_HAT], s[S_THETA_HAT], s[S_TL_HAT], mode, fault, theta, omega_ctrl)

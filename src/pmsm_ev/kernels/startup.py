@@ -94,17 +94,19 @@ from .layout import (
     MODE_EKF,
     MODE_IF,
     S_AGREE,
+    S_ALIGN_CLOCK,
     S_ALIGN_SPEED,
     S_ANCHOR,
     S_ANCHOR_REL,
     S_ANCHOR_TL,
     S_ANCHORED,
-    S_CLOCK,
     S_EPISODE,
     S_FAULT,
     S_GUARD,
+    S_I_D_HAT,
     S_I_DL,
     S_I_MAG,
+    S_I_Q_HAT,
     S_I_QL,
     S_I_TGT,
     S_IF_DUE,
@@ -114,6 +116,7 @@ from .layout import (
     S_LOS,
     S_MODE,
     S_OMEGA_CTRL,
+    S_OMEGA_HAT,
     S_OMEGA_IF,
     S_P,
     S_PHI,
@@ -123,14 +126,15 @@ from .layout import (
     S_STILL_OUT,
     S_T_FF,
     S_THETA_CTRL,
+    S_THETA_HAT,
     S_THETA_PRIOR,
+    S_TL_HAT,
     S_TRUST_OFF,
     S_TRUST_TL,
     S_V_ALPHA,
     S_V_BETA,
     S_V_Q,
     S_W_INT,
-    S_X,
 )
 from .machine import (
     A_ANCHOR,
@@ -168,11 +172,11 @@ from .machine import (
 from .observers import adapt_psi, ekf5ab_period
 from .transforms import park, wrap_angle
 
-#: the I-f strategy's state slots, zeroed where it starts: at reset (``pmsm_ev.control_unit``) and where a unit with
-#: injection that cannot see its motor's axis takes it for good (``kernels.modes.fall_back_to_if``)
-IF_STATE = (S_MODE, S_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE, S_SLIP, S_GUARD, S_LOS, S_EPISODE, S_INSYNC,
-            S_FAULT, S_THETA_CTRL, S_OMEGA_CTRL, S_ANCHOR, S_ANCHORED, S_ANCHOR_TL, S_STILL_OUT, S_IF_DUE, S_REALIGN,
-            S_TRUST_OFF, S_TRUST_TL, S_ANCHOR_REL, S_RUNAWAY_T, S_ALIGN_SPEED)
+#: the I-f strategy's state slots, zeroed where a unit with injection that cannot see its motor's axis takes it for good
+#: (``kernels.modes.fall_back_to_if``); a reset zeroes them with every slot (their declared reset value)
+IF_STATE = (S_MODE, S_ALIGN_CLOCK, S_PHI, S_I_MAG, S_I_TGT, S_OMEGA_IF, S_AGREE, S_SLIP, S_GUARD, S_LOS, S_EPISODE,
+            S_INSYNC, S_FAULT, S_THETA_CTRL, S_OMEGA_CTRL, S_ANCHOR, S_ANCHORED, S_ANCHOR_TL, S_STILL_OUT, S_IF_DUE,
+            S_REALIGN, S_TRUST_OFF, S_TRUST_TL, S_ANCHOR_REL, S_RUNAWAY_T, S_ALIGN_SPEED)
 
 
 #: the least current [A] the vector's damping gain k / sqrt(i) is taken at (``damping_gain``): the gain, placed for
@@ -238,8 +242,27 @@ def seat_current_pis(s, c, theta, turn, i_dref, i_qref, i_d, i_q, omega_est):
 def trust_rotor(s):
     """Keep the EKF's angle less the I-f vector's (``S_TRUST_OFF``: the rotor's place on the vector) and
     its load (``S_TRUST_TL``): what a stand is anchored on (``C_ANCHOR_SPEED``)."""
-    s[S_TRUST_OFF] = wrap_angle(s[S_X + 3] - s[S_PHI])
-    s[S_TRUST_TL] = s[S_X + 4]
+    s[S_TRUST_OFF] = wrap_angle(s[S_THETA_HAT] - s[S_PHI])
+    s[S_TRUST_TL] = s[S_TL_HAT]
+
+
+@kernel()
+def restart_ekf_on(s, c, theta, omega, t_l, p0):
+    """The EKF put on an angle, speed and load, its covariance diagonal from ``p0`` (a ``C_*`` slot of 5
+    entries); its currents kept."""
+    s[S_OMEGA_HAT] = omega
+    s[S_THETA_HAT] = theta
+    s[S_TL_HAT] = t_l
+    for k in range(25):
+        s[S_P + k] = 0.0
+    for k in range(5):
+        s[S_P + 6 * k] = c[p0 + k]
+
+
+@kernel()
+def model_torque(c, i_d, i_q):
+    """Eq 12 with the controller's motor model, times k_dq [N m]."""
+    return c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
 
 
 @kernel()
@@ -247,15 +270,9 @@ def restart_ekf(s, c, theta, i_d, i_q):
     """The EKF restarted at a known angle from standstill: x = [i_d, i_q, 0, theta, 0], P = the
     restart's P0 (``C_P0_ALIGNED``); the rotor's place on the I-f vector (``S_TRUST_OFF``) is where
     it was restarted, its load 0 (``trust_rotor``)."""
-    s[S_X] = i_d
-    s[S_X + 1] = i_q
-    s[S_X + 2] = 0.0
-    s[S_X + 3] = theta
-    s[S_X + 4] = 0.0
-    for i in range(25):
-        s[S_P + i] = 0.0
-    for i in range(5):
-        s[S_P + 6 * i] = c[C_P0_ALIGNED + i]
+    s[S_I_D_HAT] = i_d
+    s[S_I_Q_HAT] = i_q
+    restart_ekf_on(s, c, theta, 0.0, 0.0, C_P0_ALIGNED)
     s[S_THETA_PRIOR] = theta
     trust_rotor(s)
 
@@ -270,17 +287,17 @@ def seat_foc(s, c, omega_ref, omega_hat, i_alpha, i_beta, on_load):
     T_L_hat / k_t (k_t = k_dq N psi), after a loss of synchronism, when the present current says nothing of the
     load; the current PIs on the voltage held, turned by one period of the I-f vector's rotation
     (``seat_current_pis``)."""
-    theta = s[S_X + 3]
+    theta = s[S_THETA_HAT]
     i_d, i_q = park(i_alpha, i_beta, theta)
     if c[C_REF_MODE] != 0.0:  # the reference generator's modes: (14) returns the present torque / k_t,
         # which the generator turns into its references (the current PIs seated on them)
-        t_seat = s[S_X + 4] if on_load else c[C_K_DQN] * i_q * (c[C_PSI] + (c[C_L_D] - c[C_L_Q]) * i_d)
+        t_seat = s[S_TL_HAT] if on_load else model_torque(c, i_d, i_q)
         t_pi = t_seat - s[S_T_FF] if c[C_FF] != 0.0 else t_seat  # the feedforward's share is its own
         s[S_W_INT] = t_pi / c[C_K_T] - c[C_KP_W] * (omega_ref - omega_hat)
         i_dref, i_seat = generate_references(s, c, t_seat, omega_hat)
     elif on_load:
         i_dref = c[C_I_D_REF]
-        i_seat = s[S_X + 4] / c[C_K_T]
+        i_seat = s[S_TL_HAT] / c[C_K_T]
         s[S_W_INT] = i_seat - c[C_KP_W] * (omega_ref - omega_hat)  # (14) returns i_seat now
     else:  # N i_q (psi + (L_d - L_q) i_d) = N i_seat (psi + (L_d - L_q) i_dref)
         i_dref = c[C_I_D_REF]
@@ -384,8 +401,8 @@ def relock(s, c, omega_hat, omega_ref):
     torque needed to hold the load the EKF sees and to bring the speed to the reference within
     ``C_RELOCK_TIME``, turning at the EKF's speed, its current set to the limit at once; the rotor's
     place on it trusted (``trust_rotor``)."""
-    push = s[S_X + 4] + c[C_J_IF] * (omega_ref - omega_hat) / c[C_RELOCK_TIME]
-    s[S_PHI] = wrap_angle(s[S_X + 3] + (c[C_E_MAX] if push >= 0.0 else -c[C_E_MAX]))
+    push = s[S_TL_HAT] + c[C_J_IF] * (omega_ref - omega_hat) / c[C_RELOCK_TIME]
+    s[S_PHI] = wrap_angle(s[S_THETA_HAT] + (c[C_E_MAX] if push >= 0.0 else -c[C_E_MAX]))
     s[S_OMEGA_IF] = omega_hat
     s[S_I_TGT] = c[C_I_Q_MAX]
     s[S_I_MAG] = c[C_I_Q_MAX]  # at once: the rotor is running away (the current PIs follow in ~5 ms)
@@ -424,7 +441,7 @@ def car_stands(s, c):
     ``C_STILL`` (a back-EMF of 0.18 V at 0.5 rad/s: none to see the angle by), and the EKF's too, or, while a
     stand lasts, above it for less than ``C_STILL_TIME`` (``S_STILL_OUT``: its noise, not a motion)."""
     return (s[S_MODE] == MODE_IF and abs(s[S_OMEGA_IF]) < c[C_STILL]
-            and (abs(s[S_X + 2]) < c[C_STILL] or (s[S_ANCHORED] != 0.0 and s[S_STILL_OUT] < c[C_STILL_TIME])))
+            and (abs(s[S_OMEGA_HAT]) < c[C_STILL] or (s[S_ANCHORED] != 0.0 and s[S_STILL_OUT] < c[C_STILL_TIME])))
 
 
 @kernel()
@@ -436,7 +453,7 @@ def detect_stand(s, c):
         return EV_STANDS if stands else EV_NONE
     if stands:
         return EV_NONE
-    return EV_VECTOR_TURNS if abs(s[S_X + 2]) < c[C_STILL] else EV_ROTOR_MOVES
+    return EV_VECTOR_TURNS if abs(s[S_OMEGA_HAT]) < c[C_STILL] else EV_ROTOR_MOVES
 
 
 @kernel()
@@ -448,8 +465,8 @@ def ekf_believed(s, c):
     the EKF saw the motion). Else, at low speed, not: with a mismatched motor model its angle and load
     drift there with the current (the resistance's error), and an I-f current sized on that load would
     feed the drift (docs/sensorless.md)."""
-    lead = wrap_angle(s[S_PHI] - s[S_X + 3])
-    return (abs(s[S_X + 2]) >= c[C_ANCHOR_SPEED] or s[S_GUARD] != 0.0 or abs(lead) > c[C_E_MAX]
+    lead = wrap_angle(s[S_PHI] - s[S_THETA_HAT])
+    return (abs(s[S_OMEGA_HAT]) >= c[C_ANCHOR_SPEED] or s[S_GUARD] != 0.0 or abs(lead) > c[C_E_MAX]
             or abs(wrap_angle(lead + s[S_TRUST_OFF])) > c[C_TRUST_MOVE])
 
 
@@ -467,7 +484,7 @@ def detect_alignment_end(s, c, t):
     ``C_ALIGN_SLIP_TIME`` (its timer ``S_RUNAWAY_T``): a load beyond the vector, faster than the alignment's
     own swing; else EV_ALIGNED at the end of the schedule."""
     dt = c[C_DT]
-    runaway = c[C_ALIGN_SLIP] > 0.0 and abs(s[S_X + 2]) > c[C_ALIGN_SLIP]
+    runaway = c[C_ALIGN_SLIP] > 0.0 and abs(s[S_OMEGA_HAT]) > c[C_ALIGN_SLIP]
     s[S_RUNAWAY_T] = s[S_RUNAWAY_T] + dt if runaway else 0.0
     if s[S_RUNAWAY_T] >= c[C_ALIGN_SLIP_TIME]:
         return EV_RUNAWAY
@@ -477,7 +494,7 @@ def detect_alignment_end(s, c, t):
 @kernel()
 def detect_slowed(s, c):
     """EV_SLOWED on FOC below |omega_hat| = ``C_W_DOWN`` (the hysteresis against ``C_W_UP``)."""
-    return EV_SLOWED if abs(s[S_X + 2]) < c[C_W_DOWN] else EV_NONE
+    return EV_SLOWED if abs(s[S_OMEGA_HAT]) < c[C_W_DOWN] else EV_NONE
 
 
 @kernel()
@@ -553,7 +570,7 @@ def catch_runaway(s, c, omega_ref):
     EKF the angle (back-EMF): the EKF is kept (not restarted) and I-f takes over on its angle, the vector put
     ahead of the rotor against the load at the current limit (``relock``), as a new loss-of-synchronism
     episode (one still running from a realignment is not continued: its age starts again)."""
-    relock(s, c, s[S_X + 2], omega_ref)
+    relock(s, c, s[S_OMEGA_HAT], omega_ref)
     s[S_RUNAWAY_T] = 0.0
     s[S_EPISODE] = c[C_DT]
     s[S_INSYNC] = 0.0
@@ -577,7 +594,7 @@ def hand_down(s, c, i_alpha, i_beta):
     it (at least ``C_I_IF``), the I-f speed starts at the EKF's; the current PIs seated on the voltage held
     (``seat_current_pis``); FOC's angle is the rotor's place on the vector (``trust_rotor``)."""
     dt = c[C_DT]
-    omega_hat = s[S_X + 2]
+    omega_hat = s[S_OMEGA_HAT]
     i_mag = math.sqrt(i_alpha * i_alpha + i_beta * i_beta)
     s[S_PHI] = math.atan2(i_beta, i_alpha)
     s[S_I_MAG] = i_mag
@@ -594,7 +611,7 @@ def hand_down(s, c, i_alpha, i_beta):
 def realign(s):
     """The alignment from standstill again: its clock from the next period, the vector off, the I-f
     detectors' timers and filters, the stand and the current PIs' integrators cleared."""
-    s[S_CLOCK] = 0.0
+    s[S_ALIGN_CLOCK] = 0.0
     s[S_I_MAG] = 0.0
     s[S_I_TGT] = 0.0
     s[S_OMEGA_IF] = 0.0
@@ -604,7 +621,7 @@ def realign(s):
     s[S_GUARD] = 0.0
     s[S_LOS] = 0.0
     s[S_RUNAWAY_T] = 0.0
-    s[S_ANCHORED] = STAND_FREE
+    s[S_ANCHORED] = float(STAND_FREE)
     s[S_INT_D] = 0.0
     s[S_INT_Q] = 0.0
 
@@ -621,11 +638,11 @@ def enter_if(s, c, action, i_alpha, i_beta, omega_ref):
     elif action == A_HANDOVER_DOWN:
         hand_down(s, c, i_alpha, i_beta)
     elif action == A_HANDOVER_UP:
-        seat_foc(s, c, omega_ref, s[S_X + 2], i_alpha, i_beta, False)
+        seat_foc(s, c, omega_ref, s[S_OMEGA_HAT], i_alpha, i_beta, False)
         s[S_REALIGN] = 0.0
         s[S_IF_DUE] = 0.0
     elif action == A_FORCED_UP:
-        seat_foc(s, c, omega_ref, s[S_X + 2], i_alpha, i_beta, True)
+        seat_foc(s, c, omega_ref, s[S_OMEGA_HAT], i_alpha, i_beta, True)
         s[S_REALIGN] = 0.0
         begin_episode(s, c)
     else:  # a loss of synchronism, a limit or a stall: an episode
@@ -633,13 +650,13 @@ def enter_if(s, c, action, i_alpha, i_beta, omega_ref):
             s[S_IF_DUE] = 0.0
         begin_episode(s, c)
         if action == A_FLYING:
-            seat_foc(s, c, omega_ref, s[S_X + 2], i_alpha, i_beta, True)
+            seat_foc(s, c, omega_ref, s[S_OMEGA_HAT], i_alpha, i_beta, True)
             s[S_IF_DUE] = 0.0
         elif action == A_RELOCK:
-            relock(s, c, s[S_X + 2], omega_ref)
+            relock(s, c, s[S_OMEGA_HAT], omega_ref)
         elif action == A_STALL_FOC:
             s[S_REALIGN] += 1.0
-            seat_foc(s, c, omega_ref, s[S_X + 2], i_alpha, i_beta, True)
+            seat_foc(s, c, omega_ref, s[S_OMEGA_HAT], i_alpha, i_beta, True)
         elif action == A_REALIGN:
             s[S_REALIGN] += 1.0
             realign(s)
@@ -680,8 +697,8 @@ def release(s, c, restart, i_alpha, i_beta):
         i_d, i_q = park(i_alpha, i_beta, theta)
         restart_ekf(s, c, theta, i_d, i_q)
     else:
-        s[S_X + 3] = theta
-    s[S_X + 4] = s[S_ANCHOR_TL]
+        s[S_THETA_HAT] = theta
+    s[S_TL_HAT] = s[S_ANCHOR_TL]
     trust_rotor(s)
 
 
@@ -738,7 +755,7 @@ def turn_vector(s, c, omega_ref, omega_hat):
     s[S_SLIP] += c[C_SLIP_FILTER] * (omega_hat - s[S_OMEGA_IF] - s[S_SLIP])
     if c[C_GUARD] != 0.0 or s[S_EPISODE] > 0.0 or s[S_FAULT] == FAULT_LATCHED:
         sync_guard(s, c, omega_hat, damping_gain(s, c) * s[S_SLIP],
-                   s[S_ANCHOR] if anchored else s[S_X + 3])
+                   s[S_ANCHOR] if anchored else s[S_THETA_HAT])
 
 
 @kernel(_sig(f"UniTuple({_F}, 16)", _V, _V, _F, _F, _F))
@@ -766,7 +783,7 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     dt = c[C_DT]
     ekf5ab_period(s, c, i_alpha, i_beta)  # (23)-(27)
     # the rotor's speed above C_STILL, how long (the stand's end)
-    s[S_STILL_OUT] = s[S_STILL_OUT] + c[C_DT] if abs(s[S_X + 2]) >= c[C_STILL] else 0.0
+    s[S_STILL_OUT] = s[S_STILL_OUT] + c[C_DT] if abs(s[S_OMEGA_HAT]) >= c[C_STILL] else 0.0
     event = detect_stand(s, c)
     if event != EV_NONE:
         stand_transition(s, c, event, i_alpha, i_beta)
@@ -778,8 +795,8 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         omega_ref = 0.0
     if c[C_FF] != 0.0:  # the speed loop's feedforward, its slope kept up in every mode
         speed_feedforward(s, c, omega_ref)
-    t = s[S_CLOCK] * dt  # the alignment's clock
-    s[S_CLOCK] += 1.0
+    t = s[S_ALIGN_CLOCK] * dt  # the alignment's clock
+    s[S_ALIGN_CLOCK] += 1.0
     last = s[S_MODE]
     mode = last
     trouble = False  # this period, in I-f: out of step, or a limit reached (the episode's clock)
@@ -798,24 +815,24 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
         elif mode != MODE_IF:
             break
         elif stage == 1:  # I-f: the vector turned (not in the period it was placed), then in trouble?
-            omega_hat = s[S_X + 2]
+            omega_hat = s[S_OMEGA_HAT]
             if last == MODE_IF:
                 turn_vector(s, c, omega_ref, omega_hat)
             slip = slipping(s, c)
             event = detect_trouble(s, c, slip, at_limit(s, c, omega_ref, omega_hat), omega_hat)
             trouble = s[S_LOS] > 0.0 or event != EV_NONE
         elif stage == 2:
-            event = detect_agreed(s, c, s[S_X + 2])
+            event = detect_agreed(s, c, s[S_OMEGA_HAT])
         else:
-            event = detect_due(s, c, omega_ref, s[S_X + 2], slip)
+            event = detect_due(s, c, omega_ref, s[S_OMEGA_HAT], slip)
             trouble = trouble or event != EV_NONE
         if event != EV_NONE:
             mode = if_transition(s, c, mode, event, i_alpha, i_beta, omega_ref)
     age_episode(s, c, trouble)  # a loss-of-synchronism episode: recovered, or the fault latched
     s[S_MODE] = mode
     if mode == MODE_EKF:
-        omega_hat = s[S_X + 2]
-        theta_ctrl = s[S_X + 3]
+        omega_hat = s[S_OMEGA_HAT]
+        theta_ctrl = s[S_THETA_HAT]
         omega_ctrl = omega_hat
         i_d, i_q = park(i_alpha, i_beta, theta_ctrl)
         if c[C_REF_MODE] != 0.0:  # the reference generator: MTPA, field weakening, limits, regen
@@ -850,4 +867,5 @@ def sensorless_step(s, c, i_alpha, i_beta, omega_ref):
     if c[C_ADAPT] != 0.0:  # psi and R_s over the period just gone (AD1-AD6), in FOC on the EKF only
         adapt_period(s, c, i_alpha, i_beta, theta_ctrl, omega_ctrl, 1.0 if mode == MODE_EKF else 0.0)
     return (v_alpha, v_beta, v_d, v_q, i_d, i_q, i_qref,
-            s[S_X], s[S_X + 1], s[S_X + 2], s[S_X + 3], s[S_X + 4], mode, fault, theta_ctrl, omega_ctrl)
+            s[S_I_D_HAT], s[S_I_Q_HAT], s[S_OMEGA_HAT], s[S_THETA_HAT], s[S_TL_HAT], mode, fault, theta_ctrl,
+            omega_ctrl)
