@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.metrics.rows import T_FROM
 from pmsm_cosim.app.report import cycles, document, speed_range, synchronism
-from pmsm_cosim.app.report.configs import T_FROM
 from pmsm_cosim.app.report.robustness import cycle as robustness_cycle
 from pmsm_cosim.app.report.robustness import injection_mc
 from pmsm_cosim.app.studies import load_sweep

@@ -18,8 +18,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..metrics.rows import T_FROM
 from . import cycles, robustness, sensorless, synchronism
-from .configs import CONFIGS, OBSERVER_FMUS, SETUPS, T_FROM, Config, select
+from .configs import CONFIGS, OBSERVER_FMUS, SETUPS, Config, select
 from .document import RECOVERED, TABLE_KEYS, Data, _figures, load_split, recovery, render
 from .runs import _fmu_hashes, _key, reusable, run_configs
 

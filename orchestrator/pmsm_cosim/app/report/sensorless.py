@@ -18,11 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
+from pmsm_ev.kernels import MODE_EKF
 from pmsm_ev.params import ScenarioParams, StartupParams
 from pmsm_ev.results import row_timing_corrected_angle_error
 from pmsm_ev.scenarios import SENSORLESS_START_DELAY
 
-from ..metrics.sensorless import STARTUP_BAND, STARTUP_FROM, handovers, sensorless_metrics
+from ..metrics.rows import T_FROM
+from ..metrics.sensorless import ROLL_BACK_LIMIT, STARTUP_BAND, STARTUP_FROM, handovers, sensorless_metrics
 from ..metrics.windows import figures_where, run_timing
 from .drawing import figure_links, pyplot, save_figure
 
@@ -45,8 +47,6 @@ SETUP_KEYS = ("sensorless", "sensored")
 SPEED_RATIO = 1.1  #: speed RMS error and step dips, against the sensored drive's
 SETTLING_EXTRA = 0.5  #: settling time over the sensored drive's [s]
 ANGLE_LIMIT = 0.05  #: angle error after the start-up [rad], row timing removed
-ROLL_BACK_LIMIT = 0.05  #: [m]
-T_FROM = 20.0  #: "after the start-up" [s]
 
 
 def config_specs():
@@ -167,7 +167,7 @@ def _figures_of(data, cid: str) -> dict | None:
     out = dict(row)
     out.update(sensorless_metrics(r, T_FROM))
     # the angle error in closed loop (standing in I-f, at no back-EMF, it is not observable)
-    closed = figures_where(r, (t >= T_FROM) & (r["mode"] == 2.0), dt, pole_pairs)
+    closed = figures_where(r, (t >= T_FROM) & (r["mode"] == MODE_EKF), dt, pole_pairs)
     out["angle_max_after"], out["angle_rms_after"] = closed["angle_max"], closed["angle_rms"]
     drift = row.get("theta_drift")
     out["turns"] = None if drift is None else abs(drift) / (2 * math.pi)
@@ -300,8 +300,9 @@ def _targets(data) -> tuple[list[str], list[str]]:
                 worst_speed = e if worst_speed is None else max(worst_speed, e)
                 worst_roll = rb if worst_roll is None else max(worst_roll, rb)
     if worst_speed is not None:
+        conds = " / ".join(next(d for c, _, d in CONDITIONS if c == cond) for cond in ANGLE_CONDITIONS)
         add(f"Start-up, every initial angle: abs(ω_m − ω_ref) ≤ {STARTUP_BAND:g} rad/s from {STARTUP_FROM:g} s on",
-            f"largest {worst_speed:.2f} rad/s (8 angles × exact / σ = 1 A)", worst_speed <= STARTUP_BAND)
+            f"largest {worst_speed:.2f} rad/s ({len(ANGLES)} angles × {conds})", worst_speed <= STARTUP_BAND)
         add(f"Start-up, every initial angle: backward roll ≤ {100 * ROLL_BACK_LIMIT:g} cm on level road",
             f"largest {100 * worst_roll:.2f} cm", worst_roll <= ROLL_BACK_LIMIT)
     for cond in ("exact", "noisy1A", "offset"):
