@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from pmsm_ev import cycles, references
+from pmsm_ev.params import InjectionParams
 from pmsm_ev.results import row_timing_corrected_angle_error
 
 from .. import envelope
@@ -252,7 +253,7 @@ def _cost_table(cost: list[dict]) -> list[str]:
     return L + ["", "(Δ: sensorless minus sensored; energies in Wh)", ""]
 
 
-#: what the sensorless unit does at and near zero speed, by its ``low_speed`` (the FMU's default: "if")
+#: what the sensorless unit does at and near zero speed, by its ``low_speed`` (default ``InjectionParams``')
 LOW_SPEED_TEXT = {"injection": "high-frequency injection at and near zero speed: the acquisition, the polarity "
                                "test and FOC on the injection, the stationary-frame EKF5 above",
                   "if": "alignment, I-f, the stationary-frame EKF5, back to I-f at every stop"}
@@ -264,7 +265,7 @@ def setting_text(scenarios) -> dict[str, str]:
     scenarios' strategy at and near zero speed, ``LOW_SPEED_TEXT``) and ``climb`` (the steepest grade of the road
     ``hilly`` [%])."""
     specs = [load_system(s) for s in scenarios]
-    strategies = {s.component("ctrl").start.get("low_speed", "if") for s in specs
+    strategies = {s.component("ctrl").start.get("low_speed", InjectionParams().low_speed) for s in specs
                   if s.component("ctrl").fmu.name == "FocSensorless.fmu"}
 
     def alike(values, fmt):
