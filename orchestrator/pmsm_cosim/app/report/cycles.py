@@ -21,13 +21,12 @@ from ..drive import load_system
 from ..metrics import cycle_energy
 from ..metrics.rows import KMH
 from ..metrics.trace import TRACE_BAND_KMH, TRACE_WINDOW_S, trace_band
+from ..metrics.verdicts import INSIDE_MIN
 from ..metrics.windows import run_timing
 from .configs import CYCLE_RUNS as RUNS
 from .drawing import figure_links, pyplot, save_figure
 from .speed_range import SCENARIO_SETS
 
-#: the least share of a cycle inside the band (issue 24)
-BAND_SHARE_MIN = 0.99
 #: a torque at least this share of the envelope's at its speed counts as at the drive's limit
 AT_LIMIT = 0.98
 #: the WLTC pair the phase tables and the figures compare
@@ -111,12 +110,12 @@ def diagnosis(run, f: dict, lim) -> str:
     phase, the trace's speed there and the largest shortfall or excess in it, and what the drive was doing
     meanwhile: the share of it in alignment or I-f, at the torque envelope (|T_e| >= ``AT_LIMIT`` of the
     most the drive has at that speed), with the friction brake on, and the unit's loss-of-synchronism
-    episodes and fault. "" when the run completed inside the band for ``BAND_SHARE_MIN`` of the cycle."""
+    episodes and fault. "" when the run completed inside the band for ``INSIDE_MIN`` of the cycle."""
     tr, parts = f["trace"], []
     if f["status"] != "completed":
         parts.append(f"the run did not complete (status {f['status']}, last row at {f['t_end']:.2f} s)")
     share = tr.get("inside_share")
-    if share is not None and share < BAND_SHARE_MIN and tr.get("t_longest_excursion") is not None:
+    if share is not None and share < INSIDE_MIN and tr.get("t_longest_excursion") is not None:
         cycle, r = f["cycle"], run.r
         t0, length = tr["t_longest_excursion"], tr["longest_excursion_s"]
         w = (r["time"] >= t0 - 1e-9) & (r["time"] < t0 + length - 1e-9)
@@ -159,7 +158,7 @@ def _cycle_table(data, rows: dict) -> list[str]:
         tr, s, wh = f["trace"], f["synchronism"], f["whole"] or {}
         e, bal, wc = wh.get("energy") or {}, wh.get("balance") or {}, wh.get("wheel") or {}
         share = tr.get("inside_share")
-        mark = "" if share is None or share >= BAND_SHARE_MIN else " (< 99 %)"
+        mark = "" if share is None or share >= INSIDE_MIN else f" (< {100 * INSIDE_MIN:g} %)"
         longest = tr.get("longest_excursion_s")
         longest = "-" if longest is None else f"{longest:.2f} s at {tr['t_longest_excursion']:.1f} s"
         L.append(
@@ -305,7 +304,7 @@ def render(data, fig_names) -> list[str]:
         "band*: "
         f"the share of the cycle the car's speed is within ±{TRACE_BAND_KMH:g} km/h of the trace taken over "
         f"±{TRACE_WINDOW_S:g} s "
-        f"(GTR No. 15; issue 24 requires {100 * BAND_SHARE_MIN:g} %); *RMSE* and *largest deviation* against the "
+        f"(GTR No. 15; issue 24 requires {100 * INSIDE_MIN:g} %); *RMSE* and *largest deviation* against the "
         "trace; *slipped turns* and *loss-of-sync episodes* from metrics.json's `synchronism`; *Wh/km (DC)* the "
         "net DC-link energy per km driven; *regenerated / drawn* the DC energy returned as a share of the DC energy "
         "drawn; *balance residual / throughput* the energy balance's residual over the DC throughput "
@@ -333,10 +332,10 @@ def render(data, fig_names) -> list[str]:
     ok = [f for f in rows.values() if f is not None]
     slipped = sum(int(f["synchronism"].get("slipped_turns") or 0) for f in ok)
     if fails:
-        L.append(f"Runs that miss the {100 * BAND_SHARE_MIN:g} % of the band or did not complete, where and why:\n")
+        L.append(f"Runs that miss the {100 * INSIDE_MIN:g} % of the band or did not complete, where and why:\n")
         L += fails + [""]
     else:
-        L.append(f"Every run completed inside the band for at least {100 * BAND_SHARE_MIN:g} % of its cycle.\n")
+        L.append(f"Every run completed inside the band for at least {100 * INSIDE_MIN:g} % of its cycle.\n")
     L.append(f"Electrical turns slipped, all runs together: {slipped}.\n")
     checks = []
     for cid, scen, setup in RUNS:
