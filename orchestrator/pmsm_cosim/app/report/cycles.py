@@ -7,7 +7,6 @@ the runs (docs/cycles.md, "The report's cycles")."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +24,8 @@ from ..metrics.verdicts import INSIDE_MIN
 from ..metrics.windows import run_timing
 from .configs import CYCLE_RUNS as RUNS
 from .drawing import figure_links, pyplot, save_figure
-from .speed_range import SCENARIO_SETS
+from .drawing import num as _num
+from .speed_range import SCENARIO_SETS, limits
 
 #: a torque at least this share of the envelope's at its speed counts as at the drive's limit
 AT_LIMIT = 0.98
@@ -43,19 +43,8 @@ KINDS = (("aero", ("road_Wh", "aero")), ("rolling", ("road_Wh", "rolling")), ("g
 LOSS_KINDS = ("copper", "inverter", "iron", "friction", "gear")
 
 
-def _num(x, fmt=".2f") -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "-"
-    return format(x, fmt)
-
-
 def _pct(x, fmt=".2f") -> str:
     return "-" if x is None else f"{_num(100.0 * x, fmt)} %"
-
-
-def _limits():
-    p = envelope.parameters(SCENARIO_SETS)
-    return references.limits(p["controller"], p["motor"])
 
 
 def figures_of(data, cid: str) -> dict | None:
@@ -283,7 +272,7 @@ def render(data, fig_names) -> list[str]:
     rows = {cid: figures_of(data, cid) for cid, _, _ in RUNS}
     if not any(rows.values()):
         return L + ["(no runs)\n"]
-    lim = _limits()
+    lim = limits()
     st = setting_text(scen for _, scen, _ in RUNS)
     suffix = {scen.rsplit("-", 1)[-1] for _, scen, setup in RUNS if setup.key == "sensorless"}
     descr = []
@@ -477,8 +466,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
 
     pts = [(cid, data.runs[cid]) for cid in (*WLTC_PAIR, "cyc-us06") if cid in data.runs]
     if pts:
-        p = envelope.parameters(SCENARIO_SETS)
-        lim = references.limits(p["controller"], p["motor"])
+        lim = limits()
         speeds = references.region_speeds(lim)
         w = np.linspace(0.0, 1.15 * max(float(np.max(run.r["omega_m"])) for _, run in pts), 300)
         motoring, braking, region = references.torque_envelope(w, lim)

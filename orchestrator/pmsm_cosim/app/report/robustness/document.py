@@ -14,6 +14,7 @@ import numpy as np
 
 from pmsm_ev.params import EkfParams, MotorParams
 
+from ..drawing import num
 from .cycle import cycle_text
 from .figures import dead_time_label
 from .metrics import (
@@ -52,7 +53,7 @@ def _pct(r: dict, key: str, nominal: float) -> str:
 
 
 def _g(x, fmt=".3g") -> str:
-    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+    return num(x, fmt)
 
 
 def route_text(route: dict | None) -> str:
