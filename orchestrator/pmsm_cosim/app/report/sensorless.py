@@ -373,8 +373,10 @@ def render(data, fig_names) -> list[str]:
         f"row-timing term −N ω dt removed{lag}.\n")
     L += _table(data)
     L.append("")
+    delta = load_system(SCENARIOS[0][1]).signals["delta"].profile
+    t_step, step = next((t, math.degrees(x)) for t, x in zip(delta.times, delta.values) if x != 0.0)
     L.append(f"Start-up from eight initial rotor angles (scenario 1, {ANGLE_STOP:g} s: the start, then the "
-             f"5° step at 50 s):\n")
+             f"{step:g}° step at {t_step:g} s):\n")
     L += _start_table(data)
     L.append("")
     h = {c: _hill_figures(data, f"sl-hill-{c}-sensorless") for c, _, _ in CONDITIONS}

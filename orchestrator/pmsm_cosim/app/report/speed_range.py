@@ -99,7 +99,9 @@ def figures(data, fig_dir: Path) -> list[Path]:
     axes[0].plot(r0["time"], r0["omega_ref"] * wheel_ratio(r0) * KMH, "k--", lw=0.7, label="reference")
     axes[0].set_ylabel("v [km/h]")
     axes[0].legend(fontsize=7)
-    axes[0].set_title("Acceleration to 131 km/h and regenerative braking, level road")
+    run = data.runs.get(RUNS[0][0])
+    top = route(load_system(RUNS[0][1]), plant_params(run.metrics)[1] if run else VehicleParams())["top_kmh"]
+    axes[0].set_title(f"Acceleration to {top:.0f} km/h and regenerative braking, level road")
     axes[1].set_ylabel("T_e [N m]\n(dotted: friction brake / n_g)")
     axes[2].set_ylabel("P_dc [kW]")
     axes[2].set_xlabel("time [s]")
