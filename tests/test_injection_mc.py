@@ -4,8 +4,11 @@ from made-up samples between its markers, judged by the cycle Monte-Carlo's one 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from pmsm_cosim.app.report.robustness import injection_mc as im
 from pmsm_cosim.app.studies import load_sweep
+from pmsm_ev.params import MotorParams
 
 COLUMNS = ("run", "status", "plant.m_v", "offset.delta", "inside_share", "slipped_turns", "fault_latched",
            "dc_Wh_per_km", "wall_time_s", "us_per_step")
@@ -75,3 +78,17 @@ def test_a_fresh_draw_reported_with_its_own_seed(tmp_path):
     out = "\n".join(im.section(tmp_path / "inj", "a test machine", fresh=fresh))
     assert "drawn again with seed 41 (2 samples planned" in out
     assert "**2 samples run: 1 failed**" in out and "- 0001_y: left the band" in out
+
+
+def test_the_design_sentence_is_the_sweep_files():
+    """The section's account of the design (ranges, dead time, noise, seed) is computed from the sweep file it
+    loads, not typed beside it: another seed or range in the file is another sentence."""
+    d = load_sweep(im.SWEEP)
+    text = im.design_text(d)
+    assert f"seed {d.seed}" in text and "R_s 0 … +50 %, ψ −12 % … 0" in text and "L_d and L_q ±10 %" in text
+    r_s = MotorParams().R_s
+    other = replace(d, seed=d.seed + 1, random={**d.random, "plant.R_s": ("uniform", (r_s, 1.25 * r_s)),
+                                                 "plant.L_q": ("uniform", (0.95 * MotorParams().L_q,
+                                                                           1.05 * MotorParams().L_q))})
+    text = im.design_text(other)
+    assert f"seed {d.seed + 1}" in text and "R_s 0 … +25 %" in text and "L_d ±10 %, L_q ±5 % at zero current" in text

@@ -10,6 +10,7 @@ import math
 import pytest
 
 from pmsm_cosim.app.report.robustness import injection_sync as js
+from pmsm_ev.params import VehicleParams
 from pmsm_ev.scenarios import SYNC_MATRIX
 
 
@@ -46,7 +47,8 @@ def test_a_parked_car_gets_its_free_roll_from_the_runs_and_the_section_its_marke
                                                encoding="ascii")
     results = _matrix(park16={"roll_back": 0.20})
     table = {r["case"].name: r for r in js.rows(results, tmp_path)}
-    assert table["park16"]["free_roll"] == pytest.approx(0.5 * js.G * math.sin(math.radians(16)) * 0.3 ** 2)
+    g = VehicleParams().g
+    assert table["park16"]["free_roll"] == pytest.approx(0.5 * g * math.sin(math.radians(16)) * 0.3 ** 2)
     page = tmp_path / "robustness.md"
     page.write_text("# head\n\n" + js.BEGIN + "\nOLD-SECTION\n" + js.END + "\n\ntail\n", encoding="utf-8")
     js.write_between(page, js.section(results, tmp_path, "a test machine"), js.BEGIN, js.END)

@@ -14,6 +14,7 @@ import pytest
 
 from orchestrator_support import project_fmus
 from pmsm_cosim.app.cli import main
+from pmsm_cosim.app.drive import load_system
 from pmsm_cosim.app.metrics import cycle_energy
 from pmsm_cosim.app.metrics.rows import KMH
 from pmsm_cosim.app.metrics.trace import trace_figures
@@ -50,6 +51,16 @@ def test_the_cycle_configurations_and_only_cyc():
                                                               "--stop-time", "60.0"]
 
 
+def test_the_sensorless_cycle_runs_are_the_if_strategys():
+    """The section's sensorless runs are the ``-if`` scenarios, whose system files set the I-f strategy the
+    section's cost paragraph measures (alignment and I-f); the ``-sensorless`` ones run the injection."""
+    for _, scen, setup in cycles.RUNS:
+        strategy = load_system(scen).component("ctrl").start.get("low_speed")
+        if setup.key == "sensorless":
+            assert scen.endswith("-if") and strategy == "if", scen
+            assert load_system(scen.replace("-if", "-sensorless")).component("ctrl").start["low_speed"] == "injection"
+
+
 def cell(lines: list[str], first: str, second: str) -> list[str]:
     """The cells of the table row starting with ``| first | second |``."""
     row = next(x for x in lines if x.startswith(f"| {first} | {second} |"))
@@ -64,6 +75,8 @@ def test_the_section_holds_the_runs_figures_and_writes_its_figures(runs, tmp_pat
     assert all(p.is_file() and p.stat().st_size > 10_000 for p in figs)
     lines = cycles.render(data, names)
     text = "\n".join(lines)
+    # the drive the table shows, named as its scenarios run it: the -if scenarios, the I-f strategy
+    assert f"(`-if`, `FocSensorless`: {cycles.LOW_SPEED_TEXT['if']})" in text and "`-sensorless`" not in text
     for cid, scen, label in (("cyc-wltc3b", "wltc3b", "sensored"),
                              ("cyc-wltc3b-if", "wltc3b-if", "sensorless from standstill")):
         m = json.loads((runs[cid] / "metrics.json").read_text())

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from pmsm_cosim.app.drive import load_system
+from pmsm_cosim.app.metrics.rows import T_FROM
 from pmsm_cosim.app.report import cycles, document, speed_range, synchronism
-from pmsm_cosim.app.report.configs import T_FROM
 from pmsm_cosim.app.report.robustness import cycle as robustness_cycle
 from pmsm_cosim.app.report.robustness import injection_mc
 from pmsm_cosim.app.studies import load_sweep
@@ -167,3 +167,23 @@ def test_the_monte_carlo_failure_rules_follow_the_band(tmp_path, monkeypatch):
                                                      load_sweep("cycle_montecarlo_wltc3b"), None))
     assert "±3.2 km/h / ±2 s tolerance band" in rule
     assert "inside the ±3.2 km/h band" in injection_mc.section(tmp_path, "a test machine")[4]
+
+
+def test_the_hill_start_route_is_its_system_files(monkeypatch):
+    """The sensorless section's hill start (its grade, stop, stand and restart: the figure, the windows of its
+    figures and the text) is read from hill-start-if's system file, not typed beside it."""
+    from pmsm_cosim.app.report import sensorless
+
+    assert sensorless.hill_route() == {"grade": 22.0, "grade_at": 20.0, "stop": (30.0, 40.0), "stand": (40.0, 50.0),
+                                       "restart": (50.0, 60.0)}
+
+    def later(name):
+        spec = load_system(name)
+        for sig in ("delta", "omega_ref"):
+            table = spec.signals[sig].profile
+            spec.signals[sig].profile = replace(table, times=tuple(t + 10.0 if t >= 20.0 else t for t in table.times))
+        return spec
+
+    monkeypatch.setattr(sensorless, "load_system", later)
+    assert sensorless.hill_route() == {"grade": 22.0, "grade_at": 30.0, "stop": (40.0, 50.0), "stand": (50.0, 60.0),
+                                       "restart": (60.0, 70.0)}

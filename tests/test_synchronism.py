@@ -362,3 +362,20 @@ def test_a_restart_after_a_long_stand_with_offset_sensors(tmp_path):
     assert np.all(r["mode"][late] == _k.MODE_EKF)
     assert np.max(np.abs(r["omega_m"][late] - 200.0)) < 10.0
     assert r["fault"].max() == _k.FAULT_NONE
+
+
+def test_the_matrix_reuses_its_runs_by_the_reports_rule(tmp_path, monkeypatch):
+    """A run of the matrix is reused as the report's runs are (``runs.reusable``: completed, the same settings and
+    sources), its figures computed again from its rows; another strategy is another run."""
+    cases = [c for c in SYNC_MATRIX if c.name == "step200"]
+    first = synchronism.run_matrix(tmp_path, jobs=1, cases=cases, angles=1, log=lambda *a: None)
+    assert [(r["case"], r["controller"], r["k"], r["status"]) for r in first] == [
+        ("step200", "sensorless", 0, "completed"), ("step200", "sensored", 0, "completed")]
+
+    def no_run(*args, **kwargs):
+        raise AssertionError("a reusable run was run again")
+
+    monkeypatch.setattr(synchronism, "run_reference", no_run)
+    assert synchronism.run_matrix(tmp_path, jobs=1, cases=cases, angles=1, log=lambda *a: None) == first
+    with pytest.raises(AssertionError, match="run again"):
+        synchronism.run_matrix(tmp_path, jobs=1, cases=cases, angles=1, log=lambda *a: None, strategy="injection")

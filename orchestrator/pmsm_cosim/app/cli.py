@@ -37,6 +37,7 @@ from .drive import (
     project_fmu_dir,
     with_fmi,
 )
+from .metrics.rows import T_FROM
 from .metrics.verdicts import cycle_verdict, verdict_line
 from .overrides import CONTROLLER_INSTANCE, PLANT_INSTANCE, apply_overrides, fmu_choices, resolve_fmu
 from .studies import load_sweep
@@ -487,8 +488,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("dirs", nargs="+", metavar="RUN_DIR", help="run directories (results.csv, metrics.json)")
     c.add_argument("--out", metavar="DIR", default="runs/compare", help="output directory (default: runs/compare)")
     c.add_argument("--labels", nargs="+", metavar="LABEL", help="one label per run (default: directory names)")
-    c.add_argument("--from", dest="t_from", type=float, default=20.0, metavar="S",
-                   help="start of the window of the 'after' figures [s] (default: 20, past the start-up ramp)")
+    c.add_argument("--from", dest="t_from", type=float, default=T_FROM, metavar="S",
+                   help=f"start of the window of the 'after' figures [s] (default: {T_FROM:g}, past the start-up ramp)")
     c.add_argument("--no-figures", action="store_true", help="only the table")
     c.set_defaults(func=cmd_compare)
 

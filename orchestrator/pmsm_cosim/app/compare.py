@@ -27,11 +27,10 @@ from pmsm_ev.results import CONTRACT_COLUMNS, angle_error_unwrapped
 
 from ..engine.errors import CosimError, one_line
 from ..engine.recording import read_results
+from .metrics.rows import T_FROM
 from .metrics.run import compute_metrics
 from .metrics.windows import after_figures, step_figures
 
-#: default start of the "after" window [s]: past the 10 s start-up ramp and its settling
-T_FROM_DEFAULT = 20.0
 #: resolution of the overlay PNGs [dpi] and their size [in]
 DPI = 80
 FIGSIZE = (9.0, 3.6)
@@ -104,7 +103,7 @@ def load_run(path, label: str | None = None) -> Run:
     return Run(label or path.name, path, metrics, r)
 
 
-def summarize(run: Run, t_from: float = T_FROM_DEFAULT) -> dict:
+def summarize(run: Run, t_from: float = T_FROM) -> dict:
     """One table row: the run's bookkeeping, the whole-run speed error from its metrics, the step
     figures of its metrics (``pmsm_cosim.app.metrics.windows.step_figures``) and the figures of its rows after
     ``t_from`` (``pmsm_cosim.app.metrics.windows.after_figures``)."""
@@ -238,7 +237,7 @@ def plot_overlay(runs: list[Run], kind: str, path: Path, window: tuple[float, fl
 
 # --- the command ---------------------------------------------------------------------
 
-def compare(run_dirs, out, labels=None, t_from: float = T_FROM_DEFAULT, figures: bool = True) -> dict:
+def compare(run_dirs, out, labels=None, t_from: float = T_FROM, figures: bool = True) -> dict:
     """Load the runs, write ``OUT/metrics.md``, ``OUT/metrics.csv`` and the overlays.
 
     Returns {"rows": table rows, "markdown": path, "csv": path, "figures": [paths]}.

@@ -1,5 +1,6 @@
 """Helpers on the recorded rows that the figures of merit share: the RMS of an array, the runs of True in a
-mask, the longest of them, the driver's direction, a position's roll-back, and km/h per m/s.
+mask, the longest of them, the driver's direction, a position's roll-back, km/h per m/s, and where the "after"
+figures start (``T_FROM``).
 """
 
 from __future__ import annotations
@@ -7,6 +8,11 @@ from __future__ import annotations
 import numpy as np
 
 KMH = 3.6  #: km/h per m/s
+#: the start of the window of the "after" figures [s] (``windows.after_figures``, ``windows.tracking_figures``,
+#: ``sensorless.sensorless_metrics``): past the paper scenarios' 10 s start-up ramp and its settling, the sensorless
+#: unit's route delayed by its alignment (at speed by 12.5 s) and the robustness maps' road step at 15 s;
+#: ``pmsm-cosim compare --from``, the report and the robustness report all start their "after" figures here
+T_FROM = 20.0
 
 
 def rms(x) -> float:

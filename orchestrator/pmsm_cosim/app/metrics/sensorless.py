@@ -6,15 +6,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .rows import roll_back
+from .rows import T_FROM, roll_back
 
 #: a start-up target: |omega_m - omega_ref| within this band [rad/s] ...
 STARTUP_BAND = 10.0
 #: ... from this time on [s] (the delayed routes reach 200 rad/s at 12.5 s)
 STARTUP_FROM = 12.0
+#: a car that rolls back more than this [m] was not held: the sensorless unit's start-up on level road and its
+#: stop and restart on the hill (the report's targets), and the dead-time runs of the robustness report
+ROLL_BACK_LIMIT = 0.05
 
 
-def sensorless_metrics(r: dict[str, np.ndarray], t_from: float = 20.0) -> dict:
+def sensorless_metrics(r: dict[str, np.ndarray], t_from: float = T_FROM) -> dict:
     """Figures of a run with the sensorless columns (``SENSORLESS_COLUMNS``): the mode changes
     (time, from, to; 0 alignment, 1 I-f, 2 closed loop on the EKF; with injection 3 acquisition,
     4 polarity, 5 closed loop on the injection), the first handover to the closed loop (mode 2 or 5),

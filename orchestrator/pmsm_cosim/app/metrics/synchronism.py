@@ -22,6 +22,19 @@ FRAME_TURNING = 5.0
 #: recovered: |omega_m - omega_ref| within this band [rad/s] from some time on to the end
 RECOVERY_BAND = 30.0
 
+# the synchronism matrix's targets, each against the sensored drive on the same case, angle and noise
+#: the most wrong-way travel beyond the sensored drive's [m], by the sensorless unit's strategy at and near zero
+#: speed (``InjectionParams.low_speed``): two targets, each right for its strategy, not one value typed twice.
+#: I-f: issue 21's "no backwards roll beyond the sensored drive's plus 10 cm" (an I-f start moves the car by its
+#: alignment); injection: issue 36's "roll-back within the sensored drive's + 1 cm" (closed loop at standstill)
+ROLL_BACK_EXTRA = {"if": 0.10, "injection": 0.01}
+#: never backwards faster than the sensored drive by more than this [rad/s] (issue 21)
+SPEED_EXTRA = 5.0
+#: the frame turning while the rotor stands for at most this long [s] (issue 21)
+SPIN_LIMIT = 0.5
+#: back within ``RECOVERY_BAND`` of the reference this long after the disturbance [s] (issue 21)
+RECOVERY_LIMIT = 5.0
+
 
 def wrong_way_travel(x: np.ndarray, omega_ref: np.ndarray) -> float:
     """Largest travel against the driver's direction [m]: within each stretch of one direction

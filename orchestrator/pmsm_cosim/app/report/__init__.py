@@ -18,8 +18,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..metrics.rows import T_FROM
 from . import cycles, robustness, sensorless, synchronism
-from .configs import CONFIGS, OBSERVER_FMUS, SETUPS, T_FROM, Config, select
+from .configs import CONFIGS, OBSERVER_FMUS, SETUPS, Config, select
 from .document import RECOVERED, TABLE_KEYS, Data, _figures, load_split, recovery, render
 from .runs import _fmu_hashes, _key, reusable, run_configs
 
@@ -32,9 +33,9 @@ __all__ = ["CONFIGS", "OBSERVER_FMUS", "RECOVERED", "SETUPS", "TABLE_KEYS", "T_F
 def generate(out="docs", runs_dir="runs/report", jobs: int = 2, stop_time: float | None = None,
              only=None, force: bool = False, configs: list[Config] | None = None, log=print,
              command: str = "pmsm-cosim report", t_from: float = T_FROM, sync: bool | None = None) -> Path:
-    """Run (or reuse) the configurations and the synchronism matrix (``sync``: rerun it, else take its
-    runs in RUNS/sync as they are; default: rerun for the whole report unless ``only`` names no
-    pattern of "sync"), then write ``OUT/results.md`` and ``OUT/results/*.png``."""
+    """Run (or reuse) the configurations and the synchronism matrix (``sync``: run the matrix's runs that are not
+    up to date, ``force``: all of them; else take its runs in RUNS/sync as they are; default: run it for the whole
+    report unless ``only`` names no pattern of "sync"), then write ``OUT/results.md`` and ``OUT/results/*.png``."""
     if sync is None:  # the whole report reruns it; a report of chosen configurations or --only does not
         sync = configs is None and (not only or any(p in "sync" or "sync" in p for p in only))
     configs = list(configs or CONFIGS)
@@ -43,7 +44,8 @@ def generate(out="docs", runs_dir="runs/report", jobs: int = 2, stop_time: float
     data = Data(configs, run_dirs, t_from)
     # the synchronism matrix (its own short runs, in-process): rerun unless --only leaves it out
     sync_dir = Path(runs_dir) / "sync"
-    data.sync = synchronism.run_matrix(sync_dir, jobs=jobs, log=log) if sync else synchronism.load_matrix(sync_dir)
+    data.sync = (synchronism.run_matrix(sync_dir, jobs=jobs, log=log, force=force) if sync
+                 else synchronism.load_matrix(sync_dir))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     figs = _figures(data, out / "results")

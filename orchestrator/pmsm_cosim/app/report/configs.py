@@ -9,8 +9,6 @@ from pathlib import Path
 from ...engine.errors import CosimError
 from . import sensorless
 
-#: start of the window of the "after" figures [s]: past the 10 s ramp and its settling
-T_FROM = 20.0
 #: the speed of the flying starts [rad/s]: the paper's constant reference (Fig. 8)
 FLYING_SPEED = 200.0
 #: file in each run directory with the settings the run was made with

@@ -7,12 +7,12 @@ the runs (docs/cycles.md, "The report's cycles")."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
 from pmsm_ev import cycles, references
+from pmsm_ev.params import InjectionParams
 from pmsm_ev.results import row_timing_corrected_angle_error
 
 from .. import envelope
@@ -20,13 +20,13 @@ from ..drive import load_system
 from ..metrics import cycle_energy
 from ..metrics.rows import KMH
 from ..metrics.trace import TRACE_BAND_KMH, TRACE_WINDOW_S, trace_band
+from ..metrics.verdicts import INSIDE_MIN
 from ..metrics.windows import run_timing
 from .configs import CYCLE_RUNS as RUNS
 from .drawing import figure_links, pyplot, save_figure
-from .speed_range import SCENARIO_SETS
+from .drawing import num as _num
+from .speed_range import SCENARIO_SETS, limits
 
-#: the least share of a cycle inside the band (issue 24)
-BAND_SHARE_MIN = 0.99
 #: a torque at least this share of the envelope's at its speed counts as at the drive's limit
 AT_LIMIT = 0.98
 #: the WLTC pair the phase tables and the figures compare
@@ -43,19 +43,8 @@ KINDS = (("aero", ("road_Wh", "aero")), ("rolling", ("road_Wh", "rolling")), ("g
 LOSS_KINDS = ("copper", "inverter", "iron", "friction", "gear")
 
 
-def _num(x, fmt=".2f") -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "-"
-    return format(x, fmt)
-
-
 def _pct(x, fmt=".2f") -> str:
     return "-" if x is None else f"{_num(100.0 * x, fmt)} %"
-
-
-def _limits():
-    p = envelope.parameters(SCENARIO_SETS)
-    return references.limits(p["controller"], p["motor"])
 
 
 def figures_of(data, cid: str) -> dict | None:
@@ -110,12 +99,12 @@ def diagnosis(run, f: dict, lim) -> str:
     phase, the trace's speed there and the largest shortfall or excess in it, and what the drive was doing
     meanwhile: the share of it in alignment or I-f, at the torque envelope (|T_e| >= ``AT_LIMIT`` of the
     most the drive has at that speed), with the friction brake on, and the unit's loss-of-synchronism
-    episodes and fault. "" when the run completed inside the band for ``BAND_SHARE_MIN`` of the cycle."""
+    episodes and fault. "" when the run completed inside the band for ``INSIDE_MIN`` of the cycle."""
     tr, parts = f["trace"], []
     if f["status"] != "completed":
         parts.append(f"the run did not complete (status {f['status']}, last row at {f['t_end']:.2f} s)")
     share = tr.get("inside_share")
-    if share is not None and share < BAND_SHARE_MIN and tr.get("t_longest_excursion") is not None:
+    if share is not None and share < INSIDE_MIN and tr.get("t_longest_excursion") is not None:
         cycle, r = f["cycle"], run.r
         t0, length = tr["t_longest_excursion"], tr["longest_excursion_s"]
         w = (r["time"] >= t0 - 1e-9) & (r["time"] < t0 + length - 1e-9)
@@ -158,7 +147,7 @@ def _cycle_table(data, rows: dict) -> list[str]:
         tr, s, wh = f["trace"], f["synchronism"], f["whole"] or {}
         e, bal, wc = wh.get("energy") or {}, wh.get("balance") or {}, wh.get("wheel") or {}
         share = tr.get("inside_share")
-        mark = "" if share is None or share >= BAND_SHARE_MIN else " (< 99 %)"
+        mark = "" if share is None or share >= INSIDE_MIN else f" (< {100 * INSIDE_MIN:g} %)"
         longest = tr.get("longest_excursion_s")
         longest = "-" if longest is None else f"{longest:.2f} s at {tr['t_longest_excursion']:.1f} s"
         L.append(
@@ -252,7 +241,7 @@ def _cost_table(cost: list[dict]) -> list[str]:
     return L + ["", "(Δ: sensorless minus sensored; energies in Wh)", ""]
 
 
-#: what the sensorless unit does at and near zero speed, by its ``low_speed`` (the FMU's default: "if")
+#: what the sensorless unit does at and near zero speed, by its ``low_speed`` (default ``InjectionParams``')
 LOW_SPEED_TEXT = {"injection": "high-frequency injection at and near zero speed: the acquisition, the polarity "
                                "test and FOC on the injection, the stationary-frame EKF5 above",
                   "if": "alignment, I-f, the stationary-frame EKF5, back to I-f at every stop"}
@@ -264,7 +253,7 @@ def setting_text(scenarios) -> dict[str, str]:
     scenarios' strategy at and near zero speed, ``LOW_SPEED_TEXT``) and ``climb`` (the steepest grade of the road
     ``hilly`` [%])."""
     specs = [load_system(s) for s in scenarios]
-    strategies = {s.component("ctrl").start.get("low_speed", "if") for s in specs
+    strategies = {s.component("ctrl").start.get("low_speed", InjectionParams().low_speed) for s in specs
                   if s.component("ctrl").fmu.name == "FocSensorless.fmu"}
 
     def alike(values, fmt):
@@ -283,7 +272,7 @@ def render(data, fig_names) -> list[str]:
     rows = {cid: figures_of(data, cid) for cid, _, _ in RUNS}
     if not any(rows.values()):
         return L + ["(no runs)\n"]
-    lim = _limits()
+    lim = limits()
     st = setting_text(scen for _, scen, _ in RUNS)
     suffix = {scen.rsplit("-", 1)[-1] for _, scen, setup in RUNS if setup.key == "sensorless"}
     descr = []
@@ -304,7 +293,7 @@ def render(data, fig_names) -> list[str]:
         "band*: "
         f"the share of the cycle the car's speed is within ±{TRACE_BAND_KMH:g} km/h of the trace taken over "
         f"±{TRACE_WINDOW_S:g} s "
-        f"(GTR No. 15; issue 24 requires {100 * BAND_SHARE_MIN:g} %); *RMSE* and *largest deviation* against the "
+        f"(GTR No. 15; issue 24 requires {100 * INSIDE_MIN:g} %); *RMSE* and *largest deviation* against the "
         "trace; *slipped turns* and *loss-of-sync episodes* from metrics.json's `synchronism`; *Wh/km (DC)* the "
         "net DC-link energy per km driven; *regenerated / drawn* the DC energy returned as a share of the DC energy "
         "drawn; *balance residual / throughput* the energy balance's residual over the DC throughput "
@@ -332,10 +321,10 @@ def render(data, fig_names) -> list[str]:
     ok = [f for f in rows.values() if f is not None]
     slipped = sum(int(f["synchronism"].get("slipped_turns") or 0) for f in ok)
     if fails:
-        L.append(f"Runs that miss the {100 * BAND_SHARE_MIN:g} % of the band or did not complete, where and why:\n")
+        L.append(f"Runs that miss the {100 * INSIDE_MIN:g} % of the band or did not complete, where and why:\n")
         L += fails + [""]
     else:
-        L.append(f"Every run completed inside the band for at least {100 * BAND_SHARE_MIN:g} % of its cycle.\n")
+        L.append(f"Every run completed inside the band for at least {100 * INSIDE_MIN:g} % of its cycle.\n")
     L.append(f"Electrical turns slipped, all runs together: {slipped}.\n")
     checks = []
     for cid, scen, setup in RUNS:
@@ -477,8 +466,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
 
     pts = [(cid, data.runs[cid]) for cid in (*WLTC_PAIR, "cyc-us06") if cid in data.runs]
     if pts:
-        p = envelope.parameters(SCENARIO_SETS)
-        lim = references.limits(p["controller"], p["motor"])
+        lim = limits()
         speeds = references.region_speeds(lim)
         w = np.linspace(0.0, 1.15 * max(float(np.max(run.r["omega_m"])) for _, run in pts), 300)
         motoring, braking, region = references.torque_envelope(w, lim)

@@ -20,10 +20,11 @@ from pmsm_ev.scenarios import SCENARIO_STOP_TIME
 
 from ..compare import COLUMNS, Run, format_value, load_run, markdown_table, plot_overlay, summarize
 from ..drive import load_system
+from ..metrics.rows import T_FROM
 from ..metrics.run import PLATEAU_WINDOW, SETTLING_BAND
 from ..metrics.windows import angle_recovery, plateau_split, run_timing
 from . import cycles, sensorless, speed_range, synchronism
-from .configs import FIG_NAMES, FLYING_SPEED, REALISM_SCENARIOS, REALISM_SETUPS, SETUPS, T_FROM, Config
+from .configs import FIG_NAMES, FLYING_SPEED, REALISM_SCENARIOS, REALISM_SETUPS, SETUPS, Config
 from .drawing import figure_links
 
 # --- the document ------------------------------------------------------------------------

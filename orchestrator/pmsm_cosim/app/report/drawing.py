@@ -1,9 +1,15 @@
-"""How the report's sections draw: pyplot on the Agg backend, a figure saved as the report keeps it, and a page's
-links to the figures that were drawn."""
+"""How the report's sections draw: pyplot on the Agg backend, a figure saved as the report keeps it, a page's
+links to the figures that were drawn, and a number as a page writes it."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+
+
+def num(x, fmt: str = ".2f") -> str:
+    """A number as the pages write it: "-" for none or a non-finite one."""
+    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
 
 
 def pyplot():

@@ -18,11 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
+from pmsm_ev.kernels import MODE_EKF
 from pmsm_ev.params import ScenarioParams, StartupParams
 from pmsm_ev.results import row_timing_corrected_angle_error
 from pmsm_ev.scenarios import SENSORLESS_START_DELAY
 
-from ..metrics.sensorless import STARTUP_BAND, STARTUP_FROM, handovers, sensorless_metrics
+from ..drive import load_system
+from ..metrics.rows import T_FROM
+from ..metrics.sensorless import ROLL_BACK_LIMIT, STARTUP_BAND, STARTUP_FROM, handovers, sensorless_metrics
 from ..metrics.windows import figures_where, run_timing
 from .drawing import figure_links, pyplot, save_figure
 
@@ -41,12 +44,27 @@ ANGLE_STOP = 60.0
 #: the controllers compared: (setup key of pmsm_cosim.app.report.SETUPS)
 SETUP_KEYS = ("sensorless", "sensored")
 
+#: the hill start's margins [s]: the figure from this long before the stop to this long after the restart, the
+#: roll-back at the restart until this long after it; the stand judged from this long after it begins (the car
+#: settles), its zoomed figure this long either side of it
+HILL_MARGIN, STAND_SETTLE, STAND_ZOOM = 5.0, 1.0, 1.5
+
+
+def hill_route(scenario: str = "hill-start-if") -> dict:
+    """The hill start's route from its system file: the grade [°] and when it comes (``grade_at`` [s]), and the
+    speed reference's ``stop`` (its fall to 0), ``stand`` (at 0) and ``restart`` (its rise), each (start, end) [s]."""
+    spec = load_system(scenario)
+    d, w = spec.signals["delta"].profile, spec.signals["omega_ref"].profile
+    t, v = w.times, w.values
+    i = next(j for j in range(1, len(v) - 1) if v[j] > 0.0 and v[j + 1] == 0.0)  # the fall to the stop
+    return {"grade": math.degrees(max(d.values)), "grade_at": next(a for a, x in zip(d.times, d.values) if x > 0.0),
+            "stop": (t[i], t[i + 1]), "stand": (t[i + 1], t[i + 2]), "restart": (t[i + 2], t[i + 3])}
+
+
 #: the issue's targets
 SPEED_RATIO = 1.1  #: speed RMS error and step dips, against the sensored drive's
 SETTLING_EXTRA = 0.5  #: settling time over the sensored drive's [s]
 ANGLE_LIMIT = 0.05  #: angle error after the start-up [rad], row timing removed
-ROLL_BACK_LIMIT = 0.05  #: [m]
-T_FROM = 20.0  #: "after the start-up" [s]
 
 
 def config_specs():
@@ -103,10 +121,12 @@ def figures(data, fig_dir: Path) -> list[Path]:
     # sensored (dashed) first, the sensorless unit on top
     hill = [(data.runs.get(f"sl-hill-{c}-{k}"), f"{k}, {d}", "--" if k == "sensored" else "-")
             for k in ("sensored", "sensorless") for c, _, d in CONDITIONS[:2]]
-    hill = [(r, lab, ls) for r, lab, ls in hill if r is not None]
+    hr = hill_route()
+    window = (hr["stop"][0] - HILL_MARGIN, hr["restart"][1] + HILL_MARGIN)
+    # the runs that reach the window (a report with a short stop time has none there)
+    hill = [(r, lab, ls) for r, lab, ls in hill if r is not None and r.r["time"][-1] >= window[0]]
     if hill:
         fig, axes = plt.subplots(4, 1, figsize=(7.5, 8.5), sharex=True)
-        window = (25.0, 65.0)
         for i, (run, label, ls) in enumerate(hill):
             r = run.r
             sel = (r["time"] >= window[0]) & (r["time"] <= window[1])
@@ -125,16 +145,18 @@ def figures(data, fig_dir: Path) -> list[Path]:
         axes[1].set_ylabel(f"x − x({window[0]:g} s) [m]")
         axes[2].set_ylabel("T_e [N m]")
         axes[2].legend(fontsize=7)
-        axes[0].set_title("hill-start-if on 22°: stop (30-40 s), stand (40-50 s), restart (50-60 s)")
+        axes[0].set_title(f"hill-start-if on {hr['grade']:g}°: "
+                          + ", ".join(f"{k} ({hr[k][0]:g}-{hr[k][1]:g} s)" for k in ("stop", "stand", "restart")))
         made.append(_finish(fig, axes, fig_dir / "sensorless_hill.png", axes[3]))
         # the position over the stand, zoomed: the roll-back in millimetres
+        mid = sum(hr["stand"]) / 2
         fig, ax = plt.subplots(figsize=(7.5, 3.0))
         for i, (run, label, ls) in enumerate(hill):
             r = run.r
-            sel = (r["time"] >= 38.5) & (r["time"] <= 51.5)
-            x45 = float(np.interp(45.0, r["time"], r["x_vehicle"]))
+            sel = (r["time"] >= hr["stand"][0] - STAND_ZOOM) & (r["time"] <= hr["stand"][1] + STAND_ZOOM)
+            x45 = float(np.interp(mid, r["time"], r["x_vehicle"]))
             ax.plot(r["time"][sel], 1000.0 * (r["x_vehicle"][sel] - x45), lw=0.9, label=label, color=f"C{i}", ls=ls)
-        ax.set_ylabel("x − x(45 s) [mm]")
+        ax.set_ylabel(f"x − x({mid:g} s) [mm]")
         ax.set_ylim(-100.0, 40.0)
         ax.set_title("hill-start-if: vehicle position around the stand (below 0: rolled back)")
         ax.legend(fontsize=7)
@@ -167,7 +189,7 @@ def _figures_of(data, cid: str) -> dict | None:
     out = dict(row)
     out.update(sensorless_metrics(r, T_FROM))
     # the angle error in closed loop (standing in I-f, at no back-EMF, it is not observable)
-    closed = figures_where(r, (t >= T_FROM) & (r["mode"] == 2.0), dt, pole_pairs)
+    closed = figures_where(r, (t >= T_FROM) & (r["mode"] == MODE_EKF), dt, pole_pairs)
     out["angle_max_after"], out["angle_rms_after"] = closed["angle_max"], closed["angle_rms"]
     drift = row.get("theta_drift")
     out["turns"] = None if drift is None else abs(drift) / (2 * math.pi)
@@ -179,19 +201,23 @@ def _figures_of(data, cid: str) -> dict | None:
 
 
 def _hill_figures(data, cid: str) -> dict | None:
+    """The hill start's figures; None without the run or for a run that ends before its stand and restart (a
+    report with a short stop time)."""
     f = _figures_of(data, cid)
     if f is None:
         return None
     t = data.runs[cid].r["time"]
     r = data.runs[cid].r
-    stand = figures_where(r, (t >= 41.0) & (t <= 50.0))
-    f["roll_back_stop"] = figures_where(r, (t >= 30.0) & (t <= 50.0))["roll_back"]
-    f["roll_back_restart"] = figures_where(r, (t >= 50.0) & (t <= 65.0))["roll_back"]
+    hr = hill_route()
+    stand = figures_where(r, (t >= hr["stand"][0] + STAND_SETTLE) & (t <= hr["stand"][1]))
+    f["roll_back_stop"] = figures_where(r, (t >= hr["stop"][0]) & (t <= hr["stand"][1]))["roll_back"]
+    restart = (t >= hr["restart"][0]) & (t <= hr["restart"][1] + HILL_MARGIN)
+    f["roll_back_restart"] = figures_where(r, restart)["roll_back"]
     f["stand_travel"], f["stand_speed_max"] = stand["travel"], stand["speed_max"]
     h = handovers(f["mode_changes"])
     f["t_down"] = h["down"][0] if h["down"] else None
-    f["t_restart_up"] = next((u for u in h["up"] if u > 45.0), None)
-    return f
+    f["t_restart_up"] = next((u for u in h["up"] if u > sum(hr["stand"]) / 2), None)
+    return None if None in (f["roll_back_stop"], f["roll_back_restart"], f["stand_travel"]) else f
 
 
 def _table(data) -> list[str]:
@@ -300,20 +326,23 @@ def _targets(data) -> tuple[list[str], list[str]]:
                 worst_speed = e if worst_speed is None else max(worst_speed, e)
                 worst_roll = rb if worst_roll is None else max(worst_roll, rb)
     if worst_speed is not None:
+        conds = " / ".join(next(d for c, _, d in CONDITIONS if c == cond) for cond in ANGLE_CONDITIONS)
         add(f"Start-up, every initial angle: abs(ω_m − ω_ref) ≤ {STARTUP_BAND:g} rad/s from {STARTUP_FROM:g} s on",
-            f"largest {worst_speed:.2f} rad/s (8 angles × exact / σ = 1 A)", worst_speed <= STARTUP_BAND)
+            f"largest {worst_speed:.2f} rad/s ({len(ANGLES)} angles × {conds})", worst_speed <= STARTUP_BAND)
         add(f"Start-up, every initial angle: backward roll ≤ {100 * ROLL_BACK_LIMIT:g} cm on level road",
             f"largest {100 * worst_roll:.2f} cm", worst_roll <= ROLL_BACK_LIMIT)
+    stand = hill_route()["stand"]
     for cond in ("exact", "noisy1A", "offset"):
         desc = next(d for c, _, d in CONDITIONS if c == cond)
         h = _hill_figures(data, f"sl-hill-{cond}-sensorless")
-        if not h or h["roll_back_stop"] is None:
+        if not h:
             continue
         add(f"hill-start-if, {desc}: roll-back ≤ {100 * ROLL_BACK_LIMIT:g} cm at the stop and the restart",
             f"{100 * h['roll_back_stop']:.2f} / {100 * h['roll_back_restart']:.2f} cm",
             max(h["roll_back_stop"], h["roll_back_restart"]) <= ROLL_BACK_LIMIT)
-        add(f"hill-start-if, {desc}: holds for the 10 s",
-            f"moves {1000 * h['stand_travel']:.1f} mm, abs(ω_m) ≤ {h['stand_speed_max']:.3f} rad/s over 41-50 s",
+        add(f"hill-start-if, {desc}: holds for the {stand[1] - stand[0]:g} s",
+            f"moves {1000 * h['stand_travel']:.1f} mm, abs(ω_m) ≤ {h['stand_speed_max']:.3f} rad/s over "
+            f"{stand[0] + STAND_SETTLE:g}-{stand[1]:g} s",
             h["stand_travel"] < 0.01)
     return ["| target | measured | |", "|---|---|---|"] + rows, misses
 
@@ -344,16 +373,20 @@ def render(data, fig_names) -> list[str]:
         f"row-timing term −N ω dt removed{lag}.\n")
     L += _table(data)
     L.append("")
+    delta = load_system(SCENARIOS[0][1]).signals["delta"].profile
+    t_step, step = next((t, math.degrees(x)) for t, x in zip(delta.times, delta.values) if x != 0.0)
     L.append(f"Start-up from eight initial rotor angles (scenario 1, {ANGLE_STOP:g} s: the start, then the "
-             f"5° step at 50 s):\n")
+             f"{step:g}° step at {t_step:g} s):\n")
     L += _start_table(data)
     L.append("")
     h = {c: _hill_figures(data, f"sl-hill-{c}-sensorless") for c, _, _ in CONDITIONS}
+    hr = hill_route()
     if h["exact"]:
         e = h["exact"]
         L.append(
-            f"Hill start (22° from 20 s): with exact sensors the unit hands back to I-f at "
-            f"{_num(e['t_down'])} s while slowing down, stands from 40 to 50 s moving "
+            f"Hill start ({hr['grade']:g}° from {hr['grade_at']:g} s): with exact sensors the unit hands back to I-f "
+            f"at {_num(e['t_down'])} s while slowing down, stands from {hr['stand'][0]:g} to {hr['stand'][1]:g} s "
+            "moving "
             f"{1000 * e['stand_travel']:.1f} mm (largest |ω_m| {e['stand_speed_max']:.3f} rad/s), and hands over "
             f"to the EKF again at {_num(e['t_restart_up'])} s on the way up; roll-back {100 * e['roll_back_stop']:.2f} "
             f"cm at the stop and {100 * e['roll_back_restart']:.2f} cm at the restart"

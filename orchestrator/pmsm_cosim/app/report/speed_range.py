@@ -25,6 +25,7 @@ from ..metrics.speed_range import wheel_ratio
 from ..metrics.windows import figures_where, run_timing
 from .configs import SPEED_RANGE_RUNS as RUNS
 from .drawing import figure_links, pyplot, save_figure
+from .drawing import num as _num
 
 #: the scenario's controller settings, for its envelope (acceleration.toml's ctrl start values)
 SCENARIO_SETS = ("reference=fw", "v_dc=360", "P_regen_max=50000", "inverter_losses=true", "gear_model=power_flow")
@@ -32,10 +33,10 @@ SCENARIO_SETS = ("reference=fw", "v_dc=360", "P_regen_max=50000", "inverter_loss
 ANGLE_FROM_SPEED = 100.0
 
 
-def _num(x, fmt=".2f") -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "-"
-    return format(x, fmt)
+def limits():
+    """The drive's limits with the scenario's controller settings (``SCENARIO_SETS``; ``pmsm_ev.references``)."""
+    p = envelope.parameters(SCENARIO_SETS)
+    return references.limits(p["controller"], p["motor"])
 
 
 def route(spec, vehicle: VehicleParams) -> dict:
@@ -98,7 +99,9 @@ def figures(data, fig_dir: Path) -> list[Path]:
     axes[0].plot(r0["time"], r0["omega_ref"] * wheel_ratio(r0) * KMH, "k--", lw=0.7, label="reference")
     axes[0].set_ylabel("v [km/h]")
     axes[0].legend(fontsize=7)
-    axes[0].set_title("Acceleration to 131 km/h and regenerative braking, level road")
+    run = data.runs.get(RUNS[0][0])
+    top = route(load_system(RUNS[0][1]), plant_params(run.metrics)[1] if run else VehicleParams())["top_kmh"]
+    axes[0].set_title(f"Acceleration to {top:.0f} km/h and regenerative braking, level road")
     axes[1].set_ylabel("T_e [N m]\n(dotted: friction brake / n_g)")
     axes[2].set_ylabel("P_dc [kW]")
     axes[2].set_xlabel("time [s]")
@@ -106,8 +109,7 @@ def figures(data, fig_dir: Path) -> list[Path]:
         ax.grid(True, lw=0.3)
     made.append(save_figure(fig, fig_dir / "accel_speed.png"))
 
-    p = envelope.parameters(SCENARIO_SETS)
-    lim = references.limits(p["controller"], p["motor"])
+    lim = limits()
     speeds = references.region_speeds(lim)
     w = np.linspace(0.0, 1.15 * max(float(np.max(run.r["omega_m"])) for _, _, run in runs), 300)
     motoring, braking, region = references.torque_envelope(w, lim)
@@ -149,7 +151,7 @@ def render(data, fig_names) -> list[str]:
     if not any(rows.values()):
         return L + ["(no runs)\n"]
     p = envelope.parameters(SCENARIO_SETS)
-    lim = references.limits(p["controller"], p["motor"])
+    lim = limits()
     speeds = references.region_speeds(lim)
     v_dc = p["controller"].v_dc
     L.append(

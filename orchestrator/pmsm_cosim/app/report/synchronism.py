@@ -6,12 +6,15 @@ loads that change while the car creeps or stands, reversing) from each of the 8 
 and noise, the sensored drive as the reference. The runs are the monolithic loop
 (``pmsm_cosim.app.reference.run_reference``: the same kernels in the co-simulation's order; equal
 to the FMUs under the master to 1e-9, ``tests/test_sensorless.py``), ``--jobs`` processes at a
-time, into ``RUNS/sync/<case>-<controller>-<k>/``; the figures of merit are
-``pmsm_cosim.app.metrics.synchronism.synchronism_metrics`` and the targets those of the issue that asked for it.
+time, into ``RUNS/sync/<case>-<controller>-<k>/``, a run reused by the report's one rule (``runs.reusable``:
+completed, with the same settings and sources); the figures of merit are
+``pmsm_cosim.app.metrics.synchronism.synchronism_metrics`` of each run's rows and the targets those of the issue that
+asked for it.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -19,20 +22,28 @@ from pathlib import Path
 
 from pmsm_ev.params import LOW_SPEED_STRATEGIES, SENSORLESS_EKF, DriveParams, InjectionParams, PlantParams
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX, SyncCase
+from pmsm_ev_fmus.build import source_hash
 
 from ...engine.recording import read_results
-from ..metrics.synchronism import RECOVERY_BAND, SYNC_BAND, SYNC_REL, synchronism_metrics
+from .. import reference
+from ..metrics.synchronism import (
+    RECOVERY_BAND,
+    RECOVERY_LIMIT,
+    ROLL_BACK_EXTRA,
+    SPEED_EXTRA,
+    SPIN_LIMIT,
+    SYNC_BAND,
+    SYNC_REL,
+    synchronism_metrics,
+)
 from ..reference import run_reference
+from .configs import OBSERVER_FMUS, PLANT_FMU
 from .drawing import pyplot, save_figure
+from .runs import KEY_FILE, reusable
 
 #: current-sensor noise of every run [A] and the first seed (run k of a case has seed k + 1)
 NOISE = 1.0
 CONTROLLERS = ("sensorless", "sensored")
-#: the targets, against the sensored drive on the same case, angle and noise
-ROLL_BACK_EXTRA = 0.10  #: [m] more wrong-way travel than the sensored drive
-SPEED_EXTRA = 5.0  #: [rad/s] faster against the driver's direction than the sensored drive
-SPIN_LIMIT = 0.5  #: [s] the frame turning while the rotor stands
-RECOVERY_LIMIT = 5.0  #: [s] back within RECOVERY_BAND of the reference after the disturbance
 CASES = {c.name: c for c in SYNC_MATRIX}
 
 
@@ -49,44 +60,75 @@ def drive_params(controller: str, k: int, strategy: str = "if") -> DriveParams:
     return replace(base, plant=plant, injection=InjectionParams(low_speed=strategy))
 
 
-def run_one(case: SyncCase, controller: str, k: int, out_dir: Path, strategy: str = "if") -> dict:
-    """One run of the matrix: ``case`` from angle ``SYNC_ANGLES[k]``, noise seed k + 1 (``drive_params``); its
-    ``synchronism_metrics`` (also written into the run's metrics.json as "synchronism")."""
-    params = drive_params(controller, k, strategy)
-    route = case.route()
-    m = run_reference(out_dir, case.name, case.stop_time, controller, params=params, elevation=route["delta"],
-                      omega_ref=route["omega_ref"], startup_columns=True)
-    sync = synchronism_metrics(read_results(out_dir), case.t_disturbance, params.motor.N)
-    sync.update({"case": case.name, "controller": controller, "k": k, "theta0": SYNC_ANGLES[k],
-                 "status": m["status"]})
+def run_key(case: SyncCase, controller: str, k: int, strategy: str, sources: dict[str, str]) -> dict:
+    """What a run of the matrix is made of, for ``runs.reusable``: the case, the angle, the strategy, the drive's
+    parameters and the sources of the code that runs it (``sources``: ``matrix_sources``)."""
+    return {"case": repr(case), "controller": controller, "k": k, "strategy": strategy,
+            "params": repr(drive_params(controller, k, strategy)),
+            "sources": {n: sources[n] for n in (OBSERVER_FMUS[controller], PLANT_FMU, "loop")}}
+
+
+def matrix_sources() -> dict[str, str]:
+    """The hashes of the units' sources (their physics, as their FMUs are built from them) and of the monolithic
+    loop's module."""
+    names = {OBSERVER_FMUS[c] for c in CONTROLLERS} | {PLANT_FMU}
+    return {**{n: source_hash(n) for n in sorted(names)},
+            "loop": hashlib.sha256(Path(reference.__file__).read_bytes()).hexdigest()}
+
+
+def figures_of(case: SyncCase, controller: str, k: int, out_dir: Path, strategy: str = "if") -> dict:
+    """A run's ``synchronism_metrics`` from its rows, with the case, controller, angle and status; also written
+    into the run's metrics.json as "synchronism"."""
     path = Path(out_dir) / "metrics.json"
     data = json.loads(path.read_text(encoding="utf-8"))
+    sync = synchronism_metrics(read_results(out_dir), case.t_disturbance,
+                               drive_params(controller, k, strategy).motor.N)
+    sync.update({"case": case.name, "controller": controller, "k": k, "theta0": SYNC_ANGLES[k],
+                 "status": data["status"]})
     data["synchronism"] = sync
     path.write_text(json.dumps(data, indent=1, default=str) + "\n", encoding="utf-8")
     return sync
 
 
+def run_one(case: SyncCase, controller: str, k: int, out_dir: Path, strategy: str = "if",
+            key: dict | None = None) -> dict:
+    """One run of the matrix: ``case`` from angle ``SYNC_ANGLES[k]``, noise seed k + 1 (``drive_params``); its
+    ``figures_of``. ``key``: written beside a completed run (``runs.KEY_FILE``), which makes it reusable."""
+    (Path(out_dir) / KEY_FILE).unlink(missing_ok=True)  # a run cut short never looks reusable
+    params = drive_params(controller, k, strategy)
+    route = case.route()
+    run_reference(out_dir, case.name, case.stop_time, controller, params=params, elevation=route["delta"],
+                  omega_ref=route["omega_ref"], startup_columns=True)
+    sync = figures_of(case, controller, k, out_dir, strategy)
+    if key is not None and sync["status"] == "completed":
+        (Path(out_dir) / KEY_FILE).write_text(json.dumps(key, indent=2) + "\n", encoding="utf-8")
+    return sync
+
+
 def _run(args) -> dict:
-    name, controller, k, out, strategy = args
-    return run_one(CASES[name], controller, k, Path(out), strategy)
+    name, controller, k, out, strategy, key = args
+    return run_one(CASES[name], controller, k, Path(out), strategy, key)
 
 
 def run_matrix(runs_dir, jobs: int = 2, cases=SYNC_MATRIX, angles=len(SYNC_ANGLES), log=print,
-               strategy: str = "if") -> list[dict]:
+               strategy: str = "if", force: bool = False) -> list[dict]:
     """Every case x controller x angle, ``jobs`` at a time (``strategy``: ``drive_params``); the list of their
-    figures. ``angles``: the first that many of ``SYNC_ANGLES``, or the indices of those to run."""
+    figures. ``angles``: the first that many of ``SYNC_ANGLES``, or the indices of those to run. A run already in
+    ``runs_dir`` is reused when ``runs.reusable`` (completed, the same ``run_key``), unless ``force``."""
     runs_dir = Path(runs_dir)
     indices = list(range(angles)) if isinstance(angles, int) else list(angles)
-    todo = [(c.name, ctrl, k, str(runs_dir / f"{c.name}-{ctrl}-{k}"), strategy)
+    sources = matrix_sources()
+    plan = [(c.name, ctrl, k, str(runs_dir / f"{c.name}-{ctrl}-{k}"), strategy, run_key(c, ctrl, k, strategy, sources))
             for c in cases for ctrl in CONTROLLERS for k in indices]
-    log(f"synchronism matrix: {len(todo)} runs ({len(cases)} cases x {len(CONTROLLERS)} controllers x "
-        f"{len(indices)} angles), {jobs} at a time, in {runs_dir}")
-    if jobs > 1:
+    todo = [p for p in plan if force or not reusable(Path(p[3]), p[5])]
+    log(f"synchronism matrix: {len(plan)} runs ({len(cases)} cases x {len(CONTROLLERS)} controllers x "
+        f"{len(indices)} angles), {len(plan) - len(todo)} reused, {len(todo)} to run, {jobs} at a time, in {runs_dir}")
+    if jobs > 1 and len(todo) > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            results = list(pool.map(_run, todo))
+            made = dict(zip((p[3] for p in todo), pool.map(_run, todo)))
     else:
-        results = [_run(a) for a in todo]
-    return results
+        made = {p[3]: _run(p) for p in todo}
+    return [made[p[3]] if p[3] in made else figures_of(CASES[p[0]], p[1], p[2], Path(p[3]), strategy) for p in plan]
 
 
 def load_matrix(runs_dir) -> list[dict]:
@@ -121,7 +163,7 @@ def verdicts(results: list[dict]) -> list[dict]:
         out.append({
             "case": case, "n": len(sl),
             "roll_back": max(r["roll_back_m"] for r in sl), "roll_back_sensored": max(r["roll_back_m"] for r in sd),
-            "roll_back_ok": all(a["roll_back_m"] <= b["roll_back_m"] + ROLL_BACK_EXTRA for a, b in pairs),
+            "roll_back_ok": all(a["roll_back_m"] <= b["roll_back_m"] + ROLL_BACK_EXTRA["if"] for a, b in pairs),
             "wrong_speed": max(r["wrong_way_speed"] for r in sl),
             "wrong_speed_sensored": max(r["wrong_way_speed"] for r in sd),
             "wrong_speed_ok": all(a["wrong_way_speed"] <= b["wrong_way_speed"] + SPEED_EXTRA for a, b in pairs),
@@ -194,7 +236,8 @@ def intro(n_angles: int) -> str:
         f"|ω_m − ω_ref| ≤ {RECOVERY_BAND:g} rad/s "
         "to the end, and 'episodes' the unit's own loss-of-synchronism detections (output `fault` = 1), "
         "'faults' the latched safe states (`fault` = 2). Targets (✓/✗): roll-back within the sensored drive's "
-        f"+ {100 * ROLL_BACK_EXTRA:g} cm and wrong-way speed within its + {SPEED_EXTRA:g} rad/s, run by run; spin ≤ "
+        f"+ {100 * ROLL_BACK_EXTRA['if']:g} cm and wrong-way speed within its + {SPEED_EXTRA:g} rad/s, run by run; "
+        f"spin ≤ "
         f"{SPIN_LIMIT:g} s; recovered within {RECOVERY_LIMIT:g} s. Generated from `pmsm_ev.scenarios.SYNC_MATRIX` "
         "by `pmsm-cosim report` (monolithic loop, `pmsm_cosim.app.report.synchronism`).\n")
 

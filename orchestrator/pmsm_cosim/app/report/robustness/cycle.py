@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pmsm_ev import cycles as pcycles
+from pmsm_ev import kernels
 from pmsm_ev.params import MotorParams, VehicleParams
 
 from ....sweeps import read_summary
@@ -36,8 +37,9 @@ NOMINAL = {"plant.R_s": ("R_s", _M.R_s), "plant.psi": ("ψ", _M.psi), "plant.L_q
 
 
 #: the sensorless unit's modes (``pmsm_ev.kernels`` MODE_*: metrics.json ``sensorless`` ``mode_changes``)
-MODE_NAMES = {0.0: "alignment", 1.0: "I-f", 2.0: "FOC on the EKF", 3.0: "the injection's acquisition",
-              4.0: "the polarity test", 5.0: "FOC on the injection"}
+MODE_NAMES = {kernels.MODE_ALIGN: "alignment", kernels.MODE_IF: "I-f", kernels.MODE_EKF: "FOC on the EKF",
+              kernels.MODE_ACQUIRE: "the injection's acquisition", kernels.MODE_POLARITY: "the polarity test",
+              kernels.MODE_INJECTION: "FOC on the injection"}
 
 
 def _num(x) -> float:

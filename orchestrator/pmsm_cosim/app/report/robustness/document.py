@@ -14,7 +14,8 @@ import numpy as np
 
 from pmsm_ev.params import EkfParams, MotorParams
 
-from .cycle import cycle_text
+from ..drawing import num
+from .cycle import NOMINAL, cycle_text
 from .figures import dead_time_label
 from .metrics import (
     DEAD_CLIMB,
@@ -52,7 +53,7 @@ def _pct(r: dict, key: str, nominal: float) -> str:
 
 
 def _g(x, fmt=".3g") -> str:
-    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+    return num(x, fmt)
 
 
 def route_text(route: dict | None) -> str:
@@ -233,10 +234,8 @@ def _monte_carlo(c: Collected, figs: dict) -> list[str]:
     design = next(iter(c.mc_design.values()), None)
     what = ""
     if design is not None:
-        nominal = {"plant.R_s": ("R_s", _M.R_s), "plant.psi": ("ψ", _M.psi), "plant.L_q": ("L_q", _M.L_q),
-                   "plant.L_d": ("L_d", _M.L_d)}
-        ranges = [f"{nominal[k][0]} {100 * (a / nominal[k][1] - 1):+.0f} … {100 * (b / nominal[k][1] - 1):+.0f} %"
-                  for k, (law, (a, b)) in design.random.items() if k in nominal and law == "uniform"]
+        ranges = [f"{NOMINAL[k][0]} {100 * (a / NOMINAL[k][1] - 1):+.0f} … {100 * (b / NOMINAL[k][1] - 1):+.0f} %"
+                  for k, (law, (a, b)) in design.random.items() if k in NOMINAL and law == "uniform"]
         noise = design.fixed.get("plant.sensor_noise")
         route = c.routes.get(design.name)
         n_run = len(next(iter(c.mc.values())))

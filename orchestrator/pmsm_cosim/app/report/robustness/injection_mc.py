@@ -12,13 +12,23 @@ import argparse
 import math
 from pathlib import Path
 
-from pmsm_ev.params import MotorParams
+from pmsm_ev.params import InjectionParams, MotorParams, PlantParams
 
 from ....engine.recording import read_results
+from ...drive import load_system
 from ...metrics.synchronism import slipped_turns
 from ...metrics.trace import TRACE_BAND_KMH
 from ...studies import load_sweep
-from .cycle import INSIDE_MIN, REASONS, cycle_duration_of, cycle_rows, failure_reasons, findings, where_text
+from .cycle import (
+    INSIDE_MIN,
+    REASONS,
+    cycle_duration_of,
+    cycle_rows,
+    failure_reasons,
+    findings,
+    grade_pct,
+    where_text,
+)
 from .interval import wilson
 from .pages import write_between
 
@@ -26,6 +36,46 @@ SWEEP = "cycle_montecarlo_wltc3b_injection"
 SWEEP_IF = "cycle_montecarlo_wltc3b_injection_if"  #: the same samples with the I-f strategy
 NOT_RUN = "not run"  #: summary.csv's status of a sample a stopped sweep has not run
 BEGIN, END = "<!-- injection-mc: generated -->", "<!-- /injection-mc -->"
+
+
+def _span(lo: float, hi: float, unit: str = "%") -> str:
+    """A drawn range as the page writes it: ±hi when symmetric, else its ends (the unit beside the one not 0)."""
+    def signed(x):
+        return f"{x:+g}".replace("-", "−")
+
+    if lo == -hi:
+        return f"±{hi:g} {unit}"
+    if lo == 0:
+        return f"0 … {signed(hi)} {unit}"
+    return f"{signed(lo)} {unit} … 0" if hi == 0 else f"{signed(lo)} … {signed(hi)} {unit}"
+
+
+def design_text(design) -> str:
+    """What the sweep draws (``design``: its spec), in the page's words: each uniform range in % of the plant's
+    nominal value (the motor's, its flux model's knees, the sensors' unit gain, the dead-time compensation's
+    v_dc t_d / T_s) or in its own unit, the fixed dead time and noise, the seed."""
+    r, fixed, m, p = design.random, design.fixed, MotorParams(), PlantParams()
+    spec = load_system(design.system)
+    v_dc, dead = spec.component("plant").start.get("v_dc", p.v_dc), fixed.get("plant.dead_time", p.dead_time)
+
+    def pct(key, nominal):
+        return _span(*(round(100.0 * (x / nominal - 1.0), 1) for x in r[key][1]))
+
+    def both(a, b, text_a, text_b, what):
+        return f"{a} and {b} {text_a}{what}" if text_a == text_b else f"{a} {text_a}, {b} {text_b}{what}"
+
+    grade = [round(grade_pct(x), 1) for x in r["offset.delta"][1]]
+    offsets = " / ".join(dict.fromkeys(_span(*r[f"plant.sensor_offset_{ph}"][1], unit="A") for ph in "ab"))
+    gains = " / ".join(dict.fromkeys(pct(f"plant.sensor_gain_{ph}", 1.0) for ph in "ab"))
+    knees = (pct("plant.flux_q_current", p.flux_q_current), pct("plant.flux_d_current", p.flux_d_current))
+    return ("the plant's flux model off the controller's, "
+            + both("L_d", "L_q", pct("plant.L_d", m.L_d), pct("plant.L_q", m.L_q), " at zero current")
+            + f", the saturation's knees {knees[0] if knees[0] == knees[1] else ' (q), '.join(knees) + ' (d)'}"
+            + f"; a hot motor, R_s {pct('plant.R_s', m.R_s)}, ψ {pct('plant.psi', m.psi)}; occupants; a grade offset "
+            f"{_span(*grade)}; current-sensor offsets {offsets} and gains {gains}; "
+            f"{dead * 1e6:g} µs of dead time, its compensation off by "
+            f"{pct('ctrl.dead_time_comp', v_dc * dead / spec.step_size)}; "
+            f"{fixed.get('plant.sensor_noise', p.sensor_noise):g} A of noise; seed {design.seed}")
 
 
 def judged_rows(out: Path) -> list[dict]:
@@ -122,12 +172,11 @@ def section(out: Path, machine: str, beside: Path | None = None, fresh: Path | N
     planned = design.samples
     f = findings(rows, cycle_duration_of(rows))
     lo, hi = f.interval
+    low_speed = load_system(design.system).component("ctrl").start.get("low_speed", InjectionParams().low_speed)
     lines = [BEGIN, "", "## The cycle Monte-Carlo with injection, physically consistent", "",
-             f"`pmsm-cosim sweep {SWEEP}` (orchestrator/pmsm_cosim/app/sweeps/{SWEEP}.toml: the plant's flux model "
-             "off the controller's, L_d and L_q ±10 % at zero current, the saturation's knees ±20 %; a hot motor, "
-             "R_s 0 … +50 %, ψ −12 % … 0; occupants; a grade offset ±2 %; current-sensor offsets ±1 A and gains "
-             "±1 %; 2 µs of dead time, its compensation off by ±20 %; 1 A of noise; seed 36, a draw no earlier "
-             "study used), the unit with `low_speed = \"injection\"` through the whole WLTC 3b. A sample fails if "
+             f"`pmsm-cosim sweep {SWEEP}` (orchestrator/pmsm_cosim/app/sweeps/{SWEEP}.toml: {design_text(design)}, "
+             f"a draw no earlier study used), the unit with `low_speed = \"{low_speed}\"` through the whole WLTC 3b. "
+             "A sample fails if "
              f"it did not complete, or was inside the ±{TRACE_BAND_KMH:g} km/h band for less than "
              f"{100 * INSIDE_MIN:.0f} % of the "
              "cycle, or slipped an electrical turn, or latched the safe state.", ""]

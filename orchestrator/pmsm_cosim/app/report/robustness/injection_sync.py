@@ -2,8 +2,8 @@
 ``pmsm_ev.scenarios.SYNC_MATRIX`` from its 8 angles, the sensorless unit with ``low_speed = "injection"``
 against the sensored drive on the same plant (the algebraic flux model), angle and noise
 (``report.synchronism.run_matrix(strategy="injection")``). Each case judged on the issue's targets: the
-roll-back within the sensored drive's + ``ROLL_BACK_EXTRA``, no turn slipped, no episode, no fault, the
-frame never spinning past a standing rotor, back on the reference within ``synchronism.RECOVERY_LIMIT``.
+roll-back within the sensored drive's + ``ROLL_BACK_EXTRA["injection"]``, no turn slipped, no episode, no fault, the
+frame never spinning past a standing rotor, back on the reference within ``RECOVERY_LIMIT``.
 Where a car parked on a slope rolls back more, the section states the free roll before the unit gives
 torque, 1/2 g sin(delta) t^2 with t measured from the runs (an upper bound: no rolling resistance, no
 rotating inertia). Written between the page's markers, the rest of the page left as it is:
@@ -19,21 +19,23 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_ev.params import InjectionParams
+from pmsm_ev.kernels import MODE_INJECTION
+from pmsm_ev.params import InjectionParams, VehicleParams
 from pmsm_ev.scenarios import SYNC_ANGLES, SYNC_MATRIX
 
 from ....engine.recording import read_results
+from ...metrics.synchronism import RECOVERY_LIMIT, ROLL_BACK_EXTRA, SPIN_LIMIT
 from .. import synchronism
 from .pages import write_between
 
 BEGIN, END = "<!-- injection-sync: generated -->", "<!-- /injection-sync -->"
-ROLL_BACK_EXTRA = 0.01  #: [m] the injection's roll-back target: within the sensored drive's + 1 cm
-G = 9.81  #: [m/s^2]
-MODE_INJECTION = 5.0  #: the unit's mode when it gives torque on the injection (``pmsm_ev.kernels.MODE_INJECTION``)
+#: the injection's roll-back target [m] (``metrics.synchronism.ROLL_BACK_EXTRA``: within the sensored drive's + 1 cm)
+EXTRA = ROLL_BACK_EXTRA["injection"]
 
 
 def torque_time(run_dir: Path) -> float:
-    """The first recorded time [s] with the unit giving torque on the injection (mode 5); nan if never."""
+    """The first recorded time [s] with the unit giving torque on the injection (``MODE_INJECTION``); nan if
+    never."""
     r = read_results(run_dir)
     hit = np.nonzero(r["mode"] == MODE_INJECTION)[0]
     return float(r["time"][hit[0]]) if len(hit) else math.nan
@@ -60,15 +62,15 @@ def rows(results: list[dict], runs_dir: Path) -> list[dict]:
             "completed": all(r["status"] == "completed" for r in sl + sd),
         }
         row["ok"] = {
-            "roll-back": extra <= ROLL_BACK_EXTRA, "slip": row["slipped"] == 0, "episodes": row["episodes"] == 0,
-            "fault": row["faults"] == 0, "spin": row["spin"] <= synchronism.SPIN_LIMIT,
-            "recovery": row["recovery"] is not None and row["recovery"] <= synchronism.RECOVERY_LIMIT,
+            "roll-back": extra <= EXTRA, "slip": row["slipped"] == 0, "episodes": row["episodes"] == 0,
+            "fault": row["faults"] == 0, "spin": row["spin"] <= SPIN_LIMIT,
+            "recovery": row["recovery"] is not None and row["recovery"] <= RECOVERY_LIMIT,
             "completed": row["completed"],
         }
         delta = math.radians(case.grade_deg[0][1])
         if not row["ok"]["roll-back"] and delta > 0.0:
             t_torque = max(torque_time(runs_dir / f"{case.name}-sensorless-{k}") for k in range(len(sl)))
-            row["free_roll"] = 0.5 * G * math.sin(delta) * t_torque ** 2
+            row["free_roll"] = 0.5 * VehicleParams().g * math.sin(delta) * t_torque ** 2
             row["t_torque"] = t_torque
         out.append(row)
     return out
@@ -81,9 +83,9 @@ def section(results: list[dict], runs_dir: Path, machine: str) -> list[str]:
              f"{len(SYNC_ANGLES)} angles, σ = {synchronism.NOISE:g} A: the unit with `low_speed = \"injection\"` "
              "against the sensored drive on the same plant (the algebraic flux model), angle and noise "
              "(`python -m pmsm_cosim.app.report.robustness.injection_sync RUNS --run`, on "
-             f"{machine}). Targets: the roll-back within the sensored drive's + {100 * ROLL_BACK_EXTRA:.0f} cm, "
+             f"{machine}). Targets: the roll-back within the sensored drive's + {100 * EXTRA:.0f} cm, "
              f"no turn slipped, no episode, no fault, the frame never spinning past a standing rotor for more than "
-             f"{synchronism.SPIN_LIMIT:g} s, back within the recovery band by {synchronism.RECOVERY_LIMIT:g} s. "
+             f"{SPIN_LIMIT:g} s, back within the recovery band by {RECOVERY_LIMIT:g} s. "
              f"From enable until it first gives torque the unit holds the car with the friction brake "
              f"(`hold_brake` = {InjectionParams().hold_brake:g}: docs/sensorless.md, \"The hill hold\"); the sensored "
              "drive has torque from t = 0 and no hold.", "",
@@ -105,7 +107,7 @@ def section(results: list[dict], runs_dir: Path, machine: str) -> list[str]:
                       f"{r['t_torque']:.2f} s at the latest here): rolling free that long is "
                       f"{100 * r['free_roll']:.1f} cm (1/2 g sin δ t², an upper bound), of its "
                       f"{100 * r['extra']:+.1f} cm beyond the sensored drive, which has torque from t = 0. A car holds "
-                      "its brake until the drive reports torque (the unit's `mode` output: 5)."]
+                      f"its brake until the drive reports torque (the unit's `mode` output: {MODE_INJECTION:g})."]
     return lines + ["", END]
 
 

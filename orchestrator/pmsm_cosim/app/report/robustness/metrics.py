@@ -28,12 +28,13 @@ from pmsm_ev.params import MotorParams
 
 from ....engine.recording import read_results
 from ....sweeps import read_summary
+from ...metrics.rows import T_FROM
+from ...metrics.sensorless import ROLL_BACK_LIMIT
 from ...metrics.windows import figures_where, run_timing, tracking_figures
 from . import cycle as cycle_mc
 from .interval import wilson
 from .runs import ANGLE_USED, CONTROLLERS, CYCLE_MONTE_CARLO, DEAD_TIME, MAPS, MONTE_CARLOS, Map, sweep_spec
 
-T_FROM = 20.0  #: the metrics' window starts here [s] (past the start-up and the road step)
 #: stable below this speed RMS error after T_FROM [rad/s] (2.5 % of 200 rad/s)
 SPEED_LIMIT = 5.0
 #: diverged above this speed RMS error after T_FROM [rad/s] (25 % of 200 rad/s)
@@ -44,8 +45,6 @@ DEAD_WINDOW = (30.0, 70.0)
 DEAD_ROLL_FROM = 20.0
 DEAD_CLIMB = (25.0, 30.0)
 DEAD_LEAD_AT = 38.0
-#: a car that rolls back more than this [m] was not held (``report.sensorless.ROLL_BACK_LIMIT``)
-ROLL_BACK_LIMIT = 0.05
 #: one effect "dominates" another when it is this many times larger
 DOMINANT = 3.0
 _M = MotorParams()
