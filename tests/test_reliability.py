@@ -788,6 +788,18 @@ def test_system_loader_on_random_bytes(scratch, data):
     load_system_cleanly(path)
 
 
+@pytest.mark.parametrize("column", ['"\\n"', '"a\\tb"', '"\\u0007"'])
+def test_a_column_name_that_is_not_printable_is_named_on_one_line(tmp_path, column):
+    """A record column named by a control character: the error names it quoted, on one line (a property test
+    found a column named "\\n" whose error broke the line where the record key was named)."""
+    (tmp_path / "route.csv").write_text("time,value\n0,1\n2,3\n", encoding="utf-8")
+    path = tmp_path / "system.toml"
+    path.write_text(SYSTEM_TEMPLATE.format(**{**VALID_SLOTS, "column": column}), encoding="utf-8")
+    with pytest.raises(CosimError, match="a column name must be non-empty printable ASCII") as exc:
+        load_system(path)
+    assert "\n" not in str(exc.value)
+
+
 @PROPERTY
 @given(changes=st.one_of(
     st.dictionaries(st.sampled_from(sorted(VALID_SLOTS)), TOML_VALUES, min_size=1, max_size=2),

@@ -418,7 +418,9 @@ def parse_system(data: dict, path: Path | None = None, base_dir: Path | None = N
     rec_raw = data.get("record")
     if not isinstance(rec_raw, dict) or not rec_raw:
         raise CosimError(f"{where}: needs a [record] table (column = \"source\")")
-    columns = [_parse_column(name, value, f"{where}: record.{name}") for name, value in rec_raw.items()]
+    # a name that is not printable is quoted where it is named, so that the error stays on one line
+    columns = [_parse_column(name, value, f"{where}: record.{name if name.isprintable() else repr(name)}")
+               for name, value in rec_raw.items()]
 
     name = data.get("name") or (path.stem if path else "system")
     if not isinstance(name, str) or not name.isprintable() or any(c in name for c in "/\\") \
