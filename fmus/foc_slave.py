@@ -182,6 +182,9 @@ class FocSlave(DriveSlave):
         self.add_output("axis_cos", None, "cos 2e of the tracking observer's axis error from the d admittance and "
                                           "the identified admittances, filtered, in FOC on the injection (0 in the "
                                           "other modes)" + hold, discrete=True)
+        self.add_output("gain_ratio_id", None, "the phase sensors' relative gain g_a / g_b measured on the EKF over "
+                                               "gain_turns electrical turns and taken out of the measurements from "
+                                               "then on (eqs SG1-SG2)" + ident, discrete=True)
         self._sensorless = observer == "sensorless"
         if self._sensorless:  # it never reads the measured angle and speed: any value there, NaN included
             self.unread_inputs = frozenset(("theta_meas", "omega_meas"))
@@ -222,6 +225,7 @@ class FocSlave(DriveSlave):
     angle_accuracy = _unit_output("angle_accuracy", "``ControlUnit.angle_accuracy``")
     blind = _unit_output("blind", "``ControlUnit.blind``")
     axis_cos = _unit_output("axis_cos", "``ControlUnit.axis_cos``")
+    gain_ratio_id = _unit_output("gain_ratio_id", "``ControlUnit.gain_ratio_id``")
     del _unit_output
 
     # -- physics hooks ---------------------------------------------------------------

@@ -376,6 +376,10 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                                 "beyond this plus emf_slip_rel times the rotor's speed the loops see for inj_los_time"),
     "emf_slip_rel": (None, "... the share of the rotor's speed the current loops see (all the back-EMF they "
                            "carry) added to emf_slip_speed"),
+    "gain_turns": (None, "the phase sensors' relative gain g_a / g_b is measured on the EKF over this many electrical "
+                         "turns (eqs SG1-SG2) and taken out of the measurements from then on; 0: not measured"),
+    "saliency_calibrated": (None, "below this identified saliency L_q / L_d a seeing unit parks at its stops until "
+                                  "its phase sensors' relative gain is measured; 0: off"),
     "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "
                            "identified admittances), filtered, stays below this for inj_los_time"),
     # ControlUnit

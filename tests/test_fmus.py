@@ -68,10 +68,10 @@ CTRL_OUTPUTS = ("v_alpha", "v_beta", "v_d", "v_q", "i_d_hat", "i_q_hat", "omega_
                 "i_d", "i_q", "i_qref", "mode", "fault", "theta_ctrl", "omega_ctrl", "i_dref", "T_ref", "T_brake",
                 "ref_region", "psi_est", "R_s_est", "psi_observable", "R_s_observable", "L_d_id", "L_q_id",
                 "saliency_id", "R_s_id", "noise_id", "offset_a_id", "offset_b_id", "angle_accuracy", "blind",
-                "axis_cos")
+                "axis_cos", "gain_ratio_id")
 #: the controllers' outputs that are codes, flags or ratios: no unit
 UNITLESS = ("mode", "fault", "ref_region", "soc", "over_temperature", "psi_observable", "R_s_observable",
-            "saliency_id", "blind", "axis_cos")
+            "saliency_id", "blind", "axis_cos", "gain_ratio_id")
 DT = 1e-4
 DELTA_22 = math.radians(22.0)
 
@@ -555,7 +555,7 @@ def test_outputs_before_the_first_step(unzipped):
     p.fmu.exitInitializationMode()
     assert p.get(["omega_m", "i_alpha"]) == [60.0, Plant(plant=PlantParams(**{**start, "omega_m0": 60.0})).i_alpha]
     c = Instance(unzipped, "FocEkf5", start={"u_max": 100.0})
-    assert c.get(CTRL_OUTPUTS) == [0.0] * 12 + [2.0, 0.0, 0.0, 0.0] + [0.0] * 18  # mode 2: closed loop; no fault
+    assert c.get(CTRL_OUTPUTS) == [0.0] * 12 + [2.0, 0.0, 0.0, 0.0] + [0.0] * 19  # mode 2: closed loop; no fault
 
 
 # -- the FMUs in co-simulation -------------------------------------------------------------

@@ -323,6 +323,66 @@ def test_blind_stop_only_for_a_blind_unit_asked_to_stand_below_the_blend(blind, 
     assert k.detect_blind_stop(s, c, omega_ref) == event
 
 
+@pytest.mark.parametrize(("y_d", "y_q", "blind", "ratio", "cal", "turns", "parks"), [
+    (4460.0, 4000.0, 0.0, 0.0, 1.30, 200.0, True),  # 1.115, its sensors not yet measured
+    (4460.0, 4000.0, 0.0, 1.01, 1.30, 200.0, False),  # measured: it holds on the injection
+    (4460.0, 3300.0, 0.0, 0.0, 1.30, 200.0, False),  # 1.35: the mismatch turns its axis little
+    (4460.0, 4000.0, 0.0, 0.0, 0.0, 200.0, False),  # off
+    (4460.0, 4000.0, 0.0, 0.0, 1.30, 0.0, False),  # no measurement: nothing to wait for
+    (0.0, 0.0, 0.0, 0.0, 1.30, 200.0, False),  # not identified
+    (4460.0, 4300.0, 1.0, 1.01, 1.30, 200.0, True),  # blind, measured or not
+])
+def test_a_unit_parks_when_blind_or_its_low_saliency_meets_sensors_not_yet_measured(y_d, y_q, blind, ratio, cal,
+                                                                                   turns, parks):
+    _, s, c = _unit(saliency_calibrated=cal, gain_turns=turns)
+    s[k.S_ID_Y_D], s[k.S_ID_Y_Q], s[k.S_ID_BLIND], s[k.S_GAIN_RATIO] = y_d, y_q, blind, ratio
+    assert k.modes.parks(s, c) == parks
+    s[k.S_OMEGA_CTRL], s[k.S_MODE_TIME] = 2.0, 0.1
+    assert k.detect_blind_stop(s, c, 0.0) == (k.EV_BLIND_STOP if parks else k.EV_NONE)
+
+
+def _balanced(s, c, g_a, g_b, periods, omega=50.0, amplitude=80.0, mode=None):
+    """``periods`` control periods of balanced three-phase currents of ``amplitude`` [A] turning at the mechanical
+    speed ``omega`` [rad/s] (the EKF's), read by sensors of gains g_a, g_b; the last corrected (i_a, i_b)."""
+    s[k.S_MODE] = k.MODE_EKF if mode is None else mode
+    s[k.S_OMEGA_HAT] = omega
+    th = 0.0
+    out = (0.0, 0.0)
+    for _ in range(periods):
+        i_a = amplitude * math.cos(th)
+        i_b = amplitude * math.cos(th - 2.0 * math.pi / 3.0)
+        m_a, m_b = g_a * i_a, g_b * i_b
+        f_a, f_b = k.modes.balance_sensors(s, c, m_a, (m_a + 2.0 * m_b) / math.sqrt(3.0))
+        out = (f_a, 0.5 * (math.sqrt(3.0) * f_b - f_a), i_a, i_b)
+        th += c[k.C_N] * omega * c[k.C_DT]
+    return out
+
+
+def test_the_sensors_relative_gain_is_measured_over_its_turns_on_the_ekf_and_taken_out():
+    _, s, c = _unit(gain_turns=20.0)
+    per_turn = 2.0 * math.pi / (c[k.C_N] * 50.0 * c[k.C_DT])  # control periods an electrical turn at 50 rad/s
+    _balanced(s, c, 1.02, 0.98, int(19.5 * per_turn))
+    assert s[k.S_GAIN_RATIO] == 0.0  # not yet its turns: nothing taken out
+    assert s[k.S_GAIN_TURNS] == pytest.approx(19.5, rel=1e-3)
+    f_a, f_b, i_a, i_b = _balanced(s, c, 1.02, 0.98, int(2 * per_turn))
+    assert s[k.S_GAIN_RATIO] == pytest.approx(1.02 / 0.98, rel=2e-3)  # (SG1): a part turn's share of 21
+    assert f_b / f_a == pytest.approx(i_b / i_a, rel=3e-3)  # (SG2): the two phases read alike
+
+
+@pytest.mark.parametrize("mode", [k.MODE_INJECTION, k.MODE_ACQUIRE, k.MODE_POLARITY])
+def test_the_sensors_relative_gain_is_not_measured_with_the_square_wave_on(mode):
+    _, s, c = _unit(gain_turns=10.0)
+    _balanced(s, c, 1.02, 0.98, 20000, mode=mode)
+    assert s[k.S_GAIN_SUM_A] == s[k.S_GAIN_TURNS] == s[k.S_GAIN_RATIO] == 0.0
+
+
+def test_no_sensor_balance_where_its_turns_are_0():
+    _, s, c = _unit(gain_turns=0.0)
+    s[k.S_MODE] = k.MODE_EKF
+    assert k.modes.balance_sensors(s, c, 3.0, 4.0) == (3.0, 4.0)
+    assert s[k.S_GAIN_SUM_A] == 0.0
+
+
 @pytest.mark.parametrize(("parked", "omega_ref", "event"), [
     (1.0, 0.0, k.EV_STILL_PARKED), (1.0, 3.0, k.EV_ACQUIRED), (0.0, 0.0, k.EV_ACQUIRED)])
 def test_a_parked_acquisition_starts_again_until_the_driver_asks_to_move(parked, omega_ref, event):
@@ -724,6 +784,9 @@ def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
     ({"low_speed": "injection", "emf_slip_rel": -0.1}, "emf_slip_rel"),
     ({"low_speed": "injection", "inj_see_max": 0.1}, "inj_see_max"),
     ({"low_speed": "injection", "inj_see_max": 1.0}, "inj_see_max"),
+    ({"low_speed": "injection", "saliency_calibrated": 0.9}, "saliency_calibrated"),
+    ({"low_speed": "injection", "gain_turns": 5.0}, "gain_turns"),
+    ({"low_speed": "injection", "gain_turns": -1.0}, "gain_turns"),
 ])
 def test_bad_injection_parameters_are_refused_by_name(kw, names):
     with pytest.raises(ParameterError, match=names) as err:

@@ -89,7 +89,7 @@ _INJECTION_SLOTS = (
     ("inj_voltage_max", _k.C_INJ_V_MAX),
     ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME), ("ofs_time", _k.C_OFS_TIME),
     ("inj_angle_max", _k.C_ANGLE_MAX), ("emf_slip_speed", _k.C_EMF_SPEED), ("emf_slip_rel", _k.C_EMF_REL),
-    ("inj_see_max", _k.C_SEE_MAX))
+    ("inj_see_max", _k.C_SEE_MAX), ("gain_turns", _k.C_GAIN_TURNS), ("saliency_calibrated", _k.C_SALIENCY_CAL))
 #: the injection strategy's loss detectors low-pass filter their inputs over a third of ``inj_los_time`` (the time
 #: constant): a step then reaches 95 % (1 - e^-3) of its size within the time the detector waits [chosen]
 LOS_FILTER_CONSTANTS = 3.0
@@ -415,6 +415,9 @@ class ControlUnit:
                         "see the rotor's axis well enough; else 0.")
     axis_cos = _status(13, "cos 2e of the tracking observer's axis error from the d admittance, filtered "
                            "(``S_AXIS_F``) in FOC on the injection; 0 there and for a unit without injection).")
+    gain_ratio_id = _status(14, "The phase sensors' relative gain g_a / g_b [-] measured on the EKF (eqs SG1-SG2, "
+                                "``pmsm_ev.kernels.balance_sensors``), taken out of the measurements from then on; 0 "
+                                "until measured, and for a unit without injection.")
 
     @property
     def theta_ctrl(self) -> float:

@@ -57,6 +57,7 @@ from .layout import (
     S_AD_RS,
     S_AD_SEEN,
     S_AXIS_F,
+    S_GAIN_RATIO,
     S_HOLD,
     S_I_DREF,
     S_I_MAG,
@@ -210,6 +211,7 @@ def unit_status_outputs(io, s, c):
     io[o + 11] = s[S_ID_ACC] if inj else 0.0
     io[o + 12] = s[S_ID_BLIND] if inj else 0.0
     io[o + 13] = s[S_AXIS_F] if inj and s[S_MODE] == MODE_INJECTION else 0.0
+    io[o + 14] = s[S_GAIN_RATIO] if inj else 0.0
 
 
 @kernel(_sig("int64", _F, _F, _F, _F))

@@ -496,7 +496,11 @@ UNIT_STATE_LAYOUT = Layout("control unit state vector", "S_", (
     Slot("S_V_FUND", 2, "the last period's command without the square wave, alpha and beta [V]: the EKF's input while "
                         "the unit injects (``kernels.modes.injection_unit_step``)",
          parts=("S_V_FUND_ALPHA", "S_V_FUND_BETA")),
-), size=264)
+    Slot("S_GAIN", 4, "the phase sensors' relative gain (``kernels.modes.balance_sensors``, eqs SG1-SG2): sums of the "
+                      "measured phase a and phase b currents' squares on the EKF [A^2 periods], the electrical turns "
+                      "they span [-], and g_a / g_b from them once they span ``C_GAIN_TURNS`` (0: not yet measured)",
+         parts=("S_GAIN_SUM_A", "S_GAIN_SUM_B", "S_GAIN_TURNS", "S_GAIN_RATIO")),
+), size=268)
 
 #: the control unit's parameter vector
 #: the points of the cross-saturation table ``C_CROSS``, at i_q = 0, ``CROSS_STEP``, .. (CROSS_POINTS - 1)
@@ -691,7 +695,11 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                 "C_MODEL0_KI_IQ")),
     ("C_SEE_MAX", 1, "the largest angle accuracy (eq ID3) at which a blind unit finds the axis at its stops [rad] "
                      "(``cannot_see``)"),
-), size=178)
+    ("C_GAIN_TURNS", 1, "the electrical turns on the EKF over which the phase sensors' relative gain is measured "
+                        "before it is used (eq SG2) [-] (0: not measured)"),
+    ("C_SALIENCY_CAL", 1, "the least identified saliency at which a seeing unit holds the car on the injection at "
+                          "its stops before it has measured its phase sensors' relative gain [-]"),
+), size=180)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
@@ -799,14 +807,15 @@ UNIT_IO_LAYOUT = Layout("controller FMU buffer", "UIO_", (
     ("UIO_REF_REGION", 1, "output ref_region: ControlUnit.ref_region of the state"),
     # the identification's and the adaptation's outputs of the state (``unit_status_outputs``, UNIT_STATUS_OUTPUTS),
     # written after each step likewise: read from here with no Python
-    ("UIO_STATUS", 14, "outputs psi_est ... axis_cos (UNIT_STATUS_OUTPUTS, in that order) of the state"),
+    ("UIO_STATUS", 15, "outputs psi_est ... gain_ratio_id (UNIT_STATUS_OUTPUTS, in that order) of the state"),
     # scratch
     ("UIO_SAVE", UNIT_STATE, "the state vector before the step (restored when a kernel raises)"),
-), size=51 + UNIT_STATE)
+), size=52 + UNIT_STATE)
 #: the controller FMUs' outputs of the identification at enable and the adaptation while driving, in the order of
 #: their slots from ``UIO_STATUS`` (``pmsm_ev.kernels.unit_status_outputs``)
 UNIT_STATUS_OUTPUTS = ("psi_est", "R_s_est", "psi_observable", "R_s_observable", "L_d_id", "L_q_id", "saliency_id",
-                       "R_s_id", "noise_id", "offset_a_id", "offset_b_id", "angle_accuracy", "blind", "axis_cos")
+                       "R_s_id", "noise_id", "offset_a_id", "offset_b_id", "angle_accuracy", "blind", "axis_cos",
+                       "gain_ratio_id")
 PLANT_IO_LAYOUT.export(globals())
 UNIT_IO_LAYOUT.export(globals())
 PLANT_IO = PLANT_IO_LAYOUT.size  #: length of the plant FMU's buffer

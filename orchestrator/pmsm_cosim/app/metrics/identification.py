@@ -29,7 +29,8 @@ def identification_metrics(r: dict[str, np.ndarray]) -> dict | None:
     return {"L_d": l_d, "L_q": l_q, "saliency": float(r["saliency_id"][-1]), "R_s": float(r["R_s_id"][-1]),
             "noise": float(r["noise_id"][-1]), "offset_a": float(r["offset_a_id"][-1]),
             "offset_b": float(r["offset_b_id"][-1]), "angle_accuracy": float(r["angle_accuracy"][-1]),
-            "blind": bool(r["blind"][-1] != 0.0)}
+            "blind": bool(r["blind"][-1] != 0.0),
+            "gain_ratio": float(r["gain_ratio_id"][-1]) if "gain_ratio_id" in r and len(r["gain_ratio_id"]) else None}
 
 
 def identification_truth(motor: MotorParams, block: dict, plant: PlantParams | None = None) -> dict:
@@ -49,7 +50,8 @@ def identification_truth(motor: MotorParams, block: dict, plant: PlantParams | N
            "R_s_error": block["R_s"] / motor.R_s - 1.0 if block["R_s"] > 0.0 else None}
     if plant is not None:
         out.update({"noise_plant": plant.sensor_noise, "offset_a_plant": plant.sensor_offset_a,
-                    "offset_b_plant": plant.sensor_offset_b})
+                    "offset_b_plant": plant.sensor_offset_b,
+                    "gain_ratio_plant": plant.sensor_gain_a / plant.sensor_gain_b})
     return out
 
 
