@@ -6,9 +6,11 @@
  *
  * Every fmi3 function of co-simulation is one or two fmi2 calls of the loader (dlopen'ed RTLD_LOCAL, once per
  * process, at the first fmi3InstantiateCoSimulation). fmi2GetReal, fmi2SetReal and fmi2DoStep, the calls of every
- * step, which the loader only forwards to the binding, are the binding's own, called directly: the loader gives
- * their addresses once the binding is loaded (pmsm_fmu_forwarded), and each instance keeps them beside its FMI 2.0
- * instance (direct_calls), one hop less a call than through the loader, with the same arguments and answers:
+ * step, which the loader only forwards to the binding, are the binding's own, called directly and without the
+ * binding's look-up of the instance, which this layer has made (its own, at every call) and whose FMI 2.0 instance it
+ * frees only in fmi3FreeInstance: the loader gives their addresses once the binding is loaded (pmsm_fmu_known; else
+ * pmsm_fmu_forwarded, with the look-up), and each instance keeps them beside its FMI 2.0 instance (direct_calls), one
+ * hop and one look-up less a call than through the loader, with the same arguments and answers:
  *
  *   fmi3InstantiateCoSimulation  fmi2Instantiate (fmi2CoSimulation; the instantiation token as the GUID; the
  *                                resource folder as a file URI), with an fmi2 logger that formats the message and
@@ -200,16 +202,15 @@ typedef struct {
 /* the instances this layer made: the instance table (instance_table.h), as the lean binding's */
 #include "instance_table.h"
 
-/* an FMI 2.0 status as FMI 3.0's */
-static fmi3Status status3(fmi2Status s)
+/* an FMI 2.0 status as FMI 3.0's: the same number for the five they share (fmi2Pending, never returned in this
+ * co-simulation, is fmi3Error); one compare, on every call */
+_Static_assert((int)fmi2OK == (int)fmi3OK && (int)fmi2Warning == (int)fmi3Warning
+                   && (int)fmi2Discard == (int)fmi3Discard && (int)fmi2Error == (int)fmi3Error
+                   && (int)fmi2Fatal == (int)fmi3Fatal,
+               "the FMI 2.0 and FMI 3.0 statuses share their numbers");
+static inline fmi3Status status3(fmi2Status s)
 {
-    switch (s) {
-    case fmi2OK: return fmi3OK;
-    case fmi2Warning: return fmi3Warning;
-    case fmi2Discard: return fmi3Discard;
-    case fmi2Fatal: return fmi3Fatal;
-    default: return fmi3Error; /* fmi2Error, fmi2Pending (never in this co-simulation) */
-    }
+    return (unsigned)s <= (unsigned)fmi2Fatal ? (fmi3Status)s : fmi3Error;
 }
 
 static const char* category_of(fmi3Status s)
@@ -309,9 +310,19 @@ static void say(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
 /* whether any of the references is one of the layer's own (the time, the sample clock: the largest there are,
  * own_floor and above), one compare a reference: the get and set of Float64s, called at every step, pass the others
  * to the FMI 2.0 stack at once */
-static int own_refs(const Instance* w, const fmi3ValueReference refs[], size_t n)
+static inline int own_refs(const Instance* w, const fmi3ValueReference refs[], size_t n)
 {
-    for (size_t i = 0; i < n; i++)
+    /* first the bits of all of them, two at a time with no branch: below the floor, none is (pythonfmu's references
+     * are small numbers), else each compared */
+    fmi3ValueReference a = 0, b = 0;
+    size_t i = 0;
+    for (; i + 2 <= n; i += 2) {
+        a |= refs[i];
+        b |= refs[i + 1];
+    }
+    if (i < n) a |= refs[i];
+    if ((a | b) < w->own_floor) return 0;
+    for (i = 0; i < n; i++)
         if (refs[i] >= w->own_floor) return 1;
     return 0;
 }
@@ -378,17 +389,23 @@ static void read_clock(Instance* w, const char* uri)
     fclose(f);
 }
 
-/* the instance's calls of every step (fmi2GetReal, fmi2SetReal, fmi2DoStep): the binding's own, which the loader's
- * forward unchanged, where the loader gives them (pmsm_fmu_forwarded, once the binding is loaded), else the loader's */
+/* the instance's calls of every step (fmi2GetReal, fmi2SetReal, fmi2DoStep): the binding's own without its look-up
+ * of the instance (pmsm_fmu_known: this layer looks its own up at every call, and frees the FMI 2.0 instance only in
+ * fmi3FreeInstance, once its own is out of its table), else the binding's own, which the loader's forward unchanged
+ * (pmsm_fmu_forwarded), where the loader gives them (once the binding is loaded), else the loader's */
 static void direct_calls(Instance* w)
 {
+    static const char* const NAMES[] = {"fmi2GetReal", "fmi2SetReal", "fmi2DoStep"};
+    void* found[3] = {NULL, NULL, NULL};
+    forwarded_t known = (forwarded_t)dlsym(loader, "pmsm_fmu_known");
     forwarded_t forwarded = (forwarded_t)dlsym(loader, "pmsm_fmu_forwarded");
-    get_real_t get_real = forwarded ? (get_real_t)forwarded("fmi2GetReal") : NULL;
-    set_real_t set_real = forwarded ? (set_real_t)forwarded("fmi2SetReal") : NULL;
-    do_step_t do_step = forwarded ? (do_step_t)forwarded("fmi2DoStep") : NULL;
-    w->get_real = get_real ? get_real : fmi2.get_real;
-    w->set_real = set_real ? set_real : fmi2.set_real;
-    w->do_step = do_step ? do_step : fmi2.do_step;
+    for (int i = 0; i < 3; i++) {
+        if (known != NULL) found[i] = known(NAMES[i]);
+        if (found[i] == NULL && forwarded != NULL) found[i] = forwarded(NAMES[i]);
+    }
+    w->get_real = found[0] ? (get_real_t)found[0] : fmi2.get_real;
+    w->set_real = found[1] ? (set_real_t)found[1] : fmi2.set_real;
+    w->do_step = found[2] ? (do_step_t)found[2] : fmi2.do_step;
 }
 
 /* -- common functions ------------------------------------------------------------------------------------ */
