@@ -296,33 +296,24 @@ static void say(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
     } while (0)
 /* none of the references the sample clock: a Clock is set by fmi3SetClock, and a host that takes it for a value is
  * answered here, not by the FMI 2.0 stack, which does not know the reference */
-#define CLOCK_REFUSED(refs, nvr)                                                                             \
+#define CLOCK_REFUSED_AS(call, refs, nvr)                                                                    \
     do {                                                                                                     \
         for (size_t clock_i = 0; W->clocked && clock_i < (nvr); clock_i++)                                   \
             if ((refs)[clock_i] == W->clock_reference) {                                                     \
                 say(W->environment, W->log, fmi3Error, "%s: value reference %u is the sample clock, not a "     \
-                    "value of this type (fmi3SetClock sets it); nothing done", __func__,                     \
+                    "value of this type (fmi3SetClock sets it); nothing done", (call),                       \
                     (unsigned)W->clock_reference);                                                           \
                 return fmi3Error;                                                                            \
             }                                                                                                \
     } while (0)
+#define CLOCK_REFUSED(refs, nvr) CLOCK_REFUSED_AS(__func__, refs, nvr)
 
 /* whether any of the references is one of the layer's own (the time, the sample clock: the largest there are,
  * own_floor and above), one compare a reference: the get and set of Float64s, called at every step, pass the others
  * to the FMI 2.0 stack at once */
 static inline int own_refs(const Instance* w, const fmi3ValueReference refs[], size_t n)
 {
-    /* first the bits of all of them, two at a time with no branch: below the floor, none is (pythonfmu's references
-     * are small numbers), else each compared */
-    fmi3ValueReference a = 0, b = 0;
-    size_t i = 0;
-    for (; i + 2 <= n; i += 2) {
-        a |= refs[i];
-        b |= refs[i + 1];
-    }
-    if (i < n) a |= refs[i];
-    if ((a | b) < w->own_floor) return 0;
-    for (i = 0; i < n; i++)
+    for (size_t i = 0; i < n; i++)
         if (refs[i] >= w->own_floor) return 1;
     return 0;
 }
@@ -576,14 +567,13 @@ fmi3Status fmi3Reset(fmi3Instance instance)
 }
 
 /* -- getting and setting values -------------------------------------------------------------------------- */
-fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
-                          fmi3Float64 values[], size_t nValues)
+/* fmi3GetFloat64 with one of the layer's own references among them (the clock: refused; the time: answered here),
+ * out of line: the get of every step keeps no more than it needs */
+static __attribute__((noinline)) fmi3Status get_own_float64(fmi3Instance instance,
+                                                           const fmi3ValueReference valueReferences[],
+                                                           size_t nValueReferences, fmi3Float64 values[])
 {
-    if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
-    if (!own_refs(W, valueReferences, nValueReferences))
-        return status3(W->get_real(W->inner, valueReferences, nValueReferences, values));
-    CLOCK_REFUSED(valueReferences, nValueReferences);
+    CLOCK_REFUSED_AS("fmi3GetFloat64", valueReferences, nValueReferences);
     size_t times = 0;
     for (size_t i = 0; i < nValueReferences; i++) times += valueReferences[i] == TIME_REFERENCE;
     if (times == 0) return status3(W->get_real(W->inner, valueReferences, nValueReferences, values));
@@ -605,14 +595,22 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
     return status3(s);
 }
 
-fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
-                          const fmi3Float64 values[], size_t nValues)
+fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          fmi3Float64 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
     SCALARS(nValueReferences, nValues);
     if (!own_refs(W, valueReferences, nValueReferences))
-        return status3(W->set_real(W->inner, valueReferences, nValueReferences, values));
-    CLOCK_REFUSED(valueReferences, nValueReferences);
+        return status3(W->get_real(W->inner, valueReferences, nValueReferences, values));
+    return get_own_float64(instance, valueReferences, nValueReferences, values);
+}
+
+/* fmi3SetFloat64 with one of the layer's own references among them (the clock, the time: refused), out of line */
+static __attribute__((noinline)) fmi3Status set_own_float64(fmi3Instance instance,
+                                                           const fmi3ValueReference valueReferences[],
+                                                           size_t nValueReferences, const fmi3Float64 values[])
+{
+    CLOCK_REFUSED_AS("fmi3SetFloat64", valueReferences, nValueReferences);
     for (size_t i = 0; i < nValueReferences; i++)
         if (valueReferences[i] == TIME_REFERENCE) {
             say(W->environment, W->log, fmi3Error, "fmi3SetFloat64: the independent variable time cannot be set; "
@@ -620,6 +618,16 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
             return fmi3Error;
         }
     return status3(W->set_real(W->inner, valueReferences, nValueReferences, values));
+}
+
+fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          const fmi3Float64 values[], size_t nValues)
+{
+    if (!live(instance)) return fmi3Error;
+    SCALARS(nValueReferences, nValues);
+    if (!own_refs(W, valueReferences, nValueReferences))
+        return status3(W->set_real(W->inner, valueReferences, nValueReferences, values));
+    return set_own_float64(instance, valueReferences, nValueReferences, values);
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
@@ -1010,7 +1018,7 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
 /* fmi3DoStep in event mode: the stack stepped at the tick (fmi3UpdateDiscreteStates), up to the next tick; a step
  * here only moves the time, within that sample period, with the outputs held (the controller's change only at its
  * samples) */
-static fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eventHandlingNeeded,
+static __attribute__((noinline)) fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eventHandlingNeeded,
                                fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
                                fmi3Float64* lastSuccessfulTime)
 {
@@ -1042,6 +1050,10 @@ static fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eve
     return s;
 }
 
+static fmi3Status step_not_done(Instance* w, fmi2Status s, double currentCommunicationPoint,
+                                fmi3Boolean* eventHandlingNeeded, fmi3Boolean* terminateSimulation,
+                                fmi3Boolean* earlyReturn, fmi3Float64* lastSuccessfulTime);
+
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
                       fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                       fmi3Boolean* eventHandlingNeeded, fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
@@ -1053,8 +1065,27 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                                                                    earlyReturn, lastSuccessfulTime);
     fmi2Status s = W->do_step(W->inner, currentCommunicationPoint, communicationStepSize,
                               noSetFMUStatePriorToCurrentPoint ? 1 : 0);
+    if (s > fmi2Warning)
+        return step_not_done(W, s, currentCommunicationPoint, eventHandlingNeeded, terminateSimulation, earlyReturn,
+                             lastSuccessfulTime);
+    W->time = currentCommunicationPoint + communicationStepSize;
+    if (eventHandlingNeeded != NULL) *eventHandlingNeeded = false;
+    if (terminateSimulation != NULL) *terminateSimulation = false;
+    if (earlyReturn != NULL) *earlyReturn = false;
+    if (lastSuccessfulTime != NULL) *lastSuccessfulTime = W->time;
+    return (fmi3Status)s; /* fmi3OK, fmi3Warning */
+}
+
+/* fmi3DoStep's answer to a step the FMI 2.0 stack did not complete (fmi2Discard: where it got to and whether it ended
+ * the run; fmi2Error, fmi2Fatal), out of line: the step of every step keeps no more than it needs */
+static __attribute__((noinline)) fmi3Status step_not_done(Instance* w, fmi2Status s, double currentCommunicationPoint,
+                                                         fmi3Boolean* eventHandlingNeeded,
+                                                         fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
+                                                         fmi3Float64* lastSuccessfulTime)
+{
+    fmi3Instance instance = w;
     fmi3Boolean terminate = s == fmi2Fatal;
-    fmi3Float64 last = s <= fmi2Warning ? currentCommunicationPoint + communicationStepSize : currentCommunicationPoint;
+    fmi3Float64 last = currentCommunicationPoint; /* s > fmi2Warning here */
     if (s == fmi2Discard) { /* where the stack says it got to, and whether it ended the run */
         fmi2Real reached;
         fmi2Boolean ended;
