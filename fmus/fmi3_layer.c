@@ -6,9 +6,11 @@
  *
  * Every fmi3 function of co-simulation is one or two fmi2 calls of the loader (dlopen'ed RTLD_LOCAL, once per
  * process, at the first fmi3InstantiateCoSimulation). fmi2GetReal, fmi2SetReal and fmi2DoStep, the calls of every
- * step, which the loader only forwards to the binding, are the binding's own, called directly: the loader gives
- * their addresses once the binding is loaded (pmsm_fmu_forwarded), and each instance keeps them beside its FMI 2.0
- * instance (direct_calls), one hop less a call than through the loader, with the same arguments and answers:
+ * step, which the loader only forwards to the binding, are the binding's own, called directly and without the
+ * binding's look-up of the instance, which this layer has made (its own, at every call) and whose FMI 2.0 instance it
+ * frees only in fmi3FreeInstance: the loader gives their addresses once the binding is loaded (pmsm_fmu_known; else
+ * pmsm_fmu_forwarded, with the look-up), and each instance keeps them beside its FMI 2.0 instance (direct_calls), one
+ * hop and one look-up less a call than through the loader, with the same arguments and answers:
  *
  *   fmi3InstantiateCoSimulation  fmi2Instantiate (fmi2CoSimulation; the instantiation token as the GUID; the
  *                                resource folder as a file URI), with an fmi2 logger that formats the message and
@@ -200,16 +202,15 @@ typedef struct {
 /* the instances this layer made: the instance table (instance_table.h), as the lean binding's */
 #include "instance_table.h"
 
-/* an FMI 2.0 status as FMI 3.0's */
-static fmi3Status status3(fmi2Status s)
+/* an FMI 2.0 status as FMI 3.0's: the same number for the five they share (fmi2Pending, never returned in this
+ * co-simulation, is fmi3Error); one compare, on every call */
+_Static_assert((int)fmi2OK == (int)fmi3OK && (int)fmi2Warning == (int)fmi3Warning
+                   && (int)fmi2Discard == (int)fmi3Discard && (int)fmi2Error == (int)fmi3Error
+                   && (int)fmi2Fatal == (int)fmi3Fatal,
+               "the FMI 2.0 and FMI 3.0 statuses share their numbers");
+static inline fmi3Status status3(fmi2Status s)
 {
-    switch (s) {
-    case fmi2OK: return fmi3OK;
-    case fmi2Warning: return fmi3Warning;
-    case fmi2Discard: return fmi3Discard;
-    case fmi2Fatal: return fmi3Fatal;
-    default: return fmi3Error; /* fmi2Error, fmi2Pending (never in this co-simulation) */
-    }
+    return (unsigned)s <= (unsigned)fmi2Fatal ? (fmi3Status)s : fmi3Error;
 }
 
 static const char* category_of(fmi3Status s)
@@ -295,21 +296,22 @@ static void say(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log,
     } while (0)
 /* none of the references the sample clock: a Clock is set by fmi3SetClock, and a host that takes it for a value is
  * answered here, not by the FMI 2.0 stack, which does not know the reference */
-#define CLOCK_REFUSED(refs, nvr)                                                                             \
+#define CLOCK_REFUSED_AS(call, refs, nvr)                                                                    \
     do {                                                                                                     \
         for (size_t clock_i = 0; W->clocked && clock_i < (nvr); clock_i++)                                   \
             if ((refs)[clock_i] == W->clock_reference) {                                                     \
                 say(W->environment, W->log, fmi3Error, "%s: value reference %u is the sample clock, not a "     \
-                    "value of this type (fmi3SetClock sets it); nothing done", __func__,                     \
+                    "value of this type (fmi3SetClock sets it); nothing done", (call),                       \
                     (unsigned)W->clock_reference);                                                           \
                 return fmi3Error;                                                                            \
             }                                                                                                \
     } while (0)
+#define CLOCK_REFUSED(refs, nvr) CLOCK_REFUSED_AS(__func__, refs, nvr)
 
 /* whether any of the references is one of the layer's own (the time, the sample clock: the largest there are,
  * own_floor and above), one compare a reference: the get and set of Float64s, called at every step, pass the others
  * to the FMI 2.0 stack at once */
-static int own_refs(const Instance* w, const fmi3ValueReference refs[], size_t n)
+static inline int own_refs(const Instance* w, const fmi3ValueReference refs[], size_t n)
 {
     for (size_t i = 0; i < n; i++)
         if (refs[i] >= w->own_floor) return 1;
@@ -378,17 +380,23 @@ static void read_clock(Instance* w, const char* uri)
     fclose(f);
 }
 
-/* the instance's calls of every step (fmi2GetReal, fmi2SetReal, fmi2DoStep): the binding's own, which the loader's
- * forward unchanged, where the loader gives them (pmsm_fmu_forwarded, once the binding is loaded), else the loader's */
+/* the instance's calls of every step (fmi2GetReal, fmi2SetReal, fmi2DoStep): the binding's own without its look-up
+ * of the instance (pmsm_fmu_known: this layer looks its own up at every call, and frees the FMI 2.0 instance only in
+ * fmi3FreeInstance, once its own is out of its table), else the binding's own, which the loader's forward unchanged
+ * (pmsm_fmu_forwarded), where the loader gives them (once the binding is loaded), else the loader's */
 static void direct_calls(Instance* w)
 {
+    static const char* const NAMES[] = {"fmi2GetReal", "fmi2SetReal", "fmi2DoStep"};
+    void* found[3] = {NULL, NULL, NULL};
+    forwarded_t known = (forwarded_t)dlsym(loader, "pmsm_fmu_known");
     forwarded_t forwarded = (forwarded_t)dlsym(loader, "pmsm_fmu_forwarded");
-    get_real_t get_real = forwarded ? (get_real_t)forwarded("fmi2GetReal") : NULL;
-    set_real_t set_real = forwarded ? (set_real_t)forwarded("fmi2SetReal") : NULL;
-    do_step_t do_step = forwarded ? (do_step_t)forwarded("fmi2DoStep") : NULL;
-    w->get_real = get_real ? get_real : fmi2.get_real;
-    w->set_real = set_real ? set_real : fmi2.set_real;
-    w->do_step = do_step ? do_step : fmi2.do_step;
+    for (int i = 0; i < 3; i++) {
+        if (known != NULL) found[i] = known(NAMES[i]);
+        if (found[i] == NULL && forwarded != NULL) found[i] = forwarded(NAMES[i]);
+    }
+    w->get_real = found[0] ? (get_real_t)found[0] : fmi2.get_real;
+    w->set_real = found[1] ? (set_real_t)found[1] : fmi2.set_real;
+    w->do_step = found[2] ? (do_step_t)found[2] : fmi2.do_step;
 }
 
 /* -- common functions ------------------------------------------------------------------------------------ */
@@ -559,14 +567,13 @@ fmi3Status fmi3Reset(fmi3Instance instance)
 }
 
 /* -- getting and setting values -------------------------------------------------------------------------- */
-fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
-                          fmi3Float64 values[], size_t nValues)
+/* fmi3GetFloat64 with one of the layer's own references among them (the clock: refused; the time: answered here),
+ * out of line: the get of every step keeps no more than it needs */
+static __attribute__((noinline)) fmi3Status get_own_float64(fmi3Instance instance,
+                                                           const fmi3ValueReference valueReferences[],
+                                                           size_t nValueReferences, fmi3Float64 values[])
 {
-    if (!live(instance)) return fmi3Error;
-    SCALARS(nValueReferences, nValues);
-    if (!own_refs(W, valueReferences, nValueReferences))
-        return status3(W->get_real(W->inner, valueReferences, nValueReferences, values));
-    CLOCK_REFUSED(valueReferences, nValueReferences);
+    CLOCK_REFUSED_AS("fmi3GetFloat64", valueReferences, nValueReferences);
     size_t times = 0;
     for (size_t i = 0; i < nValueReferences; i++) times += valueReferences[i] == TIME_REFERENCE;
     if (times == 0) return status3(W->get_real(W->inner, valueReferences, nValueReferences, values));
@@ -588,14 +595,22 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
     return status3(s);
 }
 
-fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
-                          const fmi3Float64 values[], size_t nValues)
+fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          fmi3Float64 values[], size_t nValues)
 {
     if (!live(instance)) return fmi3Error;
     SCALARS(nValueReferences, nValues);
     if (!own_refs(W, valueReferences, nValueReferences))
-        return status3(W->set_real(W->inner, valueReferences, nValueReferences, values));
-    CLOCK_REFUSED(valueReferences, nValueReferences);
+        return status3(W->get_real(W->inner, valueReferences, nValueReferences, values));
+    return get_own_float64(instance, valueReferences, nValueReferences, values);
+}
+
+/* fmi3SetFloat64 with one of the layer's own references among them (the clock, the time: refused), out of line */
+static __attribute__((noinline)) fmi3Status set_own_float64(fmi3Instance instance,
+                                                           const fmi3ValueReference valueReferences[],
+                                                           size_t nValueReferences, const fmi3Float64 values[])
+{
+    CLOCK_REFUSED_AS("fmi3SetFloat64", valueReferences, nValueReferences);
     for (size_t i = 0; i < nValueReferences; i++)
         if (valueReferences[i] == TIME_REFERENCE) {
             say(W->environment, W->log, fmi3Error, "fmi3SetFloat64: the independent variable time cannot be set; "
@@ -603,6 +618,16 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
             return fmi3Error;
         }
     return status3(W->set_real(W->inner, valueReferences, nValueReferences, values));
+}
+
+fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          const fmi3Float64 values[], size_t nValues)
+{
+    if (!live(instance)) return fmi3Error;
+    SCALARS(nValueReferences, nValues);
+    if (!own_refs(W, valueReferences, nValueReferences))
+        return status3(W->set_real(W->inner, valueReferences, nValueReferences, values));
+    return set_own_float64(instance, valueReferences, nValueReferences, values);
 }
 
 fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
@@ -993,7 +1018,7 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
 /* fmi3DoStep in event mode: the stack stepped at the tick (fmi3UpdateDiscreteStates), up to the next tick; a step
  * here only moves the time, within that sample period, with the outputs held (the controller's change only at its
  * samples) */
-static fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eventHandlingNeeded,
+static __attribute__((noinline)) fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eventHandlingNeeded,
                                fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
                                fmi3Float64* lastSuccessfulTime)
 {
@@ -1025,6 +1050,10 @@ static fmi3Status clocked_step(Instance* w, double t, double h, fmi3Boolean* eve
     return s;
 }
 
+static fmi3Status step_not_done(Instance* w, fmi2Status s, double currentCommunicationPoint,
+                                fmi3Boolean* eventHandlingNeeded, fmi3Boolean* terminateSimulation,
+                                fmi3Boolean* earlyReturn, fmi3Float64* lastSuccessfulTime);
+
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
                       fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                       fmi3Boolean* eventHandlingNeeded, fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
@@ -1036,8 +1065,27 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                                                                    earlyReturn, lastSuccessfulTime);
     fmi2Status s = W->do_step(W->inner, currentCommunicationPoint, communicationStepSize,
                               noSetFMUStatePriorToCurrentPoint ? 1 : 0);
+    if (s > fmi2Warning)
+        return step_not_done(W, s, currentCommunicationPoint, eventHandlingNeeded, terminateSimulation, earlyReturn,
+                             lastSuccessfulTime);
+    W->time = currentCommunicationPoint + communicationStepSize;
+    if (eventHandlingNeeded != NULL) *eventHandlingNeeded = false;
+    if (terminateSimulation != NULL) *terminateSimulation = false;
+    if (earlyReturn != NULL) *earlyReturn = false;
+    if (lastSuccessfulTime != NULL) *lastSuccessfulTime = W->time;
+    return (fmi3Status)s; /* fmi3OK, fmi3Warning */
+}
+
+/* fmi3DoStep's answer to a step the FMI 2.0 stack did not complete (fmi2Discard: where it got to and whether it ended
+ * the run; fmi2Error, fmi2Fatal), out of line: the step of every step keeps no more than it needs */
+static __attribute__((noinline)) fmi3Status step_not_done(Instance* w, fmi2Status s, double currentCommunicationPoint,
+                                                         fmi3Boolean* eventHandlingNeeded,
+                                                         fmi3Boolean* terminateSimulation, fmi3Boolean* earlyReturn,
+                                                         fmi3Float64* lastSuccessfulTime)
+{
+    fmi3Instance instance = w;
     fmi3Boolean terminate = s == fmi2Fatal;
-    fmi3Float64 last = s <= fmi2Warning ? currentCommunicationPoint + communicationStepSize : currentCommunicationPoint;
+    fmi3Float64 last = currentCommunicationPoint; /* s > fmi2Warning here */
     if (s == fmi2Discard) { /* where the stack says it got to, and whether it ended the run */
         fmi2Real reached;
         fmi2Boolean ended;

@@ -27,8 +27,9 @@
  *
  * Every other fmi2 function, and pmsm_fmu_fast_calls, pmsm_fmu_compiled_calls and pmsm_fmu_pulls, are the
  * binding's, called with the same arguments: the instance is the binding's own. pmsm_fmu_forwarded gives the FMI 3.0
- * layer the binding's own fmi2GetReal, fmi2SetReal and fmi2DoStep, which the loader's only forward. Python's C API
- * is reached through dlsym only.
+ * layer the binding's own fmi2GetReal, fmi2SetReal and fmi2DoStep, which the loader's only forward, and
+ * pmsm_fmu_known the same three without the binding's look-up of the instance, which the layer has made. Python's
+ * C API is reached through dlsym only.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -590,6 +591,15 @@ EXPORT void* pmsm_fmu_forwarded(const char* name)
     for (size_t i = 0; name != NULL && i < sizeof FORWARDED / sizeof FORWARDED[0]; i++)
         if (strcmp(name, FORWARDED[i]) == 0) return fn(name);
     return NULL;
+}
+
+/* pmsm_fmu_known(name): the lean binding's fmi2GetReal, fmi2SetReal or fmi2DoStep without its look-up of the instance
+ * (fmus/lean_binding.c, pmsm_fmu_known), for the FMI 3.0 layer, which has checked its own instance and holds the
+ * binding's alive; NULL for any other name, without the lean binding, and before it is loaded */
+EXPORT void* pmsm_fmu_known(const char* name)
+{
+    forwarded_t f = (forwarded_t)fn("pmsm_fmu_known");
+    return f ? f(name) : NULL;
 }
 
 /* pmsm_fmu_fast_calls(instance): the lean binding's counter (fmus/lean_binding.c), 0 without one */

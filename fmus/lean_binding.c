@@ -51,7 +51,9 @@
  * An instance the binding did not make, or has freed (NULL, a stale pointer): every function returns fmi2Error
  * (fmi2FreeInstance and the counters do nothing) without touching it: the binding keeps the instances it made in
  * a table (enlist, delist) and looks each call's up there first (live), with no lock on the look-up. There is no
- * logger to tell: the host's callbacks belong to the instance.
+ * logger to tell: the host's callbacks belong to the instance. pmsm_fmu_known gives fmi2GetReal, fmi2SetReal and
+ * fmi2DoStep without the look-up to the FMI 3.0 layer (fmi3_layer.c), which looks its own instance up at every call
+ * and holds this binding's alive while it is.
  *
  * The compiled step's buffers: the slave offers their addresses with their lengths (compiled_step); a slot that
  * falls outside its buffer keeps the compiled path off for that slave (its Python step runs), never a write out
@@ -707,9 +709,9 @@ static int read_attribute(Instance* w, fmi2ValueReference vr, fmi2Real* value)
     return !(*value == -1.0 && PyErr_Occurred());
 }
 
-EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+/* fmi2GetReal of an instance known to be live (the checked entry below; pmsm_fmu_known) */
+static fmi2Status get_real_known(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
-    if (!live(c)) return fmi2Error;
     Instance* w = W;
     if (!w->ready || nvr == 0) return checked_get_real(c, vr, nvr, value);
     for (size_t i = 0; i < nvr; i++)
@@ -750,6 +752,12 @@ EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], si
     return ok ? fmi2OK : forward_get_real(c, vr, nvr, value);
 }
 
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    if (!live(c)) return fmi2Error;
+    return get_real_known(c, vr, nvr, value);
+}
+
 static fmi2Status checked_set_real(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                    const fmi2Real value[])
 {
@@ -757,9 +765,10 @@ static fmi2Status checked_set_real(fmi2Component c, const fmi2ValueReference vr[
     return status >= 0 ? (fmi2Status)status : forward_set_real(c, vr, nvr, value);
 }
 
-EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+/* fmi2SetReal of an instance known to be live (the checked entry below; pmsm_fmu_known) */
+static fmi2Status set_real_known(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                 const fmi2Real value[])
 {
-    if (!live(c)) return fmi2Error;
     Instance* w = W;
     if (!w->ready || nvr == 0) return checked_set_real(c, vr, nvr, value);
     for (size_t i = 0; i < nvr; i++)
@@ -790,6 +799,12 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
     }
     PyGILState_Release(gil);
     return ok ? fmi2OK : forward_set_real(c, vr, nvr, value);
+}
+
+EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    if (!live(c)) return fmi2Error;
+    return set_real_known(c, vr, nvr, value);
 }
 
 EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
@@ -891,9 +906,9 @@ static fmi2Status refuse_step(Instance* w, double t, int status)
     return (fmi2Status)status;
 }
 
-EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean flag)
+/* fmi2DoStep of an instance known to be live (the checked entry below; pmsm_fmu_known) */
+static fmi2Status do_step_known(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean flag)
 {
-    if (!live(c)) return fmi2Error;
     Instance* w = W;
     if (!w->ready) {
         int status = refused_step(w, t, h);
@@ -959,6 +974,26 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         forward_get_real(c, &none, 0, &nothing);
     }
     return ok > 0 ? fmi2OK : fmi2Discard;
+}
+
+EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean flag)
+{
+    if (!live(c)) return fmi2Error;
+    return do_step_known(c, t, h, flag);
+}
+
+/* pmsm_fmu_known(name): fmi2GetReal, fmi2SetReal or fmi2DoStep without their look-up of the instance in the table
+ * (live), for a caller that holds an instance of this binding's alive and has checked its own handle already: the
+ * FMI 3.0 layer (fmi3_layer.c), whose every call looks its instance up first and which frees the FMI 2.0 instance
+ * only in fmi3FreeInstance, after taking its own out of its table. The same arguments, the same answers, every
+ * other check the same. NULL for any other name. */
+EXPORT void* pmsm_fmu_known(const char* name)
+{
+    if (name == NULL) return NULL;
+    if (strcmp(name, "fmi2GetReal") == 0) return (void*)get_real_known;
+    if (strcmp(name, "fmi2SetReal") == 0) return (void*)set_real_known;
+    if (strcmp(name, "fmi2DoStep") == 0) return (void*)do_step_known;
+    return NULL;
 }
 
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c)

@@ -783,6 +783,31 @@ def test_the_plain_loop_and_the_command_line_run_the_fmi3_units(units, tmp_path)
     assert filecmp.cmp(tmp_path / "ssp2" / "results.csv", tmp_path / "ssp3" / "results.csv", shallow=False)
 
 
+def test_a_clock_is_not_an_unconnected_input(units):
+    """The controller's sample clock is ticked by the master (or by the unit itself without event mode): no "input
+    ctrl.sample is not connected" among the run's warnings, with or without event mode; a real input left
+    unconnected still is one."""
+    from pmsm_cosim.app.drive import ensure_fmus, with_fmi
+    from pmsm_cosim.app.overrides import apply_overrides
+    from pmsm_cosim.engine.master import Master
+
+    spec = with_fmi(apply_overrides("scenario1", stop_time=0.01), 3)
+    ensure_fmus(spec, quiet=True)
+    for event_mode in (True, False):
+        master = Master(spec, note=lambda line: None, event_mode=event_mode)
+        try:
+            assert not [w for w in master.warnings if "is not connected" in w], (event_mode, master.warnings)
+        finally:
+            master.close()
+    spec.connections = [c for c in spec.connections if (c.dst, c.dst_var) != ("ctrl", "i_alpha")]
+    master = Master(spec, note=lambda line: None)
+    try:
+        unconnected = [w for w in master.warnings if "is not connected" in w]
+        assert len(unconnected) == 1 and unconnected[0].startswith("input ctrl.i_alpha is not connected"), unconnected
+    finally:
+        master.close()
+
+
 def _description_bytes(z: zipfile.ZipFile) -> ET.Element:
     return ET.fromstring(z.read("modelDescription.xml"))
 

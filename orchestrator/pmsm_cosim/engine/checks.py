@@ -150,13 +150,14 @@ def drop_foreign_starts(spec: SystemSpec, instances: dict[str, FmuInstance]) -> 
 
 
 def unconnected_inputs(spec: SystemSpec, instances: dict[str, FmuInstance]) -> list[str]:
-    """A warning per input that nothing drives (it keeps its start value)."""
+    """A warning per input that nothing drives (it keeps its start value). An input clock (FMI 3.0) is no value:
+    the master ticks it in event mode, or the unit keeps its own time without (``Master``'s module doc, "Clocks")."""
     driven = {(c.dst, c.dst_var) for c in spec.connections}
     driven |= {d for sig in spec.signals.values() for d in sig.drives}
     out = []
     for name, inst in instances.items():
         for sv in inst.md.modelVariables:
-            if sv.causality == "input" and (name, sv.name) not in driven \
+            if sv.causality == "input" and sv.type != "Clock" and (name, sv.name) not in driven \
                     and sv.name not in spec.component(name).start:
                 out.append(f"input {name}.{sv.name} is not connected; it keeps its start value "
                            f"({sv.start if sv.start is not None else 'none declared'})")
