@@ -373,9 +373,9 @@ def balance_sensors(s, c, i_alpha, i_beta):
     answers, as a saliency fixed to the stator, (g_a - g_b) / sqrt 3 of the mean admittance, which turns the
     axis a motor of little saliency is found on (``C_SALIENCY_CAL``). The sums go on after: the ratio follows the
     sensors as they warm. The noise's squares add alike to both sums (the sensors' noise is alike)."""
-    i_b = 0.5 * (math.sqrt(3.0) * i_beta - i_alpha)
     if c[C_GAIN_TURNS] == 0.0:
         return i_alpha, i_beta
+    i_b = 0.5 * (math.sqrt(3.0) * i_beta - i_alpha)
     if s[S_MODE] == MODE_EKF:
         s[S_GAIN_SUM_A] += i_alpha * i_alpha
         s[S_GAIN_SUM_B] += i_b * i_b
