@@ -124,6 +124,21 @@ def _status(j: int, doc: str) -> property:
     return property(lambda self: self._status_output(j), doc=doc)
 
 
+def cross_saturation_admittances(motor: MotorParams, step: float = _k.CROSS_STEP,
+                                 n: int = _k.CROSS_POINTS) -> list[tuple[float, float, float]]:
+    """The incremental admittance matrix (g_dd, g_dq, g_qq) [1/H], the inverse of the incremental inductance
+    matrix, at i_d = 0, i_q = 0, step, .. (n - 1) step [A] in the controller's model of the saturation (as
+    ``cross_saturation_offsets``): what ``kernels.adaptation.cross_apply`` shifts by the identified motor's
+    admittances at zero current (AD8)."""
+    coeffs = [float(x) for x in flux_model_coefficients(motor, PlantParams(flux_model="algebraic"))]
+    out = []
+    for j in range(n):
+        l_dd, l_dq, l_qq = _k.incremental_inductances(0.0, j * step, coeffs, 0)
+        det = l_dd * l_qq - l_dq * l_dq
+        out.append((l_qq / det, -l_dq / det, l_dd / det))
+    return out
+
+
 def cross_saturation_offsets(motor: MotorParams, step: float = _k.CROSS_STEP, n: int = _k.CROSS_POINTS) -> list[float]:
     """The injection's axis less the rotor's d axis [rad] at i_d = 0, i_q = 0, step, .. (n - 1) step [A]:
     the angle from d of the incremental inductance's least axis (the injection's error signal is 0 there,
@@ -319,8 +334,17 @@ class ControlUnit:
             c[slot] = float(getattr(p, name))
         c[_k.C_LOS_FILTER] = min(LOS_FILTER_CONSTANTS * self.dt / p.inj_los_time, 1.0)
         c[_k.C_EKF_LOS_EMF] = self.dt * m.N * m.psi / m.L_q
-        for j, phi in enumerate(cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * _k.CROSS_POINTS):
+        offsets = cross_saturation_offsets(m) if p.inj_cross_comp else [0.0] * _k.CROSS_POINTS
+        for j, phi in enumerate(offsets):
             c[_k.C_CROSS + j] = phi
+            c[_k.C_MODEL0_CROSS + j] = phi
+        # the identified motor's offsets and current limit (AD8, ``kernels.adaptation.cross_apply``) from the given
+        # model's admittances: its offset at the given limit is the limit's measure
+        c[_k.C_MODEL0_INJ_I_MAX] = c[_k.C_INJ_I_MAX]
+        admittances = cross_saturation_admittances(m) if p.inj_cross_comp else [(0.0, 0.0, 0.0)] * _k.CROSS_POINTS
+        for j, g in enumerate(admittances):
+            c[_k.C_CROSS_G + 3 * j:_k.C_CROSS_G + 3 * j + 3] = g
+        c[_k.C_INJ_TILT_MAX] = _k.cross_offset(c, c[_k.C_INJ_I_MAX])
         c[_k.C_HOLD_BRAKE] = float(p.hold_brake) * c[_k.C_T_MAX] * c[_k.C_BRAKE_GAIN]
 
     def _set_adaptation(self) -> None:

@@ -69,6 +69,7 @@ from __future__ import annotations
 
 import math
 
+from .injection import CROSS_STEP
 from .jit import kernel
 from .layout import (
     ADAPT_USE,
@@ -91,14 +92,20 @@ from .layout import (
     C_C_WD,
     C_C_WPSI,
     C_C_WQ,
+    C_CROSS,
+    C_CROSS_G,
     C_DT,
     C_EKF_LOS_EMF,
+    C_INJ_I_MAX,
+    C_INJ_TILT_MAX,
     C_KI_ID,
     C_KI_IQ,
     C_KP_ID,
     C_KP_IQ,
     C_L_D,
     C_L_Q,
+    C_MODEL0_CROSS,
+    C_MODEL0_INJ_I_MAX,
     C_MODEL0_KI_ID,
     C_MODEL0_KI_IQ,
     C_MODEL0_KP_ID,
@@ -109,6 +116,7 @@ from .layout import (
     C_MODEL_SRC,
     C_N,
     C_PSI,
+    CROSS_POINTS,
     MODEL_IDENTIFIED,
     S_AD_I2Y,
     S_AD_I4,
@@ -213,8 +221,44 @@ def model_apply(s, c):
     c[C_KI_ID] = c[C_MODEL0_KI_ID] * r_s / c[C_MODEL0_R_S]
     c[C_KP_IQ] = c[C_MODEL0_KP_IQ] * l_q / c[C_MODEL0_L_Q]
     c[C_KI_IQ] = c[C_MODEL0_KI_IQ] * r_s / c[C_MODEL0_R_S]
+    cross_apply(c, 1.0 / l_d - 1.0 / c[C_MODEL0_L_D], 1.0 / l_q - 1.0 / c[C_MODEL0_L_Q])
     if c[C_ADAPT] == ADAPT_USE:
         adapt_apply(s, c)
+
+
+@kernel()
+def cross_apply(c, dy_d, dy_q):
+    """(AD8) Cross-saturation on the identified motor: the injection's axis less the d axis (``C_CROSS``) and the
+    injection's q current limit (``C_INJ_I_MAX``) from the given model's incremental admittances (``C_CROSS_G``) at
+    each of the table's q currents, shifted by what the identification measured at zero current less the given
+    model's, ``dy_d`` = 1/L_d - 1/L_d0 and ``dy_q`` = 1/L_q - 1/L_q0 [1/H] (the algebraic model's admittance is its
+    zero-current admittance plus the saturation's terms, ``flux_model``):
+
+        g = G0(i_q) + diag(dy_d, dy_q),   phi = atan2(2 g_dq, g_dd - g_qq) / 2                                 (AD8)
+
+    phi the axis of g's larger eigenvalue, the least inductance the injection locks onto. The tilt grows with i_q as
+    2 g_dq over g_dd - g_qq: a motor with a third of the data sheet's saliency tilts three times as far (the low-
+    saliency corner's L_d +10 %, L_q -7 %: 30 deg at 150 A, where the data sheet's model has 6 deg and the plant 48;
+    compensated with the data sheet's, the injection locked onto the q axis under a drive-off's load and slipped a
+    turn). The limit: the q current at which phi reaches the given model's phi at the given limit
+    (``C_INJ_TILT_MAX``; the tilt the limit was measured safe at), at most the given limit. Where both shifts are 0
+    (the given model) the given table and limit are put back as they were computed; no compensation (``C_CROSS_G``
+    0) leaves both as given."""
+    limit = c[C_MODEL0_INJ_I_MAX]
+    given = (dy_d == 0.0 and dy_q == 0.0) or c[C_CROSS_G] == 0.0
+    phi_max = c[C_INJ_TILT_MAX]
+    prev = 0.0
+    for j in range(CROSS_POINTS):
+        if given:
+            c[C_CROSS + j] = c[C_MODEL0_CROSS + j]
+            continue
+        k = C_CROSS_G + 3 * j
+        phi = 0.5 * math.atan2(2.0 * c[k + 1], c[k] + dy_d - (c[k + 2] + dy_q))
+        c[C_CROSS + j] = phi
+        if phi >= phi_max and (j == 0 or prev < phi_max):  # (none at all where already there at no current)
+            limit = min(limit, 0.0 if j == 0 else CROSS_STEP * (j - 1 + (phi_max - prev) / (phi - prev)))
+        prev = phi
+    c[C_INJ_I_MAX] = limit
 
 
 @kernel()

@@ -699,7 +699,14 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                         "before it is used (eq SG2) [-] (0: not measured)"),
     ("C_SALIENCY_CAL", 1, "the least identified saliency at which a seeing unit holds the car on the injection at "
                           "its stops before it has measured its phase sensors' relative gain [-]"),
-), size=180)
+    # cross-saturation on the identified motor (``kernels.adaptation.cross_apply``, AD8)
+    ("C_MODEL0_CROSS", CROSS_POINTS, "the given model's C_CROSS [rad], to go back to"),
+    ("C_MODEL0_INJ_I_MAX", 1, "the given C_INJ_I_MAX [A], to go back to"),
+    ("C_CROSS_G", 3 * CROSS_POINTS, "the given model's incremental admittance matrix (g_dd, g_dq, g_qq) [1/H] at i_d = "
+                                    "0, i_q = 0, 50, .. 400 A, three a point (0: no compensation)"),
+    ("C_INJ_TILT_MAX", 1, "the given model's cross-saturation offset at C_INJ_I_MAX [rad]: the identified motor's "
+                          "injection current limit is where its offset reaches it"),
+), size=180 + CROSS_POINTS + 1 + 3 * CROSS_POINTS + 1)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24
