@@ -183,8 +183,9 @@ class FocSlave(DriveSlave):
                                           "the identified admittances, filtered, in FOC on the injection (0 in the "
                                           "other modes)" + hold, discrete=True)
         self.add_output("gain_ratio_id", None, "the phase sensors' relative gain g_a / g_b measured on the EKF over "
-                                               "gain_turns electrical turns and taken out of the measurements from "
-                                               "then on (eqs SG1-SG2)" + ident, discrete=True)
+                                               "gain_turns electrical turns (eq SG1), or at standstill from a parked "
+                                               "unit's answers (eq SG0), and taken out of the measurements from "
+                                               "then on (eq SG2)" + ident, discrete=True)
         self._sensorless = observer == "sensorless"
         if self._sensorless:  # it never reads the measured angle and speed: any value there, NaN included
             self.unread_inputs = frozenset(("theta_meas", "omega_meas"))

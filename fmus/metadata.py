@@ -378,6 +378,9 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
                            "carry) added to emf_slip_speed"),
     "gain_turns": (None, "the phase sensors' relative gain g_a / g_b is measured on the EKF over this many electrical "
                          "turns (eqs SG1-SG2) and taken out of the measurements from then on; 0: not measured"),
+    "gain_standstill_se": (None, "the phase sensors' relative gain is also measured at standstill, from a parked "
+                                 "unit's pooled identification answers (eq SG0), and taken once its standard error "
+                                 "is at most this; 0: not measured at standstill"),
     "saliency_calibrated": (None, "below this identified saliency L_q / L_d a seeing unit parks at its stops until "
                                   "its phase sensors' relative gain is measured; 0: off"),
     "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "

@@ -242,7 +242,7 @@ def test_the_offsets_are_those_the_kernels_were_written_with():
             kernels.S_STARTED, kernels.S_MODE, kernels.S_STILL_OUT, kernels.UNIT_STATE) == (
         15, 20, 21, 46, 56, 66, 91, 92, 130, 268)
     assert (kernels.C_Q, kernels.C_C_MID, kernels.C_P0, kernels.C_T_RAMP, kernels.C_P0_ALIGNED,
-            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 93, 218)
+            kernels.C_SLIP_FILTER, kernels.C_STILL, kernels.UNIT_PARAMS) == (35, 40, 41, 46, 60, 65, 93, 219)
     # the reference generator's slots, at the end of both unit vectors
     assert (kernels.S_I_DREF, kernels.S_T_AVAIL, kernels.C_REF_MODE, kernels.C_BRAKE_GAIN) == (131, 135, 97, 104)
     # the speed loop's feedforward, after them

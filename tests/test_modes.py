@@ -40,7 +40,7 @@ ROWS = tuple(row for row in k.TRANSITIONS if row[1] in EVENTS)
 def test_table_has_one_row_per_pair_and_known_modes_and_actions():
     pairs = [(row[0], row[1]) for row in k.TRANSITIONS]
     assert len(pairs) == len(set(pairs))
-    assert len(ROWS) == 15
+    assert len(ROWS) == 16
     actions = {getattr(k, n) for n in dir(k) if n.startswith("A_")}
     for mode, event, new, action in ROWS:
         # the one way out of the strategy: a unit that cannot see its motor's axis takes the I-f strategy's alignment
@@ -164,7 +164,44 @@ def test_cannot_see_is_a_blind_unit_whose_angle_the_injection_cannot_find(y, bli
     s[k.S_HOLD] = c[k.C_HOLD_BRAKE] if held else 0.0
     assert bool(k.cannot_see(s, c)) is not sees
     s[k.S_MODE_TIME] = 10.0  # the acquisition over
+    s[k.S_GAIN_RATIO] = 1.0  # the sensors measured
     assert k.detect(s, c, k.MODE_ACQUIRE, 0.0) == (k.EV_ACQUIRED if sees else k.EV_CANNOT_SEE)
+
+
+@pytest.mark.parametrize(("ratio", "parked", "omega_ref", "event"), [
+    (0.0, 0.0, 0.0, k.EV_BLIND_STOP),  # the enable's acquisition, nothing asked: park and pool the answers
+    (0.0, 1.0, 0.0, k.EV_STILL_PARKED),  # parked: again
+    (0.0, 1.0, 5.0, k.EV_CANNOT_SEE),  # the driver asks to go: the I-f strategy now
+    (1.01, 1.0, 0.0, k.EV_CANNOT_SEE),  # the sensors measured: judged
+])
+def test_a_unit_that_cannot_see_with_its_sensors_not_yet_measured_parks_while_nothing_is_asked(ratio, parked,
+                                                                                              omega_ref, event):
+    """``detect``: a blind unit whose angle accuracy is beyond ``inj_see_max`` parks instead of taking the I-f
+    strategy for good while the driver asks for nothing and its sensors' relative gain is not yet measured (eq SG0
+    measures it from the parked answers); with ``gain_standstill_se`` 0 it is judged at once, as before."""
+    _, s, c = _unit()
+    s[k.S_ID_Y:k.S_ID_Y + 2] = [4300.0, 4220.0]
+    s[k.S_ID_BLIND], s[k.S_ID_ACC], s[k.S_HOLD] = 1.0, 0.77, c[k.C_HOLD_BRAKE]
+    s[k.S_GAIN_RATIO], s[k.S_PARKED], s[k.S_MODE_TIME] = ratio, parked, 10.0
+    assert k.detect(s, c, k.MODE_ACQUIRE, omega_ref) == event
+    _, s, c = _unit(gain_standstill_se=0.0)
+    s[k.S_ID_Y:k.S_ID_Y + 2] = [4300.0, 4220.0]
+    s[k.S_ID_BLIND], s[k.S_ID_ACC], s[k.S_HOLD] = 1.0, 0.77, c[k.C_HOLD_BRAKE]
+    s[k.S_PARKED], s[k.S_MODE_TIME] = parked, 10.0
+    assert k.detect(s, c, k.MODE_ACQUIRE, omega_ref) == k.EV_CANNOT_SEE
+
+
+def test_the_enables_acquisition_parks_a_unit_that_cannot_see_yet():
+    """Row (MODE_ACQUIRE, EV_BLIND_STOP, MODE_ACQUIRE, A_PARK): the car held on the brake, the acquisition afresh,
+    parked (so that its answers are pooled: ``refining``)."""
+    u, s, c = _unit()
+    s[k.S_ID_Y:k.S_ID_Y + 2] = [4300.0, 4220.0]
+    s[k.S_ID_BLIND], s[k.S_ID_DONE] = 1.0, 1.0
+    s[k.S_ID_SUM:k.S_ID_SUM + 8] = [1.0] * 8
+    s[k.S_MODE_TIME] = 10.0
+    assert _go(s, c, k.MODE_ACQUIRE, k.EV_BLIND_STOP) == k.MODE_ACQUIRE
+    assert s[k.S_PARKED] == 1.0 and s[k.S_HOLD] == c[k.C_HOLD_BRAKE] and s[k.S_MODE_TIME] == 0.0
+    assert k.refining(s, c) and s[k.S_ID_SUM:k.S_ID_SUM + 8] == [1.0] * 8
 
 
 def _t_brake(u, s):
@@ -645,12 +682,13 @@ def test_identify_says_blind_below_the_least_saliency_and_bounds_the_amplitude()
 
 @pytest.mark.parametrize(("blind", "parked", "measures"), [(0.0, 0.0, False), (0.0, 1.0, False), (1.0, 0.0, False),
                                                             (1.0, 1.0, True)])
-def test_only_a_blind_units_parked_acquisitions_measure_the_motor_again(blind, parked, measures):
-    """``refining``: after the enable's identification only a blind unit holding the car at a stop runs the
-    identification's phases again (not the offset window or the R_s test), and its acquisition keeps the sums."""
+def test_only_a_parking_units_parked_acquisitions_measure_the_motor_again(blind, parked, measures):
+    """``refining``: after the enable's identification only a unit that parks (here: blind) holding the car at a stop
+    runs the identification's phases again (not the offset window or the R_s test), and its acquisition keeps the
+    sums."""
     _, s, c = _unit()
     s[k.S_ID_DONE], s[k.S_ID_BLIND], s[k.S_PARKED] = 1.0, blind, parked
-    assert bool(k.refining(s)) is measures
+    assert bool(k.refining(s, c)) is measures
     assert k.identification_time(s, c) == (c[k.C_ID_TIME] if measures else 0.0)
     assert k.offset_time(s, c) == 0.0 and k.rs_test_time(s, c) == 0.0
     s[k.S_ID_SUM:k.S_ID_SUM + 8] = [1.0] * 8
@@ -820,3 +858,82 @@ def test_the_angle_accuracy_follows_eq_id3():
     assert acc == pytest.approx(0.052, abs=0.001)
     assert k.angle_accuracy(c, 1.0, 90.0, 751.0 / 3) == pytest.approx(acc, rel=1e-12)
     assert k.angle_accuracy(c, 2.0, 30.0, 751.0) == pytest.approx(2 * acc, rel=1e-12)
+
+
+@pytest.mark.parametrize(("ratio", "parked", "measures"), [(0.0, 1.0, True), (0.0, 0.0, False), (1.01, 1.0, False)])
+def test_a_seeing_unit_of_little_saliency_measures_again_while_parked_until_its_sensors_are(ratio, parked, measures):
+    """``refining``: a seeing unit that parks (its saliency below ``saliency_calibrated``, its sensors' relative gain
+    not yet measured) pools its parked acquisitions' answers too (eq SG0 needs them); once the ratio is measured it
+    neither parks nor measures again, and its next acquisition clears the sums."""
+    _, s, c = _unit()
+    s[k.S_ID_DONE], s[k.S_ID_Y_D], s[k.S_ID_Y_Q] = 1.0, 1.15 * 3000.0, 3000.0
+    s[k.S_PARKED], s[k.S_GAIN_RATIO] = parked, ratio
+    assert bool(k.refining(s, c)) is measures
+    s[k.S_ID_SUM:k.S_ID_SUM + 8] = [1.0] * 8
+    k.enter_acquire(s, c, 0.0, 0.0)
+    assert s[k.S_ID_SUM:k.S_ID_SUM + 8] == [0.0 if ratio else 1.0] * 8
+
+
+def _cross_sums(s, c, anti, spread, n=400.0):
+    """The identification's cross answers (``S_ID_D_SUM``, ``S_ID_D_SQ``) with an antisymmetric part ``anti`` [1/H]
+    alone, (b_d + b_q) / 2 = anti on both amplitudes (no dead time), each answer scattered by +-``spread`` [1/H]."""
+    for j in range(4):
+        scale = 2.0 * c[k.C_INJ_M] * c[k.C_DT] * k.identification_amplitude(c, j)  # an answer [A] per [1/H]
+        mean, sd = anti * scale, spread * scale
+        s[k.S_ID_N_D + j] = n
+        s[k.S_ID_D_SUM + j] = n * mean
+        s[k.S_ID_D_SQ + j] = n * (mean * mean + sd * sd)
+
+
+def test_the_sensors_relative_gain_at_standstill_from_the_answers_antisymmetric_part():
+    """(SG0) The antisymmetric part of the answers, Y_s (g_a - g_b) / (2 sqrt 3), gives the ratio once its standard
+    error is within ``gain_standstill_se``; the pooled sums then start afresh. Too scattered answers, a ratio already
+    measured, or the measurement off take nothing."""
+    y_d, y_q = 4400.0, 4000.0
+    x = 0.033  # (g_a - g_b) / g
+    anti = 0.5 * (y_d + y_q) * x / (2.0 * math.sqrt(3.0))
+    _, s, c = _unit()
+    s[k.S_ID_Y_D], s[k.S_ID_Y_Q] = y_d, y_q
+    _cross_sums(s, c, anti, spread=50.0)
+    k.standstill_gain(s, c)
+    assert s[k.S_GAIN_RATIO] == pytest.approx((1 + x / 2) / (1 - x / 2), rel=1e-12)
+    assert s[k.S_ID_SUM:k.S_ID_SUM + 8] == [0.0] * 8 and s[k.S_ID_NOISE:k.S_ID_NOISE + 8] == [0.0] * 8
+    _, s, c = _unit()
+    s[k.S_ID_Y_D], s[k.S_ID_Y_Q] = y_d, y_q
+    _cross_sums(s, c, anti, spread=2000.0)  # a standard error of about 0.13: not yet
+    k.standstill_gain(s, c)
+    assert s[k.S_GAIN_RATIO] == 0.0 and s[k.S_ID_N_D] == 400.0
+    for kw, ratio in (({}, 1.01), ({"gain_standstill_se": 0.0}, 0.0), ({"gain_turns": 0.0}, 0.0)):
+        _, s, c = _unit(**kw)
+        s[k.S_ID_Y_D], s[k.S_ID_Y_Q], s[k.S_GAIN_RATIO] = y_d, y_q, ratio
+        _cross_sums(s, c, anti, spread=50.0)
+        k.standstill_gain(s, c)
+        assert s[k.S_GAIN_RATIO] == ratio
+
+
+@pytest.mark.parametrize(("g_a", "g_b", "theta"), [(0.981, 1.014, 0.7), (1.014, 0.981, 2.1)])
+def test_a_parked_unit_of_little_saliency_measures_its_sensors_at_standstill(g_a, g_b, theta):
+    """A motor of saliency 1.098 (the low-saliency corner's, seed 6464), sensors 3.3 % apart, 1.5 A of noise and 2 us
+    of dead time, its car held at a stop from enable: the parked acquisitions pool their answers and SG0 takes the
+    relative gain within 1 % of the sensors' before 8 s (two rotor angles, both signs of the mismatch)."""
+    from dataclasses import replace
+
+    from pmsm_ev.params import MotorParams, PlantParams
+    from pmsm_ev.plant import Plant
+
+    motor = replace(MotorParams(), L_d=2.3216e-4, L_q=2.5483e-4, R_s=0.0104, psi=0.0822)
+    plant = Plant(motor=motor, plant=PlantParams(flux_model="algebraic", sensor_noise=1.5, sensor_seed=765252,
+                                                 flux_q_current=337.8, flux_d_current=207.5, dead_time=2e-6,
+                                                 v_dc=360.0, sensor_gain_a=g_a, sensor_gain_b=g_b))
+    plant.theta_e = theta
+    unit = ControlUnit("sensorless", controller=ControllerParams(dead_time_comp=7.25, v_dc=360.0),
+                       injection=InjectionParams(low_speed="injection"))
+    i_a = i_b = 0.0
+    for _ in range(80000):
+        out = unit.step(i_a, i_b, 0.0)
+        r = plant.step(out[0], out[1], 0.0, 1e-4, unit.T_brake)
+        i_a, i_b = r[4], r[5]
+        if unit._s[k.S_GAIN_RATIO] != 0.0:
+            break
+    assert unit._s[k.S_GAIN_RATIO] == pytest.approx(g_a / g_b, rel=0.01)
+    assert abs(plant.x_vehicle) < 1e-3  # held on the brake

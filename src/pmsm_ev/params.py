@@ -1836,6 +1836,13 @@ class InjectionParams:
     #: (the mismatch's own spread: +-0.04). Below it the unit parks at its stops (``park_car``, as a blind one does)
     #: until ``gain_turns`` are measured. 0: off
     saliency_calibrated: float = 1.30
+    #: the standard error of the phase sensors' relative gain, measured at standstill from a parked unit's pooled
+    #: answers (eq SG0, ``pmsm_ev.kernels.standstill_gain``), at which the unit takes it before it has driven [-]
+    #: [chosen: 0.005: an eighth of the +-4 % two sensors within +-2 % can differ by; it turns the injection's axis
+    #: by at most asin(0.005 / sqrt 3 (s + 1) / (s - 1)) / 2, 2.2 deg on a motor of saliency 1.08. The enable's
+    #: 0.12 s of answers give 0.03 at 1.5 A; a parked unit's stops pool theirs, so that it takes about 4 s of them
+    #: standing]. 0: not measured at standstill
+    gain_standstill_se: float = 0.005
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""
@@ -1865,6 +1872,9 @@ class InjectionParams:
                  f"saliency_calibrated must be 0 (off) or >= 1: a saliency L_q / L_d (got {self.saliency_calibrated})")
         _require(self.gain_turns == 0.0 or self.gain_turns >= 10.0,
                  f"gain_turns must be 0 (not measured) or >= 10 electrical turns (got {self.gain_turns})")
+        _require(self.gain_standstill_se < 0.04,
+                 f"gain_standstill_se must be 0 (not measured) or below 0.04, the sensors' mismatch span "
+                 f"(got {self.gain_standstill_se})")
         _require(self.rs_time == 0.0 or self.rs_time >= 0.002,
                  f"rs_time must be 0 (no test) or >= 0.002 s, ten current-loop time constants (got {self.rs_time})")
         _require(self.rs_time == 0.0 or self.rs_current > 0.0,

@@ -706,7 +706,9 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                                     "0, i_q = 0, 50, .. 400 A, three a point (0: no compensation)"),
     ("C_INJ_TILT_MAX", 1, "the given model's cross-saturation offset at C_INJ_I_MAX [rad]: the identified motor's "
                           "injection current limit is where its offset reaches it"),
-), size=180 + CROSS_POINTS + 1 + 3 * CROSS_POINTS + 1)
+    ("C_GAIN_SE", 1, "the standard error at which the phase sensors' relative gain measured at standstill is taken "
+                     "(eq SG0) [-] (0: not measured at standstill)"),
+), size=180 + CROSS_POINTS + 1 + 3 * CROSS_POINTS + 2)
 
 #: the battery's open-circuit voltage table: at most this many points (``P_BAT_OCV``)
 BAT_OCV_MAX = 24

@@ -47,7 +47,9 @@ EV_INJECTION_LOST = 7  #: the tracking observer's angle error stayed beyond C_IN
 EV_DISAGREE = 8  #: in the blend, the EKF's angle stayed that far from the tracking observer's
 EV_EKF_LOST = 9  #: the EKF's current innovation stayed beyond C_EKF_LOS_I
 EV_FLIPPED = 10  #: in the blend, the EKF's angle stayed more than pi/2 from the tracking observer's: a pi slip
-EV_BLIND_STOP = 25  #: a blind unit (its saliency below C_SALIENCY_MIN) at a stop: park the car, find the angle afresh
+#: a blind unit (its saliency below C_SALIENCY_MIN) at a stop: park the car, find the angle afresh (also at the enable's
+#: acquisition, where it cannot see with its sensors' relative gain not yet measured)
+EV_BLIND_STOP = 25
 EV_STILL_PARKED = 26  #: an acquisition over while parked and the reference still 0: another one
 EV_EMF_LOST = 27  #: the current loops carry a back-EMF the frame's speed does not explain (eqs LS1-LS2)
 EV_CANNOT_SEE = 28  #: the identification over, blind and the angle accuracy beyond C_ANGLE_MAX (``cannot_see``)
@@ -124,6 +126,7 @@ TRANSITIONS = (
     # the injection strategy
     (MODE_ACQUIRE, EV_ACQUIRED, MODE_POLARITY, A_POLARITY),
     (MODE_ACQUIRE, EV_CANNOT_SEE, MODE_ALIGN, A_IF_FALLBACK),
+    (MODE_ACQUIRE, EV_BLIND_STOP, MODE_ACQUIRE, A_PARK),
     (MODE_POLARITY, EV_POLARITY_RIGHT, MODE_INJECTION, A_TORQUE),
     (MODE_POLARITY, EV_POLARITY_FLIPPED, MODE_INJECTION, A_FLIP_TORQUE),
     (MODE_POLARITY, EV_POLARITY_UNRESOLVED, MODE_ACQUIRE, A_RETRY),

@@ -98,6 +98,7 @@ from .layout import (
     C_EMF_REL,
     C_EMF_SPEED,
     C_FF,
+    C_GAIN_SE,
     C_GAIN_TURNS,
     C_HOLD_BRAKE,
     C_I_D_REF,
@@ -329,19 +330,6 @@ RS_RISE_MIN = 0.25
 
 
 @kernel()
-def refining(s):
-    """True where a blind unit (``S_ID_BLIND``) holds the car at a stop (``S_PARKED``): its acquisitions measure the
-    motor again and pool their answers with the enable's (``enter_acquire`` keeps a blind unit's sums), so that the
-    saliency it judged itself blind by is measured from more answers at every stop, at the rotor angles the stops
-    give: the sensors' noise (at 1.5 A the enable's 0.5 s read a motor of saliency 1.10 from 4.5 % low to 12.9 %
-    high over 16 rotor angles, ``pmsm_cosim.app.identification_study``) falls as one over the root
-    of the stops' time and the phase sensors' gain mismatch (up to 2 |g_a - g_b| / sqrt 3 of it, as cos 2 theta)
-    averages out over their angles. A unit the pooled answers find above ``C_SALIENCY_TRUST`` is no longer blind and
-    drives on the injection from its next restart; a seeing unit is not measured again (its detectors watch it)."""
-    return s[S_ID_BLIND] != 0.0 and s[S_PARKED] != 0.0
-
-
-@kernel()
 def parks(s, c):
     """True where the unit holds the car on the friction brake at its stops and finds the angle afresh for each
     restart (``park_car``, ``detect_blind_stop``): a blind unit (``S_ID_BLIND``), and a seeing one whose identified
@@ -353,6 +341,21 @@ def parks(s, c):
     if c[C_GAIN_TURNS] == 0.0 or s[S_GAIN_RATIO] != 0.0:
         return False
     return s[S_ID_Y_Q] > 0.0 and s[S_ID_Y_D] < c[C_SALIENCY_CAL] * s[S_ID_Y_Q]
+
+
+@kernel()
+def refining(s, c):
+    """True where a unit that parks (``parks``: blind, or of little saliency with its sensors' relative gain not yet
+    measured) holds the car at a stop (``S_PARKED``): its acquisitions measure the motor again and pool their answers
+    with the enable's (``enter_acquire`` keeps such a unit's sums), so that the saliency a blind unit judged itself
+    blind by is measured from more answers at every stop, at the rotor angles the stops give: the sensors' noise (at
+    1.5 A the enable's 0.5 s read a motor of saliency 1.10 from 4.5 % low to 12.9 % high over 16 rotor angles,
+    ``pmsm_cosim.app.identification_study``) falls as one over the root of the stops' time and the phase sensors'
+    gain mismatch (up to 2 |g_a - g_b| / sqrt 3 of it, as cos 2 theta) averages out over their angles; and the
+    mismatch itself from the answers' antisymmetric part (``standstill_gain``, eq SG0). A blind unit the pooled
+    answers find above ``C_SALIENCY_TRUST`` is no longer blind and drives on the injection from its next restart; a
+    unit that does not park is not measured again (its detectors watch it)."""
+    return s[S_PARKED] != 0.0 and parks(s, c)
 
 
 @kernel()
@@ -389,11 +392,51 @@ def balance_sensors(s, c, i_alpha, i_beta):
 
 
 @kernel()
+def standstill_gain(s, c):
+    """(SG0) The phase sensors' relative gain at standstill, from the identification's cross answers pooled since
+    enable. The sensors read M i, M = [[g_a, 0], [(g_a - g_b) / sqrt 3, g_b]] in alpha-beta, whose antisymmetric
+    part is a turn by (g_a - g_b) / (2 sqrt 3); the rotor's admittance Y is symmetric, so that the answers M Y have
+    an antisymmetric part Y_s (g_a - g_b) / (2 sqrt 3) (to first order in the mismatch and in Y_x / Y_s), the same
+    on every axis: the cross answer on the found d axis less the one on the q axis as the d one is taken
+    (``cross_admittance``'s b_d and -b_q), (b_d + b_q) / 2 by (ID1). With y_s = (y_d + y_q) / 2 (the common gain
+    in it too):
+
+        x = (g_a - g_b) / g = 2 sqrt 3 (b_d + b_q) / (2 y_s),   g_a / g_b = (1 + x / 2) / (1 - x / 2)    (SG0)
+
+    taken into ``S_GAIN_RATIO`` (read by ``balance_sensors``, SG2) once x's standard error, from the answers'
+    scatter, is at most ``C_GAIN_SE``, and only while no ratio is taken yet; the pooled sums then start afresh (the
+    answers after it are balanced, those before it not). A low-saliency motor of seed 6464 (1.098, gains 0.981 /
+    1.014: g_a / g_b 0.9675) parked from enable took 0.9679 after 4.6 s."""
+    if c[C_GAIN_SE] == 0.0 or c[C_GAIN_TURNS] == 0.0 or s[S_GAIN_RATIO] != 0.0:
+        return
+    if not (s[S_ID_Y_D] > 0.0 and s[S_ID_Y_Q] > 0.0):
+        return
+    b = 0.0
+    var = 0.0
+    for j in range(4):
+        n = s[S_ID_N_D + j]
+        if n < 2.0:
+            return
+        scale = 2.0 * c[C_INJ_M] * c[C_DT] * identification_amplitude(c, j)
+        w = -0.5 if j % 2 == 0 else 1.0  # (ID1): 2 b(2 V) - b(V), halved over the two axes
+        b += w * s[S_ID_D_SUM + j] / n / scale
+        v = max(s[S_ID_D_SQ + j] - s[S_ID_D_SUM + j] * s[S_ID_D_SUM + j] / n, 0.0) / ((n - 1.0) * n)
+        var += w * w * v / (scale * scale)
+    k = 2.0 * math.sqrt(3.0) / (0.5 * (s[S_ID_Y_D] + s[S_ID_Y_Q]))
+    x = k * b
+    if k * math.sqrt(var) <= c[C_GAIN_SE] and abs(x) < 2.0:
+        s[S_GAIN_RATIO] = (1.0 + 0.5 * x) / (1.0 - 0.5 * x)  # (SG0)
+        for j in range(8):  # the answers from here on are balanced: a parking unit pools them afresh
+            s[S_ID_SUM + j] = 0.0
+            s[S_ID_NOISE + j] = 0.0
+
+
+@kernel()
 def identification_time(s, c):
     """The identification's time on each axis [s]: ``C_ID_TIME`` in the first acquisition after enable and in every
     parked acquisition of a blind unit (``refining``), 0 in the others (a reacquisition, which may find the car
     rolling, does not measure again)."""
-    return c[C_ID_TIME] if s[S_ID_DONE] == 0.0 or refining(s) else 0.0
+    return c[C_ID_TIME] if s[S_ID_DONE] == 0.0 or refining(s, c) else 0.0
 
 
 @kernel()
@@ -523,7 +566,8 @@ def identify(s, c):
     s[S_ID_Y_D] = y_d
     s[S_ID_Y_Q] = y_q
     identify_noise(s)
-    limit = c[C_SALIENCY_MIN] if s[S_ID_DONE] == 0.0 else c[C_SALIENCY_TRUST]  # a blind unit's pooled answers
+    # a blind unit's pooled answers must show more to be trusted (a seeing unit's pooled answers the same least)
+    limit = c[C_SALIENCY_TRUST] if s[S_ID_DONE] != 0.0 and s[S_ID_BLIND] != 0.0 else c[C_SALIENCY_MIN]
     s[S_ID_BLIND] = 1.0 if y_d < limit * y_q else 0.0
     if y_d > y_q:
         b = 0.5 * v * ((y_d - a_d) - (y_q - a_q))  # the dead time's share of the error signal's gain, times V
@@ -709,6 +753,13 @@ def cannot_see(s, c):
 
 
 @kernel()
+def sensors_balanced(s, c):
+    """True where the phase sensors' relative gain is measured (``S_GAIN_RATIO``, eqs SG0, SG1) or never will be at
+    standstill (``C_GAIN_SE`` or ``C_GAIN_TURNS`` 0)."""
+    return s[S_GAIN_RATIO] != 0.0 or c[C_GAIN_SE] == 0.0 or c[C_GAIN_TURNS] == 0.0
+
+
+@kernel()
 def detect_polarity(s, c):
     """At the end of the polarity test: EV_POLARITY_RIGHT where the d admittance at +i exceeds that at -i
     by at least ``C_POL_CONTRAST`` of their mean (a positive d current saturates the d axis),
@@ -843,10 +894,18 @@ def detect_speed(s, c, mode, omega):
 def detect(s, c, mode, omega_ref):
     """This period's event, by priority: a loss of synchronism first, then the mode's own (``omega_ref`` [rad/s]:
     the speed reference of the period). A parked acquisition (``S_PARKED``) that is over with the reference still
-    0 gives EV_STILL_PARKED: the angle is found again, not held by the tracking observer."""
+    0 gives EV_STILL_PARKED: the angle is found again, not held by the tracking observer. A unit that cannot see
+    (``cannot_see``) takes the I-f strategy for good, but while the driver asks for nothing and its sensors' relative
+    gain is not yet measured (``sensors_balanced``) it parks instead (EV_BLIND_STOP at the enable's acquisition,
+    EV_STILL_PARKED at a parked one) and pools its answers: their mismatch reads as a saliency fixed to the stator,
+    which at one rotor angle can lower the saliency read below what the motor has (a motor of 1.098 with sensors 3.3 %
+    apart read 1.03 at a stop, its accuracy beyond ``C_SEE_MAX``), and it is measured from the same answers within
+    seconds (eq SG0)."""
     if mode == MODE_ACQUIRE:
         ev = detect_acquired(s, c)
         if ev == EV_ACQUIRED and cannot_see(s, c):
+            if omega_ref == 0.0 and not sensors_balanced(s, c):  # judged again once they are: parked meanwhile
+                return EV_STILL_PARKED if s[S_PARKED] != 0.0 else EV_BLIND_STOP
             return EV_CANNOT_SEE
         return EV_STILL_PARKED if ev == EV_ACQUIRED and s[S_PARKED] != 0.0 and omega_ref == 0.0 else ev
     if mode == MODE_POLARITY:
@@ -880,14 +939,14 @@ def clear_detectors(s):
 
 @kernel()
 def enter_acquire(s, c, i_alpha, i_beta):
-    """The acquisition from the start: the square wave afresh, the sums cleared (a blind unit's identification sums
-    kept: ``refining``), no current (the PIs' integrators and the speed loop's at 0), the tracking observer at
-    rest on its angle, the EKF's weight 0."""
+    """The acquisition from the start: the square wave afresh, the sums cleared (the identification's sums of a unit
+    that parks kept: ``refining``), no current (the PIs' integrators and the speed loop's at 0), the tracking
+    observer at rest on its angle, the EKF's weight 0."""
     start_injection(s)
     seed_fundamental(s, c, i_alpha, i_beta)
     for k in range(4):
         s[S_ACQ + k] = 0.0
-    if s[S_ID_BLIND] == 0.0:
+    if not parks(s, c):
         for k in range(8):
             s[S_ID_SUM + k] = 0.0
             s[S_ID_NOISE + k] = 0.0
@@ -1110,10 +1169,11 @@ def collect(s, c, mode, t, phase, answer, i_d):
             s[S_ID_D_SQ + j] += x * x
         if starts and PHASE_ID_D2 <= phase <= PHASE_RS1 and identification_time(s, c) > 0.0:
             s[S_INJ_SKIP] = SKIP_HALF_WAVES  # the amplitude steps, the axis jumps by 90 deg (to q, back to d)
-        if starts and phase == PHASE_OVER and (s[S_ID_DONE] == 0.0 or refining(s)):
+        if starts and phase == PHASE_OVER and (s[S_ID_DONE] == 0.0 or refining(s, c)):
             if identification_time(s, c) > 0.0:
                 s[S_INJ_SKIP] = SKIP_HALF_WAVES
-                identify(s, c)  # a blind unit's parked acquisitions: from the answers pooled since enable
+                identify(s, c)  # a parking unit's parked acquisitions: from the answers pooled since enable
+                standstill_gain(s, c)
             if s[S_ID_DONE] == 0.0:
                 identify_rs(s, c)
             s[S_ID_DONE] = 1.0
