@@ -381,8 +381,9 @@ PARAMETERS: dict[str, tuple[str | None, str]] = {
     "gain_standstill_se": (None, "the phase sensors' relative gain is also measured at standstill, from a parked "
                                  "unit's pooled identification answers (eq SG0), and taken once its standard error "
                                  "is at most this; 0: not measured at standstill"),
-    "saliency_calibrated": (None, "below this identified saliency L_q / L_d a seeing unit parks at its stops until "
-                                  "its phase sensors' relative gain is measured; 0: off"),
+    "saliency_hold": (None, "below this identified saliency L_q / L_d a seeing unit parks at its stops (the friction "
+                            "brake holds the car, the angle found afresh for each restart) instead of holding the car "
+                            "on the injection; 0: off"),
     "inj_axis_cos": (None, "the tracking observer has lost the axis where cos 2e from the d admittance (with the "
                            "identified admittances), filtered, stays below this for inj_los_time"),
     # ControlUnit

@@ -360,18 +360,19 @@ def test_blind_stop_only_for_a_blind_unit_asked_to_stand_below_the_blend(blind, 
     assert k.detect_blind_stop(s, c, omega_ref) == event
 
 
-@pytest.mark.parametrize(("y_d", "y_q", "blind", "ratio", "cal", "turns", "parks"), [
+@pytest.mark.parametrize(("y_d", "y_q", "blind", "ratio", "hold", "turns", "parks"), [
     (4460.0, 4000.0, 0.0, 0.0, 1.30, 200.0, True),  # 1.115, its sensors not yet measured
-    (4460.0, 4000.0, 0.0, 1.01, 1.30, 200.0, False),  # measured: it holds on the injection
-    (4460.0, 3300.0, 0.0, 0.0, 1.30, 200.0, False),  # 1.35: the mismatch turns its axis little
+    (4460.0, 4000.0, 0.0, 1.01, 1.30, 200.0, True),  # measured: it still parks (little saliency to hold on)
+    (4460.0, 3300.0, 0.0, 0.0, 1.30, 200.0, False),  # 1.35: it holds on the injection
     (4460.0, 4000.0, 0.0, 0.0, 0.0, 200.0, False),  # off
-    (4460.0, 4000.0, 0.0, 0.0, 1.30, 0.0, False),  # no measurement: nothing to wait for
+    (4460.0, 4000.0, 0.0, 0.0, 1.30, 0.0, True),  # the sensors never measured: as measured
     (0.0, 0.0, 0.0, 0.0, 1.30, 200.0, False),  # not identified
     (4460.0, 4300.0, 1.0, 1.01, 1.30, 200.0, True),  # blind, measured or not
+    (4460.0, 3300.0, 1.0, 0.0, 0.0, 200.0, True),  # blind, the rule off
 ])
-def test_a_unit_parks_when_blind_or_its_low_saliency_meets_sensors_not_yet_measured(y_d, y_q, blind, ratio, cal,
-                                                                                   turns, parks):
-    _, s, c = _unit(saliency_calibrated=cal, gain_turns=turns)
+def test_a_unit_parks_when_blind_or_of_too_little_saliency_to_hold_the_car_on(y_d, y_q, blind, ratio, hold, turns,
+                                                                             parks):
+    _, s, c = _unit(saliency_hold=hold, gain_turns=turns)
     s[k.S_ID_Y_D], s[k.S_ID_Y_Q], s[k.S_ID_BLIND], s[k.S_GAIN_RATIO] = y_d, y_q, blind, ratio
     assert k.modes.parks(s, c) == parks
     s[k.S_OMEGA_CTRL], s[k.S_MODE_TIME] = 2.0, 0.1
@@ -822,7 +823,7 @@ def test_the_fault_latches_only_on_unresolved_polarity_twice(events):
     ({"low_speed": "injection", "emf_slip_rel": -0.1}, "emf_slip_rel"),
     ({"low_speed": "injection", "inj_see_max": 0.1}, "inj_see_max"),
     ({"low_speed": "injection", "inj_see_max": 1.0}, "inj_see_max"),
-    ({"low_speed": "injection", "saliency_calibrated": 0.9}, "saliency_calibrated"),
+    ({"low_speed": "injection", "saliency_hold": 0.9}, "saliency_hold"),
     ({"low_speed": "injection", "gain_turns": 5.0}, "gain_turns"),
     ({"low_speed": "injection", "gain_turns": -1.0}, "gain_turns"),
 ])
@@ -860,18 +861,19 @@ def test_the_angle_accuracy_follows_eq_id3():
     assert k.angle_accuracy(c, 2.0, 30.0, 751.0) == pytest.approx(2 * acc, rel=1e-12)
 
 
-@pytest.mark.parametrize(("ratio", "parked", "measures"), [(0.0, 1.0, True), (0.0, 0.0, False), (1.01, 1.0, False)])
-def test_a_seeing_unit_of_little_saliency_measures_again_while_parked_until_its_sensors_are(ratio, parked, measures):
-    """``refining``: a seeing unit that parks (its saliency below ``saliency_calibrated``, its sensors' relative gain
-    not yet measured) pools its parked acquisitions' answers too (eq SG0 needs them); once the ratio is measured it
-    neither parks nor measures again, and its next acquisition clears the sums."""
+@pytest.mark.parametrize(("y_q", "parked", "measures"), [(3000.0, 1.0, True), (3000.0, 0.0, False),
+                                                          (2500.0, 1.0, False)])
+def test_a_seeing_unit_of_little_saliency_measures_again_while_parked(y_q, parked, measures):
+    """``refining``: a seeing unit that parks (its saliency below ``saliency_hold``) pools its parked acquisitions'
+    answers too (eq SG0 needs them); a unit salient enough to hold the car on the injection does not park, is not
+    measured again, and its next acquisition clears the sums."""
     _, s, c = _unit()
-    s[k.S_ID_DONE], s[k.S_ID_Y_D], s[k.S_ID_Y_Q] = 1.0, 1.15 * 3000.0, 3000.0
-    s[k.S_PARKED], s[k.S_GAIN_RATIO] = parked, ratio
+    s[k.S_ID_DONE], s[k.S_ID_Y_D], s[k.S_ID_Y_Q] = 1.0, 1.15 * 3000.0, y_q
+    s[k.S_PARKED] = parked
     assert bool(k.refining(s, c)) is measures
     s[k.S_ID_SUM:k.S_ID_SUM + 8] = [1.0] * 8
     k.enter_acquire(s, c, 0.0, 0.0)
-    assert s[k.S_ID_SUM:k.S_ID_SUM + 8] == [0.0 if ratio else 1.0] * 8
+    assert s[k.S_ID_SUM:k.S_ID_SUM + 8] == [1.0 if y_q == 3000.0 else 0.0] * 8
 
 
 def _cross_sums(s, c, anti, spread, n=400.0):

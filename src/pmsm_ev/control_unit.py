@@ -89,7 +89,7 @@ _INJECTION_SLOTS = (
     ("inj_voltage_max", _k.C_INJ_V_MAX),
     ("rs_current", _k.C_RS_I), ("rs_time", _k.C_RS_TIME), ("ofs_time", _k.C_OFS_TIME),
     ("inj_angle_max", _k.C_ANGLE_MAX), ("emf_slip_speed", _k.C_EMF_SPEED), ("emf_slip_rel", _k.C_EMF_REL),
-    ("inj_see_max", _k.C_SEE_MAX), ("gain_turns", _k.C_GAIN_TURNS), ("saliency_calibrated", _k.C_SALIENCY_CAL),
+    ("inj_see_max", _k.C_SEE_MAX), ("gain_turns", _k.C_GAIN_TURNS), ("saliency_hold", _k.C_SALIENCY_HOLD),
     ("gain_standstill_se", _k.C_GAIN_SE))
 #: the injection strategy's loss detectors low-pass filter their inputs over a third of ``inj_los_time`` (the time
 #: constant): a step then reaches 95 % (1 - e^-3) of its size within the time the detector waits [chosen]

@@ -697,7 +697,7 @@ UNIT_PARAMS_LAYOUT = Layout("control unit parameter vector", "C_", (
                      "(``cannot_see``)"),
     ("C_GAIN_TURNS", 1, "the electrical turns on the EKF over which the phase sensors' relative gain is measured "
                         "before it is used (eq SG2) [-] (0: not measured)"),
-    ("C_SALIENCY_CAL", 1, "the least identified saliency at which a seeing unit holds the car on the injection at "
+    ("C_SALIENCY_HOLD", 1, "the least identified saliency at which a seeing unit holds the car on the injection at "
                           "its stops before it has measured its phase sensors' relative gain [-]"),
     # cross-saturation on the identified motor (``kernels.adaptation.cross_apply``, AD8)
     ("C_MODEL0_CROSS", CROSS_POINTS, "the given model's C_CROSS [rad], to go back to"),

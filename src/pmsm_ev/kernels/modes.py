@@ -127,7 +127,7 @@ from .layout import (
     C_REF_MODE,
     C_RS_I,
     C_RS_TIME,
-    C_SALIENCY_CAL,
+    C_SALIENCY_HOLD,
     C_SALIENCY_MIN,
     C_SALIENCY_TRUST,
     C_SEE_MAX,
@@ -333,20 +333,22 @@ RS_RISE_MIN = 0.25
 def parks(s, c):
     """True where the unit holds the car on the friction brake at its stops and finds the angle afresh for each
     restart (``park_car``, ``detect_blind_stop``): a blind unit (``S_ID_BLIND``), and a seeing one whose identified
-    saliency is below ``C_SALIENCY_CAL`` while its phase sensors' relative gain is not yet measured
-    (``balance_sensors``): their mismatch turns the injection's axis off the rotor's by more at a lower saliency.
-    Off where ``C_SALIENCY_CAL`` or ``C_GAIN_TURNS`` is 0."""
+    saliency is below ``C_SALIENCY_HOLD``: too little to hold a car on a slope on the injection's angle (the phase
+    sensors' mismatch turns the axis by more at a lower saliency until it is measured, and a car that creeps under
+    the hold moves the rotor faster than a weak error signal pulls the tracking observer: the low-saliency corner's
+    motor of 1.085, read 1.13, its sensors measured, slipped a turn at its first hold on a 1.9 % slope). Off where
+    ``C_SALIENCY_HOLD`` is 0 (a blind unit parks whatever)."""
     if s[S_ID_BLIND] != 0.0:
         return True
-    if c[C_GAIN_TURNS] == 0.0 or s[S_GAIN_RATIO] != 0.0:
+    if c[C_SALIENCY_HOLD] == 0.0:
         return False
-    return s[S_ID_Y_Q] > 0.0 and s[S_ID_Y_D] < c[C_SALIENCY_CAL] * s[S_ID_Y_Q]
+    return s[S_ID_Y_Q] > 0.0 and s[S_ID_Y_D] < c[C_SALIENCY_HOLD] * s[S_ID_Y_Q]
 
 
 @kernel()
 def refining(s, c):
-    """True where a unit that parks (``parks``: blind, or of little saliency with its sensors' relative gain not yet
-    measured) holds the car at a stop (``S_PARKED``): its acquisitions measure the motor again and pool their answers
+    """True where a unit that parks (``parks``: blind, or of too little saliency to hold the car on the injection)
+    holds the car at a stop (``S_PARKED``): its acquisitions measure the motor again and pool their answers
     with the enable's (``enter_acquire`` keeps such a unit's sums), so that the saliency a blind unit judged itself
     blind by is measured from more answers at every stop, at the rotor angles the stops give: the sensors' noise (at
     1.5 A the enable's 0.5 s read a motor of saliency 1.10 from 4.5 % low to 12.9 % high over 16 rotor angles,
@@ -374,7 +376,7 @@ def balance_sensors(s, c, i_alpha, i_beta):
 
     A common gain scales every current alike (the loops take it out); a mismatch reads, in the injection's
     answers, as a saliency fixed to the stator, (g_a - g_b) / sqrt 3 of the mean admittance, which turns the
-    axis a motor of little saliency is found on (``C_SALIENCY_CAL``). The sums go on after: the ratio follows the
+    axis a motor of little saliency is found on (``C_SALIENCY_HOLD``). The sums go on after: the ratio follows the
     sensors as they warm. The noise's squares add alike to both sums (the sensors' noise is alike)."""
     if c[C_GAIN_TURNS] == 0.0:
         return i_alpha, i_beta
@@ -866,11 +868,10 @@ def detect_emf_lost(s, c):
 @kernel()
 def detect_blind_stop(s, c, omega_ref):
     """EV_BLIND_STOP in FOC on the injection when the unit parks at its stops (``parks``: blind, ``S_ID_BLIND``, the
-    identified saliency below ``C_SALIENCY_MIN``; or below ``C_SALIENCY_CAL`` with its sensors' gains not yet
-    measured), the driver asks for a stop (the reference 0) and the car is below the blend
-    (``C_BLEND_LO``: the injection alone carries the angle), ``C_INJ_LOS_TIME`` after the mode's start: a
-    tracking observer on so weak an error signal drifts while the car stands, so the car is held on the friction
-    brake and the angle found afresh for the restart (``park_car``)."""
+    identified saliency below ``C_SALIENCY_MIN``; or below ``C_SALIENCY_HOLD``), the driver asks for a stop (the
+    reference 0) and the car is below the blend (``C_BLEND_LO``: the injection alone carries the angle),
+    ``C_INJ_LOS_TIME`` after the mode's start: a tracking observer on so weak an error signal drifts while the car
+    stands, so the car is held on the friction brake and the angle found afresh for the restart (``park_car``)."""
     if not parks(s, c) or omega_ref != 0.0 or s[S_MODE_TIME] < c[C_INJ_LOS_TIME]:
         return EV_NONE
     return EV_BLIND_STOP if abs(s[S_OMEGA_CTRL]) < c[C_BLEND_LO] else EV_NONE
