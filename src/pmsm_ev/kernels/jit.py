@@ -48,20 +48,18 @@ if JIT:
             # again, to the one signature now compiled (converted to it, or a TypeError, as with njit(signature))
             return self.ready().__call__
 
-    def kernel(signature=None, inline=False):
+    def kernel(signature=None):
         """Compile with numba: for ``signature`` (a top-level kernel) when it is first needed (``_Kernel``),
-        else lazily when a compiled caller first needs it; with ``inline``, written into each compiled caller
-        (numba's ``inline="always"``: no call, no reference counting of the arrays it is passed, the caller's
-        loads shared; the same operations, the same numbers)."""
+        else lazily when a compiled caller first needs it."""
         def wrap(fn):
-            dispatcher = njit(cache=CACHE, inline="always" if inline else "never")(fn)
+            dispatcher = njit(cache=CACHE)(fn)
             if signature:
                 dispatcher.__class__ = _Kernel
                 dispatcher._pending = signature
             return dispatcher
         return wrap
 else:
-    def kernel(signature=None, inline=False):
+    def kernel(signature=None):
         """Plain Python: the function as written."""
         def wrap(fn):
             return fn

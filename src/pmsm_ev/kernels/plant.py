@@ -193,7 +193,7 @@ def friction_torque(omega_m, B_m, T_m0, omega_eps, paper):
     return B_m * omega_m + T_m0 * math.tanh(omega_m / omega_eps)
 
 
-@kernel(inline=True)
+@kernel()
 def windage_torque(omega_m, k_w):
     """The rotor's windage, k_w omega_m |omega_m| [N m]: the air's drag on a turning cylinder and its end
     faces at a constant moment coefficient (turbulent flow), a power k_w |omega_m|^3
@@ -341,7 +341,7 @@ def thermal_network_step(q_cu, q_res, dt, pp, ee):
     ee[E_TH_OVER] = over
 
 
-@kernel(inline=True)
+@kernel()
 def inverter_loss(i_alpha, i_beta, v_loss, r_on):
     """Conduction and switching losses of a two-level three-phase inverter [W] for the current vector
     (i_alpha, i_beta) (amplitude-invariant Clarke: the phase currents are i_a = i_alpha, i_b, i_c):
@@ -360,7 +360,7 @@ def inverter_loss(i_alpha, i_beta, v_loss, r_on):
             + r_on * (i_alpha * i_alpha + i_b * i_b + i_c * i_c))
 
 
-@kernel(inline=True)
+@kernel()
 def inverter_modulation_loss(i_alpha, i_beta, v_alpha, v_beta, dv, dr, inv_vdc):
     """The conduction losses' part that depends on the modulation [W]: where the IGBT's knee and slope differ
     from the diode's (dv = V_CE0 - V_F0, dr = r_CE - r_F), a phase x loses (d_x - 1/2) (dv i_x + dr i_x |i_x|)
@@ -426,7 +426,7 @@ FLUX_NEWTON_MAX = 30
 FLUX_POW_INT_MAX = 16.0
 
 
-@kernel(inline=True)
+@kernel()
 def flux_pow(x, e):
     """x ** e for x >= 0, the powers of the algebraic model's terms: x itself where e = 1, a whole e up to
     ``FLUX_POW_INT_MAX`` by repeated squaring (the model's exponents are whole numbers: a pow was most of
@@ -464,7 +464,7 @@ def flux_pow(x, e):
     return x ** e
 
 
-@kernel(inline=True)
+@kernel()
 def flux_model(psi_d, psi_q, c, o):
     """The algebraic magnetic model at the flux linkages (psi_d, psi_q) [Wb]: its currents (i_d, i_q) [A]
     (``flux_currents``) and their Jacobian (g_dd, g_dq, g_qq) [1/H] (``flux_jacobian``) from one evaluation
@@ -499,7 +499,7 @@ def flux_model(psi_d, psi_q, c, o):
     return g_d * psi_d - c[o + FX_IF], g_q * psi_q, g_dd, g_dq, g_qq
 
 
-@kernel(inline=True)
+@kernel()
 def flux_currents(psi_d, psi_q, c, o):
     """The currents (i_d, i_q) [A] of the flux linkages (psi_d, psi_q) [Wb] in the algebraic magnetic
     model (``flux_model``, whose first two results they are)."""
@@ -616,7 +616,7 @@ def flux_energy(psi_d, psi_q, c, o):
     return w - c[o + FX_IF] * psi_d - c[o + FX_W0]
 
 
-@kernel(inline=True)
+@kernel()
 def flux_torque(i_d, i_q, psi_d, psi_q, N):
     """T_e = N (psi_d i_q - psi_q i_d) [N m]: eq 12 in its flux form (times k_dq in the dq
     convention's scaling); with a reciprocal model it is the co-energy's derivative in the angle."""
@@ -624,7 +624,7 @@ def flux_torque(i_d, i_q, psi_d, psi_q, N):
 
 
 # -- road load, eqs 2-4 and 29 ---------------------------------------------------------------
-@kernel(inline=True)
+@kernel()
 def gradient_force(delta, m_v, g):
     """f_g = m_v g sin(delta) [N] (eq 2)."""
     return m_v * g * math.sin(delta)
@@ -639,7 +639,7 @@ def rolling_force(v_v, delta, c_r, m_v, g, v_eps, paper):
     return f * math.tanh(v_v / v_eps)
 
 
-@kernel(inline=True)
+@kernel()
 def aero_force(v_v, rho_a, c_d, A_f, v_a, paper):
     """f_a = 0.5 rho_a c_d A_f (v_v + v_a)^2 [N] (eq 4); not ``paper``: (v+v_a)|v+v_a|."""
     v_rel = v_v + v_a
@@ -659,7 +659,7 @@ def load_torque(omega_m, delta, m_v, g, c_r, rho_a, c_d, A_f, r_w, eta, n_g, v_a
 
 
 # -- the gear --------------------------------------------------------------------------------
-@kernel(inline=True)
+@kernel()
 def power_flow_gear(x, y, j_m, m_r, eta, omega_m):
     """The gear with its efficiency in the direction the power flows (``VehicleParams.gear_model``
     'power_flow'): the rotor J_m driven by x = T_e - T_f, the vehicle m_r = m_v r_w^2 / n_g^2 at the
@@ -753,7 +753,7 @@ RK6_C = (1.0 / 3.0, 2.0 / 3.0, 1.0 / 3.0, 0.5, 0.5, 1.0)
 RK6_B = (11.0 / 120.0, 0.0, 27.0 / 40.0, 27.0 / 40.0, -4.0 / 15.0, -4.0 / 15.0, 11.0 / 120.0)
 
 
-@kernel(inline=True)
+@kernel()
 def stage_energies(acc, r, b):
     """``acc`` plus ``b`` times a stage's powers (``frame_rates``' 5th .. 15th results): the 13 integrands the step
     accumulates, (p_dc, |p_dc|, max(-p_dc, 0), p_cu, p_fric, p_shaft, p_gear, p_aero, p_roll, p_grade, p_brake,
@@ -808,13 +808,13 @@ def rk6_substep(x0, x1, x2, x3, h, v_alpha, v_beta, f_g, f_r, pp, acc, c1, s1):
             x3 + b1 * (r1[3] + r7[3]) + b3 * (r3[3] + r4[3]) + b5 * (r5[3] + r6[3]), acc)
 
 
-@kernel(inline=True)
+@kernel()
 def _rk4_stage(x0, x1, x2, x3, v_alpha, v_beta, f_g, f_r, pp, stationary):
     """A stage of ``plant_step``'s RK4: ``frame_rates_at`` at the angle x3."""
     return frame_rates_at(x0, x1, x2, math.cos(x3), math.sin(x3), v_alpha, v_beta, f_g, f_r, pp, stationary)
 
 
-@kernel(inline=True)
+@kernel()
 def _stage(x0, x1, x2, x3, v_alpha, v_beta, f_g, f_r, pp):
     """A stage of ``rk6_substep``: ``frame_rates_at`` in the stationary frame at the angle x3."""
     return frame_rates_at(x0, x1, x2, math.cos(x3), math.sin(x3), v_alpha, v_beta, f_g, f_r, pp, True)
@@ -840,14 +840,14 @@ def plant_fluxes(i_d, i_q, pp):
     return pp[P_PSI] + f_d, f_q
 
 
-@kernel(inline=True)
+@kernel()
 def axis_current(f, L0, a):
     """The current [A] of one axis's flux f [Wb] on the Froehlich-Kennelly curve f = L0 i / (1 + a |i|)
     (``saturated_flux``), explicit: i = f / (L0 - a |f|); a = 0: f / L0."""
     return f / (L0 - a * abs(f))
 
 
-@kernel(inline=True)
+@kernel()
 def plant_currents(psi_d, psi_q, pp):
     """The currents (i_d, i_q) [A] of the flux linkages (psi_d, psi_q) [Wb] in the plant's magnetic model, each
     explicit (the inverse of ``plant_fluxes``): the algebraic model's ``flux_currents``, the per-axis saturation's
@@ -908,7 +908,7 @@ def frame_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp, stationa
                           stationary)
 
 
-@kernel(inline=True)
+@kernel()
 def road_constants(delta, pp):
     """The road forces' parts that a step holds (the elevation is held over it): the gradient's force (eq 2) and
     the rolling resistance's c_r m_v g cos(delta) before its soft sign (eq 3), the same products as
@@ -917,7 +917,7 @@ def road_constants(delta, pp):
     return gradient_force(delta, pp[P_M_V], pp[P_G]), pp[P_C_R] * pp[P_M_V] * pp[P_G] * math.cos(delta)
 
 
-@kernel(inline=True)
+@kernel()
 def frame_rates_at(x_d, x_q, omega_m, c, s, v_alpha, v_beta, f_g, f_r, pp, stationary):
     """``frame_rates`` at the angle whose cosine and sine are ``c``, ``s``, with the road's held parts ``f_g``,
     ``f_r`` (``road_constants``): the same arithmetic, each soft sign evaluated once (the friction's and the iron
@@ -1199,7 +1199,7 @@ def _stage_sum(ra, rb, rc, rd, i):
     return ra[i] + 2.0 * rb[i] + 2.0 * rc[i] + rd[i]
 
 
-@kernel(inline=True)
+@kernel()
 def _regen(p):
     """The power returned to the DC link, max(-p, 0) [W]."""
     return -p if p < 0.0 else 0.0
