@@ -311,7 +311,12 @@ def ekf5ab_correct(s, c, i_alpha, i_beta):
     J_h rows: [c, -s, 0, h03, 0], [s, c, 0, h13, 0].
     """
     th = s[S_X + 3]
-    cs, sn = math.cos(th), math.sin(th)
+    ekf5ab_correct_at(s, c, i_alpha, i_beta, math.cos(th), math.sin(th))
+
+
+@kernel()
+def ekf5ab_correct_at(s, c, i_alpha, i_beta, cs, sn):
+    """``ekf5ab_correct`` with cos and sin of the prior angle given (``cs``, ``sn``)."""
     xd = s[S_X]
     xq = s[S_X + 1]
     h03 = -sn * xd - cs * xq
@@ -381,6 +386,6 @@ def ekf5ab_period_on(s, c, i_alpha, i_beta, u_alpha, u_beta):
     cs, sn = math.cos(th), math.sin(th)
     y0 = i_alpha - (cs * s[S_X] - sn * s[S_X + 1])
     y1 = i_beta - (sn * s[S_X] + cs * s[S_X + 1])
-    ekf5ab_correct(s, c, i_alpha, i_beta)  # (25)-(27)
+    ekf5ab_correct_at(s, c, i_alpha, i_beta, cs, sn)  # (25)-(27)
     return math.sqrt(y0 * y0 + y1 * y1)
 

@@ -435,6 +435,24 @@ def flux_pow(x, e):
         return x
     if 0.0 <= e <= FLUX_POW_INT_MAX and e == math.floor(e):
         n = int(e)
+        if n <= 8:  # the squaring's products below written out (the same products: the same bits), no loop
+            x2 = x * x
+            if n == 2:
+                return x2
+            if n == 3:
+                return x * x2
+            x4 = x2 * x2
+            if n == 4:
+                return x4
+            if n == 5:
+                return x * x4
+            if n == 6:
+                return x2 * x4
+            if n == 7:
+                return (x * x2) * x4
+            if n == 8:
+                return x4 * x4
+            return 1.0  # n = 0
         r = 1.0
         b = x
         while n > 0:
@@ -699,20 +717,30 @@ def shaft_load(i_d, i_q, omega_m, delta, t_e, pp):
         return t_l
     v_v = pp[P_R_W] * omega_m / pp[P_N_G]
     paper = pp[P_PAPER] != 0.0
-    forces = (gradient_force(delta, pp[P_M_V], pp[P_G])
-              + rolling_force(v_v, delta, pp[P_C_R], pp[P_M_V], pp[P_G], pp[P_V_EPS], paper)
+    # the soft signs, each evaluated once: tanh(v / v_eps) of the rolling resistance and the brake (``rolling_force``,
+    # ``brake_torque``), tanh(omega_m / omega_eps) of the friction and the iron losses (``friction_torque``,
+    # ``iron_torque``)
+    th_v = math.tanh(v_v / pp[P_V_EPS])
+    f_f = pp[P_C_R] * pp[P_M_V] * pp[P_G] * math.cos(delta)
+    if not paper:
+        f_f = f_f * th_v
+    forces = (gradient_force(delta, pp[P_M_V], pp[P_G]) + f_f
               + aero_force(v_v, pp[P_RHO_A], pp[P_C_D], pp[P_A_F], pp[P_V_A], paper))
-    y = pp[P_R_W] / pp[P_N_G] * forces + brake_torque(omega_m, pp)
-    x = t_e - plant_friction(omega_m, pp)
-    if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
+    y = pp[P_R_W] / pp[P_N_G] * forces + pp[P_T_BRAKE] * th_v / pp[P_N_G]
+    iron = pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0
+    th_w = math.tanh(omega_m / pp[P_OMEGA_EPS]) if iron or not paper else 0.0
+    t_f = pp[P_B_M] * omega_m + (pp[P_T_M0] if paper else pp[P_T_M0] * th_w)
+    if pp[P_K_W] != 0.0:
+        t_f = t_f + windage_torque(omega_m, pp[P_K_W])
+    x = t_e - t_f
+    if iron:
         if pp[P_FLUX] != 0.0:  # the algebraic model's flux linkages
-            psi_d, psi_q = plant_flux_linkages(i_d, i_q, pp)
-            x = x - iron_torque(omega_m, psi_d, psi_q, pp[P_N], pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+            f_d, f_q = plant_flux_linkages(i_d, i_q, pp)
         else:
             f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
+            f_d = pp[P_PSI] + f_d
             f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
-            x = x - iron_torque(omega_m, pp[P_PSI] + f_d, f_q, pp[P_N], pp[P_FE_H], pp[P_FE_E],
-                                pp[P_OMEGA_EPS])
+        x = x - pp[P_N] * (f_d * f_d + f_q * f_q) * (pp[P_FE_H] * th_w + pp[P_FE_E] * pp[P_N] * omega_m)
     _, _, e = power_flow_gear(x, y, pp[P_J_M], pp[P_M_R], pp[P_ETA], omega_m)
     return y / e
 
@@ -736,36 +764,37 @@ def stage_energies(acc, r, b):
 
 
 @kernel()
-def rk6_substep(x0, x1, x2, x3, h, v_alpha, v_beta, delta, pp, acc):
+def rk6_substep(x0, x1, x2, x3, h, v_alpha, v_beta, f_g, f_r, pp, acc, c1, s1):
     """One sub-step h [s] of Butcher's RK6 (``RK6_B``) in the stationary frame (``frame_rates``): the new
     (psi_alpha, psi_beta, omega_m, theta_e) and ``acc`` plus h times the RK6 quadrature of the step's powers
-    (``stage_energies``): the energies integrated with the weights of the state, as RK4's are."""
-    r1 = frame_rates(x0, x1, x2, x3, v_alpha, v_beta, delta, pp, True)
+    (``stage_energies``): the energies integrated with the weights of the state, as RK4's are. ``f_g``, ``f_r``: the
+    road's parts the step holds (``road_constants``); ``c1``, ``s1``: cos and sin of x3, the first stage's angle."""
+    r1 = frame_rates_at(x0, x1, x2, c1, s1, v_alpha, v_beta, f_g, f_r, pp, True)
     h3 = h / 3.0
-    r2 = frame_rates(x0 + h3 * r1[0], x1 + h3 * r1[1], x2 + h3 * r1[2], x3 + h3 * r1[3],
-                     v_alpha, v_beta, delta, pp, True)
+    r2 = _stage(x0 + h3 * r1[0], x1 + h3 * r1[1], x2 + h3 * r1[2], x3 + h3 * r1[3],
+                     v_alpha, v_beta, f_g, f_r, pp)
     g = 2.0 * h / 3.0
-    r3 = frame_rates(x0 + g * r2[0], x1 + g * r2[1], x2 + g * r2[2], x3 + g * r2[3], v_alpha, v_beta, delta, pp, True)
+    r3 = _stage(x0 + g * r2[0], x1 + g * r2[1], x2 + g * r2[2], x3 + g * r2[3], v_alpha, v_beta, f_g, f_r, pp)
     a1, a2, a3 = h / 12.0, h / 3.0, -h / 12.0
-    r4 = frame_rates(x0 + a1 * r1[0] + a2 * r2[0] + a3 * r3[0], x1 + a1 * r1[1] + a2 * r2[1] + a3 * r3[1],
+    r4 = _stage(x0 + a1 * r1[0] + a2 * r2[0] + a3 * r3[0], x1 + a1 * r1[1] + a2 * r2[1] + a3 * r3[1],
                      x2 + a1 * r1[2] + a2 * r2[2] + a3 * r3[2], x3 + a1 * r1[3] + a2 * r2[3] + a3 * r3[3],
-                     v_alpha, v_beta, delta, pp, True)
+                     v_alpha, v_beta, f_g, f_r, pp)
     a1, a2, a3, a4 = -h / 16.0, 9.0 * h / 8.0, -3.0 * h / 16.0, -3.0 * h / 8.0
-    r5 = frame_rates(x0 + a1 * r1[0] + a2 * r2[0] + a3 * r3[0] + a4 * r4[0],
+    r5 = _stage(x0 + a1 * r1[0] + a2 * r2[0] + a3 * r3[0] + a4 * r4[0],
                      x1 + a1 * r1[1] + a2 * r2[1] + a3 * r3[1] + a4 * r4[1],
                      x2 + a1 * r1[2] + a2 * r2[2] + a3 * r3[2] + a4 * r4[2],
-                     x3 + a1 * r1[3] + a2 * r2[3] + a3 * r3[3] + a4 * r4[3], v_alpha, v_beta, delta, pp, True)
+                     x3 + a1 * r1[3] + a2 * r2[3] + a3 * r3[3] + a4 * r4[3], v_alpha, v_beta, f_g, f_r, pp)
     a2, a3, a4, a5 = 9.0 * h / 8.0, -3.0 * h / 8.0, -3.0 * h / 4.0, h / 2.0
-    r6 = frame_rates(x0 + a2 * r2[0] + a3 * r3[0] + a4 * r4[0] + a5 * r5[0],
+    r6 = _stage(x0 + a2 * r2[0] + a3 * r3[0] + a4 * r4[0] + a5 * r5[0],
                      x1 + a2 * r2[1] + a3 * r3[1] + a4 * r4[1] + a5 * r5[1],
                      x2 + a2 * r2[2] + a3 * r3[2] + a4 * r4[2] + a5 * r5[2],
-                     x3 + a2 * r2[3] + a3 * r3[3] + a4 * r4[3] + a5 * r5[3], v_alpha, v_beta, delta, pp, True)
+                     x3 + a2 * r2[3] + a3 * r3[3] + a4 * r4[3] + a5 * r5[3], v_alpha, v_beta, f_g, f_r, pp)
     a1, a2, a3, a4, a6 = 9.0 * h / 44.0, -9.0 * h / 11.0, 63.0 * h / 44.0, 18.0 * h / 11.0, -16.0 * h / 11.0
-    r7 = frame_rates(x0 + a1 * r1[0] + a2 * r2[0] + a3 * r3[0] + a4 * r4[0] + a6 * r6[0],
+    r7 = _stage(x0 + a1 * r1[0] + a2 * r2[0] + a3 * r3[0] + a4 * r4[0] + a6 * r6[0],
                      x1 + a1 * r1[1] + a2 * r2[1] + a3 * r3[1] + a4 * r4[1] + a6 * r6[1],
                      x2 + a1 * r1[2] + a2 * r2[2] + a3 * r3[2] + a4 * r4[2] + a6 * r6[2],
                      x3 + a1 * r1[3] + a2 * r2[3] + a3 * r3[3] + a4 * r4[3] + a6 * r6[3],
-                     v_alpha, v_beta, delta, pp, True)
+                     v_alpha, v_beta, f_g, f_r, pp)
     b1, b3, b5 = h * RK6_B[0], h * RK6_B[2], h * RK6_B[4]  # b_7 = b_1, b_4 = b_3, b_6 = b_5, b_2 = 0
     acc = stage_energies(acc, r1, b1)
     acc = stage_energies(acc, r3, b3)
@@ -777,6 +806,18 @@ def rk6_substep(x0, x1, x2, x3, h, v_alpha, v_beta, delta, pp, acc):
             x1 + b1 * (r1[1] + r7[1]) + b3 * (r3[1] + r4[1]) + b5 * (r5[1] + r6[1]),
             x2 + b1 * (r1[2] + r7[2]) + b3 * (r3[2] + r4[2]) + b5 * (r5[2] + r6[2]),
             x3 + b1 * (r1[3] + r7[3]) + b3 * (r3[3] + r4[3]) + b5 * (r5[3] + r6[3]), acc)
+
+
+@kernel()
+def _rk4_stage(x0, x1, x2, x3, v_alpha, v_beta, f_g, f_r, pp, stationary):
+    """A stage of ``plant_step``'s RK4: ``frame_rates_at`` at the angle x3."""
+    return frame_rates_at(x0, x1, x2, math.cos(x3), math.sin(x3), v_alpha, v_beta, f_g, f_r, pp, stationary)
+
+
+@kernel()
+def _stage(x0, x1, x2, x3, v_alpha, v_beta, f_g, f_r, pp):
+    """A stage of ``rk6_substep``: ``frame_rates_at`` in the stationary frame at the angle x3."""
+    return frame_rates_at(x0, x1, x2, math.cos(x3), math.sin(x3), v_alpha, v_beta, f_g, f_r, pp, True)
 
 
 @kernel()
@@ -862,9 +903,26 @@ def frame_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp, stationa
     linkages (psi_alpha, psi_beta) [Wb] and the first two rates v_alpha - R_s i_alpha, v_beta - R_s i_beta [V]
     (eqs 10-11 in the frame where the held voltage is constant), the currents those of the fluxes Park
     transforms at the true angle (``plant_currents``)."""
+    f_g, f_r = road_constants(delta, pp)
+    return frame_rates_at(x_d, x_q, omega_m, math.cos(theta_e), math.sin(theta_e), v_alpha, v_beta, f_g, f_r, pp,
+                          stationary)
+
+
+@kernel()
+def road_constants(delta, pp):
+    """The road forces' parts that a step holds (the elevation is held over it): the gradient's force (eq 2) and
+    the rolling resistance's c_r m_v g cos(delta) before its soft sign (eq 3), the same products as
+    ``gradient_force`` and ``rolling_force`` [N]. ``frame_rates_at`` takes them, so that a step's stages do not
+    evaluate them again."""
+    return gradient_force(delta, pp[P_M_V], pp[P_G]), pp[P_C_R] * pp[P_M_V] * pp[P_G] * math.cos(delta)
+
+
+@kernel()
+def frame_rates_at(x_d, x_q, omega_m, c, s, v_alpha, v_beta, f_g, f_r, pp, stationary):
+    """``frame_rates`` at the angle whose cosine and sine are ``c``, ``s``, with the road's held parts ``f_g``,
+    ``f_r`` (``road_constants``): the same arithmetic, each soft sign evaluated once (the friction's and the iron
+    losses' tanh(omega_m / omega_eps), the rolling resistance's and the brake's tanh(v / v_eps): one argument each)."""
     flux = pp[P_FLUX] != 0.0
-    c = math.cos(theta_e)
-    s = math.sin(theta_e)
     if stationary:  # the state holds (psi_alpha, psi_beta): Park at the true angle, the currents explicit
         psi_d = c * x_d + s * x_q
         psi_q = -s * x_d + c * x_q
@@ -902,28 +960,37 @@ def frame_rates(x_d, x_q, omega_m, theta_e, v_alpha, v_beta, delta, pp, stationa
                                        pp[P_R_S], pp[P_L_D], pp[P_L_Q], pp[P_PSI], N)  # (10), (11)
         t_e = k * electromagnetic_torque(i_d, i_q, pp[P_PSI], pp[P_L_D], pp[P_L_Q], N)  # (12) x k_dq
     paper = pp[P_PAPER] != 0.0
-    t_f = plant_friction(omega_m, pp)  # (8), and the windage when on
+    iron = pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0
+    # the soft sign of the speed, tanh(omega_m / omega_eps), which the friction (eq 8) and the iron losses share
+    th_w = math.tanh(omega_m / pp[P_OMEGA_EPS]) if iron or not paper else 0.0
+    t_f = pp[P_B_M] * omega_m + (pp[P_T_M0] if paper else pp[P_T_M0] * th_w)  # (8) (``friction_torque``)
+    if pp[P_K_W] != 0.0:  # the windage (``plant_friction``)
+        t_f = t_f + windage_torque(omega_m, pp[P_K_W])
     t_drag = t_f  # the shaft's drag: friction, and the iron losses when on
     p_iron = 0.0
-    if pp[P_FE_H] != 0.0 or pp[P_FE_E] != 0.0:
+    if iron:
         if flux or stationary:
-            t_fe = iron_torque(omega_m, psi_d, psi_q, N, pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+            f_d, f_q = psi_d, psi_q
         else:
             f_d, _ = saturated_flux(i_d, pp[P_L_D], pp[P_SAT_AD])
+            f_d = pp[P_PSI] + f_d
             f_q, _ = saturated_flux(i_q, pp[P_L_Q], pp[P_SAT_AQ])
-            t_fe = iron_torque(omega_m, pp[P_PSI] + f_d, f_q, N, pp[P_FE_H], pp[P_FE_E], pp[P_OMEGA_EPS])
+        # (``iron_torque``)
+        t_fe = N * (f_d * f_d + f_q * f_q) * (pp[P_FE_H] * th_w + pp[P_FE_E] * N * omega_m)
         t_drag = t_f + t_fe
         p_iron = omega_m * t_fe
     # the road forces at the wheel (eqs 2-4) and the brake
     r_w, n_g, eta = pp[P_R_W], pp[P_N_G], pp[P_ETA]
     v_v = r_w * omega_m / n_g  # (1), (6)
-    f_g = gradient_force(delta, pp[P_M_V], pp[P_G])  # (2)
-    f_f = rolling_force(v_v, delta, pp[P_C_R], pp[P_M_V], pp[P_G], pp[P_V_EPS], paper)  # (3)
+    brake = pp[P_T_BRAKE] != 0.0
+    # the soft sign of the vehicle's speed, tanh(v / v_eps), which the rolling resistance and the brake share
+    th_v = math.tanh(v_v / pp[P_V_EPS]) if brake or not paper else 0.0
+    f_f = f_r if paper else f_r * th_v  # (3) (``rolling_force``)
     f_a = aero_force(v_v, pp[P_RHO_A], pp[P_C_D], pp[P_A_F], pp[P_V_A], paper)  # (4)
-    forces = f_g + f_f + f_a
+    forces = f_g + f_f + f_a  # f_g: (2)
     y_b = 0.0
-    if pp[P_T_BRAKE] != 0.0:
-        y_b = brake_torque(omega_m, pp)
+    if brake:
+        y_b = pp[P_T_BRAKE] * th_v / n_g  # (``brake_torque``)
     y = r_w / n_g * forces + y_b  # the wheel forces at the shaft, without eta
     if pp[P_GEAR_PF] == 0.0:  # the paper's gear, eq 9 = 28
         t_l = r_w / (eta * n_g) * forces  # (29)
@@ -1178,29 +1245,36 @@ def plant_step(i_d, i_q, omega_m, theta_e, v_alpha, v_beta, delta, dt, pp, ee):
     s_dc = s_abs = s_reg = s_cu = s_fr = s_sh = s_gear = s_aero = s_roll = s_grade = s_brake = s_inv = s_fe = 0.0
     x0, x1, x2, x3 = i_d, i_q, omega_m, theta_e
     flux = pp[P_FLUX] != 0.0
+    f_g, f_r = road_constants(delta, pp)  # held over the step
+    c1 = s1 = 0.0
     if stationary:  # RK4 on (psi_alpha, psi_beta) (``plant_rates``): the inverse Park of the state's fluxes
         f_d, f_q = plant_fluxes(i_d, i_q, pp)
-        x0, x1 = inverse_park(f_d, f_q, theta_e)
+        c1 = math.cos(theta_e)  # (``inverse_park``; the first stage's angle too)
+        s1 = math.sin(theta_e)
+        x0, x1 = c1 * f_d - s1 * f_q, s1 * f_d + c1 * f_q
     elif flux:  # the algebraic model: RK4 on the flux linkages (``plant_rates``), from the state's currents
         x0, x1 = plant_flux_linkages(i_d, i_q, pp)
     if stationary:  # Butcher's RK6 (``rk6_substep``), the energies with its weights
         acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        for _ in range(n):
-            x0, x1, x2, x3, acc = rk6_substep(x0, x1, x2, x3, h, v_alpha, v_beta, delta, pp, acc)
+        for j in range(n):
+            if j > 0:
+                c1 = math.cos(x3)
+                s1 = math.sin(x3)
+            x0, x1, x2, x3, acc = rk6_substep(x0, x1, x2, x3, h, v_alpha, v_beta, f_g, f_r, pp, acc, c1, s1)
         (s_dc, s_abs, s_reg, s_cu, s_fr, s_sh, s_gear, s_aero, s_roll, s_grade, s_brake, s_inv,
          s_fe) = acc
         n = 0  # and no RK4 sub-step; the sums are the integrals: their weight is 1 (``w`` below)
     for _ in range(n):
-        ra = frame_rates(x0, x1, x2, x3, v_alpha, v_beta, delta, pp, stationary)
+        ra = _rk4_stage(x0, x1, x2, x3, v_alpha, v_beta, f_g, f_r, pp, stationary)
         a0, a1, a2, a3 = ra[0], ra[1], ra[2], ra[3]
-        rb = frame_rates(x0 + 0.5 * h * a0, x1 + 0.5 * h * a1, x2 + 0.5 * h * a2,
-                         x3 + 0.5 * h * a3, v_alpha, v_beta, delta, pp, stationary)
+        rb = _rk4_stage(x0 + 0.5 * h * a0, x1 + 0.5 * h * a1, x2 + 0.5 * h * a2,
+                        x3 + 0.5 * h * a3, v_alpha, v_beta, f_g, f_r, pp, stationary)
         b0, b1, b2, b3 = rb[0], rb[1], rb[2], rb[3]
-        rc = frame_rates(x0 + 0.5 * h * b0, x1 + 0.5 * h * b1, x2 + 0.5 * h * b2,
-                         x3 + 0.5 * h * b3, v_alpha, v_beta, delta, pp, stationary)
+        rc = _rk4_stage(x0 + 0.5 * h * b0, x1 + 0.5 * h * b1, x2 + 0.5 * h * b2,
+                        x3 + 0.5 * h * b3, v_alpha, v_beta, f_g, f_r, pp, stationary)
         c0, c1, c2, c3 = rc[0], rc[1], rc[2], rc[3]
-        rd = frame_rates(x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3,
-                         v_alpha, v_beta, delta, pp, stationary)
+        rd = _rk4_stage(x0 + h * c0, x1 + h * c1, x2 + h * c2, x3 + h * c3,
+                        v_alpha, v_beta, f_g, f_r, pp, stationary)
         d0, d1, d2, d3 = rd[0], rd[1], rd[2], rd[3]
         # the energies: the same RK4 weights on the stages' powers
         s_dc += _stage_sum(ra, rb, rc, rd, 4)
