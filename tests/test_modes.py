@@ -178,8 +178,8 @@ def test_a_unit_that_cannot_see_with_its_sensors_not_yet_measured_parks_while_no
                                                                                               omega_ref, event):
     """``detect``: a blind unit whose angle accuracy is beyond ``inj_see_max`` parks instead of taking the I-f
     strategy for good while the driver asks for nothing and its sensors' relative gain is not yet measured (eq SG0
-    measures it from the parked answers); with ``gain_standstill_se`` 0 it is judged at once, as before."""
-    _, s, c = _unit()
+    measures it from the parked answers, ``gain_standstill_se`` > 0); with it 0 (the default) it is judged at once."""
+    _, s, c = _unit(gain_standstill_se=0.005)
     s[k.S_ID_Y:k.S_ID_Y + 2] = [4300.0, 4220.0]
     s[k.S_ID_BLIND], s[k.S_ID_ACC], s[k.S_HOLD] = 1.0, 0.77, c[k.C_HOLD_BRAKE]
     s[k.S_GAIN_RATIO], s[k.S_PARKED], s[k.S_MODE_TIME] = ratio, parked, 10.0
@@ -864,16 +864,22 @@ def test_the_angle_accuracy_follows_eq_id3():
 @pytest.mark.parametrize(("y_q", "parked", "measures"), [(3000.0, 1.0, True), (3000.0, 0.0, False),
                                                           (2500.0, 1.0, False)])
 def test_a_seeing_unit_of_little_saliency_measures_again_while_parked(y_q, parked, measures):
-    """``refining``: a seeing unit that parks (its saliency below ``saliency_hold``) pools its parked acquisitions'
-    answers too (eq SG0 needs them); a unit salient enough to hold the car on the injection does not park, is not
-    measured again, and its next acquisition clears the sums."""
-    _, s, c = _unit()
+    """``refining``: with the sensors' relative gain measured at standstill (``gain_standstill_se`` > 0), a seeing
+    unit that parks (its saliency below ``saliency_hold``) pools its parked acquisitions' answers too (eq SG0 needs
+    them) until the ratio is measured; a unit salient enough to hold the car on the injection does not park, is not
+    measured again, and its next acquisition clears the sums. Off (the default), only a blind unit pools."""
+    _, s, c = _unit(gain_standstill_se=0.005)
     s[k.S_ID_DONE], s[k.S_ID_Y_D], s[k.S_ID_Y_Q] = 1.0, 1.15 * 3000.0, y_q
     s[k.S_PARKED] = parked
     assert bool(k.refining(s, c)) is measures
     s[k.S_ID_SUM:k.S_ID_SUM + 8] = [1.0] * 8
     k.enter_acquire(s, c, 0.0, 0.0)
     assert s[k.S_ID_SUM:k.S_ID_SUM + 8] == [1.0 if y_q == 3000.0 else 0.0] * 8
+    s[k.S_GAIN_RATIO] = 1.01  # measured: no more
+    assert not k.refining(s, c)
+    _, s, c = _unit()
+    s[k.S_ID_DONE], s[k.S_ID_Y_D], s[k.S_ID_Y_Q], s[k.S_PARKED] = 1.0, 1.15 * 3000.0, y_q, parked
+    assert not k.refining(s, c)
 
 
 def _cross_sums(s, c, anti, spread, n=400.0):
@@ -894,18 +900,19 @@ def test_the_sensors_relative_gain_at_standstill_from_the_answers_antisymmetric_
     y_d, y_q = 4400.0, 4000.0
     x = 0.033  # (g_a - g_b) / g
     anti = 0.5 * (y_d + y_q) * x / (2.0 * math.sqrt(3.0))
-    _, s, c = _unit()
+    _, s, c = _unit(gain_standstill_se=0.005)
     s[k.S_ID_Y_D], s[k.S_ID_Y_Q] = y_d, y_q
     _cross_sums(s, c, anti, spread=50.0)
     k.standstill_gain(s, c)
     assert s[k.S_GAIN_RATIO] == pytest.approx((1 + x / 2) / (1 - x / 2), rel=1e-12)
     assert s[k.S_ID_SUM:k.S_ID_SUM + 8] == [0.0] * 8 and s[k.S_ID_NOISE:k.S_ID_NOISE + 8] == [0.0] * 8
-    _, s, c = _unit()
+    _, s, c = _unit(gain_standstill_se=0.005)
     s[k.S_ID_Y_D], s[k.S_ID_Y_Q] = y_d, y_q
     _cross_sums(s, c, anti, spread=2000.0)  # a standard error of about 0.13: not yet
     k.standstill_gain(s, c)
     assert s[k.S_GAIN_RATIO] == 0.0 and s[k.S_ID_N_D] == 400.0
-    for kw, ratio in (({}, 1.01), ({"gain_standstill_se": 0.0}, 0.0), ({"gain_turns": 0.0}, 0.0)):
+    for kw, ratio in (({"gain_standstill_se": 0.005}, 1.01), ({}, 0.0),
+                      ({"gain_standstill_se": 0.005, "gain_turns": 0.0}, 0.0)):
         _, s, c = _unit(**kw)
         s[k.S_ID_Y_D], s[k.S_ID_Y_Q], s[k.S_GAIN_RATIO] = y_d, y_q, ratio
         _cross_sums(s, c, anti, spread=50.0)
@@ -915,9 +922,11 @@ def test_the_sensors_relative_gain_at_standstill_from_the_answers_antisymmetric_
 
 @pytest.mark.parametrize(("g_a", "g_b", "theta"), [(0.981, 1.014, 0.7), (1.014, 0.981, 2.1)])
 def test_a_parked_unit_of_little_saliency_measures_its_sensors_at_standstill(g_a, g_b, theta):
-    """A motor of saliency 1.098 (the low-saliency corner's, seed 6464), sensors 3.3 % apart, 1.5 A of noise and 2 us
-    of dead time, its car held at a stop from enable: the parked acquisitions pool their answers and SG0 takes the
-    relative gain within 1 % of the sensors' before 8 s (two rotor angles, both signs of the mismatch)."""
+    """A motor of saliency 1.098 (the low-saliency corner's, seed 6464), sensors 3.3 % apart, 1.5 A of noise, an
+    inverter without dead time, its car held at a stop from enable, SG0 on: the parked acquisitions pool their
+    answers and SG0 takes the relative gain within 1 % of the sensors' before 8 s (two rotor angles, both signs of
+    the mismatch). With 2 us of dead time compensated it is biased by up to 3 % (``gain_standstill_se``: off by
+    default)."""
     from dataclasses import replace
 
     from pmsm_ev.params import MotorParams, PlantParams
@@ -925,11 +934,11 @@ def test_a_parked_unit_of_little_saliency_measures_its_sensors_at_standstill(g_a
 
     motor = replace(MotorParams(), L_d=2.3216e-4, L_q=2.5483e-4, R_s=0.0104, psi=0.0822)
     plant = Plant(motor=motor, plant=PlantParams(flux_model="algebraic", sensor_noise=1.5, sensor_seed=765252,
-                                                 flux_q_current=337.8, flux_d_current=207.5, dead_time=2e-6,
+                                                 flux_q_current=337.8, flux_d_current=207.5, dead_time=0.0,
                                                  v_dc=360.0, sensor_gain_a=g_a, sensor_gain_b=g_b))
     plant.theta_e = theta
-    unit = ControlUnit("sensorless", controller=ControllerParams(dead_time_comp=7.25, v_dc=360.0),
-                       injection=InjectionParams(low_speed="injection"))
+    unit = ControlUnit("sensorless", controller=ControllerParams(dead_time_comp=0.0, v_dc=360.0),
+                       injection=InjectionParams(low_speed="injection", gain_standstill_se=0.005))
     i_a = i_b = 0.0
     for _ in range(80000):
         out = unit.step(i_a, i_b, 0.0)

@@ -1838,12 +1838,15 @@ class InjectionParams:
     #: and keeps holding on the injection. 0: off (a blind unit parks whatever)
     saliency_hold: float = 1.30
     #: the standard error of the phase sensors' relative gain, measured at standstill from a parked unit's pooled
-    #: answers (eq SG0, ``pmsm_ev.kernels.standstill_gain``), at which the unit takes it before it has driven [-]
-    #: [chosen: 0.005: an eighth of the +-4 % two sensors within +-2 % can differ by; it turns the injection's axis
-    #: by at most asin(0.005 / sqrt 3 (s + 1) / (s - 1)) / 2, 2.2 deg on a motor of saliency 1.08. The enable's
-    #: 0.12 s of answers give 0.03 at 1.5 A; a parked unit's stops pool theirs, so that it takes about 4 s of them
-    #: standing]. 0: not measured at standstill
-    gain_standstill_se: float = 0.005
+    #: answers (eq SG0, ``pmsm_ev.kernels.standstill_gain``), at which the unit takes it before it has driven [-].
+    #: 0 (off) by default: the inverter's dead time biases it. Measured on a motor of 1.11 with sensors 3.2 % apart
+    #: (g_a / g_b 1.0316) at 1.5 A: with 2 us of dead time compensated it read 1.0647 at one rotor angle and 1.0523
+    #: at another (the compensation's sign decisions on noisy currents, phase c's noise the larger); with the dead
+    #: time uncompensated 1.0391, without dead time 1.0373 (1.0305 without noise). A unit that took 1.0761 on a
+    #: study's motor (the low-saliency corner, seed 8484, sample 24) read its sensors further apart than they were and
+    #: slipped at its first drive-off. Where it is set (0.005: an eighth of the +-4 % two sensors within +-2 % can
+    #: differ by) a parking unit pools its answers while parked (``pools``) and one that cannot see waits for it.
+    gain_standstill_se: float = 0.0
 
     def half_wave(self, dt: float) -> int:
         """The square wave's half-period in control periods, m (``inj_frequency`` = 1 / (2 m dt))."""

@@ -346,18 +346,27 @@ def parks(s, c):
 
 
 @kernel()
+def pools(s, c):
+    """True where the unit keeps its identification's answers from acquisition to acquisition (``enter_acquire``)
+    and adds its parked acquisitions' (``refining``): a blind unit (``S_ID_BLIND``), and, with the sensors' relative
+    gain measured at standstill (``C_GAIN_SE`` > 0, eq SG0), a unit that parks (``parks``) until it is."""
+    if s[S_ID_BLIND] != 0.0:
+        return True
+    return c[C_GAIN_SE] != 0.0 and c[C_GAIN_TURNS] != 0.0 and s[S_GAIN_RATIO] == 0.0 and parks(s, c)
+
+
+@kernel()
 def refining(s, c):
-    """True where a unit that parks (``parks``: blind, or of too little saliency to hold the car on the injection)
-    holds the car at a stop (``S_PARKED``): its acquisitions measure the motor again and pool their answers
-    with the enable's (``enter_acquire`` keeps such a unit's sums), so that the saliency a blind unit judged itself
+    """True where a unit that pools its answers (``pools``) holds the car at a stop (``S_PARKED``): its acquisitions
+    measure the motor again and pool their answers with the enable's, so that the saliency a blind unit judged itself
     blind by is measured from more answers at every stop, at the rotor angles the stops give: the sensors' noise (at
     1.5 A the enable's 0.5 s read a motor of saliency 1.10 from 4.5 % low to 12.9 % high over 16 rotor angles,
     ``pmsm_cosim.app.identification_study``) falls as one over the root of the stops' time and the phase sensors'
-    gain mismatch (up to 2 |g_a - g_b| / sqrt 3 of it, as cos 2 theta) averages out over their angles; and the
-    mismatch itself from the answers' antisymmetric part (``standstill_gain``, eq SG0). A blind unit the pooled
-    answers find above ``C_SALIENCY_TRUST`` is no longer blind and drives on the injection from its next restart; a
-    unit that does not park is not measured again (its detectors watch it)."""
-    return s[S_PARKED] != 0.0 and parks(s, c)
+    gain mismatch (up to 2 |g_a - g_b| / sqrt 3 of it, as cos 2 theta) averages out over their angles; and, where it
+    is on, the mismatch itself from the answers' antisymmetric part (``standstill_gain``, eq SG0). A blind unit the
+    pooled answers find above ``C_SALIENCY_TRUST`` is no longer blind and drives on the injection from its next
+    restart; a unit that does not pool is not measured again (its detectors watch it)."""
+    return s[S_PARKED] != 0.0 and pools(s, c)
 
 
 @kernel()
@@ -947,7 +956,7 @@ def enter_acquire(s, c, i_alpha, i_beta):
     seed_fundamental(s, c, i_alpha, i_beta)
     for k in range(4):
         s[S_ACQ + k] = 0.0
-    if not parks(s, c):
+    if not pools(s, c):
         for k in range(8):
             s[S_ID_SUM + k] = 0.0
             s[S_ID_NOISE + k] = 0.0
