@@ -125,16 +125,21 @@ def _status(j: int, doc: str) -> property:
     return property(lambda self: self._status_output(j), doc=doc)
 
 
+def _cross_saturation_inductances(motor: MotorParams, step: float, n: int) -> list[tuple[float, float, float]]:
+    """The incremental inductance matrix (L_dd, L_dq, L_qq) [H] at i_d = 0, i_q = 0, step, .. (n - 1) step [A] in
+    the algebraic flux model with its default shape (``PlantParams``) on this motor's L_d, L_q and psi: the
+    controller's model of the saturation."""
+    coeffs = [float(x) for x in flux_model_coefficients(motor, PlantParams(flux_model="algebraic"))]
+    return [_k.incremental_inductances(0.0, j * step, coeffs, 0) for j in range(n)]
+
+
 def cross_saturation_admittances(motor: MotorParams, step: float = _k.CROSS_STEP,
                                  n: int = _k.CROSS_POINTS) -> list[tuple[float, float, float]]:
     """The incremental admittance matrix (g_dd, g_dq, g_qq) [1/H], the inverse of the incremental inductance
-    matrix, at i_d = 0, i_q = 0, step, .. (n - 1) step [A] in the controller's model of the saturation (as
-    ``cross_saturation_offsets``): what ``kernels.adaptation.cross_apply`` shifts by the identified motor's
-    admittances at zero current (AD8)."""
-    coeffs = [float(x) for x in flux_model_coefficients(motor, PlantParams(flux_model="algebraic"))]
+    matrix, at the points of ``cross_saturation_offsets``: what ``kernels.adaptation.cross_apply`` shifts by the
+    identified motor's admittances at zero current (AD8)."""
     out = []
-    for j in range(n):
-        l_dd, l_dq, l_qq = _k.incremental_inductances(0.0, j * step, coeffs, 0)
+    for l_dd, l_dq, l_qq in _cross_saturation_inductances(motor, step, n):
         det = l_dd * l_qq - l_dq * l_dq
         out.append((l_qq / det, -l_dq / det, l_dd / det))
     return out
@@ -143,12 +148,9 @@ def cross_saturation_admittances(motor: MotorParams, step: float = _k.CROSS_STEP
 def cross_saturation_offsets(motor: MotorParams, step: float = _k.CROSS_STEP, n: int = _k.CROSS_POINTS) -> list[float]:
     """The injection's axis less the rotor's d axis [rad] at i_d = 0, i_q = 0, step, .. (n - 1) step [A]:
     the angle from d of the incremental inductance's least axis (the injection's error signal is 0 there,
-    ``pmsm_ev.kernels.injection``) in the algebraic flux model with its default shape (``PlantParams``) on
-    this motor's L_d, L_q and psi: the controller's model of the saturation."""
-    coeffs = [float(x) for x in flux_model_coefficients(motor, PlantParams(flux_model="algebraic"))]
+    ``pmsm_ev.kernels.injection``) in the controller's model of the saturation (``_cross_saturation_inductances``)."""
     out = []
-    for j in range(n):
-        l_dd, l_dq, l_qq = _k.incremental_inductances(0.0, j * step, coeffs, 0)
+    for l_dd, l_dq, l_qq in _cross_saturation_inductances(motor, step, n):
         # the eigenvector (l_dq, lam - l_dd) of the least eigenvalue lam, its angle from d in (-pi/2, pi/2]
         lam = 0.5 * (l_dd + l_qq) - math.sqrt(0.25 * (l_dd - l_qq) ** 2 + l_dq * l_dq)
         phi = math.atan2(lam - l_dd, l_dq) if l_dq != 0.0 else 0.0

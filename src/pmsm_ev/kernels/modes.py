@@ -425,14 +425,12 @@ def standstill_gain(s, c):
     b = 0.0
     var = 0.0
     for j in range(4):
-        n = s[S_ID_N_D + j]
-        if n < 2.0:
+        if s[S_ID_N_D + j] < 2.0:
             return
-        scale = 2.0 * c[C_INJ_M] * c[C_DT] * identification_amplitude(c, j)
+        b_j, var_j = cross_answer(s, c, j)
         w = -0.5 if j % 2 == 0 else 1.0  # (ID1): 2 b(2 V) - b(V), halved over the two axes
-        b += w * s[S_ID_D_SUM + j] / n / scale
-        v = max(s[S_ID_D_SQ + j] - s[S_ID_D_SUM + j] * s[S_ID_D_SUM + j] / n, 0.0) / ((n - 1.0) * n)
-        var += w * w * v / (scale * scale)
+        b += w * b_j
+        var += w * w * var_j
     k = 2.0 * math.sqrt(3.0) / (0.5 * (s[S_ID_Y_D] + s[S_ID_Y_Q]))
     x = k * b
     if k * math.sqrt(var) <= c[C_GAIN_SE] and abs(x) < 2.0:
@@ -598,19 +596,27 @@ def identify(s, c):
 
 
 @kernel()
+def cross_answer(s, c, j):
+    """The mean cross answer of the identification's phase ``PHASE_ID_D + j`` (the q part of its second differences,
+    ``S_ID_NOISE``) as an admittance [1/H], and its variance [1/H^2] (0 with fewer than two answers): over 2 m dt V,
+    the answer's [A] per [1/H] at the phase's amplitude V."""
+    n = s[S_ID_N_D + j]
+    scale = 2.0 * c[C_INJ_M] * c[C_DT] * identification_amplitude(c, j)  # 2 m dt V: the answer's [A] per [1/H]
+    b = s[S_ID_D_SUM + j] / n / scale
+    var = 0.0
+    if n > 1.0:
+        var = max(s[S_ID_D_SQ + j] - s[S_ID_D_SUM + j] * s[S_ID_D_SUM + j] / n, 0.0) / ((n - 1.0) * n)
+        var /= scale * scale
+    return b, var
+
+
+@kernel()
 def cross_admittance(s, c):
-    """Y_x sin 2e from the identification's cross answers (the q part of the second differences on the found d axis
-    and on the q axis, ``S_ID_NOISE``) [1/H], with its variance [1/H^2]: at the lower amplitude, then by (ID1). On the
-    q axis (90 deg on) the cross answer is -Y_x sin 2e, so (b_d - b_q) / 2."""
+    """Y_x sin 2e from the identification's cross answers (``cross_answer``) [1/H], with its variance [1/H^2]: at the
+    lower amplitude, then by (ID1). On the q axis (90 deg on) the cross answer is -Y_x sin 2e, so (b_d - b_q) / 2."""
     b_v = b_y = var_v = var_y = 0.0
     for j in range(4):
-        n = s[S_ID_N_D + j]
-        scale = 2.0 * c[C_INJ_M] * c[C_DT] * identification_amplitude(c, j)  # 2 m dt V: the answer's [A] per [1/H]
-        b = s[S_ID_D_SUM + j] / n / scale
-        var = 0.0
-        if n > 1.0:
-            var = max(s[S_ID_D_SQ + j] - s[S_ID_D_SUM + j] * s[S_ID_D_SUM + j] / n, 0.0) / ((n - 1.0) * n)
-            var /= scale * scale
+        b, var = cross_answer(s, c, j)
         sign = 1.0 if j < 2 else -1.0  # (b_d - b_q) / 2
         if j % 2 == 0:  # the lower amplitude: its own, and -1 of it in (ID1)
             b_v += 0.5 * sign * b
